@@ -1,0 +1,88 @@
+"""The ``surgsim`` command.
+
+Each sub-command lives in its own module exposing ``add_arguments(parser)`` and
+``run(args) -> int``; this file only wires them up, importing a module when its command runs
+(so ``surgsim models`` never pays for MuJoCo or numba start-up).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+#: command -> (module, help). "bench X" are sub-commands of "bench".
+COMMANDS: dict[str, tuple[str, str]] = {
+    "models": ("surgsim_envs.tissue.models_cmd", "list registered tissue models"),
+    "demo": ("surgsim_envs.scene.demo", "palpate and grasp on built-in defaults; writes ./surgsim-out/"),
+    "material": ("surgsim_envs.bench.material_cmd", "virtual material tests (indent, relax, slip)"),
+    "fit": ("surgsim_envs.bench.fit", "fit model parameters to measured force data"),
+    "teleop": ("surgsim_envs.haptics.teleop", "teleoperate a task with a (simulated) haptic device"),
+    "run": ("surgsim_envs.scenarios.cli", "run a trainee scenario file and write a report"),
+}
+BENCH: dict[str, tuple[str, str]] = {
+    "speed": ("surgsim_envs.bench.speed", "tissue model step time per model, integrator, node count"),
+    "loop": ("surgsim_envs.bench.loop", "full physics step (MuJoCo + contact + tissue) vs MuJoCo flex"),
+    "envs": ("surgsim_envs.bench.envs_speed", "Gymnasium env steps per second"),
+    "haptics": ("surgsim_envs.bench.haptics_speed", "haptic servo loop period"),
+    "accuracy": ("surgsim_envs.bench.accuracy", "speed against accuracy chart (Pareto front)"),
+    "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
+}
+
+
+def _attach(sub, name: str, module: str, help_text: str) -> None:
+    parser = sub.add_parser(name, help=help_text, description=help_text)
+    parser.set_defaults(_module=module, _command=name)
+    try:
+        mod = importlib.import_module(module)
+    except ImportError as exc:
+        if exc.name and module.startswith(exc.name) or (exc.name or "").startswith("surgsim_envs"):
+            parser.set_defaults(_missing=f"'{name}' is not available in this build ({exc})")
+            return
+        raise
+    mod.add_arguments(parser)
+
+
+def build_parser(argv: list[str]) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="surgsim", description="surgsim_envs: soft-tissue surgical training environments")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    # Only import the module of the command being run (fast --help for the others).
+    wanted = argv[0] if argv else None
+    wanted_bench = argv[1] if len(argv) > 1 and wanted == "bench" else None
+    for name, (module, help_text) in COMMANDS.items():
+        if name == wanted:
+            _attach(sub, name, module, help_text)
+        else:
+            sub.add_parser(name, help=help_text)
+    bench = sub.add_parser("bench", help="benchmarks (timings are medians over repeated runs)")
+    bsub = bench.add_subparsers(dest="bench_command", metavar="BENCH")
+    for name, (module, help_text) in BENCH.items():
+        if name == wanted_bench:
+            _attach(bsub, name, module, help_text)
+        else:
+            bsub.add_parser(name, help=help_text)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(argv)
+    args = parser.parse_args(argv)
+    if not getattr(args, "_module", None):
+        parser.print_help()
+        return 0 if not argv else 2
+    if getattr(args, "_missing", None):
+        print(f"surgsim: {args._missing}", file=sys.stderr)
+        return 2
+    module = importlib.import_module(args._module)
+    from surgsim_envs.errors import SurgSimError
+
+    try:
+        return int(module.run(args) or 0)
+    except SurgSimError as exc:
+        print(f"surgsim {args._command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
