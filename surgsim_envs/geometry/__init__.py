@@ -1,20 +1,38 @@
-"""Geometry: volumes, procedural organs, mesh loading and volumetric discretisation (no MuJoCo)."""
+"""Geometry: volumes, procedural organs, mesh loading and volumetric discretisation (no MuJoCo).
+
+- :class:`Volume`: tet mesh (m) + outward boundary + per-tet region labels.
+- :func:`make_volume`: named volumes ("block", "slab", "slab_inclusion", "spleen", "liver_lobe").
+- :func:`spleen_surface`, :func:`liver_lobe_surface`: procedural closed organ surfaces (trimesh).
+- :func:`load_surface` (STL/OBJ/PLY), :func:`load_tet_mesh` (legacy VTK): meshes from files.
+- :func:`lattice_volume`: fill any closed surface with lattice tets, boundary snapped by tri-ray
+  node snapping (paper 001).
+- :func:`add_spherical_inclusion`: label the tets of a spherical inclusion.
+"""
 
 from surgsim_envs.geometry.box import box_volume, lattice_tets
+from surgsim_envs.geometry.inclusion import add_spherical_inclusion
+from surgsim_envs.geometry.lattice import lattice_volume, surface_distance
+from surgsim_envs.geometry.loaders import load_surface, load_tet_mesh
+from surgsim_envs.geometry.organs import ORGANS, liver_lobe_surface, spleen_surface
+from surgsim_envs.geometry.snapping import tet_quality
 from surgsim_envs.geometry.volume import Volume, boundary_triangles, tet_signed_volumes
 
-__all__ = ["Volume", "box_volume", "lattice_tets", "boundary_triangles", "tet_signed_volumes", "make_volume"]
+__all__ = ["Volume", "box_volume", "lattice_tets", "boundary_triangles", "tet_signed_volumes", "make_volume",
+           "lattice_volume", "surface_distance", "load_surface", "load_tet_mesh", "add_spherical_inclusion",
+           "spleen_surface", "liver_lobe_surface", "tet_quality", "ORGANS"]
 
 
 def make_volume(name: str, spacing: float | None = None, **kwargs) -> Volume:
-    """A named procedural volume ("block", "slab", ...; organs once geometry.organs exists)."""
+    """A named procedural volume: "block", "slab" (boxes centred at the origin, default spacing
+    5 mm) or an organ of :mod:`surgsim_envs.geometry.organs` ("slab_inclusion", "spleen",
+    "liver_lobe"; organs rest on z = 0). ``spacing`` in m."""
     from surgsim_envs.errors import ConfigError
 
     if name in ("block", "slab"):
         size = kwargs.pop("size", (0.08, 0.08, 0.03) if name == "block" else (0.1, 0.1, 0.02))
         return box_volume(size, spacing or 0.005, name=name, **kwargs)
-    try:
-        from surgsim_envs.geometry import organs
-    except ImportError:
-        raise ConfigError(f"unknown volume {name!r}; available: ['block', 'slab']") from None
+    if not isinstance(name, str):
+        raise ConfigError(f"volume name must be a string, got {name!r}; known: {['block', *ORGANS]}")
+    from surgsim_envs.geometry import organs
+
     return organs.make_volume(name, spacing=spacing, **kwargs)

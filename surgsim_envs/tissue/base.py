@@ -223,7 +223,10 @@ class TissueModel(abc.ABC):
         """
 
     def reaction_forces(self) -> np.ndarray:
-        """(K,3) forces (N) the tissue exerts on its fixed nodes' supports, in fixed-node order."""
+        """(K,3) forces (N) the supports exert ON the tissue at its fixed nodes (fixed-node order).
+
+        The tissue pushes on its supports with the opposite force; at equilibrium this balances the
+        internal forces, so it is ``-internal_forces()[fixed]``."""
         return -self.internal_forces()[self.fixed]
 
     def momentum(self) -> np.ndarray:

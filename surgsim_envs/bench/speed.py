@@ -1,0 +1,160 @@
+"""``surgsim bench speed``: tissue-model step time per model, integrator and node count.
+
+For every registered model (models that fail to import are skipped with a note on stderr), each of
+its integrators and each requested node count, a box of liver (5 mm lattice, shape chosen to hit
+the count) is clamped at its bottom face and pressed on its top face with 0.5 N (so implicit
+solvers do real work). After a warm-up (which also compiles numba kernels) the steps of each
+repeat are timed; the row reports the median microseconds per step over the repeats.
+dt is 1 ms, or half the model's critical dt for explicit integrators if that is smaller.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from surgsim_envs.errors import ConfigError, SurgSimError
+
+SPACING = 0.005  # m
+DEFAULT_SIZES = (250, 1000, 4000)
+IMPLICIT_NAMES = ("implicit", "static", "quasi_static", "backward_euler")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def parse_sizes(text: str) -> list[int]:
+    """'250,1000,4000' -> [250, 1000, 4000]; ConfigError on anything else."""
+    try:
+        sizes = [int(s) for s in str(text).split(",") if s.strip()]
+    except ValueError:
+        raise ConfigError(f"--sizes must be comma-separated node counts like 250,1000,4000, got {text!r}") from None
+    if not sizes or any(s < 8 for s in sizes):
+        raise ConfigError(f"--sizes needs node counts >= 8, got {text!r}")
+    return sizes
+
+
+def lattice_counts(target: int) -> tuple[int, int, int]:
+    """Nodes per axis (a, a, b) with b <= a and a*a*b closest to ``target`` (ties: most cube-like)."""
+    best = None
+    for a in range(2, int(math.isqrt(target)) + 2):
+        b = max(2, min(a, round(target / (a * a))))
+        key = (abs(a * a * b - target), a - b)
+        if best is None or key < best[0]:
+            best = (key, (a, a, b))
+    return best[1]
+
+
+def bench_volume(target: int):
+    """A box volume on a 5 mm lattice with about ``target`` nodes."""
+    from surgsim_envs.geometry import box_volume
+
+    counts = np.array(lattice_counts(target))
+    return box_volume(tuple((counts - 1) * SPACING), SPACING, name=f"bench{target}")
+
+
+def _load(model, top: np.ndarray) -> np.ndarray:
+    forces = np.zeros((model.n_nodes, 3))
+    forces[top, 2] = -0.5 / max(int(top.sum()), 1)
+    return forces
+
+
+def time_model(cls, integrator: str, target: int, repeats: int, steps: int, warmup: int) -> dict[str, Any]:
+    """One benchmark row {"model", "integrator", "nodes", "us_per_step"} (us_per_step None if the
+    case failed: unstable, or the model raised; the reason goes to stderr)."""
+    vol = bench_volume(target)
+    z = vol.nodes[:, 2]
+    bottom, top = np.isclose(z, z.min()), np.isclose(z, z.max())
+    row: dict[str, Any] = {"model": cls.name, "integrator": integrator, "nodes": int(vol.n_nodes), "us_per_step": None}
+    try:
+        model = cls(vol, "liver", integrator=integrator, fixed=bottom)
+        dt = 1e-3
+        if integrator not in IMPLICIT_NAMES and not getattr(cls, "quasi_static", False):
+            crit = model.critical_dt()
+            if math.isfinite(crit):
+                dt = min(dt, 0.5 * crit)
+        forces = _load(model, top)
+        for _ in range(warmup):
+            model.step(dt, forces)
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            for _ in range(steps):
+                model.step(dt, forces)
+            times.append((time.perf_counter() - t0) / steps * 1e6)
+    except Exception as exc:  # unstable, or a model under construction: report, keep benchmarking the others
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        kind = "unstable" if isinstance(exc, SurgSimError) else type(exc).__name__
+        print(f"surgsim bench speed: {cls.name}/{integrator} at {vol.n_nodes} nodes failed ({kind}): {first[:300]}",
+              file=sys.stderr)
+        return row
+    row["us_per_step"] = round(statistics.median(times), 2)
+    return row
+
+
+def available_models() -> list[tuple[str, Any]]:
+    """(name, class) of every registered model that imports; failures are reported on stderr."""
+    from surgsim_envs.tissue import registry
+
+    out = []
+    for name in registry.names():
+        try:
+            out.append((name, registry.get(name)))
+        except Exception as exc:  # a model being written elsewhere must not stop the benchmark
+            print(f"surgsim bench speed: skipping model {name!r} ({type(exc).__name__}: {exc})", file=sys.stderr)
+    return out
+
+
+def run_bench(sizes, repeats: int = 5, steps: int = 50, warmup: int = 20, models=None, progress: bool = True) -> list[dict]:
+    """Rows for every (model, integrator, size); ``models`` restricts to those names."""
+    from tqdm import tqdm
+
+    classes = [(n, c) for n, c in available_models() if models is None or n in models]
+    jobs = [(c, integ, size) for _, c in classes for integ in c.integrators for size in sizes]
+    rows = []
+    with tqdm(jobs, desc="bench speed", unit="case", file=sys.stderr, disable=not progress) as bar:
+        for cls, integ, size in bar:
+            bar.set_postfix_str(f"{cls.name}/{integ}/{size}")
+            rows.append(time_model(cls, integ, size, repeats, steps, warmup))
+    return rows
+
+
+def format_table(rows: list[dict]) -> str:
+    header = f"{'model':<14} {'integrator':<12} {'nodes':>7} {'us/step':>10}"
+    lines = [header, "-" * len(header)]
+    for r in rows:
+        us = "failed" if r["us_per_step"] is None else f"{r['us_per_step']:.1f}"
+        lines.append(f"{r['model']:<14} {r['integrator']:<12} {r['nodes']:>7} {us:>10}")
+    return "\n".join(lines)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="print a JSON list of rows {model, integrator, nodes, us_per_step}")
+    parser.add_argument("--repeats", type=_positive_int, default=5, help="timed repeats per case (median reported); default 5")
+    parser.add_argument("--steps", type=_positive_int, default=50, help="steps per timed repeat; default 50")
+    parser.add_argument("--warmup", type=_positive_int, default=20, help="untimed steps first (numba compile); default 20")
+    parser.add_argument("--sizes", default=",".join(map(str, DEFAULT_SIZES)),
+                        help="comma-separated target node counts; default 250,1000,4000")
+    parser.add_argument("--models", default=None, help="comma-separated model names (default: all registered)")
+
+
+def run(args: argparse.Namespace) -> int:
+    sizes = parse_sizes(args.sizes)
+    models = None if not args.models else [m.strip() for m in args.models.split(",") if m.strip()]
+    rows = run_bench(sizes, repeats=args.repeats, steps=args.steps, warmup=args.warmup, models=models)
+    print(json.dumps(rows, indent=2) if args.json else format_table(rows))
+    return 0

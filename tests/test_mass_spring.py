@@ -1,0 +1,267 @@
+"""Nonlinear viscoelastic mass-spring-damper model (paper 002): physics and bad input."""
+
+import math
+
+import numpy as np
+import pytest
+import scipy.sparse.linalg as spla
+
+from surgsim_envs import tissue
+from surgsim_envs.errors import ConfigError, TissueUnstableError
+from surgsim_envs.geometry import Volume, box_volume
+from surgsim_envs.tissue.mass_spring import MassSpringModel
+
+
+def _faces(vol):
+    z = vol.nodes[:, 2]
+    return np.isclose(z, z.max()), np.isclose(z, z.min())
+
+
+def _elastic(**changes):
+    """Liver with the given fields changed."""
+    return tissue.get_material("liver").replace(**changes)
+
+
+def test_registry_builds_the_model_with_both_integrators():
+    vol = box_volume((0.02, 0.02, 0.02), 0.01)
+    for integ in ("symplectic", "implicit"):
+        m = tissue.make("mass_spring", vol, "spleen", integrator=integ)
+        assert isinstance(m, MassSpringModel) and m.integrator == integ
+        assert m.n_springs == len(vol.edges())
+    assert np.isclose(m.total_mass, 1054.0 * 0.02 ** 3)
+
+
+def test_small_strain_modulus_matches_young_on_box_lattice():
+    """Uniaxial compression with sliding (roller) ends: effective E within 20 % of the material's."""
+    vol = box_volume()  # default block, 5 mm lattice
+    E = 4000.0
+    m = MassSpringModel(vol, _elastic(young=E, relax_fraction=0.0, nonlinear=0.0))
+    K = m.stiffness_matrix()
+    top, bot = _faces(vol)
+    n, H, eps = vol.n_nodes, np.ptp(vol.nodes[:, 2]), 1e-3
+    u, fixed = np.zeros(3 * n), np.zeros(3 * n, bool)
+    fixed[3 * np.flatnonzero(top) + 2] = fixed[3 * np.flatnonzero(bot) + 2] = True
+    b = np.flatnonzero(bot)
+    fixed[3 * b[0]] = fixed[3 * b[0] + 1] = fixed[3 * b[-1] + 1] = True  # no rigid sliding/spin
+    u[3 * np.flatnonzero(top) + 2] = -eps * H
+    free = ~fixed
+    u[free] = spla.spsolve(K[free][:, free].tocsc(), -K[free][:, fixed] @ u[fixed])
+    force = -(K @ u)[3 * np.flatnonzero(top) + 2].sum()
+    area = np.ptp(vol.nodes[:, 0]) * np.ptp(vol.nodes[:, 1])
+    E_eff = force / area / eps
+    assert abs(E_eff / E - 1.0) < 0.2, E_eff
+
+
+def test_inclusion_makes_its_springs_stiffer():
+    vol = box_volume((0.04, 0.04, 0.04), 0.005)
+    centroids = vol.nodes[vol.tets].mean(axis=1)
+    labels = (np.linalg.norm(centroids, axis=1) < 0.01).astype(np.int32)
+    vol = Volume(vol.nodes, vol.tets, labels=labels)
+    m = MassSpringModel(vol, "liver", region_materials={1: {"preset": "liver", "young": 40_000.0}})
+    # edges whose every tet is in the inclusion vs edges with no inclusion tet
+    n = vol.n_nodes
+    inside_node = vol.node_labels == 1
+    bulk_only = np.zeros(n, bool)
+    bulk_only[np.unique(vol.tets[labels == 0])] = True
+    core = inside_node[m.si] & inside_node[m.sj] & ~bulk_only[m.si] & ~bulk_only[m.sj]
+    outside = ~inside_node[m.si] & ~inside_node[m.sj]
+    assert core.any() and outside.any()
+    ratio = m.K1 / MassSpringModel(vol, "liver").K1  # per spring, against the homogeneous organ
+    assert np.allclose(ratio[core], 10.0) and np.allclose(ratio[outside], 1.0)
+    mixed = ~core & ~outside
+    assert np.all((ratio[mixed] >= 1.0 - 1e-12) & (ratio[mixed] <= 10.0 + 1e-12)) and np.any(ratio[mixed] > 1.5)
+
+
+def test_undamped_symplectic_energy_is_bounded_over_10000_steps():
+    vol = box_volume((0.03, 0.03, 0.03), 0.01)
+    m = MassSpringModel(vol, _elastic(damping=0.0, relax_fraction=0.0, nonlinear=2.0))
+    rng = np.random.default_rng(1)
+    m.positions += rng.normal(0.0, 5e-4, m.positions.shape)
+    dt = 0.1 * m.critical_dt()
+    e = np.empty(10_000)
+    e0 = m.kinetic_energy() + m.elastic_energy()
+    for k in range(10_000):
+        m.step(dt)
+        e[k] = m.kinetic_energy() + m.elastic_energy()
+    # symplectic Euler: an O(dt) bounded oscillation of the energy ...
+    assert np.max(np.abs(e - e0)) < 0.1 * e0
+    # ... and no secular drift: the mean energy early and late agree
+    assert abs(e[-1000:].mean() - e[:1000].mean()) < 0.005 * e0
+
+
+@pytest.mark.parametrize("integrator", ["symplectic", "implicit"])
+def test_damped_energy_decays_monotonically(integrator):
+    vol = box_volume((0.03, 0.03, 0.03), 0.01)
+    m = MassSpringModel(vol, _elastic(damping=20.0), integrator=integrator)
+    m.positions += np.random.default_rng(2).normal(0.0, 5e-4, m.positions.shape)
+    # small explicit dt: symplectic Euler's energy oscillates by O(dt * omega) about the true value
+    dt = 0.05 * m.critical_dt() if integrator == "symplectic" else 1e-3
+    energies = [m.kinetic_energy() + m.elastic_energy()]
+    steps_per_sample = max(1, int(round(2e-3 / dt)))
+    while len(energies) < 150:
+        for _ in range(steps_per_sample):
+            m.step(dt)
+        energies.append(m.kinetic_energy() + m.elastic_energy())
+    energies = np.array(energies)
+    assert np.all(np.diff(energies) <= 0.02 * energies[0])
+    assert energies[-1] < 0.2 * energies[0]
+
+
+def test_internal_forces_sum_to_zero_and_free_body_keeps_its_momentum():
+    vol = box_volume((0.03, 0.02, 0.02), 0.005)
+    m = MassSpringModel(vol, _elastic(damping=0.0, relax_fraction=0.5, nonlinear=3.0))
+    rng = np.random.default_rng(3)
+    m.positions += rng.normal(0.0, 1e-3, m.positions.shape)
+    m.velocities[:] = rng.normal(0.0, 0.01, m.velocities.shape)
+    f = m.internal_forces()
+    assert np.abs(f).sum() > 0
+    assert np.allclose(f.sum(axis=0), 0.0, atol=1e-10 * np.abs(f).sum())
+    p0 = m.momentum().copy()
+    for _ in range(500):
+        m.step(0.5 * m.critical_dt())
+    assert np.allclose(m.momentum(), p0, atol=1e-9 * np.abs(m.masses[:, None] * m.velocities).sum() + 1e-15)
+
+
+def test_held_compression_relaxes_to_long_term_fraction_with_time_constant_tau():
+    g1, tau = 0.5, 1.0
+    vol = box_volume((0.02, 0.02, 0.02), 0.005)
+    top, bot = _faces(vol)
+    # heavy nodal damping removes the ramp's vibration; it does not change the equilibrium force
+    m = MassSpringModel(vol, _elastic(relax_fraction=g1, relax_time=tau, nonlinear=0.0, damping=30.0),
+                        integrator="implicit", fixed=top | bot)
+    dt, ramp, hold, strain = 1e-3, 0.1, 6 * tau, 0.05
+    H = np.ptp(vol.nodes[:, 2])
+    rest_top = vol.nodes[top]
+
+    def top_force():
+        return m.internal_forces()[top][:, 2].sum()  # upward push of the tissue on the plate (N)
+
+    n_ramp = int(round(ramp / dt))
+    for k in range(1, n_ramp + 1):
+        x = k / n_ramp
+        m.set_fixed(top, rest_top - [0.0, 0.0, strain * H * x * x * (3 - 2 * x)])  # smooth start and stop
+        m.step(dt)
+    peak = top_force()
+    assert peak > 0
+    forces = []
+    for _ in range(int(round(hold / dt))):
+        m.step(dt)
+        forces.append(top_force())
+    forces = np.array(forces)
+    # monotonic decay (sampled every 10 ms; a < 1 % wiggle from the ramp allowed)
+    assert np.all(np.diff(forces[::10]) <= 1e-2 * peak)
+    assert np.all(np.diff(forces[50:]) < 0)  # strictly once the ramp's vibration has died out
+    final = forces[-1]
+    assert final / peak == pytest.approx(1.0 - g1, rel=0.1)
+    # time constant: one tau into the hold, (F - F_inf) / (F0 - F_inf) ~ exp(-1)
+    f_tau = forces[int(round(tau / dt)) - 1]
+    assert (f_tau - final) / (peak - final) == pytest.approx(math.exp(-1.0), abs=0.1)
+
+
+def _secant_stiffness(nonlinear, strains):
+    """|F| / strain (N) of a 2 cm cube clamped between plates, relaxed equilibrium at each strain
+    (positive strain = compression, negative = tension)."""
+    vol = box_volume((0.02, 0.02, 0.02), 0.005)
+    top, bot = _faces(vol)
+    m = MassSpringModel(vol, _elastic(nonlinear=nonlinear), fixed=top | bot)
+    H = np.ptp(vol.nodes[:, 2])
+    out = []
+    for s in strains:
+        m.set_fixed(top, vol.nodes[top] - [0.0, 0.0, s * H])
+        m.static_solve()
+        out.append(abs(m.internal_forces()[top][:, 2].sum()) / abs(s))
+    return np.array(out)
+
+
+def test_large_strain_stiffens_the_force_strain_curve():
+    stretch = -np.array([0.02, 0.05, 0.1, 0.15, 0.2])
+    liver = _secant_stiffness(tissue.PRESETS["liver"].nonlinear, stretch)
+    assert liver[-1] > liver[0]  # secant stiffness at 20 % > at 2 %
+    # the cubic term K2 stiffens beyond the geometric change of the linear network, both ways
+    for strains in (stretch, -stretch):
+        linear = _secant_stiffness(0.0, strains)
+        stiff = _secant_stiffness(5.0, strains)
+        assert stiff[-1] / stiff[0] > linear[-1] / linear[0] + 0.05
+        assert np.all(np.diff(stiff / linear) > 0)
+
+
+def test_implicit_is_stable_at_1ms_for_skin_where_symplectic_raises():
+    vol = box_volume((0.04, 0.04, 0.02), 0.005)
+    top, bot = _faces(vol)
+    push = np.zeros((vol.n_nodes, 3))
+    push[top, 2] = -1.0 / top.sum()  # 1 N spread over the top face
+    implicit = MassSpringModel(vol, "skin", integrator="implicit", fixed=bot)
+    assert implicit.critical_dt() < 1e-3
+    for _ in range(300):
+        implicit.step(1e-3, push)
+    disp = np.linalg.norm(implicit.positions - implicit.rest_positions, axis=1).max()
+    assert np.isfinite(disp) and 0 < disp < 2e-3
+    # contact stiffness is accepted and treated implicitly
+    implicit.step(1e-3, push, stiffness=np.full(vol.n_nodes, 1e4))
+    explicit = MassSpringModel(vol, "skin", integrator="symplectic", fixed=bot)
+    with pytest.raises(TissueUnstableError) as info:
+        for _ in range(300):
+            explicit.step(1e-3, push)
+    assert info.value.critical_dt < 1e-3
+    assert np.all(np.isfinite(explicit.critical_dt()))
+
+
+def test_symplectic_is_stable_below_its_critical_dt_estimate():
+    vol = box_volume((0.03, 0.03, 0.02), 0.005)
+    m = MassSpringModel(vol, "skin", fixed=_faces(vol)[1])
+    m.velocities[~m.fixed] = np.random.default_rng(4).normal(0.0, 0.05, (int((~m.fixed).sum()), 3))
+    dt = 0.95 * m.critical_dt()
+    for _ in range(2000):
+        m.step(dt)
+    assert np.all(np.isfinite(m.positions))
+
+
+def test_overrides_set_the_paper_parameters_and_reset_clears_branches():
+    vol = box_volume((0.02, 0.02, 0.02), 0.01)
+    m = MassSpringModel(vol, "liver", K1=50.0, K2=1e6, b0=0.01, b1=2.0)
+    assert np.all(m.K1 == 50.0) and np.all(m.K2 == 1e6) and np.all(m.b0 == 0.01) and np.all(m.b1 == 2.0)
+    g1 = tissue.PRESETS["liver"].relax_fraction
+    assert np.allclose(m.kM, g1 / (1 - g1) * 50.0)
+    assert np.allclose(m.tau, 2.0 / m.kM)
+    from_extra = MassSpringModel(vol, tissue.PRESETS["liver"].replace(extra={"K1": 20.0}))
+    assert np.all(from_extra.K1 == 20.0)
+    m.positions[0] += 1e-3
+    m.step(1e-4)
+    assert np.abs(m.branch_forces()).max() > 0
+    m.reset()
+    assert np.abs(m.branch_forces()).max() == 0 and m.elastic_energy() == 0
+
+
+def test_bad_input_raises_config_error_with_the_fix():
+    vol = box_volume((0.02, 0.02, 0.02), 0.01)
+    with pytest.raises(ConfigError, match="K1"):
+        MassSpringModel(vol, "liver", K1=-1.0)
+    with pytest.raises(ConfigError, match="b0"):
+        MassSpringModel(vol, "liver", b0=float("nan"))
+    with pytest.raises(ConfigError, match="integrator"):
+        MassSpringModel(vol, "liver", integrator="rk4")
+    with pytest.raises(ConfigError, match="springs"):
+        MassSpringModel(vol, "liver", springs="lattice")
+    with pytest.raises(ConfigError, match="relax_fraction"):
+        MassSpringModel(vol, _elastic(relax_fraction=0.0), b1=1.0)
+    m = MassSpringModel(vol, "liver", integrator="implicit")
+    for bad_dt in (0.0, -1e-3, float("nan")):
+        with pytest.raises(ConfigError, match="dt"):
+            m.step(bad_dt)
+    with pytest.raises(ConfigError, match="stiffness"):
+        m.step(1e-3, stiffness=np.ones(3))
+    with pytest.raises(ConfigError, match="fixed"):
+        m.static_solve()
+
+
+def test_speed_bench_rows_cover_every_integrator_and_reject_bad_sizes():
+    from surgsim_envs.bench import speed
+
+    rows = speed.run_bench([30], repeats=1, steps=2, warmup=1, models=["mass_spring"], progress=False)
+    assert [r["integrator"] for r in rows] == list(MassSpringModel.integrators)
+    for r in rows:
+        assert set(r) == {"model", "integrator", "nodes", "us_per_step"}
+        assert r["model"] == "mass_spring" and r["us_per_step"] > 0
+        assert abs(r["nodes"] - 30) <= 15
+    with pytest.raises(ConfigError, match="sizes"):
+        speed.parse_sizes("250,abc")
