@@ -87,6 +87,7 @@ class TissueModel(abc.ABC):
                               "remove unused nodes from the volume")
         self.fixed = np.zeros(n, dtype=bool)
         self.fixed_targets = self.rest_positions.copy()
+        self._fixed_idx = np.zeros(0, dtype=np.int64)
         if fixed is not None:
             self.set_fixed(fixed)
         self.guard = guard or StabilityGuard()
@@ -147,6 +148,7 @@ class TissueModel(abc.ABC):
         if hasattr(self, "positions"):
             self.positions[idx] = self.fixed_targets[idx]
             self.velocities[idx] = 0.0
+        self._fixed_idx = np.flatnonzero(self.fixed)
         self._on_fixed_changed()
 
     def release(self, nodes=None) -> None:
@@ -155,6 +157,7 @@ class TissueModel(abc.ABC):
             self.fixed[:] = False
         else:
             self.fixed[self._as_indices(nodes, "released nodes")] = False
+        self._fixed_idx = np.flatnonzero(self.fixed)
         self._on_fixed_changed()
 
     def _on_fixed_changed(self) -> None:
@@ -189,8 +192,8 @@ class TissueModel(abc.ABC):
             raise ConfigError(f"forces must have shape {self.positions.shape}, got {forces.shape}")
         self._last_dt = float(dt)
         self._advance(float(dt), forces, stiffness)
-        fx = self.fixed
-        if fx.any():
+        fx = self._fixed_idx
+        if fx.size:
             self.positions[fx] = self.fixed_targets[fx]
             self.velocities[fx] = 0.0
         self.time += dt
