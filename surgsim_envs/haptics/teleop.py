@@ -1,0 +1,222 @@
+"""``surgsim teleop TASK --device ...``: teleoperate a task with a (simulated) haptic device.
+
+    surgsim teleop palpation --device scripted --headless --out out/ --duration 3
+    surgsim teleop grasp --device replay:hand.csv --headless --out out/
+    surgsim teleop palpation --device keyboard            # interactive viewer (needs a display)
+    surgsim teleop slippage --device udp:9870             # poses from a remote device on 127.0.0.1
+
+The servo loop runs at ``--rate`` (1 kHz) in its own thread, the physics in another; the device
+frame's origin is the tool's home pose. With a viewer the scene is shown in real time; with
+``--headless`` it writes ``teleop_TASK.mp4`` (offscreen rendering), ``force_log.csv`` (the force
+the hand felt, ``t,fx,fy,fz,saturated``) and ``stats.json`` into ``--out``. Loop statistics are
+printed at the end. The MuJoCo scene is imported only when the command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+from surgsim_envs.errors import ConfigError, SurgSimError
+
+TASK_NAMES = ("palpation", "grasp", "slippage")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("task", choices=TASK_NAMES, help="task to teleoperate")
+    parser.add_argument("--device", default="scripted",
+                        help="scripted | replay:FILE (.csv/.json) | keyboard | udp:PORT (default scripted)")
+    parser.add_argument("--script", default=None, help="scripted device: JSON/TOML trajectory spec (default: a task demo)")
+    parser.add_argument("--headless", action="store_true", help="no viewer: write video + force log to --out")
+    parser.add_argument("--out", default="surgsim-out/teleop", help="output directory (headless)")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="seconds to run (default: the script/recording length; live devices: until the "
+                             "viewer closes, 10 s headless)")
+    parser.add_argument("--rate", type=float, default=1000.0, help="servo rate, Hz (default 1000)")
+    parser.add_argument("--extrapolation", choices=("hold", "linear", "stiffness"), default="linear",
+                        help="force extrapolation between physics updates (default linear)")
+    parser.add_argument("--max-force", type=float, default=3.3, help="device force limit, N (default 3.3)")
+    parser.add_argument("--max-force-rate", type=float, default=1000.0, help="force rate clamp, N/s (default 1000)")
+    parser.add_argument("--spacing", type=float, default=None, help="tissue node spacing, m (default: the scene's)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the scripted tremor/drift")
+    parser.add_argument("--tremor", type=float, default=0.0, help="scripted tremor amplitude, m (8-12 Hz)")
+    parser.add_argument("--fps", type=float, default=25.0, help="video/viewer frames per second")
+    parser.add_argument("--size", type=int, nargs=2, default=(480, 360), metavar=("W", "H"), help="video size, pixels")
+    parser.add_argument("--camera", default="overview", help="camera name for the video")
+
+
+def parse_device(spec: str) -> tuple[str, str | int | None]:
+    """``"scripted"`` / ``"replay:FILE"`` / ``"keyboard"`` / ``"udp:PORT"`` -> (kind, argument)."""
+    if spec in ("scripted", "keyboard"):
+        return spec, None
+    kind, _, arg = spec.partition(":")
+    if kind == "replay" and arg:
+        if not Path(arg).is_file():
+            raise ConfigError(f"--device replay:{arg}: file not found; give a .csv or .json pose recording")
+        return "replay", arg
+    if kind == "udp" and arg:
+        try:
+            port = int(arg)
+        except ValueError:
+            port = -1
+        if not 0 < port < 65536:
+            raise ConfigError(f"--device udp:{arg}: PORT must be an integer in 1..65535, e.g. udp:9870")
+        return "udp", port
+    raise ConfigError(f"--device {spec!r} not understood; use scripted, replay:FILE, keyboard or udp:PORT")
+
+
+def default_script(task: str, physics, seed: int = 0, tremor: float = 0.0) -> dict:
+    """A demonstration trajectory (device frame, origin at the tool's home) for ``task``."""
+    extra = {"seed": seed, "tremor_amplitude": tremor, "profile": "minimum_jerk"}
+    if task == "palpation":
+        from surgsim_envs.haptics.scene_adapter import tissue_top
+
+        tip = float(physics.tool.config.tip_radius)
+        gap = physics.home_position[2] - tip - tissue_top(physics)  # m to first contact
+        down = -(max(gap, 0.0) + 0.006)
+        return {"waypoints": [[0, 0, 0], [0, 0, down], [0.01, 0, down], [0, 0, 0]], "speeds": [0.01, 0.005, 0.01],
+                "dwell": [0.2, 0.5, 0.3, 0.2], **extra}
+    pull = 0.02 if task == "grasp" else 0.03
+    grip = 0.8 if task == "grasp" else 0.45
+    speed = 0.01 if task == "grasp" else 0.02
+    return {"waypoints": [[0, 0, 0], [0, 0, 0], [pull, 0, 0], [pull, 0, 0]], "speeds": [1.0, speed, 1.0],
+            "dwell": [0.2, 3.0, 0.5, 0.0], "grip": [0.0, grip, grip, grip], **extra}
+
+
+def _load_script(path: str) -> dict:
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"--script {path}: file not found")
+    if p.suffix.lower() == ".json":
+        return json.loads(p.read_text())
+    if p.suffix.lower() == ".toml":
+        try:
+            import tomllib
+        except ModuleNotFoundError:  # pragma: no cover - python < 3.11
+            import tomli as tomllib
+        data = tomllib.loads(p.read_text())
+        return data.get("trajectory", data)
+    raise ConfigError(f"--script {path}: expected a .json or .toml trajectory spec")
+
+
+def make_device(kind: str, arg, args, physics, limits):
+    """Build the device named on the command line."""
+    from surgsim_envs.haptics.keyboard import KeyboardDevice
+    from surgsim_envs.haptics.replay import ReplayDevice
+    from surgsim_envs.haptics.scripted import ScriptedDevice, TrajectorySpec
+    from surgsim_envs.haptics.udp_bridge import UdpDevice
+
+    if kind == "scripted":
+        spec = _load_script(args.script) if args.script else default_script(args.task, physics, args.seed, args.tremor)
+        return ScriptedDevice(TrajectorySpec.from_dict(spec), limits=limits)
+    if kind == "replay":
+        return ReplayDevice(arg, limits=limits)
+    if kind == "keyboard":
+        return KeyboardDevice(limits=limits)
+    return UdpDevice(port=int(arg), limits=limits)
+
+
+def run(args) -> int:
+    from surgsim_envs.haptics.device import DeviceLimits
+    from surgsim_envs.haptics.servo import DeviceMapping, ServoConfig, ServoLoop
+
+    kind, arg = parse_device(args.device)
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ConfigError(f"--duration must be > 0 s, got {args.duration}")
+    if not args.headless and not os.environ.get("DISPLAY") and sys.platform.startswith("linux"):
+        print("surgsim teleop: no display ($DISPLAY is not set), so the interactive viewer cannot open.\n"
+              f"Run headless instead, e.g.: surgsim teleop {args.task} --device {args.device} --headless "
+              "--out surgsim-out/teleop --duration 5", file=sys.stderr)
+        return 2
+    if kind == "keyboard" and args.headless:
+        raise ConfigError("--device keyboard needs the interactive viewer; drop --headless (and run with a display)")
+    try:
+        from surgsim_envs.haptics import scene_adapter
+    except ImportError as exc:
+        raise SurgSimError(f"teleop needs the MuJoCo scene (surgsim_envs.scene), which is unavailable: {exc}") from None
+
+    print(f"building the {args.task} scene ...", flush=True)
+    physics = scene_adapter.make_haptic_simulation(args.task, spacing=args.spacing)
+    limits = DeviceLimits(max_force=args.max_force)
+    device = make_device(kind, arg, args, physics, limits)
+    duration = args.duration
+    if duration is None:
+        if kind in ("scripted", "replay"):
+            duration = float(device.duration) + 0.2
+        else:  # live devices: until the viewer closes; headless needs a bound
+            duration = 10.0 if args.headless else math.inf
+    config = ServoConfig(rate_hz=args.rate, max_force_rate=args.max_force_rate, extrapolation=args.extrapolation,
+                         mapping=DeviceMapping(origin=tuple(physics.home_position)))
+    with device:
+        if kind == "udp":
+            print(f"listening for pose packets on udp://{device.address[0]}:{device.address[1]}", flush=True)
+        loop = ServoLoop(device, physics, config)
+        if args.headless:
+            stats = _run_headless(loop, physics, args, duration)
+        else:
+            stats = _run_viewer(loop, physics, device, kind, duration)
+    print(stats.summary())
+    if args.headless:
+        out = Path(args.out)
+        device.force_log.to_csv(out / "force_log.csv")
+        (out / "stats.json").write_text(json.dumps({"task": args.task, "device": args.device, **stats.as_dict()}, indent=2))
+        print(f"wrote {out / f'teleop_{args.task}.mp4'}, {out / 'force_log.csv'}, {out / 'stats.json'}")
+    return 0
+
+
+def _run_headless(loop, physics, args, duration: float):
+    import cv2
+    import mujoco
+
+    from surgsim_envs.errors import RenderingUnavailableError
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    sim = physics.sim
+    width, height = int(args.size[0]), int(args.size[1])
+    try:
+        renderer = mujoco.Renderer(sim.model, height=height, width=width)
+    except Exception as exc:
+        raise RenderingUnavailableError(
+            f"offscreen rendering failed ({exc}); set MUJOCO_GL=egl or MUJOCO_GL=osmesa (apt-get install libosmesa6)"
+        ) from None
+    cam = args.camera if mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_CAMERA, args.camera) >= 0 else -1
+    scratch = mujoco.MjData(sim.model)
+    path = out / f"teleop_{args.task}.mp4"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(args.fps), (width, height))
+
+    def frame(_loop) -> None:
+        with _loop.physics_lock:  # copy the state briefly; render outside the lock
+            sim.sync_visual()
+            mujoco.mj_copyData(scratch, sim.model, sim.data)
+        renderer.update_scene(scratch, camera=cam)
+        writer.write(cv2.cvtColor(renderer.render(), cv2.COLOR_RGB2BGR))
+
+    try:
+        stats = loop.run_realtime(duration, on_frame=frame, frame_period=1.0 / args.fps)
+    finally:
+        writer.release()
+        renderer.close()
+    return stats
+
+
+def _run_viewer(loop, physics, device, kind: str, duration: float):  # pragma: no cover - needs a display
+    import mujoco.viewer
+
+    sim = physics.sim
+    callback = device.key_callback if kind == "keyboard" else None
+    with mujoco.viewer.launch_passive(sim.model, sim.data, key_callback=callback) as viewer:
+        def frame(_loop):
+            if not viewer.is_running():
+                return False
+            with _loop.physics_lock:
+                sim.sync_visual()
+                viewer.sync()
+            return True
+
+        stats = loop.run_realtime(duration if math.isfinite(duration) else 1e9, on_frame=frame, frame_period=1 / 60)
+    return stats

@@ -1,0 +1,374 @@
+"""Linear / corotational tetrahedral FEM: the "basic model" of paper 004 (section 2.1).
+
+Linear 4-node tets, Hooke's law ``sigma = D eps`` (paper eq. 2), ``eps = B u`` (eq. 3),
+``K_e = B^T D B V``; the global system ``K U = R`` with Dirichlet nodes. Additions for
+interactive surgery simulation:
+
+* corotational option (``corotational=True``, default): each tet's rotation R (polar
+  decomposition of F) is factored out, ``f_e = -R K_e (R^T x - X)``, so large rigid rotations
+  produce no spurious forces;
+* locking-free volumetric term (``formulation="anp"``, default): averaged nodal pressure of
+  Bonet & Burton (1998), linearised: deviatoric stress per tet, pressure from the volume change
+  averaged over each node's incident tets. ``formulation="standard"`` is plain ``B^T D B V``
+  (locks at nu -> 0.5);
+* integrators: ``"implicit"`` (backward Euler, one linear solve per step; sparse LU of
+  ``M + dt C + dt^2 K`` for the linear model, matrix-free Jacobi-PCG with the warped stiffness
+  for the corotational one) and ``"symplectic"`` (semi-implicit Euler, numba kernels);
+* damping ``C = alpha M + beta K`` with alpha = material ``damping`` (1/s, per element) and
+  beta = ``stiffness_damping`` (s, default ``material.extra.get("stiffness_damping", 0)``).
+
+Units: m, kg, s, N, Pa. See docs/models/fem.md for equations, stable region and timings.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from surgsim_envs.errors import ConfigError
+from surgsim_envs.tissue import fem_assembly as asm
+from surgsim_envs.tissue import fem_kernels as kern
+from surgsim_envs.tissue.base import TissueModel
+
+FORMULATIONS = ("anp", "standard")
+
+
+class TetFEMModel(TissueModel):
+    """Linear tetrahedral FEM, optionally corotational, with a locking-free (ANP) option.
+
+    Parameters (besides those of :class:`TissueModel`)
+    ----------
+    corotational: remove per-element rotations (large-rotation capable). Default True.
+    formulation: ``"anp"`` (averaged nodal pressure, locking-free; default) or ``"standard"``.
+    stiffness_damping: Rayleigh stiffness coefficient beta (s), >= 0.
+    rotation_iters: Newton iterations of the polar decomposition per step (warm-started; 1 is
+        enough at interactive dt, the rotation keeps converging over the following steps).
+    cg_tol: relative residual of the implicit corotational solve.
+    """
+
+    name = "fem"
+    summary = "Linear tetrahedral FEM (paper 004 basic model): corotational, locking-free ANP, implicit/symplectic"
+    integrators = ("implicit", "symplectic")
+
+    def __init__(self, volume, material="liver", *, integrator=None, corotational: bool = True,
+                 formulation: str = "anp", stiffness_damping: float | None = None,
+                 rotation_iters: int = 1, cg_tol: float = 1e-6, **base_kwargs):
+        if not isinstance(corotational, (bool, np.bool_)):
+            raise ConfigError(f"corotational must be True or False, got {corotational!r}")
+        if formulation not in FORMULATIONS:
+            raise ConfigError(f"formulation must be one of {list(FORMULATIONS)}, got {formulation!r}; "
+                              "'anp' (averaged nodal pressure) avoids volumetric locking for nu near 0.5")
+        super().__init__(volume, material, integrator=integrator, **base_kwargs)
+        if stiffness_damping is None:
+            stiffness_damping = float(self.material.extra.get("stiffness_damping", 0.0))
+        if not (math.isfinite(stiffness_damping) and stiffness_damping >= 0):
+            raise ConfigError(f"stiffness_damping (Rayleigh beta, s) must be >= 0, got {stiffness_damping!r}")
+        if not (math.isfinite(cg_tol) and 0 < cg_tol < 1):
+            raise ConfigError(f"cg_tol must lie in (0, 1), got {cg_tol!r}")
+        if not (isinstance(rotation_iters, (int, np.integer)) and rotation_iters >= 1):
+            raise ConfigError(f"rotation_iters must be an integer >= 1, got {rotation_iters!r}")
+        self.corotational = bool(corotational)
+        self.formulation = formulation
+        self.stiffness_damping = float(stiffness_damping)
+        self.rotation_iters = int(rotation_iters)
+        self.cg_tol = float(cg_tol)
+        self.last_cg_iterations = 0
+        self._setup()
+
+    # ------------------------------------------------------------------------------------------
+    # Precomputation
+    def _setup(self) -> None:
+        vol = self.volume
+        n = vol.n_nodes
+        self.tets = np.ascontiguousarray(vol.tets, dtype=np.int64)
+        self.grads, self.tet_volume, self.dm_inv = asm.shape_gradients(self.rest_positions, self.tets)
+        young, poisson = self.fields["young"], self.fields["poisson"]
+        bad = np.flatnonzero((young <= 0) | (poisson >= 0.5) | (poisson <= -1))
+        if len(bad):
+            raise ConfigError(f"linear FEM needs E > 0 and -1 < nu < 0.5; element {bad[0]} has E={young[bad[0]]!r} Pa, "
+                              f"nu={poisson[bad[0]]!r}. Use nu <= 0.499 for nearly incompressible tissue")
+        self.mu, self.lam, kappa = asm.lame_parameters(young, poisson)
+        self.node_volume = asm.nodal_volumes(self.tets, self.tet_volume, n)
+        self.kappa_node = asm.nodal_average(self.tets, self.tet_volume, kappa, n)
+        # mass-proportional damping per node: mass-weighted average of the element values
+        md = np.zeros(n)
+        np.add.at(md, self.tets.ravel(), np.repeat(self.fields["density"] * self.tet_volume / 4.0 * self.fields["damping"], 4))
+        self.alpha_node = md / self.masses
+        b = asm.b_matrices(self.grads)
+        if self.formulation == "anp":
+            self._ke = asm.element_stiffness(b, asm.deviatoric_d_matrices(young, poisson), self.tet_volume)
+        else:
+            self._ke = asm.element_stiffness(b, asm.d_matrices(young, poisson), self.tet_volume)
+        self.stiffness_matrix = self._assemble_stiffness(None)
+        self._kdiag_node = self.stiffness_matrix.diagonal().reshape(-1, 3).mean(axis=1)
+        t = len(self.tets)
+        self._quats = np.zeros((t, 4))
+        self._quats[:, 0] = 1.0
+        self._rots = np.ascontiguousarray(np.broadcast_to(np.eye(3), (t, 3, 3)).copy())
+        self._theta = np.zeros(n)
+        self._eps = np.zeros((t, 6))
+        self._ybuf = np.zeros((n, 3))
+        self._fbuf = np.zeros((n, 3))
+        self._lin = None          # cached (dt, fixed mask, LU of A_ff) for the linear implicit step
+        self._crit = None
+
+    def _assemble_stiffness(self, rotations) -> sp.csr_matrix:
+        """Global (3N,3N) stiffness (N/m), warped by per-element ``rotations`` if given."""
+        ke = self._ke if rotations is None else asm.rotate_element_matrices(self._ke, rotations)
+        k = asm.assemble(self.tets, ke, self.n_nodes)
+        if self.formulation == "anp":
+            k = k + asm.anp_volumetric_matrix(self.tets, self.grads, self.tet_volume, self.kappa_node,
+                                              self.n_nodes, rotations)
+        return k.tocsr()
+
+    @property
+    def _anp(self) -> bool:
+        return self.formulation == "anp"
+
+    # ------------------------------------------------------------------------------------------
+    # Kernels wrappers
+    def _update_rotations(self, x, tol=None, max_iter=None) -> None:
+        """Polar rotations at positions x: ``rotation_iters`` warm-started Newton steps while
+        stepping (tol None), or iterate to ``tol`` rad (energies, static solves)."""
+        if self.corotational:
+            if tol is None:
+                kern.update_rotations(x, self.tets, self.dm_inv, self._quats, self._rots, self.rotation_iters, 1e-12)
+            else:
+                kern.update_rotations(x, self.tets, self.dm_inv, self._quats, self._rots, max_iter or 50, tol)
+
+    def _stiffness_product(self, y, subtract_rest: bool, out=None) -> np.ndarray:
+        out = np.zeros_like(y) if out is None else out
+        kern.stiffness_product(np.ascontiguousarray(y), self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam,
+                               self._rots, subtract_rest, self._anp, self.kappa_node, self.node_volume,
+                               self._theta, self._eps, out, y, self._quats, 0, 0.0, False)
+        return out
+
+    def elastic_forces(self, positions=None) -> np.ndarray:
+        """(N,3) elastic nodal forces (N) at ``positions`` (default: current), no damping."""
+        x = self.positions if positions is None else np.asarray(positions, dtype=np.float64)
+        if x.shape != self.positions.shape:
+            raise ConfigError(f"positions must have shape {self.positions.shape}, got {x.shape}")
+        self._update_rotations(x, tol=1e-10)
+        return -self._stiffness_product(x, True)
+
+    def internal_forces(self) -> np.ndarray:
+        """Elastic + viscous (Rayleigh beta K v and mass-proportional alpha M v) nodal forces (N)."""
+        self._update_rotations(self.positions, tol=1e-10)
+        y = self.positions + self.stiffness_damping * self.velocities
+        f = -self._stiffness_product(y, True)
+        return f - (self.alpha_node * self.masses)[:, None] * self.velocities
+
+    def elastic_energy(self) -> float:
+        self._update_rotations(self.positions, tol=1e-10)
+        return float(kern.elastic_energy(self.positions, self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam,
+                                         self._rots, self._anp, self.kappa_node, self.node_volume, self._theta))
+
+    def inverted_elements(self) -> int:
+        """Tets with det F <= 0 at the current positions."""
+        return int(kern.count_inverted(self.positions, self.tets))
+
+    def element_stress(self) -> np.ndarray:
+        """(T,3,3) Cauchy stress (Pa) per tet (linear/corotated: R sigma R^T), incl. ANP pressure."""
+        self._update_rotations(self.positions, tol=1e-10)
+        x = self.positions
+        ds = np.stack([x[self.tets[:, k]] - x[self.tets[:, 0]] for k in (1, 2, 3)], axis=2)
+        g = np.einsum("tji,tjk,tkl->til", self._rots, ds, self.dm_inv) - np.eye(3)
+        eps = 0.5 * (g + g.transpose(0, 2, 1))
+        tr = np.trace(eps, axis1=1, axis2=2)
+        if self._anp:
+            theta = np.zeros(self.n_nodes)
+            np.add.at(theta, self.tets.ravel(), np.repeat(0.25 * self.tet_volume * tr, 4))
+            p_node = self.kappa_node * theta / self.node_volume
+            p = p_node[self.tets].mean(axis=1)
+            sig = 2.0 * self.mu[:, None, None] * (eps - tr[:, None, None] / 3.0 * np.eye(3)) + p[:, None, None] * np.eye(3)
+        else:
+            sig = 2.0 * self.mu[:, None, None] * eps + (self.lam * tr)[:, None, None] * np.eye(3)
+        return np.einsum("tij,tjk,tlk->til", self._rots, sig, self._rots)
+
+    # ------------------------------------------------------------------------------------------
+    # Stability
+    def critical_dt(self, method: str = "spectral") -> float:
+        """Largest stable dt (s) of the symplectic integrator, times a 0.9 safety factor.
+
+        ``"spectral"`` (default): 2 / omega_max with omega_max^2 the largest eigenvalue of
+        M^-1 K (rest stiffness, Lanczos, cached), reduced for stiffness damping beta by
+        ``sqrt(1 + z^2) - z``, z = beta omega / 2. ``"geometric"``: min over tets of the
+        inscribed-sphere diameter 2 r_e over the dilatational wave speed sqrt((lambda + 2 mu)/rho)
+        (cheap, usually within a factor ~2 of the spectral value; see docs/models/fem.md).
+        """
+        if method == "geometric":
+            return 0.9 * self._geometric_dt()
+        if method != "spectral":
+            raise ConfigError(f"critical_dt method must be 'spectral' or 'geometric', got {method!r}")
+        if self._crit is None:
+            self._crit = self._spectral_dt()
+        return self._crit
+
+    def _max_omega(self) -> float:
+        minv = 1.0 / np.sqrt(np.repeat(self.masses, 3))
+        a = sp.diags(minv) @ self.stiffness_matrix @ sp.diags(minv)
+        try:
+            lam = spla.eigsh(a, k=1, which="LA", return_eigenvectors=False, tol=1e-4, maxiter=5000)[0]
+        except spla.ArpackNoConvergence as exc:  # pragma: no cover - fall back on the Gershgorin bound
+            lam = float(np.max(np.abs(a).sum(axis=1)))
+            del exc
+        return math.sqrt(max(float(lam), 1e-300))
+
+    def _spectral_dt(self) -> float:
+        omega = self._max_omega()
+        z = 0.5 * self.stiffness_damping * omega
+        return 0.9 * (2.0 / omega) * (math.sqrt(1.0 + z * z) - z)
+
+    def _geometric_dt(self) -> float:
+        x = self.rest_positions
+        t = self.tets
+        faces = ((1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2))
+        area = np.zeros(len(t))
+        for a, b, c in faces:
+            area += 0.5 * np.linalg.norm(np.cross(x[t[:, b]] - x[t[:, a]], x[t[:, c]] - x[t[:, a]]), axis=1)
+        r_in = 3.0 * self.tet_volume / area
+        c = np.sqrt((self.lam + 2.0 * self.mu) / self.fields["density"])
+        return float(np.min(2.0 * r_in / c))
+
+    # ------------------------------------------------------------------------------------------
+    # Stepping
+    def _advance(self, dt: float, forces: np.ndarray, stiffness) -> None:
+        forces = np.ascontiguousarray(forces, dtype=np.float64)
+        if self.integrator == "symplectic":
+            kern.symplectic_step(self.positions, self.velocities, forces, self.masses, self.alpha_node, self.gravity,
+                                 self.fixed, dt, self.stiffness_damping, self.corotational, self.rotation_iters, 1e-12,
+                                 self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam, self._quats, self._rots,
+                                 self._anp, self.kappa_node, self.node_volume, self._theta, self._eps,
+                                 self._ybuf, self._fbuf)
+            return
+        kc = None
+        if stiffness is not None:
+            kc = np.asarray(stiffness, dtype=np.float64).reshape(-1)
+            if kc.shape != (self.n_nodes,) or not np.all(np.isfinite(kc)) or np.any(kc < 0):
+                raise ConfigError(f"stiffness must be a finite (N,)={self.n_nodes} array of >= 0 N/m, got shape {kc.shape}")
+            if not kc.any():
+                kc = None
+        if self.corotational:
+            self._implicit_corotational(dt, forces, kc)
+        else:
+            self._implicit_linear(dt, forces, kc)
+
+    def _prescribed_velocity(self, dt: float) -> np.ndarray:
+        vc = np.zeros_like(self.positions)
+        fx = self.fixed
+        vc[fx] = (self.fixed_targets[fx] - self.positions[fx]) / dt
+        return vc
+
+    def _implicit_linear(self, dt, forces, kc) -> None:
+        free = ~self.fixed
+        free3 = np.repeat(free, 3)
+        c_k = self.stiffness_damping * dt + dt * dt
+        mdiag = np.repeat(self.masses * (1.0 + self.alpha_node * dt), 3)
+        lin = self._lin
+        if lin is None or lin[0] != dt or not np.array_equal(lin[1], self.fixed):
+            a = (sp.diags(mdiag) + c_k * self.stiffness_matrix).tocsr()
+            a_ff = a[free3][:, free3].tocsc()
+            lin = self._lin = (dt, self.fixed.copy(), spla.splu(a_ff))
+        lu = lin[2]
+        x, v = self.positions, self.velocities
+        k = self.stiffness_matrix
+        f_el = -(k @ (x - self.rest_positions).ravel())
+        rhs = np.repeat(self.masses, 3) * v.ravel() + dt * (f_el + forces.ravel() + np.repeat(self.masses, 3) * np.tile(self.gravity, self.n_nodes))
+        vc = self._prescribed_velocity(dt).ravel()
+        if self.fixed.any():
+            rhs = rhs - c_k * (k @ vc)
+        rhs_f = rhs[free3]
+        if kc is None:
+            v_f = lu.solve(rhs_f)
+        else:
+            extra = dt * dt * np.repeat(kc, 3)[free3]
+            a_ff = sp.diags(mdiag[free3] + extra) + c_k * k[free3][:, free3]
+            pre = spla.LinearOperator(a_ff.shape, matvec=lu.solve)
+            v_f, _ = spla.cg(a_ff, rhs_f, x0=lu.solve(rhs_f), M=pre, rtol=self.cg_tol, maxiter=200)
+        vnew = vc.copy()
+        vnew[free3] = v_f
+        self.velocities = vnew.reshape(-1, 3)
+        self.positions = self.positions + dt * self.velocities
+
+    def _implicit_corotational(self, dt, forces, kc) -> None:
+        x, v = self.positions, self.velocities
+        self._update_rotations(x)
+        c_k = self.stiffness_damping * dt + dt * dt
+        diag = self.masses * (1.0 + self.alpha_node * dt)
+        if kc is not None:
+            diag = diag + dt * dt * kc
+        f_el = -self._stiffness_product(x, True)
+        rhs = self.masses[:, None] * v + dt * (f_el + forces + self.masses[:, None] * self.gravity[None, :])
+        vc = self._prescribed_velocity(dt)
+        free = ~self.fixed
+        if self.fixed.any():
+            rhs -= c_k * self._stiffness_product(vc, False)
+        rhs[self.fixed] = 0.0
+        precond = diag + c_k * self._kdiag_node
+        sol = np.where(free[:, None], v, 0.0)
+        self.last_cg_iterations = int(kern.pcg_solve(
+            rhs, sol, diag, c_k, precond, free, self.cg_tol, 10 * 3 * self.n_nodes, self.tets, self.dm_inv,
+            self.tet_volume, self.mu, self.lam, self._rots, self._anp, self.kappa_node, self.node_volume,
+            self._theta, self._eps))
+        sol[self.fixed] = vc[self.fixed]
+        self.velocities = sol
+        self.positions = x + dt * sol
+
+    # ------------------------------------------------------------------------------------------
+    # Static equilibrium
+    def static_solve(self, forces: np.ndarray | None = None, *, max_iter: int = 50, tol: float = 1e-9) -> np.ndarray:
+        """Equilibrium positions (N,3) m under external ``forces`` (N,3) N (+ gravity) and the
+        current Dirichlet nodes/targets: solves K u = R (linear) or iterates with the warped
+        stiffness R K R^T until the update is below ``tol`` times the body size (corotational).
+        Updates ``positions`` (velocities are zeroed) and returns a copy.
+        """
+        if not self.fixed.any():
+            raise ConfigError("static_solve needs Dirichlet nodes (the free body has rigid modes); "
+                              "call set_fixed(nodes) first")
+        if forces is None:
+            forces = self.external_forces
+        forces = np.asarray(forces, dtype=np.float64)
+        if forces.shape != self.positions.shape or not np.all(np.isfinite(forces)):
+            raise ConfigError(f"forces must be a finite array of shape {self.positions.shape}, got {forces.shape}")
+        if not (isinstance(max_iter, (int, np.integer)) and max_iter >= 1):
+            raise ConfigError(f"max_iter must be a positive integer, got {max_iter!r}")
+        load = forces + self.masses[:, None] * self.gravity[None, :]
+        free = ~self.fixed
+        free3 = np.repeat(free, 3)
+        x = self.positions.copy()
+        x[self.fixed] = self.fixed_targets[self.fixed]
+        size = float(np.ptp(self.rest_positions, axis=0).max())
+        lu = None
+        iters = max_iter if self.corotational else 1
+        for it in range(iters):
+            if self.corotational:
+                self._update_rotations(x, tol=1e-12, max_iter=100)
+                k = self._assemble_stiffness(self._rots)
+                lu = spla.splu(k[free3][:, free3].tocsc())
+            elif lu is None:
+                lu = spla.splu(self.stiffness_matrix[free3][:, free3].tocsc())
+            r = (load - self._stiffness_product(x, True)).ravel()
+            dx = lu.solve(r[free3])
+            if not np.all(np.isfinite(dx)):
+                raise ConfigError("static_solve: singular stiffness (check that the fixed nodes hold the body)")
+            x[free] += dx.reshape(-1, 3)
+            self.static_iterations = it + 1
+            if np.max(np.abs(dx)) < tol * size:
+                break
+        self.positions = x
+        self.velocities = np.zeros_like(x)
+        return x.copy()
+
+    def _reset_state(self) -> None:
+        self._quats[:] = 0.0
+        self._quats[:, 0] = 1.0
+        self._rots[:] = np.eye(3)
+
+    def describe(self) -> dict:
+        out = super().describe()
+        out.update(corotational=self.corotational, formulation=self.formulation,
+                   stiffness_damping=self.stiffness_damping)
+        return out
