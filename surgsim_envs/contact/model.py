@@ -1,0 +1,403 @@
+"""Tool-tissue contact: penalty normal force with one-sided damping, Coulomb friction with stick state.
+
+Contact law for a candidate tissue node ``i`` at ``x`` (velocity ``v``) and a tool geom ``g``
+(signed distance ``phi(x)``, outward unit normal ``n``, geom velocity ``[w, u]`` at its origin ``p``):
+
+    depth   = max(-phi(x), 0)                             penetration, m
+    v_rel   = v - (u + w x (x - p))                       node velocity relative to the geom surface
+    v_n     = v_rel . n                                   < 0 while approaching / compressing
+    f_n     = k_n depth + c_n max(-v_n, 0)                normal force magnitude, N (always >= 0)
+    f_t     = stick/slip spring, |f_t| <= mu_tool f_n     see :mod:`surgsim_envs.contact.friction`
+    F_i    += f_n n + f_t                                 force ON the tissue node
+    F_tool -= f_n n + f_t,  tau_tool -= (x - c_tool) x (f_n n + f_t)
+
+The damping acts only while the node approaches the surface, so the contact never pulls (no
+adhesion): a separating node feels at most the elastic ``k_n depth``, and nothing once it is out.
+Reaction torques are taken with the force applied at the node position, so tissue plus tools
+conserve linear *and* angular momentum exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from surgsim_envs.contact.friction import stick_slip
+from surgsim_envs.contact.report import ContactReport
+from surgsim_envs.contact.shapes import N_KINDS, bounding_radius, local_outside, world_sdf
+from surgsim_envs.errors import ConfigError
+
+#: default explicit-stability ratio k_n dt^2 / m used by :func:`auto_stiffness`
+AUTO_STIFFNESS_RATIO = 0.1
+
+
+def auto_stiffness(masses, dt: float, ratio: float = AUTO_STIFFNESS_RATIO) -> float:
+    """Penalty stiffness k_n (N/m) that keeps explicit contact integration stable.
+
+    A node of mass m on a penalty spring k_n is a harmonic oscillator; symplectic Euler is stable
+    for k_n dt^2 / m < 4 and accurate only well below that. This returns
+    ``k_n = ratio * min(masses) / dt^2`` so that ``k_n dt^2 / m <= ratio`` (default 0.1, i.e. 40x
+    below the stability limit, leaving room for the tissue's own springs acting on the same node).
+
+    masses: (N,) node masses in kg (use the candidate nodes' masses); dt: time step in s;
+    ratio: target k_n dt^2 / m_min in (0, 4).
+    """
+    m = np.asarray(masses, dtype=np.float64).reshape(-1)
+    if len(m) == 0 or not np.all(np.isfinite(m)) or np.any(m <= 0):
+        raise ConfigError("auto stiffness needs positive finite node masses in kg (e.g. tissue.masses)")
+    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
+        raise ConfigError(f"dt must be a positive number of seconds, got {dt!r}")
+    if not (0.0 < ratio < 4.0):
+        raise ConfigError(f"ratio k_n dt^2/m must lie in (0, 4) for explicit stability, got {ratio!r}; use ~0.1")
+    return float(ratio * m.min() / (dt * dt))
+
+
+@dataclass
+class ContactParams:
+    """Contact law parameters (per node: they do not scale with mesh resolution).
+
+    stiffness: k_n, N/m per node, normal penalty spring; or "auto" (needs ``node_masses`` in
+        :class:`ContactModel`): chosen per call from the smallest candidate node mass and dt by
+        :func:`auto_stiffness` so explicit contact is stable.
+    damping: c_n, N s/m per node, normal damping, acting only while the node approaches the
+        surface (never pulls, so never adhesive).
+    tangential_stiffness: k_t, N/m per node, stick spring of the Coulomb friction; None = k_n.
+    """
+
+    stiffness: float | str = 200.0
+    damping: float = 0.5
+    tangential_stiffness: float | None = None
+
+    def __post_init__(self) -> None:
+        if isinstance(self.stiffness, str):
+            if self.stiffness != "auto":
+                raise ConfigError(f"stiffness must be a number in N/m or 'auto', got {self.stiffness!r}")
+        elif not (_is_number(self.stiffness) and self.stiffness > 0):
+            raise ConfigError(f"stiffness must be > 0 N/m (typical 50-2000 per node) or 'auto', got {self.stiffness!r}")
+        if not (_is_number(self.damping) and self.damping >= 0):
+            raise ConfigError(f"damping must be >= 0 N s/m, got {self.damping!r}")
+        if self.tangential_stiffness is not None and not (
+                _is_number(self.tangential_stiffness) and self.tangential_stiffness > 0):
+            raise ConfigError(f"tangential_stiffness must be > 0 N/m or None (= stiffness), "
+                              f"got {self.tangential_stiffness!r}")
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+@dataclass
+class ContactResult:
+    """Output of :meth:`ContactModel.compute` (arrays owned by the model, overwritten next call).
+
+    forces: (N,3) N, contact force ON each tissue node (zeros off contact).
+    stiffness: (N,) N/m, isotropic contact stiffness per node (sum over its contacts of
+        max(k_n, k_t) while sticking, k_n while slipping) for implicit tissue integrators.
+    tool_force: (T,3) N, total force ON each tool (minus the sum of its forces on the tissue).
+    tool_torque: (T,3) N m, torque ON each tool about ``tool_com``.
+    report: per-tool summary.
+    geom_normal_force: (G,) N, sum of normal force magnitudes per geom.
+    geom_tangential_force: (G,) N, magnitude of the summed friction force per geom.
+    """
+
+    forces: np.ndarray
+    stiffness: np.ndarray
+    tool_force: np.ndarray
+    tool_torque: np.ndarray
+    report: ContactReport
+    geom_normal_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    geom_tangential_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+# Status codes returned by the kernel (negative = bad input at a geom index).
+_OK, _BAD_KIND, _BAD_TOOL, _BAD_SIZE = 0, 1, 2, 3
+
+
+@njit(cache=True)
+def _contact_kernel(positions, velocities, cand, kind, tool, size, gpos, gmat, gvel, tool_com, mu,
+                    k_n, c_n, k_t, anchor_local, anchor_on,
+                    forces, stiffness, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv,
+                    tool_fn, tool_ft, tool_ftv, contacts, slipping, penetration, last_contact, last_slip,
+                    err):
+    G = kind.shape[0]
+    T = tool_force.shape[0]
+    # validate geoms and precompute bounding radii
+    radius = np.empty(G)
+    for g in range(G):
+        if kind[g] < 0 or kind[g] >= 4:
+            err[0] = 1
+            err[1] = g
+            return
+        if tool[g] < 0 or tool[g] >= T:
+            err[0] = 2
+            err[1] = g
+            return
+        r = bounding_radius(kind[g], size[g, 0], size[g, 1], size[g, 2])
+        if not (r > 0.0) or not (size[g, 0] > 0.0):
+            err[0] = 3
+            err[1] = g
+            return
+        radius[g] = r
+    for t in range(T):
+        for k in range(3):
+            tool_force[t, k] = 0.0
+            tool_torque[t, k] = 0.0
+            tool_ftv[t, k] = 0.0
+        tool_fn[t] = 0.0
+        contacts[t] = 0
+        slipping[t] = 0
+        penetration[t] = 0.0
+        last_contact[t] = -1
+        last_slip[t] = -1
+    for g in range(G):
+        geom_fn[g] = 0.0
+        for k in range(3):
+            geom_ftv[g, k] = 0.0
+    nl = np.empty(3)
+    cl = np.empty(3)
+    nrm = np.empty(3)
+    cpt = np.empty(3)
+    ft = np.empty(3)
+    C = cand.shape[0]
+    for c in range(C):
+        i = cand[c]
+        x0 = positions[i, 0]
+        x1 = positions[i, 1]
+        x2 = positions[i, 2]
+        fx = 0.0
+        fy = 0.0
+        fz = 0.0
+        kk = 0.0
+        for g in range(G):
+            dx = x0 - gpos[g, 0]
+            dy = x1 - gpos[g, 1]
+            dz = x2 - gpos[g, 2]
+            rg = radius[g]
+            if dx * dx + dy * dy + dz * dz >= rg * rg:
+                anchor_on[c, g] = 0
+                continue
+            # cheap exact inside test in the geom frame before the full signed distance
+            qx = gmat[g, 0] * dx + gmat[g, 3] * dy + gmat[g, 6] * dz
+            qy = gmat[g, 1] * dx + gmat[g, 4] * dy + gmat[g, 7] * dz
+            qz = gmat[g, 2] * dx + gmat[g, 5] * dy + gmat[g, 8] * dz
+            if local_outside(kind[g], size[g, 0], size[g, 1], size[g, 2], qx, qy, qz):
+                anchor_on[c, g] = 0
+                continue
+            phi = world_sdf(kind[g], size, gpos, gmat, g, x0, x1, x2, nl, cl, nrm, cpt)
+            if phi >= 0.0:
+                anchor_on[c, g] = 0
+                continue
+            depth = -phi
+            # relative normal velocity: v - (u + w x (x - p))
+            vsx = gvel[g, 3] + gvel[g, 1] * dz - gvel[g, 2] * dy
+            vsy = gvel[g, 4] + gvel[g, 2] * dx - gvel[g, 0] * dz
+            vsz = gvel[g, 5] + gvel[g, 0] * dy - gvel[g, 1] * dx
+            vn = ((velocities[i, 0] - vsx) * nrm[0] + (velocities[i, 1] - vsy) * nrm[1]
+                  + (velocities[i, 2] - vsz) * nrm[2])
+            f_n = k_n * depth
+            if vn < 0.0:
+                f_n -= c_n * vn
+            t = tool[g]
+            is_new = anchor_on[c, g] == 0
+            anchor_on[c, g] = 1
+            slip = stick_slip(x0, x1, x2, nrm, f_n, mu[t], k_t, gpos, gmat, g, anchor_local, c, is_new, ft)
+            gx = f_n * nrm[0] + ft[0]
+            gy = f_n * nrm[1] + ft[1]
+            gz = f_n * nrm[2] + ft[2]
+            fx += gx
+            fy += gy
+            fz += gz
+            if slip:
+                kk += k_n
+            else:
+                kk += k_n if k_n > k_t else k_t
+            # reactions on the tool (applied at the node position)
+            tool_force[t, 0] -= gx
+            tool_force[t, 1] -= gy
+            tool_force[t, 2] -= gz
+            rx = x0 - tool_com[t, 0]
+            ry = x1 - tool_com[t, 1]
+            rz = x2 - tool_com[t, 2]
+            tool_torque[t, 0] -= ry * gz - rz * gy
+            tool_torque[t, 1] -= rz * gx - rx * gz
+            tool_torque[t, 2] -= rx * gy - ry * gx
+            # bookkeeping
+            geom_fn[g] += f_n
+            geom_ftv[g, 0] += ft[0]
+            geom_ftv[g, 1] += ft[1]
+            geom_ftv[g, 2] += ft[2]
+            tool_fn[t] += f_n
+            tool_ftv[t, 0] += ft[0]
+            tool_ftv[t, 1] += ft[1]
+            tool_ftv[t, 2] += ft[2]
+            if last_contact[t] != c:
+                last_contact[t] = c
+                contacts[t] += 1
+            if slip and last_slip[t] != c:
+                last_slip[t] = c
+                slipping[t] += 1
+            if depth > penetration[t]:
+                penetration[t] = depth
+        forces[i, 0] = fx
+        forces[i, 1] = fy
+        forces[i, 2] = fz
+        stiffness[i] = kk
+    for g in range(G):
+        geom_ft[g] = math.sqrt(geom_ftv[g, 0] ** 2 + geom_ftv[g, 1] ** 2 + geom_ftv[g, 2] ** 2)
+    for t in range(T):
+        tool_ft[t] = math.sqrt(tool_ftv[t, 0] ** 2 + tool_ftv[t, 1] ** 2 + tool_ftv[t, 2] ** 2)
+    err[0] = 0
+
+
+def _array(value, shape, dtype, name, unit):
+    arr = np.ascontiguousarray(value, dtype=dtype)
+    if arr.shape != shape:
+        raise ConfigError(f"{name} must have shape {shape} ({unit}), got {np.shape(value)}")
+    return arr
+
+
+class ContactModel:
+    """Penalty contact between tissue nodes and tool shapes, with Coulomb stick/slip friction.
+
+    n_nodes: number of tissue nodes N.
+    candidate_nodes: (C,) unique indices of the nodes that may touch tools (usually surface nodes).
+    tool_friction: (T,) Coulomb coefficient mu >= 0 per tool (also fixes the number of tools T).
+    params: :class:`ContactParams`.
+    node_masses: (N,) kg, needed only for ``stiffness="auto"``.
+
+    Call :meth:`compute` once per physics step (between ``mj_step1`` and ``mj_step2``). It keeps
+    the friction anchors between calls; :meth:`reset` clears them. The returned arrays are reused
+    on every call (no allocation in the loop): copy what you want to keep.
+    """
+
+    def __init__(self, n_nodes: int, candidate_nodes, tool_friction, params: ContactParams | None = None,
+                 node_masses=None):
+        if not (isinstance(n_nodes, (int, np.integer)) and n_nodes > 0):
+            raise ConfigError(f"n_nodes must be a positive integer, got {n_nodes!r}")
+        self.n_nodes = int(n_nodes)
+        cand = np.asarray(candidate_nodes)
+        if cand.dtype == bool:
+            if cand.shape != (self.n_nodes,):
+                raise ConfigError(f"candidate_nodes mask must have shape ({self.n_nodes},), got {cand.shape}")
+            cand = np.flatnonzero(cand)
+        cand = np.ascontiguousarray(cand.reshape(-1), dtype=np.int64)
+        if len(cand) and (cand.min() < 0 or cand.max() >= self.n_nodes):
+            raise ConfigError(f"candidate_nodes must lie in [0, {self.n_nodes}), got [{cand.min()}, {cand.max()}]")
+        if len(np.unique(cand)) != len(cand):
+            raise ConfigError("candidate_nodes contains duplicates; pass np.unique(candidate_nodes)")
+        self.candidate_nodes = cand
+        mu = np.ascontiguousarray(np.asarray(tool_friction, dtype=np.float64).reshape(-1))
+        if len(mu) == 0 or not np.all(np.isfinite(mu)) or np.any(mu < 0):
+            raise ConfigError(f"tool_friction must be one Coulomb coefficient >= 0 per tool, got {mu.tolist()}")
+        self.tool_friction = mu
+        self.params = params if params is not None else ContactParams()
+        if not isinstance(self.params, ContactParams):
+            raise ConfigError(f"params must be a ContactParams, got {type(self.params).__name__}")
+        self.node_masses = None
+        if node_masses is not None:
+            self.node_masses = _array(np.asarray(node_masses, dtype=np.float64).reshape(-1), (self.n_nodes,),
+                                      np.float64, "node_masses", "kg")
+            if np.any(self.node_masses <= 0):
+                raise ConfigError("node_masses must be > 0 kg")
+        if self.params.stiffness == "auto" and self.node_masses is None:
+            raise ConfigError("stiffness='auto' needs node_masses (kg, e.g. tissue.masses) in ContactModel(...)")
+        self._auto_dt = None
+        self._k_n = None if self.params.stiffness == "auto" else float(self.params.stiffness)
+
+        T = len(mu)
+        self.report = ContactReport.zeros(T)
+        self.result = ContactResult(np.zeros((self.n_nodes, 3)), np.zeros(self.n_nodes), np.zeros((T, 3)),
+                                    np.zeros((T, 3)), self.report)
+        self._tool_ftv = np.zeros((T, 3))
+        self._last = np.zeros((2, T), dtype=np.int64)
+        self._err = np.zeros(2, dtype=np.int64)
+        self._n_geoms = -1
+        self._alloc_geoms(0)
+
+    @property
+    def n_tools(self) -> int:
+        return len(self.tool_friction)
+
+    def stiffness_for(self, dt: float) -> float:
+        """The normal penalty stiffness k_n (N/m) used at time step ``dt`` (s)."""
+        if self.params.stiffness != "auto":
+            return float(self.params.stiffness)
+        if self._auto_dt != dt:
+            self._k_n = auto_stiffness(self.node_masses[self.candidate_nodes] if len(self.candidate_nodes)
+                                       else self.node_masses, dt)
+            self._auto_dt = dt
+        return self._k_n
+
+    def _alloc_geoms(self, G: int) -> None:
+        C = len(self.candidate_nodes)
+        self._n_geoms = G
+        self._anchor_local = np.zeros((C, G, 3))
+        self._anchor_on = np.zeros((C, G), dtype=np.uint8)
+        self.result.geom_normal_force = np.zeros(G)
+        self.result.geom_tangential_force = np.zeros(G)
+        self._geom_ftv = np.zeros((G, 3))
+
+    def reset(self) -> None:
+        """Forget all stick anchors (every contact starts fresh) and zero the outputs."""
+        self._anchor_on[:] = 0
+        self._anchor_local[:] = 0.0
+        r = self.result
+        for arr in (r.forces, r.stiffness, r.tool_force, r.tool_torque, r.geom_normal_force,
+                    r.geom_tangential_force, self.report.normal_force, self.report.tangential_force,
+                    self.report.contacts, self.report.slipping, self.report.penetration):
+            arr[...] = 0
+
+    @property
+    def in_contact(self) -> np.ndarray:
+        """(C, G) bool: candidate node c is in contact with geom g after the last call."""
+        return self._anchor_on.astype(bool)
+
+    def compute(self, positions, velocities, shape_kind, shape_tool, shape_size, shape_pos, shape_mat,
+                shape_vel, tool_com, dt) -> ContactResult:
+        """Contact forces for the current tissue state and tool poses (see module docstring).
+
+        positions, velocities: (N,3) tissue nodes, m and m/s.
+        shape_kind (G,) int codes (SPHERE, CAPSULE, BOX, CYLINDER); shape_tool (G,) int tool index;
+        shape_size (G,3) m (MuJoCo geom_size); shape_pos (G,3) m (d.geom_xpos);
+        shape_mat (G,9) row-major rotations (d.geom_xmat); shape_vel (G,6) [angular rad/s, linear m/s]
+        world velocity of each geom frame origin (zeros allowed); tool_com (T,3) m, torque reference
+        point per tool; dt s, time step (used by "auto" stiffness).
+        """
+        N, T = self.n_nodes, self.n_tools
+        pos = _array(positions, (N, 3), np.float64, "positions", "m")
+        vel = _array(velocities, (N, 3), np.float64, "velocities", "m/s")
+        kind = np.ascontiguousarray(shape_kind, dtype=np.int64).reshape(-1)
+        G = len(kind)
+        tool = _array(shape_tool, (G,), np.int64, "shape_tool", "tool index per geom")
+        size = _array(shape_size, (G, 3), np.float64, "shape_size", "m")
+        gpos = _array(shape_pos, (G, 3), np.float64, "shape_pos", "m")
+        gmat = _array(shape_mat, (G, 9), np.float64, "shape_mat", "row-major rotation")
+        gvel = _array(shape_vel, (G, 6), np.float64, "shape_vel", "[rad/s, m/s]")
+        com = _array(tool_com, (T, 3), np.float64, "tool_com", "m")
+        if not (_is_number(dt) and dt > 0):
+            raise ConfigError(f"dt must be a positive number of seconds, got {dt!r}")
+        if G != self._n_geoms:
+            self._alloc_geoms(G)
+        k_n = self.stiffness_for(dt)
+        k_t = self.params.tangential_stiffness or k_n
+        r, rep = self.result, self.report
+        err = self._err
+        _contact_kernel(pos, vel, self.candidate_nodes, kind, tool, size, gpos, gmat, gvel, com,
+                        self.tool_friction, k_n, float(self.params.damping), float(k_t),
+                        self._anchor_local, self._anchor_on, r.forces, r.stiffness, r.tool_force,
+                        r.tool_torque, r.geom_normal_force, r.geom_tangential_force, self._geom_ftv,
+                        rep.normal_force, rep.tangential_force, self._tool_ftv, rep.contacts, rep.slipping,
+                        rep.penetration, self._last[0], self._last[1], err)
+        if err[0] != _OK:
+            g = int(err[1])
+            if err[0] == _BAD_KIND:
+                raise ConfigError(f"shape_kind[{g}] = {kind[g]} is not a shape code; use 0..{N_KINDS - 1} "
+                                  "(SPHERE, CAPSULE, BOX, CYLINDER)")
+            if err[0] == _BAD_TOOL:
+                raise ConfigError(f"shape_tool[{g}] = {tool[g]} is not a tool index in [0, {T})")
+            raise ConfigError(f"shape_size[{g}] = {size[g].tolist()} m is invalid for shape kind {kind[g]}; "
+                              "sizes must be positive (MuJoCo geom_size convention)")
+        return r
