@@ -1,0 +1,265 @@
+"""Scene composition in code: tissue + anchors + tools + cameras + lights + floor.
+
+:func:`build_scene` turns a :class:`SceneConfig` into a :class:`Scene` (compiled MuJoCo model,
+tissue models, tool records). One function per ready-made scene returns its default config or
+builds it: :func:`palpation_scene` (probe over a slab with a stiff inclusion),
+:func:`grasp_scene` (three-jaw grasper around the tip of a spleen anchored at its hilum end),
+:func:`demo_scene` (both tools, both organs). ``make_scene(name)`` looks scenes up by name.
+
+>>> from surgsim_envs.scene import palpation_scene, Simulation
+>>> sim = Simulation(palpation_scene())          # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import mujoco
+import numpy as np
+
+from surgsim_envs.errors import ConfigError
+from surgsim_envs.scene.config import (CameraConfig, GrasperConfig, ProbeConfig, SceneConfig, TissueConfig,
+                                       validate_scene_config)
+from surgsim_envs.scene.tissue_binding import TissueBinding
+from surgsim_envs.scene.tools import ToolSpec, add_grasper, add_haptic_proxy, add_probe
+
+ANCHOR_FACES = {"bottom": (2, 0), "top": (2, 1), "x_min": (0, 0), "x_max": (0, 1), "y_min": (1, 0), "y_max": (1, 1)}
+
+
+@dataclass
+class Scene:
+    """A built scene: the MuJoCo spec/model, tissue models and tool records (by name)."""
+
+    config: SceneConfig
+    spec: mujoco.MjSpec
+    model: mujoco.MjModel
+    tissues: dict = field(default_factory=dict)         # name -> TissueModel
+    bindings: dict = field(default_factory=dict)        # name -> TissueBinding
+    tissue_configs: dict = field(default_factory=dict)  # name -> TissueConfig
+    tools: dict = field(default_factory=dict)           # name -> ToolSpec
+    proxies: dict = field(default_factory=dict)         # proxy name -> ToolSpec it drives
+
+
+# ----------------------------------------------------------------------------------------------
+# Tissue placement and anchors
+def _euler_matrix(euler) -> np.ndarray:
+    q = np.zeros(4)
+    mujoco.mju_euler2Quat(q, np.asarray(euler, dtype=float), "XYZ")
+    mat = np.zeros(9)
+    mujoco.mju_quat2Mat(mat, q)
+    return mat.reshape(3, 3)
+
+
+def placed_volume(cfg: TissueConfig):
+    """The tissue's volume, rotated by ``cfg.euler`` and with its bounding-box centre at ``cfg.position``."""
+    from surgsim_envs.geometry import Volume, make_volume
+
+    vol = make_volume(cfg.organ, spacing=cfg.spacing, **dict(cfg.volume_options))
+    lo, hi = vol.bounds()
+    centre = (lo + hi) / 2.0
+    nodes = vol.nodes - centre
+    if any(float(a) != 0.0 for a in cfg.euler):
+        nodes = nodes @ _euler_matrix(cfg.euler).T
+        lo2, hi2 = nodes.min(axis=0), nodes.max(axis=0)
+        nodes = nodes - (lo2 + hi2) / 2.0
+    nodes = nodes + np.asarray(cfg.position, dtype=float)
+    return Volume(nodes, vol.tets.copy(), vol.surface.copy(), vol.labels.copy(), vol.name, vol.node_labels.copy())
+
+
+def anchor_nodes(nodes: np.ndarray, anchors, tolerance: float, what: str = "tissue") -> np.ndarray:
+    """Indices of anchored (fixed) nodes from selectors (see :class:`TissueConfig`).
+
+    A selector is a face name ("bottom", "top", "x_min", "x_max", "y_min", "y_max"), optionally
+    with a layer thickness in m after a colon ("x_min:0.03"), or a sequence of node indices.
+    """
+    n = len(nodes)
+    lo, hi = nodes.min(axis=0), nodes.max(axis=0)
+    picked = np.zeros(n, dtype=bool)
+    for sel in anchors or ():
+        if isinstance(sel, str):
+            face, _, thick = sel.partition(":")
+            if face not in ANCHOR_FACES:
+                raise ConfigError(f"{what}: unknown anchor {sel!r}; use one of {sorted(ANCHOR_FACES)} "
+                                  "(optionally 'face:thickness_m', e.g. 'x_min:0.03') or a list of node indices")
+            try:
+                tol = float(thick) if thick else tolerance
+            except ValueError:
+                raise ConfigError(f"{what}: anchor {sel!r} has a bad thickness; write e.g. 'x_min:0.03' (m)") from None
+            axis, side = ANCHOR_FACES[face]
+            if side == 0:
+                picked |= nodes[:, axis] <= lo[axis] + tol
+            else:
+                picked |= nodes[:, axis] >= hi[axis] - tol
+        else:
+            idx = np.asarray(sel, dtype=np.int64).reshape(-1)
+            if len(idx) and (idx.min() < 0 or idx.max() >= n):
+                raise ConfigError(f"{what}: anchor node indices must lie in [0, {n}), got [{idx.min()}, {idx.max()}]")
+            picked[idx] = True
+    return np.flatnonzero(picked)
+
+
+def build_tissue(cfg: TissueConfig):
+    """Build the TissueModel of ``cfg`` (placed, anchored)."""
+    from surgsim_envs import tissue
+
+    vol = placed_volume(cfg)
+    fixed = anchor_nodes(vol.nodes, cfg.anchors, cfg.anchor_tolerance, what=f"tissue '{cfg.name}'")
+    options = dict(cfg.options)
+    if cfg.region_materials:
+        labels = set(np.unique(vol.labels).tolist())
+        options["region_materials"] = {k: v for k, v in dict(cfg.region_materials).items() if int(k) in labels}
+    return tissue.make(cfg.model, vol, cfg.material, fixed=fixed if len(fixed) else None,
+                       gravity=tuple(cfg.gravity), **options)
+
+
+# ----------------------------------------------------------------------------------------------
+def _add_environment(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
+    spec.option.timestep = float(cfg.dt)
+    spec.option.gravity = [float(g) for g in cfg.gravity]
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.visual.global_.offwidth = max(int(cfg.render_width), 640)
+    spec.visual.global_.offheight = max(int(cfg.render_height), 480)
+    spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
+    spec.visual.headlight.diffuse = [0.45, 0.45, 0.45]
+    wb = spec.worldbody
+    wb.add_light(name="key", pos=[0.3, -0.3, 0.8], dir=[-0.3, 0.3, -0.8], diffuse=[0.7, 0.7, 0.7], castshadow=True)
+    wb.add_light(name="fill", pos=[-0.3, 0.2, 0.6], dir=[0.3, -0.2, -0.6], diffuse=[0.3, 0.3, 0.3], castshadow=False)
+    if cfg.floor:
+        tex = spec.add_texture(name="floor_tex", type=mujoco.mjtTexture.mjTEXTURE_2D,
+                               builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, rgb1=[0.32, 0.36, 0.40],
+                               rgb2=[0.26, 0.29, 0.32], width=256, height=256)
+        mat = spec.add_material(name="floor_mat", texrepeat=[8, 8], reflectance=0.0)
+        mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = tex.name
+        wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0.5, 0.5, 0.01], material="floor_mat",
+                    contype=1, conaffinity=1)
+    for cam in cfg.cameras:
+        _add_camera(spec, cam)
+
+
+def _add_camera(spec: mujoco.MjSpec, cam: CameraConfig) -> None:
+    pos = np.asarray(cam.position, dtype=float)
+    fwd = np.asarray(cam.target, dtype=float) - pos
+    if np.linalg.norm(fwd) < 1e-9:
+        raise ConfigError(f"camera '{cam.name}': position and target coincide ({cam.position})")
+    fwd /= np.linalg.norm(fwd)
+    up = np.array([0.0, 0.0, 1.0]) if abs(fwd[2]) < 0.99 else np.array([0.0, 1.0, 0.0])
+    right = np.cross(fwd, up)
+    right /= np.linalg.norm(right)
+    cam_up = np.cross(right, fwd)
+    # MuJoCo cameras look along their local -z with +y up: xyaxes = (right, up)
+    spec.worldbody.add_camera(name=cam.name, pos=pos.tolist(), xyaxes=[*right.tolist(), *cam_up.tolist()],
+                              fovy=float(cam.fovy))
+
+
+def build_scene(cfg: SceneConfig) -> Scene:
+    """Compile ``cfg`` into a :class:`Scene` (validates it first; ConfigError on bad input)."""
+    validate_scene_config(cfg)
+    spec = mujoco.MjSpec()
+    spec.modelname = cfg.name
+    _add_environment(spec, cfg)
+    scene = Scene(config=cfg, spec=spec, model=None)  # type: ignore[arg-type]
+    for tcfg in cfg.tissues:
+        model = build_tissue(tcfg)
+        scene.tissues[tcfg.name] = model
+        scene.tissue_configs[tcfg.name] = tcfg
+        binding = TissueBinding(tcfg.name, model, rgba=tcfg.rgba)
+        binding.add_to(spec)
+        scene.bindings[tcfg.name] = binding
+    for pcfg in cfg.probes:
+        scene.tools[pcfg.name] = add_probe(spec, pcfg)
+    for gcfg in cfg.graspers:
+        scene.tools[gcfg.name] = add_grasper(spec, gcfg)
+    for hcfg in cfg.proxies:
+        tool = scene.tools[hcfg.tool]
+        add_haptic_proxy(spec, hcfg, tool)
+        scene.proxies[hcfg.name] = tool
+    try:
+        scene.model = spec.compile()
+    except Exception as exc:  # MuJoCo compiler errors are ValueError subclasses with the XML-ish message
+        raise ConfigError(f"scene '{cfg.name}' does not compile in MuJoCo: {exc}") from exc
+    for tool in scene.tools.values():
+        tool.bind(scene.model)
+    for binding in scene.bindings.values():
+        binding.bind(scene.model)
+    return scene
+
+
+# ----------------------------------------------------------------------------------------------
+# Ready-made scenes
+def palpation_config(organ: str = "slab_inclusion", model: str = "mass_spring") -> SceneConfig:
+    """A probe above the middle of a 10 x 10 x 2 cm liver slab with a stiff inclusion, bed fixed."""
+    tissue = TissueConfig(name="slab", organ=organ, model=model, material="liver", spacing=0.005,
+                          anchors=("bottom",), position=(0.0, 0.0, 0.01),
+                          region_materials={1: {"preset": "liver", "young": 20_000.0, "name": "tumour"}},
+                          options={"integrator": "symplectic"})
+    probe = ProbeConfig(name="probe", tip_radius=0.008, position=(0.0, 0.0, 0.031))
+    cams = [CameraConfig("overview", (0.0, -0.17, 0.13), (0.0, 0.0, 0.01)),
+            CameraConfig("top", (0.0, -0.001, 0.25), (0.0, 0.0, 0.0)),
+            CameraConfig("side", (0.0, -0.16, 0.03), (0.0, 0.0, 0.015))]
+    # explicit tissue + explicit penalty contact: 0.5 ms keeps k_n dt^2 / m well below the limit
+    return SceneConfig(name="palpation", tissues=[tissue], probes=[probe], cameras=cams, dt=5e-4)
+
+
+def palpation_scene(cfg: SceneConfig | None = None) -> Scene:
+    """Build the palpation scene (``cfg`` defaults to :func:`palpation_config`)."""
+    return build_scene(cfg if cfg is not None else palpation_config())
+
+
+def place_grasper_around_tip(tissue_nodes: np.ndarray, grasper: GrasperConfig, margin: float = 0.004,
+                             reach: float = 0.8) -> GrasperConfig:
+    """Copy of ``grasper`` placed so its open jaws surround the +x tip of ``tissue_nodes``.
+
+    The axis points along -x into the organ; the jaws cover the last ``reach * jaw_length`` of
+    the organ; ``open_radius`` is the largest distance of those nodes from the axis plus ``margin``.
+    """
+    g = copy.deepcopy(grasper)
+    xmax = tissue_nodes[:, 0].max()
+    depth = reach * g.jaw_length
+    tip = tissue_nodes[tissue_nodes[:, 0] >= xmax - depth]
+    cy, cz = (tip[:, 1].min() + tip[:, 1].max()) / 2.0, (tip[:, 2].min() + tip[:, 2].max()) / 2.0
+    radius = float(np.sqrt((tip[:, 1] - cy) ** 2 + (tip[:, 2] - cz) ** 2).max())
+    g.axis = (-1.0, 0.0, 0.0)
+    g.open_radius = radius + margin
+    # the jaw tips end ``depth`` into the organ; the wrist origin sits at the start of the jaws
+    g.position = (float(xmax - depth + g.jaw_length), float(cy), float(cz))
+    return g
+
+
+def grasp_config(organ: str = "spleen", model: str = "mass_spring") -> SceneConfig:
+    """Three-jaw grasper (paper 002) around the tip of a spleen held at its other end (ligaments)."""
+    tissue = TissueConfig(name="spleen", organ=organ, model=model, material="spleen", spacing=None,
+                          anchors=("x_min:0.03",), position=(0.0, 0.0, 0.025),
+                          options={"integrator": "implicit"}, rgba=(0.55, 0.18, 0.25, 1.0))
+    cams = [CameraConfig("overview", (0.05, -0.22, 0.16), (0.03, 0.0, 0.02)),
+            CameraConfig("top", (0.03, -0.001, 0.30), (0.03, 0.0, 0.0)),
+            CameraConfig("side", (0.03, -0.25, 0.03), (0.03, 0.0, 0.025))]
+    return SceneConfig(name="grasp", tissues=[tissue], graspers=[GrasperConfig(name="grasper")], cameras=cams)
+
+
+def grasp_scene(cfg: SceneConfig | None = None, auto_place: bool = True) -> Scene:
+    """Build the grasp scene (``cfg`` defaults to :func:`grasp_config`).
+
+    With ``auto_place`` the first grasper is placed around the +x tip of the first tissue
+    (:func:`place_grasper_around_tip`), so any organ can be grasped.
+    """
+    cfg = copy.deepcopy(cfg if cfg is not None else grasp_config())
+    if auto_place and cfg.graspers and cfg.tissues:
+        validate_scene_config(cfg)
+        nodes = placed_volume(cfg.tissues[0]).nodes
+        cfg.graspers[0] = place_grasper_around_tip(nodes, cfg.graspers[0])
+    return build_scene(cfg)
+
+
+SCENES: dict[str, Callable[..., Scene]] = {"palpation": palpation_scene, "grasp": grasp_scene}
+
+
+def make_scene(name: str, cfg: SceneConfig | None = None) -> Scene:
+    """Build the ready-made scene ``name`` ("palpation", "grasp")."""
+    try:
+        fn = SCENES[name]
+    except KeyError:
+        raise ConfigError(f"unknown scene {name!r}; available scenes: {sorted(SCENES)}") from None
+    return fn(cfg)

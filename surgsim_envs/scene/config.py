@@ -1,0 +1,300 @@
+"""Configuration dataclasses of a scene: tissues, tools, cameras and the step loop.
+
+Everything is data (SI units: m, kg, s, N, rad) so that scenes can be loaded from TOML files and
+compared. :func:`validate_scene_config` checks a whole :class:`SceneConfig` and raises
+:class:`~surgsim_envs.errors.ConfigError` naming the bad value and its fix; the builders call it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+from surgsim_envs.errors import ConfigError
+
+#: allowed physics time step range (s); the tissue models' stable regions lie inside it
+DT_RANGE = (1e-5, 5e-3)
+#: allowed physics steps per control step
+SUBSTEPS_RANGE = (1, 1000)
+
+
+@dataclass
+class TissueConfig:
+    """One deformable organ.
+
+    organ: volume name for :func:`surgsim_envs.geometry.make_volume` ("slab", "block",
+        "slab_inclusion", "spleen", "liver_lobe", ...).
+    model: tissue model registry name ("mass_spring", "fem", or a plugin).
+    material: preset name, dict of :class:`~surgsim_envs.tissue.Material` fields, or a Material.
+    spacing: node spacing (m) of the volumetric discretisation (None = the organ's default).
+    anchors: fixed nodes (organ bed, ligaments): a list of selectors, each one of
+        "bottom"/"top"/"x_min"/"x_max"/"y_min"/"y_max" (nodes within ``anchor_tolerance`` of that
+        face of the bounding box, after placement) or an explicit sequence of node indices.
+    anchor_tolerance: m, thickness of the face layer an anchor selector picks.
+    position: (3,) m, where the centre of the volume's bounding box goes (bottom face at
+        ``position[2] - height / 2``).
+    euler: (3,) rad, XYZ Euler rotation applied about the box centre before translation.
+    region_materials: {region label: material} for inclusions/layers.
+    options: extra keyword options for the model constructor (integrator, ...).
+    volume_options: extra keyword options for make_volume (size, ...).
+    rgba: colour of the rendered surface.
+    """
+
+    name: str = "tissue"
+    organ: str = "slab"
+    model: str = "mass_spring"
+    material: Any = "liver"
+    spacing: float | None = 0.005
+    anchors: Sequence[Any] = ("bottom",)
+    anchor_tolerance: float = 1e-4
+    position: Sequence[float] = (0.0, 0.0, 0.01)
+    euler: Sequence[float] = (0.0, 0.0, 0.0)
+    region_materials: Mapping[int, Any] | None = None
+    gravity: Sequence[float] = (0.0, 0.0, 0.0)
+    options: Mapping[str, Any] = field(default_factory=dict)
+    volume_options: Mapping[str, Any] = field(default_factory=dict)
+    rgba: Sequence[float] = (0.78, 0.33, 0.30, 1.0)
+
+
+@dataclass
+class ProbeConfig:
+    """A rigid rod with a spherical tip (indenter).
+
+    tip_radius: m, radius of the spherical tip (its centre is the body origin).
+    rod_radius, rod_length: m, the capsule shaft above the tip along the probe axis.
+    position: (3,) m, initial tip-centre position (the "home" pose).
+    drive: "position" (slide joints + position actuators), "proxy" (driven through a
+        :class:`HapticProxyConfig` weld by a mocap body; no actuators) or "free" (slide joints
+        only, nothing drives it: for conservation tests and scripted initial velocities).
+    orientation: add two hinge joints (tilt about world x and y, rad) with position actuators.
+    kp: N/m, position actuator stiffness; damping ratio ``dampratio`` (critical = 1).
+    speed: m/s, default rate limit of target changes (inf = jump).
+    travel: m, half range of each slide joint about home.
+    mass: kg, tool mass.
+    friction: Coulomb coefficient tool-tissue (None = the tissue material's friction).
+    """
+
+    name: str = "probe"
+    tip_radius: float = 0.005
+    rod_radius: float = 0.003
+    rod_length: float = 0.10
+    position: Sequence[float] = (0.0, 0.0, 0.06)
+    drive: str = "position"
+    orientation: bool = False
+    kp: float = 20_000.0
+    dampratio: float = 1.0
+    speed: float = math.inf
+    travel: float = 0.2
+    mass: float = 0.05
+    friction: float | None = None
+    rgba: Sequence[float] = (0.75, 0.75, 0.80, 1.0)
+
+
+@dataclass
+class GrasperConfig:
+    """The three-jaw large-organ grasper of paper 002.
+
+    Three rigid box jaws at 120 degrees about the tool axis move in parallel and close radially.
+    One slide joint (jaw 1) is actuated; jaws 2 and 3 follow through joint-coupling equalities.
+    The wrist translates along and across the axis (three slide joints + position actuators).
+
+    position: (3,) m, wrist origin (where the jaws start) at home.
+    axis: (3,) unit direction the tool points (from handle towards the jaw tips), world frame.
+    open_radius: m, distance from the axis to each jaw's inner face when fully open.
+    min_radius: m, the closest the jaws may get to the axis.
+    jaw_length, jaw_width, jaw_thickness: m, box jaw dimensions (along the axis, tangential,
+        radial).
+    roll: rad, angle of jaw 1 about the axis, measured from the wrist frame's x axis (for a
+        horizontal axis pi/2 puts jaw 1 on top and the other two below at +-120 degrees).
+    closing_speed: m/s, default rate of the jaw opening changes (paper 002 closes in 4 s).
+    kp, jaw_kp: N/m, wrist and jaw position actuator stiffness.
+    """
+
+    name: str = "grasper"
+    position: Sequence[float] = (0.1, 0.0, 0.05)
+    axis: Sequence[float] = (-1.0, 0.0, 0.0)
+    open_radius: float = 0.03
+    min_radius: float = 0.004
+    roll: float = math.pi / 2
+    jaw_length: float = 0.04
+    jaw_width: float = 0.012
+    jaw_thickness: float = 0.003
+    shaft_radius: float = 0.005
+    shaft_length: float = 0.12
+    drive: str = "position"
+    closing_speed: float = 0.005
+    speed: float = math.inf
+    travel: float = 0.2
+    kp: float = 20_000.0
+    jaw_kp: float = 20_000.0
+    dampratio: float = 1.0
+    mass: float = 0.1
+    jaw_mass: float = 0.02
+    friction: float | None = None
+    rgba: Sequence[float] = (0.6, 0.62, 0.68, 1.0)
+
+
+@dataclass
+class HapticProxyConfig:
+    """A mocap body a device or script moves, coupled to a tool by a weld (virtual coupling).
+
+    tool: name of the probe or grasper it drives (that tool must have ``drive="proxy"``).
+    timeconst, dampratio: the weld's soft-constraint spring (``solref``): time constant s and
+        damping ratio; a smaller time constant is a stiffer coupling.
+    """
+
+    name: str = "proxy"
+    tool: str = "probe"
+    timeconst: float = 0.01
+    dampratio: float = 1.0
+
+
+@dataclass
+class CameraConfig:
+    """A named fixed camera looking at ``target`` from ``position`` (m)."""
+
+    name: str = "overview"
+    position: Sequence[float] = (0.0, -0.30, 0.22)
+    target: Sequence[float] = (0.0, 0.0, 0.01)
+    fovy: float = 45.0
+
+
+@dataclass
+class ContactConfig:
+    """Tool-tissue contact penalty parameters (see surgsim_envs.contact.ContactParams).
+
+    stiffness: N/m per node (or "auto"); damping: N s/m per node; tangential_stiffness: N/m per
+    node (None = stiffness).
+    """
+
+    stiffness: Any = 200.0
+    damping: float = 0.02
+    tangential_stiffness: float | None = None
+
+
+def _default_cameras() -> list[CameraConfig]:
+    return [CameraConfig("overview", (0.0, -0.30, 0.22), (0.0, 0.0, 0.01)),
+            CameraConfig("top", (0.0, -0.001, 0.35), (0.0, 0.0, 0.0)),
+            CameraConfig("side", (0.35, 0.0, 0.06), (0.0, 0.0, 0.02))]
+
+
+@dataclass
+class SceneConfig:
+    """A whole scene: tissues, tools, haptic proxies, cameras and the step loop.
+
+    dt: s, physics step (validated against :data:`DT_RANGE`); substeps: physics steps per
+    control step (:meth:`Simulation.step`). gravity: m/s^2 for the MuJoCo (tool) world; tools are
+    gravity-compensated. seed: seeds ``Simulation.rng``.
+    """
+
+    name: str = "scene"
+    tissues: list[TissueConfig] = field(default_factory=list)
+    probes: list[ProbeConfig] = field(default_factory=list)
+    graspers: list[GrasperConfig] = field(default_factory=list)
+    proxies: list[HapticProxyConfig] = field(default_factory=list)
+    cameras: list[CameraConfig] = field(default_factory=_default_cameras)
+    contact: ContactConfig = field(default_factory=ContactConfig)
+    dt: float = 1e-3
+    substeps: int = 1
+    gravity: Sequence[float] = (0.0, 0.0, -9.81)
+    floor: bool = True
+    seed: int = 0
+    render_width: int = 640
+    render_height: int = 480
+
+
+# ----------------------------------------------------------------------------------------------
+def _vec(value, n: int, what: str) -> tuple[float, ...]:
+    try:
+        out = tuple(float(v) for v in value)
+    except TypeError:
+        raise ConfigError(f"{what} must be a sequence of {n} numbers, got {value!r}") from None
+    if len(out) != n or not all(math.isfinite(v) for v in out):
+        raise ConfigError(f"{what} must be {n} finite numbers, got {value!r}")
+    return out
+
+
+def _positive(value, what: str, hint: str, allow_inf: bool = False) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value) or value <= 0 \
+            or (math.isinf(value) and not allow_inf):
+        raise ConfigError(f"{what} must be a positive finite number, got {value!r}; {hint}")
+
+
+def validate_step(dt: float, substeps: int) -> None:
+    """Raise ConfigError unless dt (s) and substeps lie in their allowed ranges."""
+    lo, hi = DT_RANGE
+    if not isinstance(dt, (int, float)) or not math.isfinite(dt) or not (lo <= dt <= hi):
+        raise ConfigError(f"dt={dt!r} s is out of range [{lo:g}, {hi:g}] s; the default is 1e-3 s (1 ms)")
+    slo, shi = SUBSTEPS_RANGE
+    if isinstance(substeps, bool) or not isinstance(substeps, int) or not (slo <= substeps <= shi):
+        raise ConfigError(f"substeps={substeps!r} is out of range: give an integer in [{slo}, {shi}] "
+                          "(physics steps per control step; default 1)")
+
+
+def validate_scene_config(cfg: SceneConfig) -> None:
+    """Check a SceneConfig; raise ConfigError naming the first bad value and how to fix it."""
+    if not isinstance(cfg, SceneConfig):
+        raise ConfigError(f"expected a SceneConfig, got {type(cfg).__name__}")
+    validate_step(cfg.dt, cfg.substeps)
+    _vec(cfg.gravity, 3, "gravity")
+    names: set[str] = set()
+    for group in (cfg.tissues, cfg.probes, cfg.graspers, cfg.proxies, cfg.cameras):
+        for item in group:
+            if not isinstance(item.name, str) or not item.name:
+                raise ConfigError(f"every scene object needs a non-empty name, got {item.name!r}")
+            if item.name in names:
+                raise ConfigError(f"duplicate scene object name {item.name!r}; names of tissues, tools, proxies "
+                                  "and cameras must be unique")
+            names.add(item.name)
+    for t in cfg.tissues:
+        if t.spacing is not None:
+            _positive(t.spacing, f"tissue '{t.name}' spacing", "try 0.005 (5 mm), or None for the organ's default")
+        _vec(t.position, 3, f"tissue '{t.name}' position")
+        _vec(t.euler, 3, f"tissue '{t.name}' euler")
+        _vec(t.gravity, 3, f"tissue '{t.name}' gravity")
+        _vec(t.rgba, 4, f"tissue '{t.name}' rgba")
+    for p in cfg.probes:
+        for key, hint in (("tip_radius", "e.g. 0.005 (5 mm)"), ("rod_radius", "e.g. 0.003"), ("rod_length", "e.g. 0.1"),
+                          ("kp", "e.g. 2e4 N/m"), ("mass", "e.g. 0.05 kg"), ("travel", "e.g. 0.2 m"),
+                          ("speed", "m/s, inf for no limit")):
+            _positive(getattr(p, key), f"probe '{p.name}' {key}", hint, allow_inf=key == "speed")
+        _vec(p.position, 3, f"probe '{p.name}' position")
+        if p.drive not in ("position", "proxy", "free"):
+            raise ConfigError(f"probe '{p.name}' drive={p.drive!r}; choose 'position', 'proxy' or 'free'")
+    for g in cfg.graspers:
+        for key in ("open_radius", "min_radius", "jaw_length", "jaw_width", "jaw_thickness", "shaft_radius",
+                    "shaft_length", "closing_speed", "kp", "jaw_kp", "mass", "jaw_mass", "travel", "speed"):
+            _positive(getattr(g, key), f"grasper '{g.name}' {key}", "give a positive number in SI units",
+                      allow_inf=key == "speed")
+        if g.min_radius >= g.open_radius:
+            raise ConfigError(f"grasper '{g.name}': min_radius={g.min_radius} m must be < open_radius={g.open_radius} m")
+        if g.jaw_width / 2 >= g.min_radius * math.sqrt(3):
+            raise ConfigError(f"grasper '{g.name}': jaws of width {g.jaw_width} m would collide at min_radius "
+                              f"{g.min_radius} m; use min_radius > {g.jaw_width / (2 * math.sqrt(3)):.4f} m")
+        ax = _vec(g.axis, 3, f"grasper '{g.name}' axis")
+        if math.sqrt(sum(a * a for a in ax)) < 1e-9:
+            raise ConfigError(f"grasper '{g.name}' axis must be a non-zero direction, got {g.axis!r}")
+        _vec(g.position, 3, f"grasper '{g.name}' position")
+        if g.drive not in ("position", "proxy", "free"):
+            raise ConfigError(f"grasper '{g.name}' drive={g.drive!r}; choose 'position', 'proxy' or 'free'")
+    tools = {p.name: p for p in [*cfg.probes, *cfg.graspers]}
+    driven = set()
+    for h in cfg.proxies:
+        if h.tool not in tools:
+            raise ConfigError(f"haptic proxy '{h.name}' drives tool {h.tool!r}, which does not exist; "
+                              f"tools in this scene: {sorted(tools)}")
+        if tools[h.tool].drive != "proxy":
+            raise ConfigError(f"haptic proxy '{h.name}': tool '{h.tool}' has drive={tools[h.tool].drive!r}; "
+                              "set its drive='proxy'")
+        if h.tool in driven:
+            raise ConfigError(f"tool '{h.tool}' is driven by two haptic proxies; give each tool at most one")
+        driven.add(h.tool)
+        _positive(h.timeconst, f"haptic proxy '{h.name}' timeconst", "e.g. 0.01 s")
+        _positive(h.dampratio, f"haptic proxy '{h.name}' dampratio", "1 is critical damping")
+    for t in tools.values():
+        if t.drive == "proxy" and t.name not in driven:
+            raise ConfigError(f"tool '{t.name}' has drive='proxy' but no HapticProxyConfig(tool='{t.name}') drives it")
+    for c in cfg.cameras:
+        _vec(c.position, 3, f"camera '{c.name}' position")
+        _vec(c.target, 3, f"camera '{c.name}' target")

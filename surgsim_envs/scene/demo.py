@@ -1,0 +1,247 @@
+"""``surgsim demo``: a probe palpates a slab with a stiff inclusion, then a three-jaw grasper grasps
+and pulls a spleen (paper 002's close / hold / pull, time-compressed).
+
+Writes to ``--out`` (default ./surgsim-out/): ``demo.mp4`` (unless --no-video or no OpenGL),
+``forces.png`` (normal and tangential force per tool against time) and ``summary.json``;
+prints where the files are and the key figures. Headless; needs no arguments.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from surgsim_envs.errors import ConfigError, RenderingUnavailableError
+
+#: default simulated seconds: palpation + grasp (close 1 s, hold 1.5 s, pull 1.5 s)
+DEFAULT_DURATION = 7.0
+PALPATION_SHARE = 3.0 / 7.0
+FPS = 25
+SAMPLE_EVERY = 0.005  # s between force samples
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--out", default="surgsim-out", help="output directory (default ./surgsim-out)")
+    parser.add_argument("--duration", type=float, default=DEFAULT_DURATION,
+                        help=f"simulated seconds for both parts together (default {DEFAULT_DURATION}; 2-60)")
+    parser.add_argument("--no-video", action="store_true", help="skip rendering and the MP4")
+    parser.add_argument("--camera", default="overview", help="camera name (default overview)")
+
+
+class _Runner:
+    """Steps a simulation, samples forces, renders frames at FPS, times the physics."""
+
+    def __init__(self, sim, renderer, writer, camera, bar, label):
+        self.sim, self.renderer, self.writer, self.camera, self.bar = sim, renderer, writer, camera, bar
+        self.label = label
+        self.samples: list[dict] = []
+        self.physics_seconds = 0.0
+        self.physics_steps = 0
+        self._next_frame = 0.0
+        self._next_sample = 0.0
+
+    def run(self, duration: float, record) -> None:
+        sim = self.sim
+        end = sim.time + duration
+        steps_per_frame = max(1, int(round(1.0 / FPS / sim.dt)))
+        while sim.time < end - 1e-9:
+            n = min(steps_per_frame, int(round((end - sim.time) / sim.dt)))
+            t0 = time.perf_counter()
+            for _ in range(n):
+                sim.physics_step()
+                if sim.time >= self._next_sample - 1e-12:
+                    self.samples.append(record(sim))
+                    self._next_sample += SAMPLE_EVERY
+            self.physics_seconds += time.perf_counter() - t0
+            self.physics_steps += n
+            if self.writer is not None and sim.time >= self._next_frame - 1e-9:
+                self.writer.write(self.renderer.render(self.camera))
+                self._next_frame += 1.0 / FPS
+            if self.bar is not None:
+                self.bar.update(min(n * sim.dt, self.bar.total - self.bar.n))
+
+
+def _palpation(sim, runner, duration: float) -> dict:
+    """Press above the inclusion, lift, press beside it; return key figures."""
+    tissue = sim.tissue()
+    top = float(tissue.positions[:, 2].max())
+    r = sim.tool("probe").config.tip_radius
+    depth = 0.004
+    phase = duration / 4.0
+    speed = depth / (0.8 * phase) + 1e-9
+    xs = (0.0, 0.03)
+    peaks = []
+
+    def record(s):
+        rep = s.contact_report()["probe"]
+        return {"t": s.time, "normal": rep["normal_force"], "tangential": rep["tangential_force"],
+                "penetration": rep["penetration"], "z": float(s.tool_position("probe")[2])}
+
+    for x in xs:
+        above = [x, 0.0, top + r + 0.002]
+        sim.set_tool_target("probe", above, speed=math.inf)
+        runner.run(0.05 * phase, record)
+        start = len(runner.samples)
+        sim.set_tool_target("probe", [x, 0.0, top + r - depth], speed=speed)
+        runner.run(phase * 0.95, record)
+        pressed = runner.samples[start:]
+        peaks.append(max((s["normal"] for s in pressed), default=0.0))
+        sim.set_tool_target("probe", above, speed=speed * 2)
+        runner.run(phase, record)
+    pen = max((s["penetration"] for s in runner.samples), default=0.0)
+    return {"indentation_depth_m": depth, "peak_force_above_inclusion_N": peaks[0],
+            "peak_force_beside_inclusion_N": peaks[1], "max_penetration_m": pen,
+            "probe_positions_x_m": list(xs)}
+
+
+def _grasp(sim, runner, duration: float) -> dict:
+    """Close, hold, pull (paper 002 proportions 4 : 7 : pull, compressed); return key figures."""
+    g = sim.tool("grasper")
+    cfg = g.config
+    close_t, hold_t = duration * 0.25, duration * 0.375
+    pull_t = duration - close_t - hold_t
+    closed = max(cfg.min_radius, 0.012)
+    axis = -np.asarray(cfg.axis, dtype=float) / np.linalg.norm(cfg.axis)   # pull direction: out of the organ
+    state = {"phase": "close"}
+
+    def record(s):
+        rep = s.contact_report()["grasper"]
+        jaws = s.jaw_forces("grasper")
+        return {"t": s.time, "phase": state["phase"], "normal": rep["normal_force"],
+                "tangential": rep["tangential_force"], "contacts": rep["contacts"], "slipping": rep["slipping"],
+                "pull_force": float(-s.tool_force("grasper") @ axis), "jaw_normal": jaws["normal"].tolist()}
+
+    sim.set_jaw_opening("grasper", closed, speed=(cfg.open_radius - closed) / (0.9 * close_t))
+    runner.run(close_t, record)
+    state["phase"] = "hold"
+    runner.run(hold_t, record)
+    state["phase"] = "pull"
+    pull_dist = min(0.05, cfg.travel * 0.9)
+    sim.set_tool_target("grasper", g.home + axis * pull_dist, speed=pull_dist / pull_t)
+    runner.run(pull_t, record)
+    pulls = [s for s in runner.samples if s["phase"] == "pull"]
+    # gross slip onset as in paper 002 (Fig. 5, red points): the pull force peaks and then falls
+    # as the contact nodes slide along the jaws
+    peak_pull = max(pulls, key=lambda s: s["pull_force"]) if pulls else None
+    onset = peak_pull if peak_pull is not None and peak_pull["slipping"] > 0 else None
+    end_close = [s for s in runner.samples if s["phase"] == "close"]
+    end_hold = [s for s in runner.samples if s["phase"] == "hold"]
+    return {"closed_radius_m": closed, "pull_distance_m": pull_dist,
+            "peak_normal_force_N": max((s["normal"] for s in runner.samples), default=0.0),
+            "normal_force_end_of_close_N": end_close[-1]["normal"] if end_close else 0.0,
+            "normal_force_end_of_hold_N": end_hold[-1]["normal"] if end_hold else 0.0,
+            "peak_pull_force_N": peak_pull["pull_force"] if peak_pull else 0.0,
+            "peak_pull_time_s": peak_pull["t"] if peak_pull else None,
+            "slip_onset_time_s": onset["t"] if onset else None,
+            "slip_onset_pull_force_N": onset["pull_force"] if onset else None,
+            "slipping_nodes_at_onset": onset["slipping"] if onset else None,
+            "contact_nodes_at_onset": onset["contacts"] if onset else None,
+            "phases_s": {"close": close_t, "hold": hold_t, "pull": pull_t}}
+
+
+def _plot(path: Path, palp: list[dict], grasp: list[dict], grasp_summary: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6.5))
+    ax = axes[0]
+    t = [s["t"] for s in palp]
+    ax.plot(t, [s["normal"] for s in palp], label="normal")
+    ax.plot(t, [s["tangential"] for s in palp], label="tangential")
+    ax.set_title("Probe palpating a liver slab with a stiff inclusion")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("force (N)")
+    ax.legend()
+    ax = axes[1]
+    t = [s["t"] for s in grasp]
+    ax.plot(t, [s["normal"] for s in grasp], label="normal (3 jaws)")
+    ax.plot(t, [s["tangential"] for s in grasp], label="tangential (3 jaws)")
+    ax.plot(t, [s["pull_force"] for s in grasp], ":", label="pull force (along axis)")
+    for key, phase in (("close", "close"), ("hold", "hold")):
+        ends = [s["t"] for s in grasp if s["phase"] == phase]
+        if ends:
+            ax.axvline(ends[-1], color="grey", lw=0.8)
+    if grasp_summary.get("slip_onset_time_s") is not None:
+        ax.plot([grasp_summary["slip_onset_time_s"]], [grasp_summary["slip_onset_pull_force_N"]], "ro",
+                label="gross slip onset")
+    ax.set_title("Three-jaw grasper: close, hold, pull (paper 002, time-compressed)")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("force (N)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def run(args) -> int:
+    from tqdm import tqdm
+
+    from surgsim_envs.scene.builder import grasp_scene, palpation_scene
+    from surgsim_envs.scene.render import SceneRenderer, VideoWriter
+    from surgsim_envs.scene.simulation import Simulation
+
+    duration = float(args.duration)
+    if not (math.isfinite(duration) and 2.0 <= duration <= 60.0):
+        raise ConfigError(f"--duration {args.duration!r} s is out of range; give 2-60 s (default {DEFAULT_DURATION})")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    wall0 = time.perf_counter()
+    sims = {"palpation": Simulation(palpation_scene()), "grasp": Simulation(grasp_scene())}
+    renderers, writer, video_note = {}, None, None
+    if not args.no_video:
+        try:
+            for name, sim in sims.items():
+                renderers[name] = SceneRenderer(sim, 640, 480)
+            writer = VideoWriter(out / "demo.mp4", FPS, (640, 480))
+        except RenderingUnavailableError as exc:
+            renderers, writer, video_note = {}, None, str(exc)
+            print(f"surgsim demo: no video: {exc}")
+    durations = {"palpation": duration * PALPATION_SHARE, "grasp": duration * (1 - PALPATION_SHARE)}
+    summary: dict = {"duration_s": duration}
+    samples = {}
+    with tqdm(total=round(duration, 6), mininterval=0.5, unit="sim s", bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} sim s [{elapsed}]") as bar:
+        for name, fn in (("palpation", _palpation), ("grasp", _grasp)):
+            sim = sims[name]
+            runner = _Runner(sim, renderers.get(name), writer, args.camera, bar, name)
+            if writer is not None and args.camera not in renderers[name].cameras:
+                raise ConfigError(f"unknown camera {args.camera!r}; cameras: {renderers[name].cameras}")
+            figures = fn(sim, runner, durations[name])
+            figures["physics_steps"] = runner.physics_steps
+            figures["dt_s"] = sim.dt
+            figures["physics_steps_per_second"] = runner.physics_steps / max(runner.physics_seconds, 1e-9)
+            figures["tissue_nodes"] = int(sim.tissue().n_nodes)
+            figures["tissue_model"] = sim.tissue().name
+            summary[name] = figures
+            samples[name] = runner.samples
+    if writer is not None:
+        writer.close()
+    for r in renderers.values():
+        r.close()
+    plot_path = out / "forces.png"
+    _plot(plot_path, samples["palpation"], samples["grasp"], summary["grasp"])
+    summary["wall_time_s"] = time.perf_counter() - wall0
+    summary["files"] = {"video": str(out / "demo.mp4") if writer is not None else None, "plot": str(plot_path),
+                        "summary": str(out / "summary.json")}
+    if video_note:
+        summary["video_unavailable"] = video_note
+    with open(out / "summary.json", "w") as fh:
+        json.dump(summary, fh, indent=2, default=float)
+    p, g = summary["palpation"], summary["grasp"]
+    print(f"surgsim demo: wrote {', '.join(v for v in summary['files'].values() if v)}")
+    print(f"  palpation: peak force {p['peak_force_above_inclusion_N']:.3f} N above the inclusion vs "
+          f"{p['peak_force_beside_inclusion_N']:.3f} N beside it (indentation {p['indentation_depth_m'] * 1e3:.0f} mm, "
+          f"max penetration {p['max_penetration_m'] * 1e3:.2f} mm); "
+          f"{p['physics_steps_per_second']:.0f} physics steps/s ({p['tissue_nodes']} nodes, dt {p['dt_s'] * 1e3:g} ms)")
+    onset = ("no gross slip" if g["slip_onset_time_s"] is None else
+             f"gross slip at t={g['slip_onset_time_s']:.2f} s, pull force {g['slip_onset_pull_force_N']:.3f} N")
+    print(f"  grasp: peak normal force {g['peak_normal_force_N']:.3f} N (end of close {g['normal_force_end_of_close_N']:.3f} N"
+          f" -> end of hold {g['normal_force_end_of_hold_N']:.3f} N, relaxation); peak pull {g['peak_pull_force_N']:.3f} N; "
+          f"{onset}; {g['physics_steps_per_second']:.0f} physics steps/s ({g['tissue_nodes']} nodes)")
+    print(f"  wall time {summary['wall_time_s']:.1f} s")
+    return 0

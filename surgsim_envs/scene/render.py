@@ -1,0 +1,111 @@
+"""Offscreen rendering of a :class:`Simulation` and MP4 output with OpenCV.
+
+Headless machines: set ``MUJOCO_GL=egl`` (Mesa EGL, no GPU needed) or ``MUJOCO_GL=osmesa``
+(``apt-get install libosmesa6``) before MuJoCo is imported; :mod:`surgsim_envs.scene` sets
+``egl`` by default when there is no display. Where no OpenGL context can be created, creating a
+:class:`SceneRenderer` raises :class:`~surgsim_envs.errors.RenderingUnavailableError` with that
+advice, and everything else (physics, forces, plots) keeps working.
+
+Tissue surfaces are written into ``d.flexvert_xpos`` by ``sim.sync_visual()`` right before
+``Renderer.update_scene`` (MuJoCo's own kinematics would otherwise show the rest shape).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from surgsim_envs.errors import ConfigError, RenderingUnavailableError
+
+_GL_HINT = ("set MUJOCO_GL=egl (Mesa EGL, works without a GPU) or MUJOCO_GL=osmesa (apt-get install libosmesa6) "
+            "before importing mujoco, or run without rendering (e.g. `surgsim demo --no-video`)")
+
+
+class SceneRenderer:
+    """Renders RGB frames (H, W, 3) uint8 of a simulation from its named cameras.
+
+    sim: a Simulation; width, height: pixels (at most the model's offscreen buffer,
+    ``SceneConfig.render_width/height``, at least 640x480).
+    """
+
+    def __init__(self, sim, width: int = 640, height: int = 480):
+        import mujoco
+
+        m = sim.model
+        for what, v, cap in (("width", width, m.vis.global_.offwidth), ("height", height, m.vis.global_.offheight)):
+            if not isinstance(v, int) or v <= 0 or v > cap:
+                raise ConfigError(f"render {what} must be an integer in [1, {cap}] px, got {v!r}; "
+                                  "raise SceneConfig.render_width/height for larger frames")
+        self.sim = sim
+        try:
+            self._renderer = mujoco.Renderer(m, height=height, width=width)
+        except Exception as exc:  # no GL library, no display, bad MUJOCO_GL, ...
+            raise RenderingUnavailableError(
+                f"could not create an offscreen OpenGL context (MUJOCO_GL={os.environ.get('MUJOCO_GL', '<unset>')!r}): "
+                f"{exc}. To render, {_GL_HINT}.") from exc
+        self.width, self.height = width, height
+        self.cameras = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_CAMERA, i) for i in range(m.ncam)]
+
+    def render(self, camera: str | int = -1) -> np.ndarray:
+        """One RGB frame from ``camera`` (a camera name, an index, or -1 for the free camera)."""
+        if isinstance(camera, str) and camera not in self.cameras:
+            raise ConfigError(f"unknown camera {camera!r}; cameras in this scene: {self.cameras}")
+        self.sim.sync_visual()
+        self._renderer.update_scene(self.sim.data, camera=camera)
+        return self._renderer.render().copy()
+
+    def close(self) -> None:
+        if getattr(self, "_renderer", None) is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):  # pragma: no cover - interpreter shutdown order
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+class VideoWriter:
+    """Writes RGB frames to an MP4 file (OpenCV, codec mp4v) at ``fps`` frames per second."""
+
+    def __init__(self, path, fps: float, size: tuple[int, int]):
+        import cv2
+
+        if not (isinstance(fps, (int, float)) and fps > 0):
+            raise ConfigError(f"fps must be > 0, got {fps!r}")
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        w, h = size
+        self._writer = cv2.VideoWriter(str(self.path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (int(w), int(h)))
+        if not self._writer.isOpened():
+            raise RenderingUnavailableError(f"OpenCV could not open {self.path} for MP4 (mp4v) writing")
+        self.size = (int(w), int(h))
+        self.frames = 0
+
+    def write(self, rgb: np.ndarray) -> None:
+        import cv2
+
+        if rgb.shape[:2] != (self.size[1], self.size[0]):
+            rgb = cv2.resize(rgb, self.size)
+        self._writer.write(cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
+        self.frames += 1
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.release()
+            self._writer = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

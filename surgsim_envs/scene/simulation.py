@@ -1,0 +1,443 @@
+"""The step loop that joins MuJoCo (rigid tools) to the tissue models and the contact model.
+
+One physics step (DESIGN.md "One physics step"), in exactly this order:
+
+1. controls / mocap: rate-limited actuator targets move towards their goals;
+2. ``mujoco.mj_step1``: tool kinematics and velocities at time t (and rigid collisions);
+3. ``contact.compute``: tool geoms at ``d.geom_xpos``/``d.geom_xmat`` against the tissue nodes at t;
+4. ``tissue.step(dt, forces, stiffness)``: tissue to t + dt under the contact forces;
+5. ``d.xfrc_applied[tool bodies] = reaction wrench`` (minus the forces on the tissue, torque
+   about each body's centre of mass ``d.xipos``);
+6. ``mujoco.mj_step2``: tools to t + dt with that reaction; then the written ``xfrc_applied``
+   rows are zeroed again so nothing stale is applied by later MuJoCo calls.
+
+Tools and tissue therefore see the same force over the same interval: action equals reaction
+and total linear momentum is conserved when nothing else acts (tests/test_momentum.py).
+No MuJoCo callbacks are used (never ``set_mjcb_passive``); tissue nodes are not MuJoCo dofs.
+Units: m, s, kg, N, rad.
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+from numba import njit
+
+from surgsim_envs.contact import BOX, CAPSULE, CYLINDER, SPHERE, ContactModel, ContactParams
+from surgsim_envs.errors import ConfigError
+from surgsim_envs.scene.builder import Scene
+from surgsim_envs.scene.config import validate_step
+
+_KIND = {int(mujoco.mjtGeom.mjGEOM_SPHERE): SPHERE, int(mujoco.mjtGeom.mjGEOM_CAPSULE): CAPSULE,
+         int(mujoco.mjtGeom.mjGEOM_BOX): BOX, int(mujoco.mjtGeom.mjGEOM_CYLINDER): CYLINDER}
+_EQ = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+
+
+@njit(cache=True)
+def _gather_geoms(geom_ids, geom_body, body_root, bodies, geom_xpos, geom_xmat, cvel, subtree_com, xipos,
+                  out_pos, out_mat, out_vel, out_com):
+    """Copy the tool geoms' world poses and the velocity [w, v] of each geom origin (world frame)."""
+    for k in range(geom_ids.shape[0]):
+        g = geom_ids[k]
+        b = geom_body[k]
+        r = body_root[k]
+        for j in range(3):
+            out_pos[k, j] = geom_xpos[g, j]
+        for j in range(9):
+            out_mat[k, j] = geom_xmat[g, j]
+        wx, wy, wz = cvel[b, 0], cvel[b, 1], cvel[b, 2]
+        dx = geom_xpos[g, 0] - subtree_com[r, 0]
+        dy = geom_xpos[g, 1] - subtree_com[r, 1]
+        dz = geom_xpos[g, 2] - subtree_com[r, 2]
+        out_vel[k, 0] = wx
+        out_vel[k, 1] = wy
+        out_vel[k, 2] = wz
+        out_vel[k, 3] = cvel[b, 3] + wy * dz - wz * dy
+        out_vel[k, 4] = cvel[b, 4] + wz * dx - wx * dz
+        out_vel[k, 5] = cvel[b, 5] + wx * dy - wy * dx
+    for t in range(bodies.shape[0]):
+        for j in range(3):
+            out_com[t, j] = xipos[bodies[t], j]
+
+
+class Simulation:
+    """Owns the MjModel/MjData, the tissue models and one ContactModel per tissue.
+
+    scene: a built :class:`~surgsim_envs.scene.builder.Scene`.
+    dt: physics step in s (default the scene config's, 1 ms), validated range
+        :data:`~surgsim_envs.scene.config.DT_RANGE`; substeps: physics steps per :meth:`step`.
+    seed: seeds :attr:`rng` (the physics itself is deterministic).
+
+    Raises ConfigError if a tissue starts inside a tool (initial penetration).
+    """
+
+    def __init__(self, scene: Scene, *, dt: float | None = None, substeps: int | None = None, seed: int | None = None):
+        if not isinstance(scene, Scene):
+            raise ConfigError(f"Simulation needs a Scene from surgsim_envs.scene.build_scene(...), got {type(scene).__name__}")
+        cfg = scene.config
+        self.scene = scene
+        self.dt = float(cfg.dt if dt is None else dt)
+        self.substeps = cfg.substeps if substeps is None else substeps
+        validate_step(self.dt, self.substeps)
+        self.model = scene.model
+        self.model.opt.timestep = self.dt
+        self.data = mujoco.MjData(self.model)
+        self.tissues = dict(scene.tissues)
+        self.tools = dict(scene.tools)
+        self.proxies = dict(scene.proxies)
+        self.bindings = dict(scene.bindings)
+        self.seed = int(cfg.seed if seed is None else seed)
+        self.rng = np.random.default_rng(self.seed)
+        self._setup_contact_arrays()
+        self._setup_controls()
+        self.contacts: dict[str, ContactModel] = {}
+        params = ContactParams(stiffness=cfg.contact.stiffness, damping=cfg.contact.damping,
+                               tangential_stiffness=cfg.contact.tangential_stiffness)
+        for name, model in self.tissues.items():
+            mat_mu = float(model.material.friction)
+            mu = np.array([self._body_friction[b] if self._body_friction[b] is not None else mat_mu
+                           for b in range(len(self._bodies))], dtype=np.float64)
+            if len(mu) == 0:
+                mu = np.zeros(1)
+            self.contacts[name] = ContactModel(model.n_nodes, model.surface_nodes, mu, params,
+                                               node_masses=model.masses)
+        self._pairs = [(self.tissues[n], self.contacts[n]) for n in self.tissues]
+        self.steps = 0
+        self.reset()
+        self._check_initial_penetration()
+
+    # ------------------------------------------------------------------------------------------
+    # set-up
+    def _setup_contact_arrays(self) -> None:
+        m = self.model
+        geoms, owner_tool = [], []
+        for tool in self.tools.values():
+            for gid in tool.geom_ids:
+                geoms.append(int(gid))
+                owner_tool.append(tool.name)
+        bodies = sorted({int(m.geom_bodyid[g]) for g in geoms})
+        self._bodies = np.array(bodies, dtype=np.int64)
+        body_index = {b: i for i, b in enumerate(bodies)}
+        self._geom_ids = np.array(geoms, dtype=np.int64)
+        self._geom_body = np.array([m.geom_bodyid[g] for g in geoms], dtype=np.int64)
+        self._geom_root = np.array([m.body_rootid[b] for b in self._geom_body], dtype=np.int64)
+        self._shape_tool = np.array([body_index[int(b)] for b in self._geom_body], dtype=np.int64)
+        kinds = []
+        for g in geoms:
+            t = int(m.geom_type[g])
+            if t not in _KIND:
+                raise ConfigError(f"tool geom {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g)!r} has a type the "
+                                  "contact model does not support; use sphere, capsule, box or cylinder")
+            kinds.append(_KIND[t])
+        self._shape_kind = np.array(kinds, dtype=np.int64)
+        self._shape_size = np.ascontiguousarray(m.geom_size[self._geom_ids], dtype=np.float64).reshape(-1, 3)
+        G, T = len(geoms), max(len(bodies), 1)
+        self._gpos = np.zeros((G, 3))
+        self._gmat = np.zeros((G, 9))
+        self._gvel = np.zeros((G, 6))
+        self._tcom = np.zeros((T, 3))
+        self._wrench = np.zeros((len(bodies), 6))
+        self._geom_index = {g: k for k, g in enumerate(geoms)}
+        # which contact bodies belong to which tool; friction per body
+        self._tool_bodies = {}
+        self._body_friction: list[float | None] = [None] * len(bodies)
+        for tool in self.tools.values():
+            idx = sorted({body_index[int(m.geom_bodyid[g])] for g in tool.geom_ids})
+            self._tool_bodies[tool.name] = np.array(idx, dtype=np.int64)
+            for i in idx:
+                self._body_friction[i] = tool.config.friction
+        self._tool_geom_rows = {tool.name: np.array([self._geom_index[int(g)] for g in tool.geom_ids], dtype=np.int64)
+                                for tool in self.tools.values()}
+
+    def _setup_controls(self) -> None:
+        m = self.model
+        self._goal = np.zeros(m.nu)
+        self._rate = np.full(m.nu, np.inf)
+        for tool in self.tools.values():
+            cfg = tool.config
+            for a in tool.actuator_ids:
+                self._rate[a] = float(cfg.speed)
+            if tool.kind == "grasper":
+                self._rate[tool.jaw_actuator_id] = float(cfg.closing_speed)
+        self._moving = False
+
+    def _check_initial_penetration(self) -> None:
+        if not len(self._geom_ids):
+            return
+        d = self.data
+        self._gather()
+        for name, (tissue, contact) in zip(self.tissues, self._pairs):
+            res = contact.compute(tissue.positions, tissue.velocities, self._shape_kind, self._shape_tool,
+                                  self._shape_size, self._gpos, self._gmat, self._gvel, self._tcom, self.dt)
+            pen = res.report.penetration.copy()
+            contact.reset()
+            if np.any(pen > 1e-9):
+                b = int(np.argmax(pen))
+                tool = next(t for t, idx in self._tool_bodies.items() if b in idx)
+                raise ConfigError(f"tissue '{name}' starts inside tool '{tool}' (initial penetration "
+                                  f"{pen[b] * 1e3:.2f} mm); move the tool away from the tissue (tool position "
+                                  f"{d.xpos[self._bodies[b]].round(4).tolist()} m) or the tissue (TissueConfig.position)")
+
+    # ------------------------------------------------------------------------------------------
+    # state
+    @property
+    def time(self) -> float:
+        """Simulation time (s)."""
+        return float(self.data.time)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Back to the initial state: MuJoCo data, tool targets at home, tissues at rest, contacts cleared."""
+        if seed is not None:
+            self.seed = int(seed)
+        self.rng = np.random.default_rng(self.seed)
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        d.ctrl[:] = 0.0
+        self._goal[:] = 0.0
+        self._moving = False
+        for tissue in self.tissues.values():
+            tissue.reset()
+        for contact in self.contacts.values():
+            contact.reset()
+        self.steps = 0
+        mujoco.mj_forward(m, d)
+
+    # ------------------------------------------------------------------------------------------
+    # stepping
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` control steps of ``substeps`` physics steps each."""
+        for _ in range(int(n) * self.substeps):
+            self.physics_step()
+
+    def run(self, duration: float) -> None:
+        """Advance by ``duration`` seconds (rounded to whole physics steps)."""
+        if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration >= 0):
+            raise ConfigError(f"duration must be a non-negative number of seconds, got {duration!r}")
+        for _ in range(int(round(duration / self.dt))):
+            self.physics_step()
+
+    def _gather(self) -> None:
+        d = self.data
+        _gather_geoms(self._geom_ids, self._geom_body, self._geom_root, self._bodies, d.geom_xpos, d.geom_xmat,
+                      d.cvel, d.subtree_com, d.xipos, self._gpos, self._gmat, self._gvel, self._tcom)
+
+    def physics_step(self) -> None:
+        """One physics step in the documented order (module docstring)."""
+        m, d, dt = self.model, self.data, self.dt
+        if self._moving:
+            self._advance_controls()
+        mujoco.mj_step1(m, d)
+        if len(self._geom_ids):
+            self._gather()
+            w = self._wrench
+            w[:] = 0.0
+            for tissue, contact in self._pairs:
+                res = contact.compute(tissue.positions, tissue.velocities, self._shape_kind, self._shape_tool,
+                                      self._shape_size, self._gpos, self._gmat, self._gvel, self._tcom, dt)
+                tissue.step(dt, res.forces, res.stiffness)
+                w[:, :3] += res.tool_force
+                w[:, 3:] += res.tool_torque
+            d.xfrc_applied[self._bodies] = w
+            mujoco.mj_step2(m, d)
+            d.xfrc_applied[self._bodies] = 0.0
+        else:
+            for tissue in self.tissues.values():
+                tissue.step(dt)
+            mujoco.mj_step2(m, d)
+        self.steps += 1
+
+    def _advance_controls(self) -> None:
+        d = self.data
+        delta = self._goal - d.ctrl
+        lim = self._rate * self.dt
+        d.ctrl[:] = d.ctrl + np.clip(delta, -lim, lim)
+        self._moving = bool(np.any(np.abs(self._goal - d.ctrl) > 1e-12))
+
+    # ------------------------------------------------------------------------------------------
+    # tool commands
+    def tool(self, name: str):
+        """The ToolSpec of tool ``name`` (ConfigError listing the tools if unknown)."""
+        try:
+            return self.tools[name]
+        except KeyError:
+            raise ConfigError(f"unknown tool {name!r}; tools in this scene: {sorted(self.tools)}") from None
+
+    def set_tool_target(self, name: str, position, speed: float | None = None, tilt=None) -> None:
+        """Move tool ``name``'s origin (probe tip centre / grasper wrist) towards ``position`` (3,) m, world.
+
+        speed: m/s rate limit (None = the tool config's ``speed``; inf = jump). tilt: (2,) rad about
+        world x and y (probes built with ``orientation=True``). The grasper moves only along and
+        across its axis within its slide ``travel``.
+        """
+        tool = self.tool(name)
+        if tool.config.drive == "proxy":
+            raise ConfigError(f"tool '{name}' is driven by a haptic proxy; move it with set_proxy_pose('{tool.proxy}', ...)")
+        if tool.config.drive != "position":
+            raise ConfigError(f"tool '{name}' has drive={tool.config.drive!r} and no actuators; build it with drive='position'")
+        pos = np.asarray(position, dtype=float).reshape(-1)
+        if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+            raise ConfigError(f"tool target position must be 3 finite numbers (m), got {position!r}")
+        local = tool.frame.T @ (pos - tool.home)
+        travel = tool.config.travel
+        if np.any(np.abs(local) > travel + 1e-12):
+            raise ConfigError(f"target {pos.round(4).tolist()} m is outside tool '{name}''s reach of +-{travel} m "
+                              f"about its home {tool.home.round(4).tolist()} m; raise its travel or choose a closer target")
+        act = tool.actuator_ids[:3]
+        self._goal[act] = local
+        if speed is not None:
+            self._set_rate(act, speed)
+        if tilt is not None:
+            if len(tool.actuator_ids) < 5:
+                raise ConfigError(f"tool '{name}' has no orientation joints; build it with orientation=True")
+            tilt = np.asarray(tilt, dtype=float).reshape(-1)
+            if tilt.shape != (2,) or np.any(np.abs(tilt) > 1.0):
+                raise ConfigError(f"tilt must be two angles in [-1, 1] rad, got {tilt.tolist()}")
+            self._goal[tool.actuator_ids[3:5]] = tilt
+        self._moving = True
+
+    def _set_rate(self, actuators, speed) -> None:
+        if not (isinstance(speed, (int, float)) and speed > 0):
+            raise ConfigError(f"speed must be a positive number (m/s), or math.inf for no limit, got {speed!r}")
+        self._rate[actuators] = float(speed)
+
+    def set_jaw_opening(self, name: str, radius: float, speed: float | None = None) -> None:
+        """Close or open grasper ``name`` to ``radius`` m (axis to each jaw's inner face) at ``speed`` m/s."""
+        tool = self.tool(name)
+        if tool.kind != "grasper":
+            raise ConfigError(f"tool '{name}' is a {tool.kind}, not a grasper; it has no jaws")
+        cfg = tool.config
+        if not (isinstance(radius, (int, float)) and cfg.min_radius - 1e-12 <= radius <= cfg.open_radius + 1e-12):
+            raise ConfigError(f"jaw opening {radius!r} m is outside [{cfg.min_radius}, {cfg.open_radius:.4f}] m "
+                              f"(min_radius .. open_radius) of grasper '{name}'")
+        self._goal[tool.jaw_actuator_id] = cfg.open_radius - float(radius)
+        if speed is not None:
+            self._set_rate([tool.jaw_actuator_id], speed)
+        self._moving = True
+
+    def jaw_opening(self, name: str) -> float:
+        """Current distance (m) from the axis to jaw 1's inner face."""
+        tool = self.tool(name)
+        if tool.kind != "grasper":
+            raise ConfigError(f"tool '{name}' is not a grasper")
+        return float(tool.config.open_radius - self.data.qpos[tool.jaw_qpos_adr[0]])
+
+    def _proxy_tool(self, name: str):
+        if name in self.proxies:
+            return self.proxies[name]
+        tool = self.tools.get(name)
+        if tool is not None and tool.proxy:
+            return tool
+        raise ConfigError(f"unknown haptic proxy {name!r}; proxies in this scene: {sorted(self.proxies)}")
+
+    def set_proxy_pose(self, name: str, position, quat=None) -> None:
+        """Place haptic proxy ``name`` (or the proxy of tool ``name``) at ``position`` (3,) m and ``quat`` (4,)."""
+        tool = self._proxy_tool(name)
+        pos = np.asarray(position, dtype=float).reshape(-1)
+        if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+            raise ConfigError(f"proxy position must be 3 finite numbers (m), got {position!r}")
+        self.data.mocap_pos[tool.mocap_id] = pos
+        if quat is not None:
+            q = np.asarray(quat, dtype=float).reshape(-1)
+            if q.shape != (4,) or not np.isfinite(q).all() or np.linalg.norm(q) < 1e-9:
+                raise ConfigError(f"proxy quat must be 4 finite numbers (w, x, y, z), got {quat!r}")
+            self.data.mocap_quat[tool.mocap_id] = q / np.linalg.norm(q)
+
+    def coupling_force(self, name: str) -> np.ndarray:
+        """(6,) [force N, torque N m] the weld (virtual coupling) exerts ON the tool, world frame."""
+        tool = self._proxy_tool(name)
+        d = self.data
+        rows = np.flatnonzero((d.efc_type == _EQ) & (d.efc_id == tool.proxy_eq_id))
+        out = np.zeros(6)
+        out[:len(rows)] = d.efc_force[rows][:6]
+        return out
+
+    def proxy_force(self, name: str) -> np.ndarray:
+        """(3,) N, the force the hand feels: the coupling force on the proxy (= minus that on the tool)."""
+        return -self.coupling_force(name)[:3]
+
+    # ------------------------------------------------------------------------------------------
+    # readouts
+    def tool_pose(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(position (3,) m, quaternion (4,) w x y z) of the tool's main body (probe tip centre / wrist)."""
+        tool = self.tool(name)
+        return self.data.xpos[tool.body_id].copy(), self.data.xquat[tool.body_id].copy()
+
+    def tool_position(self, name: str) -> np.ndarray:
+        """(3,) m world position of the tool origin."""
+        return self.data.xpos[self.tool(name).body_id].copy()
+
+    def tool_force(self, name: str) -> np.ndarray:
+        """(3,) N total contact force ON tool ``name`` from all tissues in the last physics step."""
+        idx = self._tool_bodies[self.tool(name).name]
+        out = np.zeros(3)
+        for contact in self.contacts.values():
+            out += contact.result.tool_force[idx].sum(axis=0)
+        return out
+
+    def contact_report(self) -> dict[str, dict[str, float]]:
+        """Per tool, summed over its bodies and all tissues, for the last physics step:
+        normal_force N (sum of normal magnitudes), tangential_force N (sum over the tool's bodies of
+        the magnitude of each body's summed friction force), contacts (nodes), slipping (nodes),
+        penetration m (max depth)."""
+        out = {}
+        for name in self.tools:
+            idx = self._tool_bodies[name]
+            fn = ft = 0.0
+            nc = ns = 0
+            pen = 0.0
+            for contact in self.contacts.values():
+                r = contact.report
+                fn += float(r.normal_force[idx].sum())
+                ft += float(r.tangential_force[idx].sum())
+                nc += int(r.contacts[idx].sum())
+                ns += int(r.slipping[idx].sum())
+                pen = max(pen, float(r.penetration[idx].max()) if len(idx) else 0.0)
+            out[name] = {"normal_force": fn, "tangential_force": ft, "contacts": nc, "slipping": ns, "penetration": pen}
+        return out
+
+    def jaw_forces(self, name: str) -> dict[str, np.ndarray]:
+        """Per-jaw contact forces of grasper ``name``: {"normal": (3,) N, "tangential": (3,) N}."""
+        tool = self.tool(name)
+        if tool.kind != "grasper":
+            raise ConfigError(f"tool '{name}' is a {tool.kind}, not a grasper")
+        rows = [self._geom_index[int(g)] for g in tool.jaw_geom_ids]
+        fn, ft = np.zeros(3), np.zeros(3)
+        for contact in self.contacts.values():
+            fn += contact.result.geom_normal_force[rows]
+            ft += contact.result.geom_tangential_force[rows]
+        return {"normal": fn, "tangential": ft}
+
+    def tissue(self, name: str | None = None):
+        """The TissueModel ``name`` (the only one if None)."""
+        if name is None:
+            if len(self.tissues) != 1:
+                raise ConfigError(f"this scene has {len(self.tissues)} tissues; name one of {sorted(self.tissues)}")
+            return next(iter(self.tissues.values()))
+        try:
+            return self.tissues[name]
+        except KeyError:
+            raise ConfigError(f"unknown tissue {name!r}; tissues in this scene: {sorted(self.tissues)}") from None
+
+    def tissue_positions(self, name: str | None = None) -> np.ndarray:
+        """(N,3) m copy of the node positions of tissue ``name``."""
+        return self.tissue(name).positions.copy()
+
+    def momentum(self) -> np.ndarray:
+        """(3,) kg m/s total linear momentum of all MuJoCo bodies plus all tissue nodes (diagnostic)."""
+        m, d = self.model, self.data
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_comVel(m, d)
+        mujoco.mj_subtreeVel(m, d)
+        p = m.body_subtreemass[0] * d.subtree_linvel[0]
+        for tissue in self.tissues.values():
+            p = p + tissue.momentum()
+        return p
+
+    # ------------------------------------------------------------------------------------------
+    def sync_visual(self) -> None:
+        """Write every tissue surface into ``d.flexvert_xpos`` (call right before rendering)."""
+        for binding in self.bindings.values():
+            binding.write(self.data)
