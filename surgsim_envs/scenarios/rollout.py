@@ -1,0 +1,93 @@
+"""Scenario runs that drive a registered Gymnasium task with a saved policy (``scenario.task``).
+
+The policy reference (``[policy] file``) is loaded by :func:`~surgsim_envs.scenarios.runner.load_policy`.
+A callable whose first parameter is named ``env`` is a *factory*: it is called with the
+environment at the start of each episode and must return ``policy(obs) -> action``. Otherwise the
+callable is the policy itself. Each control step records the tool's contact forces (N) and
+position (m) from the task's simulation; the episode's ``info`` supplies the inclusion estimate
+(``guess_xy_m``) and truth (``inclusion_centre_m``) when the task has them.
+"""
+
+from __future__ import annotations
+
+import inspect
+import time
+
+import numpy as np
+
+from surgsim_envs.errors import ConfigError, TissueUnstableError
+
+
+def _as_policy(obj, env):
+    try:
+        params = list(inspect.signature(obj).parameters)
+    except (TypeError, ValueError):
+        params = []
+    if params and params[0] == "env":
+        return obj(env)
+    return obj
+
+
+def run_rollout(sc, progress: bool = False):
+    """Run ``sc.policy.episodes`` episodes of ``sc.meta.task``; return one RunResult (all episodes
+    concatenated in time; phases are the episodes)."""
+    import gymnasium as gym
+
+    import surgsim_envs  # noqa: F401  (registers the SurgSim tasks)
+    from surgsim_envs.scenarios.runner import Recording, _evaluate_rollout, load_policy
+
+    spec = sc.policy
+    wall0 = time.perf_counter()
+    try:
+        env = gym.make(sc.meta.task, **dict(spec.env_kwargs))
+    except gym.error.Error as exc:
+        raise ConfigError(f"{sc.source or sc.name}: scenario.task {sc.meta.task!r} cannot be made: {exc}") from None
+    base = sc.source.parent if sc.source else None
+    ref = load_policy(spec.file, base)
+    rec = Recording()
+    completed, error, infos = True, None, []
+    t_offset = 0.0
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=spec.episodes * spec.max_steps, unit="step", mininterval=0.5)
+    try:
+        for ep in range(spec.episodes):
+            obs, info = env.reset(seed=sc.meta.seed + ep)
+            policy = _as_policy(ref, env)
+            sim = getattr(env.unwrapped, "sim", None)
+            tool = next(iter(sim.tools)) if sim is not None and sim.tools else None
+            start = t_offset
+            done, steps = False, 0
+            while not done and steps < spec.max_steps:
+                action = policy(obs)
+                obs, reward, terminated, truncated, info = env.step(action)
+                done = terminated or truncated
+                steps += 1
+                if tool is not None:
+                    rep = sim.contact_report()[tool]
+                    rec.add(t_offset + sim.time, ep, rep["normal_force"], rep["tangential_force"], 0.0,
+                            rep["slipping"], rep["contacts"], rep["penetration"], sim.tool_position(tool), np.nan)
+                else:
+                    rec.add(t_offset + float(info.get("time_s", steps)), ep, float(info.get("force_N", 0.0)), 0.0, 0.0,
+                            0, 0, 0.0, np.zeros(3), np.nan)
+                if bar is not None:
+                    bar.update(1)
+            if not done:
+                completed = False
+                error = f"episode {ep} did not end within max_steps={spec.max_steps}"
+            end = t_offset + (sim.time if sim is not None else steps)
+            rec.phase_names.append(f"episode {ep}")
+            rec.phase_spans.append({"index": ep, "type": "policy", "label": f"episode {ep}", "driver": "policy",
+                                    "start": start, "end": end})
+            infos.append({k: v for k, v in info.items() if isinstance(v, (int, float, str, bool, list))})
+            t_offset = end
+    except TissueUnstableError as exc:
+        completed, error = False, str(exc)
+    finally:
+        if bar is not None:
+            bar.close()
+        env.close()
+    rec.finish()
+    return _evaluate_rollout(sc, rec, completed, error, infos, time.perf_counter() - wall0)

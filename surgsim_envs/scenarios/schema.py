@@ -1,0 +1,466 @@
+"""The scenario file schema (TOML), as dataclasses, with loading and validation.
+
+A scenario file has these tables (every key is optional unless marked *required*; SI units)::
+
+    [scenario]                 # what is run
+    name = "spleen_grasp"      # *required*, used for the output folder and the report
+    description = "..."
+    scene = "grasp"            # ready-made scene: "palpation" (probe, slab with inclusion) or "grasp"
+                               # (three-jaw grasper around the spleen tip). Omit when `task` is given.
+    task = ""                  # a registered Gymnasium task id ("SurgSim/Palpation-v0"): a policy rollout
+    seed = 0
+    sample_period = 0.01       # s between recorded samples
+    duration_scale = 1.0       # multiplies every phase duration (the CLI's --duration-scale multiplies again)
+
+    [scene]                    # overrides of the ready-made scene (all optional)
+    organ = "spleen"           # geometry volume name (make_volume)
+    model = "mass_spring"      # tissue model registry name
+    material = "spleen"        # material preset name
+    spacing = 0.006            # m, node spacing
+    mu = 0.6                   # tool-tissue Coulomb friction coefficient
+    dt = 0.001                 # s, physics step
+    inclusion_xy = [0.01, 0.0] # m, where the hidden inclusion sits (palpation)
+
+    [trainee]                  # who drives the phases by default
+    driver = "script"          # "script" | "device" | "policy"
+    device = "scripted"        # device spec for driver = "device": scripted | replay:FILE | keyboard | udp:PORT
+    script = ""                # scripted device: path to a JSON/TOML trajectory (default: the phase motion)
+    policy = ""                # driver = "policy": "module:function" or an SB3 .zip file
+    tremor = 0.0               # m, tremor amplitude of the default simulated hand (device "scripted")
+
+    [[phases]]                 # in order; see surgsim_envs.scenarios.phases for every type and key
+    type = "close_jaws"        # approach | close_jaws | hold | pull | press | palpate | release
+    duration = 4.0             # s
+    ...                        # type-specific keys (opening, distance, force, depth, at, ...)
+    driver = "script"          # optional per-phase override of [trainee]
+
+    [scoring]
+    safety_limit = 3.0         # N, normal force above which time counts as a safety violation
+    [scoring.criteria.peak_force]   # one table per criterion (see scoring.CRITERIA)
+    target = 2.0               # full marks at or below this value
+    limit = 4.0                # zero marks at or above (the criterion fails)
+    weight = 1.0
+
+    [sweep]                    # optional: one run per value; keys are [scene] keys
+    mu = [0.6, 0.8, 1.0]
+
+    [policy]                   # only with scenario.task (Gymnasium rollout)
+    file = "surgsim_envs.scenarios.policies:palpation_scan"
+    episodes = 1
+    max_steps = 200
+    env_kwargs = {}
+
+Unknown keys, wrong types, bad values and impossible phase orders raise
+:class:`~surgsim_envs.errors.ConfigError` naming the key, its value and (for files) the line,
+before any simulation is built.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import re
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from surgsim_envs.errors import ConfigError
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - python < 3.11
+    import tomli as tomllib  # type: ignore[no-redef]
+
+SCENES = ("palpation", "grasp")
+DRIVERS = ("script", "device", "policy")
+
+
+@dataclass
+class ScenarioMeta:
+    """The ``[scenario]`` table. ``sample_period`` s; ``duration_scale`` multiplies phase durations."""
+
+    name: str = ""
+    description: str = ""
+    scene: str = ""
+    task: str = ""
+    seed: int = 0
+    sample_period: float = 0.01
+    duration_scale: float = 1.0
+
+
+@dataclass
+class SceneOverrides:
+    """The ``[scene]`` table: changes to the ready-made scene. ``None`` keeps the scene's value.
+
+    organ: volume name; model: tissue model; material: preset name; spacing: m;
+    mu: tool-tissue friction coefficient; dt: s physics step; inclusion_xy: (2,) m x, y of the
+    stiff inclusion's centre (organ "slab_inclusion" only).
+    """
+
+    organ: str | None = None
+    model: str | None = None
+    material: str | None = None
+    spacing: float | None = None
+    mu: float | None = None
+    dt: float | None = None
+    inclusion_xy: tuple[float, float] | None = None
+
+
+@dataclass
+class TraineeSpec:
+    """The ``[trainee]`` table: default driver of every phase (see module docstring)."""
+
+    driver: str = "script"
+    device: str = "scripted"
+    script: str = ""
+    policy: str = ""
+    tremor: float = 0.0
+
+
+@dataclass
+class CriterionSpec:
+    """One scoring criterion: full marks at or below ``target``, zero at or above ``limit``
+    (linear in between; the criterion fails at or above ``limit``), weighted by ``weight``.
+    For ``completion`` target/limit are ignored."""
+
+    target: float = 0.0
+    limit: float = 1.0
+    weight: float = 1.0
+
+
+@dataclass
+class ScoringSpec:
+    """The ``[scoring]`` table: ``safety_limit`` N and the criteria by name."""
+
+    safety_limit: float = 3.0
+    criteria: dict[str, CriterionSpec] = field(default_factory=dict)
+
+
+@dataclass
+class PolicySpec:
+    """The ``[policy]`` table of a Gymnasium rollout scenario (``scenario.task``)."""
+
+    file: str = ""
+    episodes: int = 1
+    max_steps: int = 200
+    env_kwargs: dict = field(default_factory=dict)
+
+
+@dataclass
+class Scenario:
+    """A validated scenario. ``phases`` are :class:`~surgsim_envs.scenarios.phases.Phase` objects;
+    ``sweep`` maps a [scene] key to its values; ``source`` is the file it came from (or None)."""
+
+    meta: ScenarioMeta
+    scene: SceneOverrides = field(default_factory=SceneOverrides)
+    trainee: TraineeSpec = field(default_factory=TraineeSpec)
+    phases: list = field(default_factory=list)
+    scoring: ScoringSpec = field(default_factory=ScoringSpec)
+    sweep: dict[str, list] = field(default_factory=dict)
+    policy: PolicySpec | None = None
+    source: Path | None = None
+
+    @property
+    def name(self) -> str:
+        return self.meta.name
+
+    def runs(self) -> list[tuple[dict, "Scenario"]]:
+        """One (sweep values, scenario with those [scene] values) per run; one run without a sweep."""
+        if not self.sweep:
+            return [({}, self)]
+        keys = list(self.sweep)
+        n = len(self.sweep[keys[0]])
+        out = []
+        for i in range(n):
+            values = {k: self.sweep[k][i] for k in keys}
+            sc = copy.deepcopy(self)
+            sc.sweep = {}
+            for k, v in values.items():
+                setattr(sc.scene, k, v)
+            out.append((values, sc))
+        return out
+
+    def scaled(self, factor: float) -> "Scenario":
+        """A copy with every phase duration multiplied by ``factor`` (> 0)."""
+        if isinstance(factor, bool) or not isinstance(factor, (int, float)) or not (0 < factor <= 100):
+            raise ConfigError(f"duration scale must be a number in (0, 100], got {factor!r}")
+        sc = copy.deepcopy(self)
+        sc.meta.duration_scale = self.meta.duration_scale * float(factor)
+        return sc
+
+
+# ----------------------------------------------------------------------------------------------
+# Locating keys in the TOML text (tomllib reports no positions for valid files)
+class KeyLocator:
+    """Maps a key path such as ``("phases", 2, "duration")`` to its 1-based line in the TOML text."""
+
+    _HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
+    _KEY = re.compile(r"^\s*(\"[^\"]+\"|'[^']+'|[A-Za-z0-9_.\-]+)\s*=")
+
+    def __init__(self, text: str | None):
+        self.lines: dict[tuple, int] = {}
+        if not text:
+            return
+        table: tuple = ()
+        counts: dict[tuple, int] = {}
+        for no, line in enumerate(text.splitlines(), start=1):
+            m = self._HEADER.match(line)
+            if m and not self._KEY.match(line):
+                parts = tuple(p.strip().strip("\"'") for p in m.group(2).split("."))
+                if m.group(1) == "[[":
+                    i = counts.get(parts, 0)
+                    counts[parts] = i + 1
+                    table = parts + (i,)
+                else:
+                    table = parts
+                self.lines.setdefault(table, no)
+                continue
+            k = self._KEY.match(line)
+            if k:
+                key = tuple(p.strip().strip("\"'") for p in k.group(1).split("."))
+                self.lines.setdefault(table + key, no)
+
+    def line(self, path: tuple) -> int | None:
+        """Line of ``path`` or of its nearest enclosing table; None when unknown."""
+        p = tuple(path)
+        while p:
+            if p in self.lines:
+                return self.lines[p]
+            p = p[:-1]
+        return None
+
+
+class _Ctx:
+    def __init__(self, source: str, locator: KeyLocator):
+        self.source, self.locator = source, locator
+
+    def error(self, path: tuple, message: str) -> ConfigError:
+        key = _dotted(path)
+        line = self.locator.line(path)
+        where = f"{self.source}" + (f", line {line}" if line else "")
+        return ConfigError(f"{where}: {key}: {message}")
+
+
+def _dotted(path: tuple) -> str:
+    out = ""
+    for p in path:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
+    return out or "<top level>"
+
+
+# ----------------------------------------------------------------------------------------------
+# Generic typed construction of dataclasses from TOML tables
+def _check_type(value: Any, hint: Any, path: tuple, ctx: _Ctx) -> Any:
+    origin = typing.get_origin(hint)
+    args = typing.get_args(hint)
+    if hint is Any:
+        return value
+    if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for a in args:
+            if a is type(None):
+                continue
+            try:
+                return _check_type(value, a, path, ctx)
+            except ConfigError as exc:
+                errors.append(exc)
+        raise errors[0]
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ctx.error(path, f"expected a number, got {value!r} ({type(value).__name__})")
+        if not math.isfinite(value):
+            raise ctx.error(path, f"expected a finite number, got {value!r}")
+        return float(value)
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ctx.error(path, f"expected an integer, got {value!r} ({type(value).__name__})")
+        return value
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ctx.error(path, f"expected true or false, got {value!r} ({type(value).__name__})")
+        return value
+    if hint is str:
+        if not isinstance(value, str):
+            raise ctx.error(path, f"expected a string, got {value!r} ({type(value).__name__})")
+        return value
+    if origin in (list, tuple):
+        if not isinstance(value, list):
+            raise ctx.error(path, f"expected an array, got {value!r} ({type(value).__name__})")
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            if len(value) != len(args):
+                raise ctx.error(path, f"expected an array of {len(args)} values, got {len(value)}: {value!r}")
+            return tuple(_check_type(v, a, path + (i,), ctx) for i, (v, a) in enumerate(zip(value, args)))
+        inner = args[0] if args else Any
+        out = [_check_type(v, inner, path + (i,), ctx) for i, v in enumerate(value)]
+        return tuple(out) if origin is tuple else out
+    if origin is dict or hint is dict:
+        if not isinstance(value, dict):
+            raise ctx.error(path, f"expected a table, got {value!r} ({type(value).__name__})")
+        if args and dataclasses.is_dataclass(args[1]):
+            return {k: build_dataclass(args[1], v, path + (k,), ctx) for k, v in value.items()}
+        return dict(value)
+    if dataclasses.is_dataclass(hint):
+        return build_dataclass(hint, value, path, ctx)
+    return value  # pragma: no cover - unsupported annotation: accept as is
+
+
+def build_dataclass(cls, table: Any, path: tuple, ctx: _Ctx, skip: tuple = ()):
+    """Instance of dataclass ``cls`` from the TOML ``table``; ConfigError names unknown keys and bad types."""
+    if not isinstance(table, dict):
+        raise ctx.error(path, f"expected a table, got {table!r} ({type(table).__name__})")
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls) if f.init]
+    kwargs = {}
+    for key, value in table.items():
+        if key in skip:
+            continue
+        if key not in names:
+            close = [n for n in names if n.startswith(key[:3])] or names
+            raise ctx.error(path + (key,), f"unknown key {key!r} (value {value!r}); allowed keys here: "
+                                           f"{', '.join(sorted(close if len(close) < len(names) else names))}")
+        kwargs[key] = _check_type(value, hints[key], path + (key,), ctx)
+    try:
+        return cls(**kwargs)
+    except ConfigError as exc:
+        raise ctx.error(path, str(exc)) from None
+
+
+# ----------------------------------------------------------------------------------------------
+_TOP = ("scenario", "scene", "trainee", "phases", "scoring", "sweep", "policy")
+
+
+def _positive(ctx: _Ctx, path: tuple, value, allow_zero: bool = False, unit: str = "") -> None:
+    if value is None:
+        return
+    ok = value >= 0 if allow_zero else value > 0
+    if not ok:
+        raise ctx.error(path, f"must be {'>= 0' if allow_zero else '> 0'}{' ' + unit if unit else ''}, got {value!r}")
+
+
+def validate_driver(ctx: _Ctx, path: tuple, driver: str, device: str, policy: str) -> None:
+    """Check a driver name and, for devices, the device spec's form (files are checked when run)."""
+    if driver not in DRIVERS:
+        raise ctx.error(path + ("driver",), f"unknown driver {driver!r}; choose one of {', '.join(DRIVERS)}")
+    if driver == "device":
+        kind, _, arg = device.partition(":")
+        if device not in ("scripted", "keyboard") and not (kind in ("replay", "udp") and arg):
+            raise ctx.error(path + ("device",), f"device {device!r} not understood; use scripted, replay:FILE, "
+                                                "keyboard or udp:PORT")
+    if driver == "policy" and not policy:
+        raise ctx.error(path + ("policy",), "driver 'policy' needs a policy: 'module:function' or a .zip file")
+
+
+def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = None) -> Scenario:
+    """Validate a parsed TOML document and build a :class:`Scenario` (ConfigError on any problem)."""
+    from surgsim_envs.scenarios.phases import build_phase, check_phase_order
+    from surgsim_envs.scenarios.scoring import CRITERIA
+
+    ctx = _Ctx(source, KeyLocator(text))
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: a scenario must be a TOML document (a table), got {type(data).__name__}")
+    for key in data:
+        if key not in _TOP:
+            raise ctx.error((key,), f"unknown top-level table {key!r}; allowed: {', '.join(_TOP)}")
+    if "scenario" not in data:
+        raise ctx.error(("scenario",), "missing the [scenario] table (it needs at least name = \"...\")")
+    meta = build_dataclass(ScenarioMeta, data["scenario"], ("scenario",), ctx)
+    if not meta.name or not re.fullmatch(r"[A-Za-z0-9_.\-]+", meta.name):
+        raise ctx.error(("scenario", "name"), f"give a name of letters, digits, '_', '-' or '.', got {meta.name!r}")
+    if meta.task and meta.scene:
+        raise ctx.error(("scenario", "task"), f"give either scene = ... (scripted phases) or task = ... (a Gymnasium "
+                                              f"policy rollout), not both (scene={meta.scene!r}, task={meta.task!r})")
+    if not meta.task and meta.scene not in SCENES:
+        raise ctx.error(("scenario", "scene"), f"unknown scene {meta.scene!r}; choose one of {', '.join(SCENES)} "
+                                               "(or set task = \"SurgSim/...-v0\" for a policy rollout)")
+    _positive(ctx, ("scenario", "sample_period"), meta.sample_period, unit="s")
+    _positive(ctx, ("scenario", "duration_scale"), meta.duration_scale)
+    scene = build_dataclass(SceneOverrides, data.get("scene", {}), ("scene",), ctx)
+    for key, unit in (("spacing", "m"), ("dt", "s")):
+        _positive(ctx, ("scene", key), getattr(scene, key), unit=unit)
+    _positive(ctx, ("scene", "mu"), scene.mu, allow_zero=True)
+    trainee = build_dataclass(TraineeSpec, data.get("trainee", {}), ("trainee",), ctx)
+    validate_driver(ctx, ("trainee",), trainee.driver, trainee.device, trainee.policy)
+    _positive(ctx, ("trainee", "tremor"), trainee.tremor, allow_zero=True, unit="m")
+
+    scoring_tab = data.get("scoring", {})
+    scoring = build_dataclass(ScoringSpec, scoring_tab, ("scoring",), ctx, skip=("criteria",))
+    _positive(ctx, ("scoring", "safety_limit"), scoring.safety_limit, unit="N")
+    crit_tab = scoring_tab.get("criteria", {}) if isinstance(scoring_tab, dict) else {}
+    if not isinstance(crit_tab, dict):
+        raise ctx.error(("scoring", "criteria"), f"expected a table of criteria, got {crit_tab!r}")
+    for name, tab in crit_tab.items():
+        if name not in CRITERIA:
+            raise ctx.error(("scoring", "criteria", name), f"unknown criterion {name!r}; choose from "
+                                                           f"{', '.join(CRITERIA)}")
+        crit = build_dataclass(CriterionSpec, tab, ("scoring", "criteria", name), ctx)
+        if crit.weight < 0:
+            raise ctx.error(("scoring", "criteria", name, "weight"), f"must be >= 0, got {crit.weight}")
+        if name != "completion" and not crit.limit > crit.target:
+            raise ctx.error(("scoring", "criteria", name, "limit"),
+                            f"limit ({crit.limit}) must be greater than target ({crit.target})")
+        scoring.criteria[name] = crit
+
+    sweep = data.get("sweep", {})
+    if not isinstance(sweep, dict):
+        raise ctx.error(("sweep",), f"expected a table like mu = [0.6, 0.8, 1.0], got {sweep!r}")
+    allowed = [f.name for f in dataclasses.fields(SceneOverrides)]
+    lengths = set()
+    for key, values in sweep.items():
+        if key not in allowed:
+            raise ctx.error(("sweep", key), f"cannot sweep {key!r}; sweepable [scene] keys: {', '.join(allowed)}")
+        if not isinstance(values, list) or not values:
+            raise ctx.error(("sweep", key), f"expected a non-empty array of values, got {values!r}")
+        hint = typing.get_type_hints(SceneOverrides)[key]
+        for i, v in enumerate(values):
+            _check_type(v, hint, ("sweep", key, i), ctx)
+        lengths.add(len(values))
+    if len(lengths) > 1:
+        raise ctx.error(("sweep",), f"all swept arrays must have the same length, got lengths {sorted(lengths)}")
+
+    policy = None
+    if "policy" in data:
+        if not meta.task:
+            raise ctx.error(("policy",), "a [policy] table needs scenario.task (a Gymnasium task id)")
+        policy = build_dataclass(PolicySpec, data["policy"], ("policy",), ctx)
+        if not policy.file:
+            raise ctx.error(("policy", "file"), "give the policy: 'module:function' or a stable-baselines3 .zip file")
+        _positive(ctx, ("policy", "episodes"), policy.episodes)
+        _positive(ctx, ("policy", "max_steps"), policy.max_steps)
+    elif meta.task:
+        raise ctx.error(("scenario", "task"), "a task rollout needs a [policy] table with file = '...'")
+
+    phases_tab = data.get("phases", [])
+    if meta.task:
+        if phases_tab:
+            raise ctx.error(("phases",), "a Gymnasium task rollout takes no [[phases]]; the policy drives the task")
+    else:
+        if not isinstance(phases_tab, list) or not phases_tab:
+            raise ctx.error(("phases",), "a scenario needs at least one [[phases]] table (e.g. type = \"hold\")")
+    phases = [build_phase(tab, ("phases", i), ctx, trainee) for i, tab in enumerate(phases_tab)]
+    if phases:
+        check_phase_order(phases, meta.scene, ctx)
+    return Scenario(meta=meta, scene=scene, trainee=trainee, phases=phases, scoring=scoring, sweep=dict(sweep),
+                    policy=policy, source=None)
+
+
+def loads_scenario(text: str, source: str = "<string>") -> Scenario:
+    """Parse and validate scenario TOML ``text``."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+    return parse_scenario(data, source, text)
+
+
+def load_scenario(path) -> Scenario:
+    """Load and validate the scenario file ``path`` (.toml)."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"scenario file {str(path)!r} not found; give a path such as tasks/spleen_grasp_and_retract.toml")
+    sc = loads_scenario(p.read_text(), str(p))
+    sc.source = p
+    return sc
