@@ -1,0 +1,134 @@
+"""``surgsim bench accuracy``: force error against cost for every model, integrator and resolution.
+
+Scene "indent": a rigid sphere (R = 5 mm) pressed into a 30 mm liver slab (E = 4 kPa, nu = 0.45)
+bonded to a rigid base (:func:`surgsim_envs.bench.material.indent`, graded quarter mesh). Error:
+mean relative force error against Dimitriadis et al. (2002) over depths in [d_v/4, d_v], d_v the
+reference's validity depth (1.5 mm here); ``self_error`` is the same against the model's own
+finest resolution (its converged solution). Cost: microseconds of compute per simulated
+millisecond (wall time of one physics step, contact + tissue, times the steps per ms at the
+model's stable dt). Outputs ``accuracy.json`` (the table :func:`surgsim_envs.bench.choose` reads)
+and ``accuracy.png`` (log-log, Pareto front marked).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+
+import numpy as np
+
+from surgsim_envs.bench.references import dimitriadis_force, dimitriadis_valid_depth
+
+RADIUS, THICKNESS, MATERIAL = 0.005, 0.03, "liver"  # liver made elastic (relax_fraction = 0)
+SPACINGS = (0.003, 0.002, 0.0015, 0.001, 0.0007)
+QUICK_SPACINGS = (0.003, 0.002, 0.0013)
+
+
+def force_error(depth, force, ref_force, valid_depth: float) -> float:
+    """Mean relative error of ``force`` against ``ref_force`` at depths in [valid_depth/4, valid_depth]."""
+    depth, force, ref_force = map(np.asarray, (depth, force, ref_force))
+    sel = (depth >= 0.25 * valid_depth - 1e-12) & (depth <= valid_depth + 1e-12)
+    return float(np.mean(np.abs(force[sel] / ref_force[sel] - 1.0)))
+
+
+def sweep(models=None, spacings=SPACINGS, progress: bool = True, time_steps: int = 10) -> list[dict]:
+    """Rows {scene, model, integrator, spacing, nodes, dt, us_per_step, us_per_ms, error, self_error}."""
+    from tqdm import tqdm
+
+    from surgsim_envs.bench.material import indent
+    from surgsim_envs.bench.speed import available_models
+    from surgsim_envs.tissue import get_material
+
+    mat = get_material(MATERIAL).replace(relax_fraction=0.0, nonlinear=0.0)  # elastic: the reference is
+    dv = dimitriadis_valid_depth(RADIUS, THICKNESS)
+    classes = [(n, c) for n, c in available_models() if models is None or n in models]
+    jobs = [(c, integ, s) for _, c in classes for integ in c.integrators for s in spacings]
+    rows = []
+    with tqdm(jobs, desc="bench accuracy", unit="case", file=sys.stderr, disable=not progress) as bar:
+        for cls, integ, s in bar:
+            bar.set_postfix_str(f"{cls.name}/{integ} h={s * 1e3:g} mm")
+            try:
+                res = indent(cls, mat, indenter_radius=RADIUS, depth=dv, thickness=THICKNESS, spacing=s,
+                             n_depths=8, integrator=integ, time_steps=time_steps)
+            except Exception as exc:  # keep sweeping
+                print(f"surgsim bench accuracy: {cls.name}/{integ} h={s}: {exc}", file=sys.stderr)
+                continue
+            ref = dimitriadis_force(res.depth, RADIUS, mat.young, mat.poisson, THICKNESS, bonded=True)
+            rows.append({"scene": "indent", "model": cls.name, "integrator": integ, "spacing": s,
+                         "nodes": res.nodes, "dt": res.dt, "us_per_step": res.us_per_step, "us_per_ms": res.us_per_ms,
+                         "error": force_error(res.depth, res.force, ref, dv), "depth": res.depth.tolist(),
+                         "force": res.force.tolist()})
+    for r in rows:  # error against the model's own finest resolution
+        finest = min((q for q in rows if q["model"] == r["model"]), key=lambda q: q["spacing"])
+        r["self_error"] = force_error(r["depth"], r["force"], finest["force"], dv)
+    return rows
+
+
+def pareto(rows: list[dict]) -> list[dict]:
+    """Rows not dominated in (us_per_ms, error): nobody is both cheaper and more accurate."""
+    pts = [r for r in rows if math.isfinite(r["us_per_ms"]) and math.isfinite(r["error"])]
+    front = [r for r in pts if not any(q is not r and q["us_per_ms"] <= r["us_per_ms"] and q["error"] <= r["error"]
+                                       and (q["us_per_ms"] < r["us_per_ms"] or q["error"] < r["error"]) for q in pts)]
+    return sorted(front, key=lambda r: r["us_per_ms"])
+
+
+def plot(rows: list[dict], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    series = sorted({(r["model"], r["integrator"]) for r in rows})
+    for m, integ in series:
+        sub = sorted((r for r in rows if r["model"] == m and r["integrator"] == integ and math.isfinite(r["us_per_ms"])),
+                     key=lambda r: r["spacing"])
+        if not sub:
+            continue
+        ax.plot([r["us_per_ms"] for r in sub], [max(r["error"], 1e-4) for r in sub], "o-", label=f"{m} / {integ}")
+        for r in sub:
+            ax.annotate(f"{r['spacing'] * 1e3:g}", (r["us_per_ms"], max(r["error"], 1e-4)), fontsize=6,
+                        textcoords="offset points", xytext=(3, 3))
+    front = pareto(rows)
+    if front:
+        ax.step([r["us_per_ms"] for r in front], [max(r["error"], 1e-4) for r in front], where="post", color="k",
+                lw=2, alpha=0.35, label="Pareto front")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("cost: us of compute per simulated ms")
+    ax.set_ylabel("force error vs Dimitriadis (fraction)")
+    ax.set_title("Sphere indentation of a bonded 30 mm liver slab (labels: mm spacing)", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", default="surgsim-out/accuracy", help="output directory (accuracy.json, accuracy.png)")
+    parser.add_argument("--quick", action="store_true", help="three resolutions only (about 1-2 min)")
+    parser.add_argument("--models", default=None, help="comma-separated model names (default: all registered)")
+
+
+def run(args: argparse.Namespace) -> int:
+    models = None if not args.models else [m.strip() for m in args.models.split(",") if m.strip()]
+    rows = sweep(models, QUICK_SPACINGS if args.quick else SPACINGS)
+    os.makedirs(args.out, exist_ok=True)
+    table = {"scene": "indent", "radius": RADIUS, "thickness": THICKNESS, "material": MATERIAL,
+             "reference": "dimitriadis bonded", "rows": rows}
+    with open(os.path.join(args.out, "accuracy.json"), "w") as fh:
+        json.dump(table, fh, indent=1)
+    if rows:
+        plot(rows, os.path.join(args.out, "accuracy.png"))
+    front = {id(r) for r in pareto(rows)}
+    print(f"{'model':<12} {'integrator':<11} {'h (mm)':>7} {'nodes':>6} {'us/ms':>10} {'error':>7} {'self':>7}")
+    for r in rows:
+        mark = " *" if id(r) in front else ""
+        print(f"{r['model']:<12} {r['integrator']:<11} {r['spacing'] * 1e3:>7.3g} {r['nodes']:>6} "
+              f"{r['us_per_ms']:>10.4g} {r['error']:>7.3f} {r['self_error']:>7.3f}{mark}")
+    print(f"(* = Pareto front) wrote {args.out}/accuracy.json and accuracy.png")
+    return 0

@@ -1,0 +1,129 @@
+"""``surgsim bench envs``: Gymnasium env steps per second per task.
+
+Single process, default task settings (control rate, physics dt and substeps are reported),
+random actions (Palpation's "report" component held at -1 so episodes run to the time limit),
+episode resets included. Then ``gym.make_vec(..., vectorization_mode="async")`` with
+``--workers`` processes (default 2) for the scaling figure. Every figure is the median over
+``--repeats`` timed runs of ``--steps`` env steps each (after a warm-up that compiles numba).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+
+import numpy as np
+
+from surgsim_envs.errors import ConfigError
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--tasks", default="all", help="comma-separated task ids or 'all'")
+    parser.add_argument("--steps", type=int, default=400, help="env steps per timed run (default 400)")
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs per figure; median reported (default 3)")
+    parser.add_argument("--workers", type=int, default=2, help="async vector env size (0 to skip; default 2)")
+    parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+
+def _actions(space, n, rng, palpation):
+    a = rng.uniform(-1, 1, (n, *space.shape)).astype(np.float32)
+    if palpation:
+        a[..., 3] = -1.0
+    return a
+
+
+def single_rate(env_id: str, steps: int, repeats: int) -> dict:
+    """Median env steps/s of one env in this process, plus its timing settings."""
+    import gymnasium as gym
+
+    env = gym.make(env_id)
+    u = env.unwrapped
+    rng = np.random.default_rng(0)
+    pal = "Palpation" in env_id
+    env.reset(seed=0)
+    for a in _actions(env.action_space, 20, rng, pal):
+        env.step(a)
+    rates = []
+    for r in range(repeats):
+        acts = _actions(env.action_space, steps, rng, pal)
+        env.reset(seed=r)
+        t0 = time.perf_counter()
+        for a in acts:
+            _, _, term, trunc, _ = env.step(a)
+            if term or trunc:
+                env.reset()
+        rates.append(steps / (time.perf_counter() - t0))
+    t0 = time.perf_counter()
+    for r in range(5):
+        env.reset(seed=r)
+    reset_ms = (time.perf_counter() - t0) / 5 * 1e3
+    out = {"task": env_id, "steps_per_s": statistics.median(rates), "control_hz": u.config.control_hz,
+           "physics_dt_s": u.sim.dt, "substeps": u.substeps, "tissue_nodes": int(u.sim.tissue().n_nodes),
+           "reset_ms": reset_ms, "physics_steps_per_s": statistics.median(rates) * u.substeps}
+    env.close()
+    return out
+
+
+def async_rate(env_id: str, workers: int, steps: int, repeats: int) -> float:
+    """Median total env steps/s of an async vector env with ``workers`` processes."""
+    import gymnasium as gym
+
+    vec = gym.make_vec(env_id, num_envs=workers, vectorization_mode="async")
+    rng = np.random.default_rng(0)
+    pal = "Palpation" in env_id
+    try:
+        vec.reset(seed=list(range(workers)))
+        for a in _actions(vec.action_space, 10, rng, pal):
+            vec.step(a)
+        rates = []
+        n = max(1, steps // workers)
+        for _ in range(repeats):
+            acts = _actions(vec.action_space, n, rng, pal)
+            t0 = time.perf_counter()
+            for a in acts:
+                vec.step(a)
+            rates.append(n * workers / (time.perf_counter() - t0))
+    finally:
+        vec.close()
+    return statistics.median(rates)
+
+
+def run(args) -> int:
+    import surgsim_envs  # noqa: F401
+    from surgsim_envs.envs import TASKS
+
+    for key in ("steps", "repeats"):
+        if getattr(args, key) <= 0:
+            raise ConfigError(f"--{key} must be a positive integer, got {getattr(args, key)}")
+    if args.workers < 0:
+        raise ConfigError(f"--workers must be >= 0, got {args.workers}")
+    tasks = list(TASKS) if args.tasks == "all" else [t.strip() for t in args.tasks.split(",")]
+    unknown = [t for t in tasks if t not in TASKS]
+    if unknown:
+        raise ConfigError(f"unknown task(s) {unknown}; known: {list(TASKS)}")
+    rows = []
+    for t in tasks:
+        row = single_rate(t, args.steps, args.repeats)
+        if args.workers:
+            row["async_workers"] = args.workers
+            row["async_steps_per_s"] = async_rate(t, args.workers, args.steps, args.repeats)
+            row["async_speedup"] = row["async_steps_per_s"] / row["steps_per_s"]
+        rows.append(row)
+    if args.json:
+        print(json.dumps({"envs": rows}, indent=2))
+        return 0
+    print(f"{'task':24s} {'steps/s':>8s} {'ctrl Hz':>8s} {'dt ms':>6s} {'sub':>4s} {'nodes':>6s} {'reset ms':>9s}"
+          f" {'async/s':>8s} {'speedup':>8s}")
+    for r in rows:
+        print(f"{r['task']:24s} {r['steps_per_s']:8.0f} {r['control_hz']:8.0f} {r['physics_dt_s'] * 1e3:6.2f} "
+              f"{r['substeps']:4d} {r['tissue_nodes']:6d} {r['reset_ms']:9.1f} "
+              f"{r.get('async_steps_per_s', float('nan')):8.0f} {r.get('async_speedup', float('nan')):8.2f}")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    p = argparse.ArgumentParser(description=__doc__)
+    add_arguments(p)
+    raise SystemExit(run(p.parse_args()))

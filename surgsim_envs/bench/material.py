@@ -1,0 +1,457 @@
+"""Virtual material tests: spherical indentation, ramp-and-hold relaxation, grasp-and-pull slip.
+
+Every test takes a registered tissue model (name or class), a material (preset name, dict or
+:class:`~surgsim_envs.tissue.Material`) and returns plain arrays in SI units (m, N, s), so the
+results can be compared with the closed forms of :mod:`surgsim_envs.bench.references`.
+
+* :func:`indent` -- a rigid sphere pressed slowly into a square slab on a rigid base. Quasi-static:
+  the model's small-strain stiffness (its linearisation about rest; relaxed for viscoelastic
+  models) is condensed onto the top-surface nodes under the indenter, and frictionless contact
+  is solved exactly as a linear complementarity problem at every depth (a node touches the
+  sphere or is force-free; no penalty parameter). A short dynamic run on the same mesh measures
+  the wall time of one physics step (tissue step + contact detection).
+* :func:`relax` -- a block between two bonded plates, compressed at constant rate, then held:
+  force on the top plate against time, stepped with the model's own integrator.
+* :func:`slip` -- three flat jaws squeeze a tissue cylinder, then a soft handle spring pulls it
+  along its axis; the pull, the summed jaw normal force and the pull at slip onset (the rig of
+  ``tests/test_grasp_slip.py``, for any model).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.optimize as so
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from surgsim_envs.errors import ConfigError, TissueUnstableError
+from surgsim_envs.tissue.materials import Material, get_material
+
+#: integrator names treated as unconditionally stable (no explicit dt limit)
+IMPLICIT_INTEGRATORS = ("implicit", "static", "quasi_static", "backward_euler")
+DEFAULT_DT = 1e-3  # s
+
+
+# ----------------------------------------------------------------------------------------------
+# helpers
+def model_class(model):
+    """Registered model class for a name (or the class itself)."""
+    from surgsim_envs.tissue import registry
+    from surgsim_envs.tissue.base import TissueModel
+
+    if isinstance(model, str):
+        return registry.get(model)
+    if isinstance(model, type) and issubclass(model, TissueModel):
+        return model
+    raise ConfigError(f"model must be a registered model name or a TissueModel subclass, got {model!r}")
+
+
+def _positive(**values) -> None:
+    for key, val in values.items():
+        if not (isinstance(val, (int, float, np.integer, np.floating)) and not isinstance(val, bool)
+                and math.isfinite(val) and val > 0):
+            raise ConfigError(f"{key} must be a positive number (SI units), got {val!r}")
+
+
+def is_explicit(cls, integrator: str | None) -> bool:
+    integ = integrator or cls.integrators[0]
+    return integ not in IMPLICIT_INTEGRATORS and not getattr(cls, "quasi_static", False)
+
+
+def stable_dt(model, dt: float | None = None, safety: float = 0.8) -> float:
+    """``dt`` (default 1 ms), reduced to ``safety`` x the critical dt for explicit integrators."""
+    dt = DEFAULT_DT if dt is None else float(dt)
+    if is_explicit(type(model), model.integrator):
+        crit = float(model.critical_dt())
+        if math.isfinite(crit) and crit > 0:
+            dt = min(dt, safety * crit)
+    return dt
+
+
+def linear_stiffness(model) -> sp.csr_matrix:
+    """Small-strain stiffness ``-df/dx`` (3N x 3N, N/m) of ``model`` about its current state.
+
+    Uses ``model.stiffness_matrix`` (a method taking ``relaxed=True`` for viscoelastic models, or a
+    sparse attribute); otherwise builds it by central differences of ``internal_forces`` (only for
+    models up to 3,000 nodes).
+    """
+    sm = getattr(model, "stiffness_matrix", None)
+    if callable(sm):
+        try:
+            k = sm(relaxed=True)
+        except TypeError:
+            k = sm()
+        return sp.csr_matrix(k)
+    if sm is not None and sp.issparse(sm):
+        return sm.tocsr()
+    n = model.n_nodes
+    if n > 3000:
+        raise ConfigError(f"model '{model.name}' exposes no stiffness_matrix and has {n} nodes; finite-difference "
+                          "stiffness is limited to 3,000 nodes (coarsen the mesh or add stiffness_matrix)")
+    x0 = model.positions.copy()
+    h = 1e-7 * float(np.ptp(x0, axis=0).max())
+    cols = []
+    for j in range(3 * n):
+        model.positions = x0.copy()
+        model.positions.reshape(-1)[j] += h
+        fp = model.internal_forces().ravel()
+        model.positions = x0.copy()
+        model.positions.reshape(-1)[j] -= h
+        fm = model.internal_forces().ravel()
+        cols.append(sp.csc_matrix(-(fp - fm)[:, None] / (2 * h)))
+    model.positions = x0
+    k = sp.hstack(cols).tocsr()
+    return (0.5 * (k + k.T)).tocsr()
+
+
+def _build(cls, volume, material, opts: dict[str, Any], fixed=None):
+    opts = dict(opts)
+    try:
+        return cls(volume, material, fixed=fixed, **opts)
+    except TypeError as exc:
+        raise ConfigError(f"model '{cls.name}' rejected options {sorted(opts)}: {exc}") from None
+
+
+# ----------------------------------------------------------------------------------------------
+# Indentation
+@dataclass
+class IndentResult:
+    """Indentation curve: ``depth`` (m), ``force`` (N) on the sphere, ``nodes`` of the simulated mesh,
+    ``us_per_step`` (wall time of one dynamic physics step, microseconds) at ``dt`` (s)."""
+
+    depth: np.ndarray
+    force: np.ndarray
+    nodes: int
+    us_per_step: float
+    dt: float
+    model: str = ""
+    integrator: str = ""
+    spacing: float = 0.0
+    info: dict = field(default_factory=dict)
+
+    @property
+    def us_per_ms(self) -> float:
+        """Compute cost per simulated millisecond (us / ms)."""
+        return self.us_per_step * 1e-3 / self.dt
+
+    def as_dict(self) -> dict:
+        out = asdict(self)
+        out["depth"] = [float(v) for v in self.depth]
+        out["force"] = [float(v) for v in self.force]
+        out["us_per_ms"] = self.us_per_ms
+        return out
+
+
+def _solve_lcp(c: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """Contact pressures p >= 0 (N) with w = C p + g >= 0, p.w = 0 (C SPD compliance, m/N).
+
+    Equivalent to min 0.5 p'Cp + g'p, p >= 0; solved as NNLS on the Cholesky factor."""
+    if not np.any(g < 0):
+        return np.zeros_like(g)
+    low = sla.cholesky(c, lower=True)
+    rhs = -sla.solve_triangular(low, g, lower=True)
+    p, _ = so.nnls(low.T, rhs, maxiter=50 * len(g))
+    return p
+
+
+def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: float = 0.003,
+           thickness: float = 0.03, width: float | None = None, spacing: float | None = None, bonded: bool = True,
+           n_depths: int = 12, grading: float = 1.3, max_cell: float | None = None, quarter: bool = True,
+           dt: float | None = None, time_steps: int = 20, **opts) -> IndentResult:
+    """Press a rigid sphere (``indenter_radius`` m) up to ``depth`` (m) into a square slab
+    (``width`` m, default 4 x ``thickness``; ``thickness`` m) lying on a rigid base.
+
+    bonded: bottom nodes fixed in all directions (else in z only: a frictionless base).
+    spacing: mesh spacing (m) under the indenter, default min(sqrt(R d)/4, thickness/6); cells grow
+        by ``grading`` per cell away from the contact zone, up to ``max_cell`` (default 8 x spacing).
+    quarter: simulate a quarter slab with symmetry conditions (exact for a centred sphere; 4x fewer
+        nodes); the force is that of the whole slab.
+    n_depths: depths sampled uniformly in (0, depth].
+    dt, time_steps: the timed dynamic run (dt default 1 ms, reduced to 0.8 x the critical dt for
+        explicit integrators); ``time_steps=0`` skips it (us_per_step = nan).
+    **opts: model options (e.g. integrator="implicit").
+
+    Returns an :class:`IndentResult` (depth m, force N, nodes, us_per_step).
+    """
+    from surgsim_envs.bench.indent_mesh import graded_slab
+
+    cls = model_class(model)
+    mat = get_material(material)
+    _positive(indenter_radius=indenter_radius, depth=depth, thickness=thickness)
+    R = float(indenter_radius)
+    if depth >= min(R, thickness):
+        raise ConfigError(f"depth {depth} m must be smaller than the indenter radius ({R} m) and the thickness "
+                          f"({thickness} m)")
+    a_max = math.sqrt(R * depth)
+    width = 4.0 * thickness if width is None else width
+    spacing = min(a_max / 4.0, thickness / 6.0) if spacing is None else spacing
+    _positive(width=width, spacing=spacing, grading=grading)
+    if width < 4.0 * a_max:
+        raise ConfigError(f"width {width} m is too small for a contact radius of {a_max:.3g} m; use >= {4 * a_max:.3g} m")
+    if not (isinstance(n_depths, (int, np.integer)) and n_depths >= 1):
+        raise ConfigError(f"n_depths must be a positive integer, got {n_depths!r}")
+    zone = min(0.999 * R, 1.6 * a_max + 2.0 * spacing)
+    vol = graded_slab(width, thickness, spacing, zone + 2.0 * spacing, grading=grading, max_cell=max_cell,
+                      quarter=quarter)
+    X = vol.nodes
+    bottom = np.isclose(X[:, 2], -thickness)
+    tissue = _build(cls, vol, mat, opts, fixed=bottom)
+
+    # constrained dofs: base, symmetry planes (and rigid modes of an unbonded full slab)
+    n = vol.n_nodes
+    cons = np.zeros((n, 3), dtype=bool)
+    cons[bottom, 2] = True
+    if bonded:
+        cons[bottom] = True
+    if quarter:
+        cons[np.isclose(X[:, 0], 0.0), 0] = True
+        cons[np.isclose(X[:, 1], 0.0), 1] = True
+    elif not bonded:
+        centre = np.flatnonzero(bottom & np.isclose(X[:, 0], 0.0) & np.isclose(X[:, 1], 0.0))
+        side = np.flatnonzero(bottom & np.isclose(X[:, 1], 0.0) & (X[:, 0] > 0))
+        cons[centre, :2] = True
+        cons[side[:1], 1] = True
+    r = np.hypot(X[:, 0], X[:, 1])
+    cand = np.flatnonzero(np.isclose(X[:, 2], 0.0) & (r < zone))
+    K = linear_stiffness(tissue)
+    free = ~cons.ravel()
+    kff = K[free][:, free].tocsc()
+    try:
+        lu = spla.splu(kff)
+    except RuntimeError as exc:
+        raise ConfigError(f"indent: singular stiffness for model '{cls.name}' ({exc})") from None
+    index = -np.ones(3 * n, dtype=np.int64)
+    index[free] = np.arange(int(free.sum()))
+    zdofs = index[3 * cand + 2]
+    rhs = np.zeros((kff.shape[0], len(cand)))
+    rhs[zdofs, np.arange(len(cand))] = 1.0
+    sol = lu.solve(rhs)
+    comp = sol[zdofs]                                   # m/N: z displacement per unit upward z force
+    comp = 0.5 * (comp + comp.T)
+    gap0 = R - np.sqrt(R * R - r[cand] ** 2)            # sphere surface height above its lowest point
+    depths = np.linspace(depth / n_depths, depth, n_depths)
+    forces = np.empty(n_depths)
+    p = np.zeros(len(cand))
+    for k, d in enumerate(depths):
+        p = _solve_lcp(comp, gap0 - d)                  # gap g = -d + gap0 (u_z <= g)
+        forces[k] = p.sum() * (4.0 if quarter else 1.0)
+
+    us, dt_used = math.nan, math.nan
+    if time_steps:
+        load = np.zeros((n, 3))
+        load[cand, 2] = -0.1 * p                       # a gentle load: timing, not a dynamic test
+        try:
+            us, dt_used = _time_steps(tissue, load, R, depth, dt, int(time_steps))
+        except TissueUnstableError as exc:          # report it; the force curve is still valid
+            us, dt_used = math.nan, exc.dt
+    return IndentResult(depths, forces, n, us, dt_used, cls.name, tissue.integrator, float(spacing),
+                        {"bonded": bool(bonded), "quarter": bool(quarter), "thickness": float(thickness),
+                         "width": float(width), "radius": R, "young": mat.young, "poisson": mat.poisson,
+                         "contact_nodes": int(np.count_nonzero(p)), "candidate_nodes": int(len(cand))})
+
+
+def _time_steps(tissue, load: np.ndarray, radius: float, depth: float, dt: float | None, steps: int):
+    """Median wall time (us) of one physics step: contact detection on the surface nodes plus the
+    tissue step under the indentation load. Returns (us_per_step, dt)."""
+    from surgsim_envs.contact import SPHERE, ContactModel, ContactParams
+
+    dt = stable_dt(tissue, dt)
+    cm = ContactModel(tissue.n_nodes, tissue.surface_nodes, [0.0], ContactParams(stiffness=200.0))
+    kind, tool = np.array([SPHERE]), np.array([0])
+    size = np.array([[radius, 0.0, 0.0]])
+    pos = np.array([[0.0, 0.0, radius - depth]])
+    mat = np.eye(3).reshape(1, 9)
+    vel, com = np.zeros((1, 6)), np.zeros((1, 3))
+    times = []
+    for i in range(steps + 3):
+        t0 = time.perf_counter()
+        cm.compute(tissue.positions, tissue.velocities, kind, tool, size, pos, mat, vel, com, dt)
+        tissue.step(dt, load)
+        if i >= 3:                                     # the first steps compile numba kernels
+            times.append(time.perf_counter() - t0)
+    return float(np.median(times) * 1e6), float(dt)
+
+
+# ----------------------------------------------------------------------------------------------
+# Ramp-and-hold relaxation
+@dataclass
+class RelaxResult:
+    """Compression force on the top plate (N, positive in compression) against ``time`` (s)."""
+
+    time: np.ndarray
+    force: np.ndarray
+    nodes: int
+    area: float
+    height: float
+    strain: float
+    ramp_time: float
+    dt: float
+    model: str = ""
+    integrator: str = ""
+
+    def as_dict(self) -> dict:
+        return {"time": [float(v) for v in self.time], "force": [float(v) for v in self.force],
+                "nodes": self.nodes, "area": self.area, "height": self.height, "strain": self.strain,
+                "ramp_time": self.ramp_time, "dt": self.dt, "model": self.model, "integrator": self.integrator}
+
+
+def relax(model, material="liver", *, strain: float = 0.05, ramp_time: float = 0.2, hold_time: float = 3.0,
+          size=(0.02, 0.02, 0.02), spacing: float = 0.005, dt: float | None = None, samples: int = 200,
+          **opts) -> RelaxResult:
+    """Ramp-and-hold compression of a block (``size`` m) between bonded rigid plates.
+
+    The top plate moves down by ``strain`` x height at constant speed over ``ramp_time`` (s) and is
+    then held for ``hold_time`` (s). The force (N) is the sum of the z reactions on the top nodes
+    (``internal_forces`` there). The model's implicit integrator is used when it has one (override
+    with ``integrator=...``); ``dt`` defaults to 1 ms (0.8 x critical dt if explicit). About
+    ``samples`` points are returned.
+    """
+    from surgsim_envs.geometry import box_volume
+
+    cls = model_class(model)
+    mat = get_material(material)
+    _positive(strain=strain, ramp_time=ramp_time, hold_time=hold_time, spacing=spacing, samples=samples)
+    if strain >= 0.5:
+        raise ConfigError(f"strain {strain} is too large for a relaxation test; use 0.01-0.2")
+    if "integrator" not in opts and "implicit" in cls.integrators:
+        opts = {**opts, "integrator": "implicit"}
+    vol = box_volume(tuple(size), spacing, center=(0.0, 0.0, size[2] / 2.0), name="relax_block")
+    z = vol.nodes[:, 2]
+    bottom, top = np.isclose(z, 0.0), np.isclose(z, z.max())
+    tissue = _build(cls, vol, mat, opts, fixed=bottom | top)
+    dt = stable_dt(tissue, dt)
+    h = float(size[2])
+    n_steps = int(round((ramp_time + hold_time) / dt))
+    every = max(1, n_steps // int(samples))
+    top_idx = np.flatnonzero(top)
+    targets = tissue.rest_positions[top_idx].copy()
+    times, forces = [0.0], [0.0]
+    for i in range(1, n_steps + 1):
+        t = i * dt
+        targets[:, 2] = h - strain * h * min(t / ramp_time, 1.0)
+        tissue.set_fixed(top_idx, targets)
+        tissue.step(dt)
+        if i % every == 0 or i == n_steps:
+            times.append(t)
+            forces.append(float(tissue.internal_forces()[top_idx, 2].sum()))
+    return RelaxResult(np.array(times), np.array(forces), vol.n_nodes, float(size[0] * size[1]), h, float(strain),
+                       float(ramp_time), float(dt), cls.name, tissue.integrator)
+
+
+# ----------------------------------------------------------------------------------------------
+# Grasp and pull
+@dataclass
+class SlipResult:
+    """Grasp-and-pull record from the start of the pull: ``time`` (s), ``pull`` (N), ``normal_sum``
+    (N, summed jaw normal force), ``slide`` (m, axial motion of the tissue's centre of mass);
+    ``slip_onset_pull`` (N): pull when the slide first exceeds ``onset_slide``; ``slip_onset_normal``
+    (N) the jaws' normal force at that instant (nan if the grasp never slipped)."""
+
+    time: np.ndarray
+    pull: np.ndarray
+    normal_sum: np.ndarray
+    slide: np.ndarray
+    slip_onset_pull: float
+    slip_onset_normal: float
+    mu: float
+    nodes: int
+    model: str = ""
+
+    def as_dict(self) -> dict:
+        return {"pull": [float(v) for v in self.pull], "normal_sum": [float(v) for v in self.normal_sum],
+                "slip_onset_pull": self.slip_onset_pull, "slip_onset_normal": self.slip_onset_normal,
+                "time": [float(v) for v in self.time], "slide": [float(v) for v in self.slide],
+                "mu": self.mu, "nodes": self.nodes, "model": self.model}
+
+
+SLIP_MATERIAL = Material(young=20_000.0, poisson=0.45, density=1000.0, damping=10.0, name="gel")
+
+
+def grasp_cylinder(radius: float, length: float, spacing: float):
+    """Tet volume of a tissue cylinder (axis z, centred at the origin), lattice + surface snapping."""
+    import trimesh
+
+    from surgsim_envs.geometry.lattice import lattice_volume
+
+    return lattice_volume(trimesh.creation.cylinder(radius=radius, height=length, sections=48), spacing)
+
+
+def _jaw_frames():
+    ang = np.deg2rad([90.0, 210.0, 330.0])
+    er = np.stack([np.cos(ang), np.sin(ang), np.zeros(3)], axis=1)
+    et = np.stack([-np.sin(ang), np.cos(ang), np.zeros(3)], axis=1)
+    ez = np.tile([0.0, 0.0, 1.0], (3, 1))
+    mats = np.stack([np.stack([er[k], et[k], ez[k]], axis=1).ravel() for k in range(3)])
+    return er, mats
+
+
+def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length: float = 0.04,
+         spacing: float = 0.003, squeeze: float = 0.0005, dt: float = 5e-5, contact_stiffness: float = 60.0,
+         contact_damping: float = 0.02, handle_stiffness: float = 100.0, handle_speed: float = 0.01,
+         close_time: float = 0.15, settle_time: float = 0.1, pull_time: float = 0.6, onset_slide: float = 2.5e-3,
+         volume=None, **opts) -> SlipResult:
+    """Three flat jaws (120 degrees apart, longer than the tissue) close radially by ``squeeze`` (m)
+    on a tissue cylinder (``radius``, ``length`` m) over ``close_time`` s, hold for ``settle_time`` s,
+    then a handle spring (``handle_stiffness`` N/m, far end moving at ``handle_speed`` m/s) pulls the
+    tissue along its axis (as a body force spread by mass) for ``pull_time`` s.
+
+    Coulomb friction ``mu`` on the jaws; penalty contact ``contact_stiffness`` N/m per node.
+    Gross slip (reference: mu * sum(N)) is taken to start when the tissue has slid ``onset_slide`` m.
+    ``material`` defaults to a 20 kPa gel. Same rig as ``tests/test_grasp_slip.py``.
+    """
+    from surgsim_envs.contact import BOX, ContactModel, ContactParams
+
+    cls = model_class(model)
+    mat = SLIP_MATERIAL if material is None else get_material(material)
+    if not (isinstance(mu, (int, float, np.floating)) and math.isfinite(mu) and mu >= 0):
+        raise ConfigError(f"mu must be a friction coefficient >= 0, got {mu!r}")
+    _positive(radius=radius, length=length, spacing=spacing, squeeze=squeeze, dt=dt, close_time=close_time,
+              settle_time=settle_time, pull_time=pull_time, handle_stiffness=handle_stiffness,
+              handle_speed=handle_speed, onset_slide=onset_slide)
+    vol = grasp_cylinder(radius, length, spacing) if volume is None else volume
+    tissue = _build(cls, vol, mat, opts)
+    cm = ContactModel(tissue.n_nodes, tissue.surface_nodes, [float(mu)],
+                      ContactParams(stiffness=contact_stiffness, damping=contact_damping))
+    er, mats = _jaw_frames()
+    jaw_half = np.array([0.002, 0.003, 0.5 * length + 0.015])
+    kind, tool = np.full(3, BOX), np.zeros(3, dtype=int)
+    size = np.tile(jaw_half, (3, 1))
+    com = np.zeros((1, 3))
+    weights = tissue.masses / tissue.total_mass
+    forces = np.zeros_like(tissue.positions)
+    gvel = np.zeros((3, 6))
+    clearance = 0.0005
+    travel = clearance + squeeze
+    z0 = t0 = None
+    rows = []
+    res = None
+    for i in range(int(round((close_time + settle_time + pull_time) / dt))):
+        t = i * dt
+        s = min(t / close_time, 1.0)                    # smooth radial closing, then held
+        rho = radius + clearance - travel * s * s * (3 - 2 * s)
+        gvel[:, 3:] = -er * travel * (6 * s * (1 - s) / close_time if t < close_time else 0.0)
+        res = cm.compute(tissue.positions, tissue.velocities, kind, tool, size, er * (rho + jaw_half[0]),
+                         mats, gvel, com, dt)
+        pull = 0.0
+        if t >= close_time + settle_time:
+            zc = weights @ tissue.positions[:, 2]
+            if z0 is None:
+                z0, t0 = zc, t
+            pull = max(handle_stiffness * (handle_speed * (t - t0) - (zc - z0)), 0.0)
+            rows.append((t - t0, pull, float(res.report.normal_force[0]), zc - z0))
+        np.copyto(forces, res.forces)
+        forces[:, 2] += pull * weights
+        tissue.step(dt, forces, res.stiffness)
+    if res is None or res.report.contacts[0] == 0:
+        raise ConfigError("slip: the jaws never touched the tissue; increase squeeze")
+    tt, pull, normal, slide = np.array(rows).T
+    hit = np.flatnonzero(slide > onset_slide)
+    onset_pull = float(pull[hit[0]]) if len(hit) else math.nan
+    onset_normal = float(normal[hit[0]]) if len(hit) else math.nan
+    return SlipResult(tt, pull, normal, slide, onset_pull, onset_normal, float(mu), vol.n_nodes, cls.name)

@@ -1,0 +1,106 @@
+"""``surgsim material indent|relax|slip``: run a virtual material test and print the curve.
+
+    surgsim material indent --model fem --set young=5000 --set poisson=0.45 --radius 0.005 \
+        --depth 0.003 --thickness 0.03 --json
+    surgsim material relax --model mass_spring --material liver --strain 0.05 --json
+    surgsim material slip --model mass_spring --mu 0.6 --json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from surgsim_envs.errors import ConfigError
+
+
+def parse_sets(items, base: str):
+    """--set key=value pairs on top of preset ``base`` -> material dict."""
+    out = {"preset": base}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ConfigError(f"--set expects key=value (e.g. young=5000), got {item!r}")
+        try:
+            out[key.strip()] = float(value)
+        except ValueError:
+            raise ConfigError(f"--set {key}: value {value!r} is not a number (SI units)") from None
+    return out
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="test", metavar="TEST", required=True)
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--model", default="fem", help="registered model name (default fem)")
+    common.add_argument("--material", default="liver", help="material preset the --set values modify")
+    common.add_argument("--set", action="append", metavar="KEY=VALUE", help="material field, e.g. young=5000")
+    common.add_argument("--integrator", default=None, help="model integrator (default: the test's choice)")
+    common.add_argument("--spacing", type=float, default=None, help="mesh spacing in m")
+    common.add_argument("--json", action="store_true", help="print the result as JSON")
+    common.add_argument("--plot", default=None, metavar="FILE.png", help="save a plot of the curve")
+    p = sub.add_parser("indent", parents=[common], help="rigid sphere into a slab on a rigid base")
+    p.add_argument("--radius", type=float, default=0.005, help="sphere radius m")
+    p.add_argument("--depth", type=float, default=0.003, help="final depth m")
+    p.add_argument("--thickness", type=float, default=0.03, help="slab thickness m")
+    p.add_argument("--width", type=float, default=None, help="slab width m (default 4 x thickness)")
+    p.add_argument("--unbonded", action="store_true", help="slab slides on its base (fixed in z only)")
+    p.add_argument("--points", type=int, default=12, help="number of depths")
+    r = sub.add_parser("relax", parents=[common], help="ramp-and-hold compression of a block")
+    r.add_argument("--strain", type=float, default=0.05)
+    r.add_argument("--ramp-time", type=float, default=0.2, help="s")
+    r.add_argument("--hold-time", type=float, default=3.0, help="s")
+    s = sub.add_parser("slip", parents=[common], help="three-jaw grasp, then a ramped pull")
+    s.add_argument("--mu", type=float, default=0.6, help="jaw friction coefficient")
+
+
+def run(args: argparse.Namespace) -> int:
+    from surgsim_envs.bench import material as mt
+
+    opts = {}
+    if args.integrator:
+        opts["integrator"] = args.integrator
+    if args.spacing:
+        opts["spacing"] = args.spacing
+    mat = parse_sets(args.set, args.material)
+    if args.test == "indent":
+        res = mt.indent(args.model, mat, indenter_radius=args.radius, depth=args.depth, thickness=args.thickness,
+                        width=args.width, bonded=not args.unbonded, n_depths=args.points, **opts)
+        out = {"depth": res.depth.tolist(), "force": res.force.tolist(), "nodes": res.nodes,
+               "us_per_step": res.us_per_step, "dt": res.dt}
+        text = (f"{res.model}/{res.integrator}: {res.nodes} nodes, force {res.force[-1]:.4g} N at depth "
+                f"{res.depth[-1] * 1e3:.3g} mm; {res.us_per_step:.4g} us per step at dt {res.dt:.3g} s")
+        xy, labels = (res.depth * 1e3, res.force), ("depth (mm)", "force (N)")
+    elif args.test == "relax":
+        res = mt.relax(args.model, mat, strain=args.strain, ramp_time=args.ramp_time, hold_time=args.hold_time, **opts)
+        out = {"time": res.time.tolist(), "force": res.force.tolist()}
+        text = (f"{res.model}/{res.integrator}: peak {res.force.max():.4g} N, final {res.force[-1]:.4g} N "
+                f"({res.force[-1] / max(res.force.max(), 1e-30):.3f} of peak) after {res.time[-1]:.3g} s")
+        xy, labels = (res.time, res.force), ("time (s)", "force (N)")
+    else:
+        if args.set:
+            opts_mat = mat
+        else:
+            opts_mat = None
+        res = mt.slip(args.model, opts_mat, mu=args.mu, **opts)
+        out = {"pull": res.pull.tolist(), "normal_sum": res.normal_sum.tolist(), "slip_onset_pull": res.slip_onset_pull}
+        text = (f"{res.model}: slip onset at pull {res.slip_onset_pull:.4g} N; mu * sum(N) there = "
+                f"{res.mu * res.slip_onset_normal:.4g} N")
+        xy, labels = (res.time, res.pull), ("time since pull start (s)", "pull (N)")
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(5, 3.5))
+        ax.plot(*xy)
+        if args.test == "slip":
+            ax.plot(res.time, res.mu * res.normal_sum, "--", label="mu * sum(N)")
+            ax.legend()
+        ax.set_xlabel(labels[0])
+        ax.set_ylabel(labels[1])
+        fig.tight_layout()
+        fig.savefig(args.plot, dpi=120)
+        plt.close(fig)
+    print(json.dumps(out) if args.json else text)
+    return 0
