@@ -54,3 +54,37 @@ def test_fem_beats_affine_prediction_and_error_grows_with_strain(cube):
     assert errors[0.05] < 0.8 * affine5, (errors, affine5)
     assert errors[0.1825] < tc.rms(tc.affine_prediction(rest, 0.1825), measured[0.1825])
     assert errors[0.05] < 0.05 * tc.CUBE * 0.3          # well below the plate travel (4 mm)
+
+
+def test_mass_spring_static_solve_converges_to_a_stable_equilibrium_under_plate_compression(cube):
+    """Load-stepped Newton: the residual vanishes, the solution is a stable (not saddle) equilibrium,
+    and below the spring network's buckling strain the bulge beats the affine prediction."""
+    tc, rest, measured = cube
+    model, vol, bottom, top = tc.cube_model("mass_spring", 0.016)
+    free = ~np.isin(np.arange(vol.n_nodes), np.concatenate([bottom, top]))
+    for strain in (0.125, 0.1825):
+        model.reset()
+        x = tc.compress(model, bottom, top, strain)
+        assert np.all(np.isfinite(x))
+        assert np.allclose(x[top, 2], vol.nodes[top, 2] - strain * tc.CUBE)
+        f = model.spring_forces()                  # branches relaxed after static_solve
+        reaction = np.linalg.norm(f[top].sum(axis=0))
+        assert reaction > 0
+        assert np.abs(f[free] + model.masses[free, None] * model.gravity).max() < 1e-6 * reaction
+        lam, _ = model._lowest_mode(x)             # a minimum of the energy, not a saddle
+        assert lam > 0, lam
+        if strain == 0.125:
+            assert tc.rms(tc.predict_beads(vol, x, rest), measured[strain]) < tc.rms(tc.affine_prediction(rest, strain), measured[strain])
+
+
+def test_mass_spring_static_solve_rejects_bad_tolerances(cube):
+    tc, _, _ = cube
+    from surgsim_envs.errors import ConfigError
+
+    model, vol, bottom, top = tc.cube_model("mass_spring", 0.02)
+    model.set_fixed(bottom)
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(ConfigError, match="tol"):
+            model.static_solve(tol=bad)
+    with pytest.raises(ConfigError, match="max_iter"):
+        model.static_solve(max_iter=0)

@@ -27,6 +27,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+import numba
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.tissue import fem_assembly as asm
@@ -47,6 +48,10 @@ class TetFEMModel(TissueModel):
     rotation_iters: Newton iterations of the polar decomposition per step (warm-started; 1 is
         enough at interactive dt, the rotation keeps converging over the following steps).
     cg_tol: relative residual of the implicit corotational solve.
+    threads: numba threads for the element loops (1: single-thread kernels, the default, robust on
+        a shared machine; >= 2: ``prange`` passes, deterministic and bitwise independent of the
+        thread count; capped at ``numba.config.NUMBA_NUM_THREADS``). Parallel passes wait for
+        every thread at each pass, so only use them when the cores are not busy with other work.
     """
 
     name = "fem"
@@ -55,7 +60,7 @@ class TetFEMModel(TissueModel):
 
     def __init__(self, volume, material="liver", *, integrator=None, corotational: bool = True,
                  formulation: str = "anp", stiffness_damping: float | None = None,
-                 rotation_iters: int = 1, cg_tol: float = 1e-6, **base_kwargs):
+                 rotation_iters: int = 1, cg_tol: float = 1e-6, threads: int = 1, **base_kwargs):
         if not isinstance(corotational, (bool, np.bool_)):
             raise ConfigError(f"corotational must be True or False, got {corotational!r}")
         if formulation not in FORMULATIONS:
@@ -70,6 +75,10 @@ class TetFEMModel(TissueModel):
             raise ConfigError(f"cg_tol must lie in (0, 1), got {cg_tol!r}")
         if not (isinstance(rotation_iters, (int, np.integer)) and rotation_iters >= 1):
             raise ConfigError(f"rotation_iters must be an integer >= 1, got {rotation_iters!r}")
+        if not (isinstance(threads, (int, np.integer)) and not isinstance(threads, bool) and threads >= 1):
+            raise ConfigError(f"threads must be an integer >= 1 (1 = single-thread kernels), got {threads!r}")
+        self.threads = min(int(threads), int(numba.config.NUMBA_NUM_THREADS))
+        self._parallel = self.threads > 1
         self.corotational = bool(corotational)
         self.formulation = formulation
         self.stiffness_damping = float(stiffness_damping)
@@ -105,11 +114,8 @@ class TetFEMModel(TissueModel):
         self.stiffness_matrix = self._assemble_stiffness(None)
         self._kdiag_node = self.stiffness_matrix.diagonal().reshape(-1, 3).mean(axis=1)
         t = len(self.tets)
-        self._quats = np.zeros((t, 4))
-        self._quats[:, 0] = 1.0
         self._rots = np.ascontiguousarray(np.broadcast_to(np.eye(3), (t, 3, 3)).copy())
-        self._theta = np.zeros(n)
-        self._eps = np.zeros((t, 6))
+        self._work = kern.make_work(self.tets, n)
         self._ybuf = np.zeros((n, 3))
         self._fbuf = np.zeros((n, 3))
         self._lin = None          # cached (dt, fixed mask, LU of A_ff) for the linear implicit step
@@ -130,20 +136,31 @@ class TetFEMModel(TissueModel):
 
     # ------------------------------------------------------------------------------------------
     # Kernels wrappers
+    def _set_threads(self) -> bool:
+        """Numba thread count for the parallel kernels; returns whether to use them."""
+        if self._parallel and numba.get_num_threads() != self.threads:
+            numba.set_num_threads(self.threads)
+        return self._parallel
+
     def _update_rotations(self, x, tol=None, max_iter=None) -> None:
         """Polar rotations at positions x: ``rotation_iters`` warm-started Newton steps while
         stepping (tol None), or iterate to ``tol`` rad (energies, static solves)."""
         if self.corotational:
+            par = self._set_threads()
             if tol is None:
-                kern.update_rotations(x, self.tets, self.dm_inv, self._quats, self._rots, self.rotation_iters, 1e-12)
+                kern.update_rotations(x, self.tets, self.dm_inv, self._rots, self.rotation_iters, 1e-12, par)
             else:
-                kern.update_rotations(x, self.tets, self.dm_inv, self._quats, self._rots, max_iter or 50, tol)
+                kern.update_rotations(x, self.tets, self.dm_inv, self._rots, max_iter or 50, tol, par)
 
-    def _stiffness_product(self, y, subtract_rest: bool, out=None) -> np.ndarray:
+    def _stiffness_product(self, y, subtract_rest: bool, out=None, update_rotations: bool = False) -> np.ndarray:
+        """R K R^T y [- R K X] (N); ``update_rotations``: first ``rotation_iters`` warm-started
+        rotation steps at positions y, fused into the same element pass."""
         out = np.zeros_like(y) if out is None else out
-        kern.stiffness_product(np.ascontiguousarray(y), self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam,
+        y = np.ascontiguousarray(y)
+        iters = self.rotation_iters if (update_rotations and self.corotational) else 0
+        kern.stiffness_product(y, self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam,
                                self._rots, subtract_rest, self._anp, self.kappa_node, self.node_volume,
-                               self._theta, self._eps, out, y, self._quats, 0, 0.0, False)
+                               self._work, out, y, iters, 1e-12, True, self._set_threads())
         return out
 
     def elastic_forces(self, positions=None) -> np.ndarray:
@@ -162,9 +179,12 @@ class TetFEMModel(TissueModel):
         return f - (self.alpha_node * self.masses)[:, None] * self.velocities
 
     def elastic_energy(self) -> float:
-        self._update_rotations(self.positions, tol=1e-10)
+        """Stored energy (J) at the current positions. The rotations are first iterated (same
+        pass) until the Newton step is below 1e-6 rad: the energy is stationary in R at the polar
+        rotation, so its relative error is O(1e-12)."""
         return float(kern.elastic_energy(self.positions, self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam,
-                                         self._rots, self._anp, self.kappa_node, self.node_volume, self._theta))
+                                         self._rots, self._anp, self.kappa_node, self.node_volume,
+                                         50 if self.corotational else 0, 1e-6, self._work, self._set_threads()))
 
     def inverted_elements(self) -> int:
         """Tets with det F <= 0 at the current positions."""
@@ -211,7 +231,8 @@ class TetFEMModel(TissueModel):
         minv = 1.0 / np.sqrt(np.repeat(self.masses, 3))
         a = sp.diags(minv) @ self.stiffness_matrix @ sp.diags(minv)
         try:
-            lam = spla.eigsh(a, k=1, which="LA", return_eigenvectors=False, tol=1e-4, maxiter=5000)[0]
+            v0 = np.cos(np.arange(a.shape[0]) * 0.7071)   # fixed start vector: reproducible dt
+            lam = spla.eigsh(a, k=1, which="LA", return_eigenvectors=False, tol=1e-4, maxiter=5000, v0=v0)[0]
         except spla.ArpackNoConvergence as exc:  # pragma: no cover - fall back on the Gershgorin bound
             lam = float(np.max(np.abs(a).sum(axis=1)))
             del exc
@@ -240,9 +261,9 @@ class TetFEMModel(TissueModel):
         if self.integrator == "symplectic":
             kern.symplectic_step(self.positions, self.velocities, forces, self.masses, self.alpha_node, self.gravity,
                                  self.fixed, dt, self.stiffness_damping, self.corotational, self.rotation_iters, 1e-12,
-                                 self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam, self._quats, self._rots,
-                                 self._anp, self.kappa_node, self.node_volume, self._theta, self._eps,
-                                 self._ybuf, self._fbuf)
+                                 self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam, self._rots,
+                                 self._anp, self.kappa_node, self.node_volume, self._work, self._ybuf,
+                                 self._fbuf, self._set_threads())
             return
         kc = None
         if stiffness is not None:
@@ -295,16 +316,15 @@ class TetFEMModel(TissueModel):
 
     def _implicit_corotational(self, dt, forces, kc) -> None:
         x, v = self.positions, self.velocities
-        self._update_rotations(x)
         c_k = self.stiffness_damping * dt + dt * dt
         diag = self.masses * (1.0 + self.alpha_node * dt)
         if kc is not None:
             diag = diag + dt * dt * kc
-        f_el = -self._stiffness_product(x, True)
+        f_el = -self._stiffness_product(x, True, update_rotations=True)
         rhs = self.masses[:, None] * v + dt * (f_el + forces + self.masses[:, None] * self.gravity[None, :])
         vc = self._prescribed_velocity(dt)
         free = ~self.fixed
-        if self.fixed.any():
+        if vc.any():   # moving Dirichlet nodes
             rhs -= c_k * self._stiffness_product(vc, False)
         rhs[self.fixed] = 0.0
         precond = diag + c_k * self._kdiag_node
@@ -312,7 +332,7 @@ class TetFEMModel(TissueModel):
         self.last_cg_iterations = int(kern.pcg_solve(
             rhs, sol, diag, c_k, precond, free, self.cg_tol, 10 * 3 * self.n_nodes, self.tets, self.dm_inv,
             self.tet_volume, self.mu, self.lam, self._rots, self._anp, self.kappa_node, self.node_volume,
-            self._theta, self._eps))
+            self._work, self._set_threads()))
         sol[self.fixed] = vc[self.fixed]
         self.velocities = sol
         self.positions = x + dt * sol
@@ -363,12 +383,10 @@ class TetFEMModel(TissueModel):
         return x.copy()
 
     def _reset_state(self) -> None:
-        self._quats[:] = 0.0
-        self._quats[:, 0] = 1.0
         self._rots[:] = np.eye(3)
 
     def describe(self) -> dict:
         out = super().describe()
         out.update(corotational=self.corotational, formulation=self.formulation,
-                   stiffness_damping=self.stiffness_damping)
+                   stiffness_damping=self.stiffness_damping, threads=self.threads)
         return out
