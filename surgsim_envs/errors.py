@@ -30,6 +30,9 @@ class TissueUnstableError(SurgSimError, RuntimeError):
             "(integrator='implicit'), or soften the material."
         )
 
+    def __reduce__(self):  # picklable across processes (e.g. gymnasium async vector envs)
+        return (type(self), (self.model, self.dt, self.critical_dt, self.reason))
+
 
 class RenderingUnavailableError(SurgSimError, RuntimeError):
     """No OpenGL context could be created for offscreen rendering."""

@@ -18,6 +18,9 @@ import numpy as np
 
 from surgsim_envs.errors import ConfigError
 
+#: s, an async step that takes longer than this raises instead of hanging
+STEP_TIMEOUT = 60.0
+
 
 def add_arguments(parser) -> None:
     parser.add_argument("--tasks", default="all", help="comma-separated task ids or 'all'")
@@ -76,14 +79,16 @@ def async_rate(env_id: str, workers: int, steps: int, repeats: int) -> float:
     try:
         vec.reset(seed=list(range(workers)))
         for a in _actions(vec.action_space, 10, rng, pal):
-            vec.step(a)
+            vec.step_async(a)
+            vec.step_wait(timeout=STEP_TIMEOUT)
         rates = []
         n = max(1, steps // workers)
         for _ in range(repeats):
             acts = _actions(vec.action_space, n, rng, pal)
             t0 = time.perf_counter()
             for a in acts:
-                vec.step(a)
+                vec.step_async(a)
+                vec.step_wait(timeout=STEP_TIMEOUT)
             rates.append(n * workers / (time.perf_counter() - t0))
     finally:
         vec.close()

@@ -1,5 +1,32 @@
-"""Gymnasium tasks."""
+"""Gymnasium tasks: ``SurgSim/Palpation-v0``, ``SurgSim/Grasp-v0``, ``SurgSim/Slippage-v0``.
+
+>>> import gymnasium as gym, surgsim_envs
+>>> env = gym.make("SurgSim/Palpation-v0")          # doctest: +SKIP
+>>> obs, info = env.reset(seed=0)                   # doctest: +SKIP
+
+Config classes and scripted experts: :mod:`surgsim_envs.envs.palpation`,
+:mod:`surgsim_envs.envs.grasp`, :mod:`surgsim_envs.envs.slippage`. See docs/tasks.md.
+"""
+
+from __future__ import annotations
+
+#: task id -> "module:Class"
+TASKS = {
+    "SurgSim/Palpation-v0": "surgsim_envs.envs.palpation:PalpationEnv",
+    "SurgSim/Grasp-v0": "surgsim_envs.envs.grasp:GraspEnv",
+    "SurgSim/Slippage-v0": "surgsim_envs.envs.slippage:SlippageEnv",
+}
+
 
 def register_envs() -> None:
-    """Registers SurgSim/* tasks (filled by the envs issue)."""
+    """Register the SurgSim tasks with Gymnasium (idempotent). Time limits are applied by the
+    envs themselves (``config.episode_seconds``), so no TimeLimit wrapper is added."""
+    import gymnasium as gym
 
+    for env_id, entry in TASKS.items():
+        if env_id in gym.registry:
+            continue
+        gym.register(id=env_id, entry_point=entry, disable_env_checker=False)
+
+
+__all__ = ["TASKS", "register_envs"]

@@ -1,0 +1,245 @@
+"""Common machinery of the SurgSim Gymnasium tasks.
+
+:class:`SurgSimEnv` owns one :class:`~surgsim_envs.scene.Simulation` built once in ``__init__``
+and reused by every ``reset`` (only fields, friction and positions are re-randomised), checks
+actions (shape, NaN), applies the time limit, renders ("rgb_array" / "human") and fills ``info``
+with physical metrics (SI: m, s, N). Subclasses supply a config dataclass and implement
+``_build``, ``_randomise``, ``_apply_action``, ``_observe`` and ``_evaluate`` (reward terms).
+
+Configuration: ``gym.make("SurgSim/Palpation-v0", config=PalpationConfig(...))`` or keyword
+overrides of config fields (``gym.make(..., control_hz=50)``). ``reset(options=...)`` accepts only
+the task's ``OPTIONS`` names (domain randomisation); anything else raises ConfigError by name.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+
+from surgsim_envs.errors import ConfigError, RenderingUnavailableError
+
+
+def apply_overrides(config, overrides: dict[str, Any]):
+    """Copy of dataclass ``config`` with ``overrides``; ConfigError naming unknown fields."""
+    names = {f.name for f in dataclasses.fields(config)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise ConfigError(f"unknown {type(config).__name__} field(s) {unknown}; known fields: {sorted(names)}")
+    return dataclasses.replace(config, **overrides)
+
+
+def check_range(value, what: str, lo: float = -math.inf, hi: float = math.inf) -> tuple[float, float]:
+    """Validate a (low, high) range of finite numbers inside [lo, hi]; return it as floats."""
+    try:
+        a, b = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{what} must be a (low, high) pair of numbers, got {value!r}") from None
+    if not (math.isfinite(a) and math.isfinite(b) and lo <= a <= b <= hi):
+        raise ConfigError(f"{what}={value!r} must satisfy {lo:g} <= low <= high <= {hi:g}")
+    return a, b
+
+
+def check_positive(value, what: str, hint: str = "") -> float:
+    """Validate a positive finite number."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+            or not math.isfinite(value) or value <= 0:
+        raise ConfigError(f"{what} must be a positive finite number, got {value!r}{'; ' + hint if hint else ''}")
+    return float(value)
+
+
+def sample(rng: np.random.Generator, value, what: str, lo: float = -math.inf, hi: float = math.inf) -> float:
+    """A number: ``value`` itself if scalar, else uniform in the (low, high) range ``value``."""
+    if isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool):
+        v = float(value)
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise ConfigError(f"{what}={value!r} must be a finite number in [{lo:g}, {hi:g}]")
+        return v
+    a, b = check_range(value, what, lo, hi)
+    return float(rng.uniform(a, b)) if b > a else a
+
+
+class SurgSimEnv(gym.Env):
+    """Base class of the SurgSim tasks (see module docstring).
+
+    config: the task's config dataclass (None = defaults); render_mode: None, "rgb_array" or
+    "human"; **overrides: config fields to replace.
+    """
+
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 25}
+    #: the task's config dataclass
+    config_cls: ClassVar[type]
+    #: names accepted in ``reset(options=...)``
+    OPTIONS: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(self, config=None, render_mode: str | None = None, **overrides):
+        if config is None:
+            config = self.config_cls()
+        if not isinstance(config, self.config_cls):
+            raise ConfigError(f"config must be a {self.config_cls.__name__}, got {type(config).__name__}")
+        self.config = apply_overrides(config, overrides) if overrides else config
+        self.config.validate()
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ConfigError(f"render_mode={render_mode!r} is not supported; use one of "
+                              f"{self.metadata['render_modes']} or None")
+        self.render_mode = render_mode
+        self.metadata = dict(self.metadata, render_fps=int(round(self.config.control_hz)))
+        self._renderer = None
+        self._viewer = None
+        self._sims: dict[Any, Any] = {}
+        self.sim = None
+        self._build()
+        self.steps = 0
+        self.peak_force = 0.0
+        self.episode_return = 0.0
+
+    # -- subclass hooks ---------------------------------------------------------------------
+    def _build(self) -> None:
+        raise NotImplementedError
+
+    def _randomise(self, options: dict[str, Any]) -> None:
+        raise NotImplementedError
+
+    def _apply_action(self, action: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def _observe(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def _evaluate(self, action: np.ndarray) -> tuple[float, bool, dict[str, Any]]:
+        """(reward, terminated, info terms) after a control step."""
+        raise NotImplementedError
+
+    def _metrics(self) -> dict[str, Any]:
+        return {}
+
+    # -- helpers ----------------------------------------------------------------------------
+    @property
+    def control_dt(self) -> float:
+        """Control period (s)."""
+        return 1.0 / self.config.control_hz
+
+    @property
+    def substeps(self) -> int:
+        """Physics steps per control step."""
+        return max(1, int(round(self.control_dt / self.config.dt)))
+
+    @property
+    def max_episode_steps(self) -> int:
+        return max(1, int(round(self.config.episode_seconds * self.config.control_hz)))
+
+    def check_action(self, action) -> np.ndarray:
+        """Action as a float array of the action space's shape, clipped to [-1, 1].
+
+        Raises ConfigError (a ValueError) on a wrong shape or non-finite entries.
+        """
+        try:
+            a = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ConfigError(f"action must be numeric with shape {self.action_space.shape}, got {action!r}") from None
+        if a.shape != self.action_space.shape:
+            if a.size == int(np.prod(self.action_space.shape)) and a.ndim <= 1:
+                a = a.reshape(self.action_space.shape)
+            else:
+                raise ConfigError(f"action has shape {a.shape}; {type(self).__name__} expects shape "
+                                  f"{self.action_space.shape} with entries in [-1, 1]")
+        if not np.all(np.isfinite(a)):
+            raise ConfigError(f"action contains NaN or inf: {a.tolist()}; give finite numbers in [-1, 1]")
+        return np.clip(a, -1.0, 1.0)
+
+    # -- Gymnasium API ----------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = sorted(set(options) - set(self.OPTIONS))
+        if unknown:
+            raise ConfigError(f"unknown reset option(s) {unknown} for {type(self).__name__}; "
+                              f"accepted options: {list(self.OPTIONS)}")
+        self.steps = 0
+        self.peak_force = 0.0
+        self.episode_return = 0.0
+        self._randomise(options)
+        obs = self._observe()
+        info = self._info({})
+        if self.render_mode == "human":
+            self.render()
+        return obs, info
+
+    def step(self, action):
+        if self.sim is None:
+            raise ConfigError("call reset() before step()")
+        a = self.check_action(action)
+        self._apply_action(a)
+        self.steps += 1
+        reward, terminated, terms = self._evaluate(a)
+        truncated = (not terminated) and self.steps >= self.max_episode_steps
+        if truncated:
+            extra_r, extra = self._on_truncate()
+            reward += extra_r
+            terms.update(extra)
+        self.episode_return += reward
+        obs = self._observe()
+        info = self._info(terms)
+        if self.render_mode == "human":
+            self.render()
+        return obs, float(reward), bool(terminated), bool(truncated), info
+
+    def _on_truncate(self) -> tuple[float, dict[str, Any]]:
+        return 0.0, {}
+
+    def _info(self, terms: dict[str, Any]) -> dict[str, Any]:
+        info = {"time_s": self.sim.time, "steps": self.steps, "peak_force_N": self.peak_force,
+                "control_hz": self.config.control_hz, "physics_dt_s": self.sim.dt, "substeps": self.substeps}
+        info.update(self._metrics())
+        info.update(terms)
+        return info
+
+    # -- rendering --------------------------------------------------------------------------
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without render_mode; pass render_mode='rgb_array' to gym.make")
+            return None
+        if self.render_mode == "rgb_array":
+            return self.render_rgb()
+        self._render_human()
+        return None
+
+    def render_rgb(self, width: int | None = None, height: int | None = None, camera: str | None = None) -> np.ndarray:
+        """(H, W, 3) uint8 frame from ``camera`` (default the config's ``camera``)."""
+        from surgsim_envs.scene.render import SceneRenderer
+
+        w = int(width or self.config.render_width)
+        h = int(height or self.config.render_height)
+        if self._renderer is None or (self._renderer.sim is not self.sim) or \
+                (self._renderer.width, self._renderer.height) != (w, h):
+            if self._renderer is not None:
+                self._renderer.close()
+            self._renderer = SceneRenderer(self.sim, w, h)
+        return self._renderer.render(camera or self.config.camera)
+
+    def _render_human(self) -> None:
+        if self._viewer is None:
+            try:
+                import mujoco.viewer
+
+                self._viewer = mujoco.viewer.launch_passive(self.sim.model, self.sim.data)
+            except Exception as exc:  # no display, or not the main thread on macOS
+                raise RenderingUnavailableError(
+                    f"render_mode='human' needs a display for mujoco.viewer ({exc}); use render_mode='rgb_array' "
+                    "on headless machines") from exc
+        self.sim.sync_visual()
+        self._viewer.sync()
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        if self._viewer is not None:
+            try:
+                self._viewer.close()
+            except Exception:
+                pass
+            self._viewer = None

@@ -1,0 +1,210 @@
+"""SurgSim/Grasp-v0: close a three-jaw grasper on an organ tip and retract it to a target.
+
+The organ (spleen by default, or a liver lobe; option ``organ``) is held by its ligaments at one
+end; the grasper starts open around its other tip (paper 002). The agent closes the jaws, then
+moves the wrist to a target ``target_offset`` m away (out of and above the organ) without
+crushing (jaw normal force above ``damage_force`` N) or losing the grasp.
+
+Action (4,) in [-1, 1]: ``[dx, dy, dz, close]``: wrist target displacement (world frame) of up
+to ``max_step`` m per control step, and the jaw opening from fully open (-1) to ``min_radius``
+(+1), rate-limited at ``closing_speed`` m/s.
+
+Observation (15,) float32, SI: wrist position (3) m (the grasper only translates: that is its
+pose); target minus wrist (3) m; jaw opening (1) m; per-jaw normal force (3) N; per-jaw
+tangential force (3) N; slipping contact nodes (1); contact nodes (1).
+
+Reward: ``progress_weight * (d_prev - d) / target distance`` while grasped;
+``- force_weight * sum(jaw normal - damage_force)+``; ``- slip_weight * slipping fraction``
+while grasped; ``- drop_penalty`` on losing a grasp (terminates); ``+ success_bonus`` when the
+wrist is within ``tolerance`` m of the target with the organ grasped (terminates, success).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+from gymnasium import spaces
+
+from surgsim_envs.envs.base import SurgSimEnv, check_positive, check_range, sample
+from surgsim_envs.envs.grasp_common import (ORGAN_SPACING, SlipTracker, build_grasp_simulation, contact_nodes,
+                                            excess_force_penalty, is_grasped, slip_fraction)
+from surgsim_envs.envs.stiffness_field import StiffnessField
+from surgsim_envs.errors import ConfigError
+
+
+@dataclass
+class GraspConfig:
+    """Grasp-v0 settings (SI units). Ranges are (low, high) sampled uniformly per episode."""
+
+    control_hz: float = 50.0
+    dt: float = 4e-4                   # s; squeezed, strain-stiffened tissue needs < 0.5 ms
+    episode_seconds: float = 3.0
+    organ: str = "spleen"
+    closing_speed: float = 0.03        # m/s, jaw rate limit
+    max_step: float = 0.001            # m per control step (5 cm/s at 50 Hz)
+    workspace: float = 0.06            # m, wrist target |offset| from home per axis
+    # randomisation
+    mu: Sequence[float] = (0.6, 1.0)                 # tool-tissue Coulomb friction
+    young_scale: Sequence[float] = (0.8, 1.2)        # organ Young's modulus scale
+    target_offset_x: Sequence[float] = (0.012, 0.02)  # m, along the pull direction (out of the organ)
+    target_offset_z: Sequence[float] = (0.0, 0.005)   # m, lift
+    # reward
+    hold_force: float = 0.03           # N, a jaw "holds" above this normal force
+    damage_force: float = 1.0          # N per jaw
+    force_weight: float = 1.0
+    slip_weight: float = 0.1
+    progress_weight: float = 5.0
+    drop_penalty: float = 2.0
+    success_bonus: float = 5.0
+    tolerance: float = 0.005           # m
+    camera: str = "overview"
+    render_width: int = 480
+    render_height: int = 480
+
+    def validate(self) -> None:
+        for key in ("control_hz", "dt", "episode_seconds", "closing_speed", "max_step", "workspace", "hold_force",
+                    "damage_force", "tolerance"):
+            check_positive(getattr(self, key), f"GraspConfig.{key}")
+        if self.organ not in ORGAN_SPACING:
+            raise ConfigError(f"GraspConfig.organ={self.organ!r}; choose one of {sorted(ORGAN_SPACING)}")
+        check_range(self.mu, "mu", 0.0, 2.0)
+        check_range(self.young_scale, "young_scale", 0.5, 1.25)
+        check_range(self.target_offset_x, "target_offset_x", -self.workspace, self.workspace)
+        check_range(self.target_offset_z, "target_offset_z", -self.workspace, self.workspace)
+
+
+class GraspEnv(SurgSimEnv):
+    """Grasp-v0 (see module docstring)."""
+
+    config_cls = GraspConfig
+    OPTIONS = ("organ", "mu", "young_scale", "target_offset_x", "target_offset_z")
+    tool_name = "grasper"
+
+    def _build(self) -> None:
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
+        self.observation_space = spaces.Box(-1e6, 1e6, shape=(15,), dtype=np.float32)
+        self._fields: dict[str, StiffnessField] = {}
+        self._select(self.config.organ)
+        self.slip = SlipTracker()
+
+    def _select(self, organ: str) -> None:
+        if organ not in ORGAN_SPACING:
+            raise ConfigError(f"unknown organ {organ!r}; choose one of {sorted(ORGAN_SPACING)}")
+        if organ not in self._sims:
+            c = self.config
+            self._sims[organ] = build_grasp_simulation(organ, c.dt, self.substeps, c.closing_speed)
+            self._fields[organ] = StiffnessField(self._sims[organ].tissue())
+        self.sim = self._sims[organ]
+        self.field = self._fields[organ]
+        self.organ = organ
+        tool = self.sim.tool(self.tool_name)
+        self.home = tool.home.copy()
+        self.frame = tool.frame
+        self.gcfg = tool.config
+        self.pull_dir = -np.asarray(self.gcfg.axis, dtype=float) / np.linalg.norm(self.gcfg.axis)
+
+    def _randomise_common(self, options: dict[str, Any]) -> None:
+        c, rng = self.config, self.np_random
+        self._select(options.get("organ", self.config.organ))
+        mu = sample(rng, options.get("mu", c.mu), "mu", 0.0, 2.0)
+        scale = sample(rng, options.get("young_scale", c.young_scale), "young_scale", 0.5, 1.25)
+        self.field.apply(np.full(len(self.field.tet_scale), scale))
+        for contact in self.sim.contacts.values():
+            contact.tool_friction[:] = mu
+        self.sim.reset(seed=int(rng.integers(2**31)))
+        crit = self.sim.tissue().critical_dt()
+        if crit < self.sim.dt:
+            raise ConfigError(f"young_scale {scale:.2f} makes the explicit tissue step unstable (critical dt "
+                              f"{crit:.2e} s < dt {self.sim.dt:g} s); lower young_scale or dt")
+        self.mu, self.young_scale = mu, scale
+        self.slip.reset()
+        self.slip_distance = 0.0
+        self.was_grasped = False
+
+    def _randomise(self, options: dict[str, Any]) -> None:
+        c, rng = self.config, self.np_random
+        self._randomise_common(options)
+        ox = sample(rng, options.get("target_offset_x", c.target_offset_x), "target_offset_x", -c.workspace, c.workspace)
+        oz = sample(rng, options.get("target_offset_z", c.target_offset_z), "target_offset_z", -c.workspace, c.workspace)
+        self.goal = self.home + self.pull_dir * ox + np.array([0.0, 0.0, oz])
+        self.target = self.home.copy()
+        self.prev_dist = float(np.linalg.norm(self.goal - self.home))
+        self.goal_dist0 = max(self.prev_dist, 1e-6)
+
+    def _clip_target(self, pos: np.ndarray) -> np.ndarray:
+        local = np.clip(self.frame.T @ (pos - self.home), -self.config.workspace, self.config.workspace)
+        return self.home + self.frame @ local
+
+    def _apply_action(self, a: np.ndarray) -> None:
+        c, g = self.config, self.gcfg
+        self.target = self._clip_target(self.target + a[:3] * c.max_step)
+        self.sim.set_tool_target(self.tool_name, self.target)
+        radius = g.open_radius - (a[3] + 1.0) / 2.0 * (g.open_radius - g.min_radius)
+        self.sim.set_jaw_opening(self.tool_name, float(np.clip(radius, g.min_radius, g.open_radius)))
+        self.sim.step()
+
+    def _readings(self):
+        sim = self.sim
+        jaws = sim.jaw_forces(self.tool_name)
+        rep = sim.contact_report()[self.tool_name]
+        return sim.tool_position(self.tool_name), jaws["normal"], jaws["tangential"], rep
+
+    def _observe(self) -> np.ndarray:
+        pos, fn, ft, rep = self._readings()
+        return np.array([*pos, *(self.goal - pos), self.sim.jaw_opening(self.tool_name), *fn, *ft,
+                         rep["slipping"], rep["contacts"]], dtype=np.float32)
+
+    def _update_grasp(self, pos, fn) -> bool:
+        c = self.config
+        grasped = is_grasped(fn, c.hold_force)
+        if grasped and not self.slip.active:
+            nodes = contact_nodes(self.sim)
+            if len(nodes):
+                self.slip.start(pos, self.sim.tissue().positions, nodes)
+        self.slip_distance = self.slip.distance(pos, self.sim.tissue().positions)
+        self.peak_force = max(self.peak_force, float(np.sum(fn)))
+        return grasped
+
+    def _evaluate(self, a: np.ndarray):
+        c = self.config
+        pos, fn, ft, rep = self._readings()
+        grasped = self._update_grasp(pos, fn)
+        dist = float(np.linalg.norm(self.goal - pos))
+        reward = excess_force_penalty(fn, c.damage_force, c.force_weight)
+        terms: dict[str, Any] = {"grasped": grasped, "distance_to_target_m": dist}
+        terminated = False
+        if grasped:
+            reward += c.progress_weight * (self.prev_dist - dist) / self.goal_dist0
+            reward -= c.slip_weight * slip_fraction(rep["slipping"], rep["contacts"])
+            self.was_grasped = True
+            if dist <= c.tolerance:
+                reward += c.success_bonus
+                terminated = True
+                terms["success"] = terms["is_success"] = True
+        elif self.was_grasped and rep["contacts"] == 0:
+            reward -= c.drop_penalty
+            terminated = True
+            terms["dropped"] = True
+        self.prev_dist = dist
+        return reward, terminated, terms
+
+    def _metrics(self) -> dict[str, Any]:
+        return {"organ": self.organ, "mu": self.mu, "young_scale": self.young_scale,
+                "slip_distance_m": self.slip_distance, "success": False, "is_success": False, "dropped": False}
+
+
+def grasp_expert(env, close_action: float = 1.0, close_steps: int = 30):
+    """Scripted policy: close the jaws, wait, then move straight to the target."""
+    state = {"n": 0}
+
+    def policy(obs):
+        state["n"] += 1
+        if state["n"] <= close_steps:
+            return np.array([0, 0, 0, close_action], dtype=np.float32)
+        rel = obs[3:6]
+        step = env.unwrapped.config.max_step
+        return np.array([*np.clip(rel / step * 0.6, -0.6, 0.6), close_action], dtype=np.float32)
+
+    return policy

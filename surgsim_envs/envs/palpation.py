@@ -1,0 +1,298 @@
+"""SurgSim/Palpation-v0: find a hidden stiff inclusion in a tissue slab with a probe.
+
+A liver slab (default 10 x 10 x 2 cm, bed fixed, mass-spring, 10 mm lattice: 363 nodes) hides a
+spherical inclusion of random position, radius and stiffness contrast. The agent moves a
+spherical-tip probe and presses; when it is sure it raises the "report" action and the probe's
+current (x, y) is its guess of the inclusion centre (at the time limit the probe's position is
+taken as the guess too).
+
+Action (4,) in [-1, 1]: ``[vx, vy, press, report]``; vx, vy move the probe target by up to
+``max_xy_step`` m per control step; press sets the target depth from ``hover`` m above the rest
+surface (-1) to ``max_depth`` m below it (+1); report > 0 ends the episode with the guess (ignored
+during the first ``min_report_seconds``).
+
+Observation (11,) float32, SI: probe tip-centre position (3) m; contact force on the probe (3)
+N; indentation depth (1) m below the rest surface; best stiffness site so far (x, y) (2) m and
+its stiffness estimate F_z / depth (1) N/m; elapsed fraction of the episode (1).
+
+Reward: ``press_reward`` for each press deeper than ``press_min_depth`` at a site at least
+``site_spacing`` m from earlier ones (informative presses); ``- damage_weight * (|F| -
+damage_force)`` per step above the tissue-damage force; at the end ``localisation_weight *
+(1 - min(err / localisation_scale, 1)) + success_bonus * success``. ``info["success"]``: guess
+within ``tolerance_mm``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+from gymnasium import spaces
+
+from surgsim_envs.envs.base import SurgSimEnv, check_positive, check_range, sample
+from surgsim_envs.envs.stiffness_field import StiffnessField
+from surgsim_envs.errors import ConfigError
+
+
+@dataclass
+class PalpationConfig:
+    """Palpation-v0 settings (SI units). Ranges are (low, high) sampled uniformly per episode."""
+
+    # physics / timing
+    control_hz: float = 100.0          # Hz, control rate
+    dt: float = 1e-3                   # s, physics step (substeps = round(1 / (control_hz dt)))
+    episode_seconds: float = 6.0       # s, time limit
+    spacing: float = 0.01              # m, tissue lattice spacing (363 nodes for the default slab)
+    slab_size: Sequence[float] = (0.1, 0.1, 0.02)   # m
+    material: str = "liver"
+    tip_radius: float = 0.01           # m, probe tip
+    probe_speed: float = 0.2           # m/s, rate limit of the probe target
+    # action scaling
+    max_xy_step: float = 0.003         # m per control step
+    hover: float = 0.002               # m above the rest surface at press = -1
+    max_depth: float = 0.008           # m below the rest surface at press = +1
+    xy_limit: float = 0.045            # m, probe target |x|, |y| bound
+    # randomisation (per episode)
+    inclusion_xy: Sequence[float] = (-0.03, 0.03)     # m, centre x and y range
+    inclusion_depth: Sequence[float] = (0.008, 0.011)  # m, centre below the top surface
+    inclusion_radius: Sequence[float] = (0.007, 0.011)  # m
+    stiffness_contrast: Sequence[float] = (3.0, 5.0)   # E_inclusion / E_tissue
+    young_scale: Sequence[float] = (0.8, 1.1)         # scales the whole slab's Young's modulus
+    # reward
+    press_min_depth: float = 0.003     # m, a press counts from this depth
+    site_spacing: float = 0.01         # m, new press sites must be this far from earlier ones
+    press_reward: float = 0.05
+    max_rewarded_sites: int = 25
+    damage_force: float = 1.5          # N, tissue-damage threshold
+    damage_weight: float = 1.0         # per N above the threshold per step
+    localisation_weight: float = 1.0
+    localisation_scale: float = 0.04   # m
+    success_bonus: float = 1.0
+    tolerance_mm: float = 10.0         # mm
+    min_report_seconds: float = 1.0    # s, "report" is ignored before this (stops reflexive guesses)
+    # rendering
+    camera: str = "overview"
+    render_width: int = 480
+    render_height: int = 480
+
+    def validate(self) -> None:
+        for key in ("control_hz", "dt", "episode_seconds", "spacing", "tip_radius", "probe_speed", "max_xy_step",
+                    "hover", "max_depth", "xy_limit", "press_min_depth", "site_spacing", "damage_force",
+                    "localisation_scale", "tolerance_mm"):
+            check_positive(getattr(self, key), f"PalpationConfig.{key}")
+        if 1.0 / self.control_hz < self.dt:
+            raise ConfigError(f"control period 1/control_hz={1 / self.control_hz:g} s is shorter than dt={self.dt:g} s; "
+                              "lower control_hz or dt")
+        if not (isinstance(self.min_report_seconds, (int, float)) and 0 <= self.min_report_seconds <= self.episode_seconds):
+            raise ConfigError(f"min_report_seconds={self.min_report_seconds!r} must lie in [0, episode_seconds]")
+        size = np.asarray(self.slab_size, dtype=float)
+        if size.shape != (3,) or not np.all(size > 0):
+            raise ConfigError(f"slab_size must be three positive lengths in m, got {self.slab_size!r}")
+        if self.xy_limit > size[:2].min() / 2:
+            raise ConfigError(f"xy_limit={self.xy_limit} m exceeds half the slab ({size[:2].min() / 2} m)")
+        half = size[:2].min() / 2
+        check_range(self.inclusion_xy, "inclusion_xy", -half, half)
+        check_range(self.inclusion_depth, "inclusion_depth", 0.0, float(size[2]))
+        check_range(self.inclusion_radius, "inclusion_radius", 1e-4, float(size.max()))
+        check_range(self.stiffness_contrast, "stiffness_contrast", 1.0, 20.0)
+        check_range(self.young_scale, "young_scale", 0.1, 10.0)
+
+
+# ----------------------------------------------------------------------------------------------
+# term functions (each testable alone)
+def indentation_depth(probe_z: float, surface_z: float, tip_radius: float) -> float:
+    """m the probe tip's lowest point lies below the rest surface (0 above it)."""
+    return max(0.0, surface_z + tip_radius - probe_z)
+
+
+def stiffness_estimate(force_z: float, depth: float, min_depth: float) -> float:
+    """Apparent stiffness F_z / depth (N/m) of a press deeper than ``min_depth`` m, else 0."""
+    return float(force_z) / depth if depth >= min_depth else 0.0
+
+
+def is_new_site(xy: np.ndarray, sites: list, spacing: float) -> bool:
+    """True if ``xy`` (2,) m is at least ``spacing`` m from every earlier press site."""
+    return all(float(np.hypot(*(xy - s))) >= spacing for s in sites)
+
+
+def damage_penalty(force: np.ndarray, threshold: float, weight: float) -> float:
+    """-weight * (|force| - threshold) above the tissue-damage threshold (N), else 0."""
+    return -weight * max(0.0, float(np.linalg.norm(force)) - threshold)
+
+
+def localisation_error(guess_xy: np.ndarray, true_xy: np.ndarray) -> float:
+    """m, planar distance from the guess to the inclusion centre."""
+    return float(np.hypot(*(np.asarray(guess_xy, dtype=float) - np.asarray(true_xy, dtype=float))))
+
+
+def localisation_reward(error: float, scale: float, tolerance: float, weight: float, bonus: float) -> float:
+    """weight * (1 - min(error / scale, 1)) + bonus if error <= tolerance (all in m)."""
+    return weight * (1.0 - min(error / scale, 1.0)) + (bonus if error <= tolerance else 0.0)
+
+
+# ----------------------------------------------------------------------------------------------
+class PalpationEnv(SurgSimEnv):
+    """Palpation-v0 (see module docstring)."""
+
+    config_cls = PalpationConfig
+    OPTIONS = ("inclusion_position", "inclusion_xy", "inclusion_depth", "inclusion_radius", "stiffness_contrast", "young_scale")
+
+    def _build(self) -> None:
+        from surgsim_envs.scene import Simulation, palpation_config, palpation_scene
+
+        c = self.config
+        cfg = palpation_config(organ="slab")
+        t = cfg.tissues[0]
+        t.spacing = c.spacing
+        t.material = c.material
+        t.region_materials = None
+        t.volume_options = {"size": tuple(float(s) for s in c.slab_size)}
+        t.position = (0.0, 0.0, float(c.slab_size[2]) / 2.0)
+        self.surface_z = float(c.slab_size[2])
+        p = cfg.probes[0]
+        p.tip_radius = c.tip_radius
+        p.position = (0.0, 0.0, self.surface_z + c.tip_radius + c.hover)
+        cfg.dt = c.dt
+        self.sim = Simulation(palpation_scene(cfg), dt=c.dt, substeps=self.substeps)
+        self.field = StiffnessField(self.sim.tissue())
+        self.home = np.asarray(p.position, dtype=float)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
+        big = np.float32(1e6)
+        self.observation_space = spaces.Box(-big, big, shape=(11,), dtype=np.float32)
+        self.inclusion = {}
+
+    # -- episode ----------------------------------------------------------------------------
+    def _randomise(self, options: dict[str, Any]) -> None:
+        c, rng = self.config, self.np_random
+        get = lambda k: options.get(k, getattr(c, k))  # noqa: E731
+        half = float(min(c.slab_size[:2])) / 2
+        xy = get("inclusion_xy")
+        x = sample(rng, xy, "inclusion_xy", -half, half)
+        y = sample(rng, xy, "inclusion_xy", -half, half)
+        if options.get("inclusion_position") is not None:
+            pos = np.asarray(options["inclusion_position"], dtype=float).reshape(-1)
+            if pos.shape != (2,) or not np.all(np.isfinite(pos)) or np.any(np.abs(pos) > half):
+                raise ConfigError(f"inclusion_position must be (x, y) m inside +-{half} m, "
+                                  f"got {options['inclusion_position']!r}")
+            x, y = float(pos[0]), float(pos[1])
+        depth = sample(rng, get("inclusion_depth"), "inclusion_depth", 0.0, float(c.slab_size[2]))
+        radius = sample(rng, get("inclusion_radius"), "inclusion_radius", 1e-4, float(max(c.slab_size)))
+        contrast = sample(rng, get("stiffness_contrast"), "stiffness_contrast", 1.0, 20.0)
+        scale = sample(rng, get("young_scale"), "young_scale", 0.1, 10.0)
+        centre = np.array([x, y, self.surface_z - depth])
+        s = np.full(len(self.field.tet_scale), scale)
+        s[self.field.sphere_mask(centre, radius)] *= contrast
+        self.field.apply(s)
+        self.sim.reset(seed=int(rng.integers(2**31)))
+        crit = self.sim.tissue().critical_dt()
+        if crit < self.sim.dt:
+            raise ConfigError(f"Palpation: stiffness contrast {contrast:.2f} x young_scale {scale:.2f} makes the "
+                              f"explicit tissue step unstable (critical dt {crit:.2e} s < dt {self.sim.dt:g} s); "
+                              "lower stiffness_contrast / young_scale, or dt")
+        self.inclusion = {"centre": centre, "radius": radius, "contrast": contrast, "young_scale": scale}
+        self.target = self.home.copy()
+        self.sim.set_tool_target("probe", self.target, speed=c.probe_speed)
+        self.sites: list[np.ndarray] = []
+        self.best = (0.0, 0.0, 0.0)  # x, y, stiffness estimate
+        self.guess = None
+        self.error = None
+
+    def _apply_action(self, a: np.ndarray) -> None:
+        c = self.config
+        xy = np.clip(self.target[:2] + a[:2] * c.max_xy_step, -c.xy_limit, c.xy_limit)
+        press = (a[2] + 1.0) / 2.0
+        z = self.surface_z + c.tip_radius + c.hover - press * (c.hover + c.max_depth)
+        self.target = np.array([xy[0], xy[1], z])
+        self.sim.set_tool_target("probe", self.target, speed=c.probe_speed)
+        self.sim.step()
+
+    def _readings(self):
+        pos = self.sim.tool_position("probe")
+        force = self.sim.tool_force("probe")
+        depth = indentation_depth(pos[2], self.surface_z, self.config.tip_radius)
+        return pos, force, depth
+
+    def _observe(self) -> np.ndarray:
+        pos, force, depth = self._readings()
+        frac = self.steps / self.max_episode_steps
+        return np.array([*pos, *force, depth, self.best[0], self.best[1], self.best[2], frac], dtype=np.float32)
+
+    def _evaluate(self, a: np.ndarray):
+        c = self.config
+        pos, force, depth = self._readings()
+        fmag = float(np.linalg.norm(force))
+        self.peak_force = max(self.peak_force, fmag)
+        reward = damage_penalty(force, c.damage_force, c.damage_weight)
+        k = stiffness_estimate(force[2], depth, c.press_min_depth)
+        if k > self.best[2]:
+            self.best = (float(pos[0]), float(pos[1]), k)
+        if depth >= c.press_min_depth and is_new_site(pos[:2], self.sites, c.site_spacing):
+            self.sites.append(pos[:2].copy())
+            if len(self.sites) <= c.max_rewarded_sites:
+                reward += c.press_reward
+        terms: dict[str, Any] = {"stiffness_estimate_N_per_m": k, "force_N": fmag}
+        terminated = bool(a[3] > 0.0) and self.steps * self.control_dt >= self.config.min_report_seconds
+        if terminated:
+            r, t = self._finish(pos)
+            reward += r
+            terms.update(t)
+        return reward, terminated, terms
+
+    def _finish(self, pos) -> tuple[float, dict[str, Any]]:
+        c = self.config
+        self.guess = pos[:2].copy()
+        self.error = localisation_error(self.guess, self.inclusion["centre"][:2])
+        r = localisation_reward(self.error, c.localisation_scale, c.tolerance_mm * 1e-3, c.localisation_weight,
+                                c.success_bonus)
+        return r, {"guess_xy_m": self.guess.tolist(), "localisation_error_m": self.error}
+
+    def _on_truncate(self):
+        pos = self.sim.tool_position("probe")
+        return self._finish(pos)
+
+    def _metrics(self) -> dict[str, Any]:
+        inc = self.inclusion
+        success = self.error is not None and self.error <= self.config.tolerance_mm * 1e-3
+        return {"inclusion_centre_m": inc["centre"].tolist(), "inclusion_radius_m": inc["radius"],
+                "stiffness_contrast": inc["contrast"], "press_sites": len(self.sites), "success": bool(success),
+                "is_success": bool(success)}
+
+
+def palpation_expert(env, grid: int = 5, depth_action: float = 0.6) -> Any:
+    """A scripted policy: press on a ``grid`` x ``grid`` raster, then report at the stiffest site
+    refined by a stiffness-weighted centroid. Returns a callable ``policy(obs) -> action``."""
+    c = env.unwrapped.config
+    lim = float(min(c.inclusion_xy[1], c.xy_limit))
+    xs = np.linspace(-lim, lim, grid)
+    pts = [np.array([x, y]) for j, y in enumerate(np.linspace(-lim, lim, grid)) for x in (xs if j % 2 == 0 else xs[::-1])]
+    state = {"i": 0, "phase": "move", "n": 0, "k": [], "final": None}
+
+    def policy(obs):
+        pos = obs[:3]
+        if state["final"] is not None:
+            goal = state["final"]
+            d = goal - pos[:2]
+            if np.hypot(*d) < 0.001:
+                return np.array([0, 0, -1, 1], dtype=np.float32)
+            return np.array([*np.clip(d / c.max_xy_step, -1, 1), -1, -1], dtype=np.float32)
+        goal = pts[state["i"]]
+        d = goal - pos[:2]
+        if state["phase"] == "move":
+            if np.hypot(*d) < 0.0015:
+                state["phase"], state["n"] = "press", 0
+            return np.array([*np.clip(d / c.max_xy_step, -1, 1), -1, -1], dtype=np.float32)
+        state["n"] += 1
+        if state["n"] >= 12:
+            f, depth = obs[5], obs[6]
+            state["k"].append(f / max(depth, 1e-4))
+            state["i"] += 1
+            state["phase"] = "move"
+            if state["i"] == len(pts):
+                k = np.array(state["k"])
+                w = np.clip(k - np.median(k), 0, None) ** 2
+                state["final"] = (w[:, None] * np.array(pts)).sum(0) / w.sum() if w.sum() > 0 else pts[int(np.argmax(k))]
+            return np.array([0, 0, -1, -1], dtype=np.float32)
+        return np.array([*np.clip(d / c.max_xy_step, -1, 1), depth_action, -1], dtype=np.float32)
+
+    return policy

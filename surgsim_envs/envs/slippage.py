@@ -1,0 +1,203 @@
+"""SurgSim/Slippage-v0: hold a grasped organ against a ramping, varying pull with the least squeeze.
+
+At reset the three-jaw grasper closes on the organ tip (``initial_closure``, ``settle_time`` s).
+Then the wrist is pulled out of the organ along the tool axis by a force
+``F(t) = rate * t + amplitude * sin(2 pi f t + phase)`` (N, >= 0; the along-axis wrist drive
+becomes a force motor with ``pull_damping`` N s/m of joint damping), while the tool-tissue
+friction mu is drawn per episode (0.3-1.0). The agent only modulates the jaw closure.
+
+Action (1,) in [-1, 1]: jaw opening target from fully open (-1) to ``min_radius`` (+1),
+rate-limited at ``closing_speed`` m/s.
+
+Observation (12,) float32, SI: jaw opening (1) m; per-jaw normal force (3) N; per-jaw tangential
+force (3) N; slipping contact nodes (1); contact nodes (1); pull force (1) N; wrist displacement
+along the pull since the grasp (1) m; slip distance (1) m (tissue relative to the jaws).
+
+Reward per step: ``hold_reward`` while the grasp holds, ``- slip_weight * (slip increase in mm)+ - squeeze_weight * (sum normal -
+|F| / mu)+`` (the squeeze above the least one that holds); ``- drop_penalty`` and termination
+on loss of grasp (no contact node, or slip beyond ``max_slip``). ``info["success"]``: the time
+limit reached with slip below ``slip_tolerance``.
+
+Actuation note: this task writes the jaw and pull actuator controls (``MjData.ctrl``) itself
+each physics step (it never calls ``set_jaw_opening``/``set_tool_target``, whose rate limiter
+would overwrite them).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+from gymnasium import spaces
+
+from surgsim_envs.envs.base import check_positive, check_range, sample
+from surgsim_envs.envs.grasp import GraspConfig, GraspEnv
+from surgsim_envs.envs.grasp_common import contact_nodes
+from surgsim_envs.errors import ConfigError
+
+
+@dataclass
+class SlippageConfig(GraspConfig):
+    """Slippage-v0 settings (SI units); inherits the grasp scene settings of :class:`GraspConfig`."""
+
+    episode_seconds: float = 3.0
+    dt: float = 4e-4                   # s; the squeezed, strain-stiffened tissue needs < 0.5 ms
+    mu: Sequence[float] = (0.3, 1.0)
+    young_scale: Sequence[float] = (0.8, 1.2)
+    closing_speed: float = 0.05
+    initial_closure: float = 0.7       # action value the jaws close to during the settle
+    settle_time: float = 0.4           # s
+    pull_rate: Sequence[float] = (0.03, 0.06)       # N/s
+    pull_amplitude: Sequence[float] = (0.0, 0.03)   # N
+    pull_frequency: Sequence[float] = (0.5, 2.0)   # Hz
+    max_pull: float = 3.0              # N, motor limit
+    pull_damping: float = 2.0          # N s/m on the wrist's along-axis joint
+    slip_weight: float = 1.0           # per mm of slip
+    squeeze_weight: float = 0.05       # per N of excess squeeze per step
+    drop_penalty: float = 5.0
+    hold_reward: float = 0.3           # per control step while the grasp holds (dropping early never pays)
+    max_slip: float = 0.015            # m, loss of grasp
+    slip_tolerance: float = 0.008      # m, success
+
+    def validate(self) -> None:
+        super().validate()
+        for key in ("settle_time", "max_pull", "pull_damping", "max_slip", "slip_tolerance"):
+            check_positive(getattr(self, key), f"SlippageConfig.{key}")
+        if not -1.0 <= self.initial_closure <= 1.0:
+            raise ConfigError(f"initial_closure={self.initial_closure!r} must lie in [-1, 1]")
+        check_range(self.pull_rate, "pull_rate", 0.0, 10.0)
+        check_range(self.pull_amplitude, "pull_amplitude", 0.0, 10.0)
+        check_range(self.pull_frequency, "pull_frequency", 0.0, 50.0)
+
+
+# ----------------------------------------------------------------------------------------------
+# term functions
+def pull_force(t: float, rate: float, amplitude: float, frequency: float, phase: float) -> float:
+    """N, the pull at ``t`` s after the grasp: a ramp plus a sinusoid, never negative."""
+    return max(0.0, rate * t + amplitude * math.sin(2.0 * math.pi * frequency * t + phase))
+
+
+def least_squeeze(pull: float, mu: float) -> float:
+    """N, the smallest total normal force whose friction (mu * N) balances ``pull`` N."""
+    return abs(pull) / mu if mu > 0 else math.inf
+
+
+def excess_squeeze_penalty(normal_total: float, pull: float, mu: float, weight: float) -> float:
+    """-weight * (normal_total - least_squeeze)+ (N)."""
+    return -weight * max(0.0, normal_total - least_squeeze(pull, mu))
+
+
+def slip_penalty(slip_now: float, slip_before: float, weight_per_mm: float) -> float:
+    """-weight * increase of the slip distance in mm (no reward for slipping back)."""
+    return -weight_per_mm * max(0.0, slip_now - slip_before) * 1e3
+
+
+class SlippageEnv(GraspEnv):
+    """Slippage-v0 (see module docstring)."""
+
+    config_cls = SlippageConfig
+    OPTIONS = ("organ", "mu", "young_scale", "pull_rate", "pull_amplitude", "pull_frequency")
+
+    def _build(self) -> None:
+        super()._build()
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.observation_space = spaces.Box(-1e6, 1e6, shape=(12,), dtype=np.float32)
+
+    def _select(self, organ: str) -> None:
+        new = organ not in self._sims
+        super()._select(organ)
+        tool = self.sim.tool(self.tool_name)
+        self._pull_act = int(tool.actuator_ids[2])      # slide along the tool axis: + is out of the organ
+        self._jaw_act = int(tool.jaw_actuator_id)
+        if new:
+            m = self.sim.model
+            a, dof = self._pull_act, int(tool.dof_adr[2])
+            m.actuator_gainprm[a, :] = 0.0
+            m.actuator_gainprm[a, 0] = 1.0
+            m.actuator_biasprm[a, :] = 0.0
+            m.actuator_ctrlrange[a] = [-self.config.max_pull, self.config.max_pull]
+            m.dof_damping[dof] = self.config.pull_damping
+
+    def _closure_ctrl(self, action_value: float) -> float:
+        """Jaw actuator target (closing travel, m) of a closure action in [-1, 1]."""
+        g = self.gcfg
+        return (action_value + 1.0) / 2.0 * (g.open_radius - g.min_radius)
+
+    def _run(self, steps: int, jaw_goal: float, pull: callable) -> None:
+        d, sim = self.sim.data, self.sim
+        lim = self.config.closing_speed * sim.dt
+        for _ in range(steps):
+            d.ctrl[self._jaw_act] += float(np.clip(jaw_goal - d.ctrl[self._jaw_act], -lim, lim))
+            d.ctrl[self._pull_act] = pull()
+            sim.physics_step()
+
+    def _randomise(self, options: dict[str, Any]) -> None:
+        c, rng = self.config, self.np_random
+        self._randomise_common(options)
+        self.rate = sample(rng, options.get("pull_rate", c.pull_rate), "pull_rate", 0.0, 10.0)
+        self.amplitude = sample(rng, options.get("pull_amplitude", c.pull_amplitude), "pull_amplitude", 0.0, 10.0)
+        self.frequency = sample(rng, options.get("pull_frequency", c.pull_frequency), "pull_frequency", 0.0, 50.0)
+        self.phase = float(rng.uniform(0.0, 2.0 * math.pi))
+        self._run(int(round(c.settle_time / self.sim.dt)), self._closure_ctrl(c.initial_closure), lambda: 0.0)
+        pos = self.sim.tool_position(self.tool_name)
+        nodes = contact_nodes(self.sim)
+        if len(nodes) == 0:
+            raise ConfigError("Slippage: the jaws closed on nothing during the settle; raise initial_closure")
+        self.slip.start(pos, self.sim.tissue().positions, nodes)
+        self.t0 = self.sim.time
+        self.pos0 = pos
+        self.jaw_goal = self._closure_ctrl(c.initial_closure)
+        self.pull = 0.0
+
+    def _pull_now(self) -> float:
+        self.pull = min(self.config.max_pull, pull_force(self.sim.time - self.t0, self.rate, self.amplitude,
+                                                         self.frequency, self.phase))
+        return self.pull
+
+    def _apply_action(self, a: np.ndarray) -> None:
+        self.jaw_goal = self._closure_ctrl(float(a[0]))
+        self._run(self.substeps, self.jaw_goal, self._pull_now)
+
+    def _observe(self) -> np.ndarray:
+        pos, fn, ft, rep = self._readings()
+        disp = float((pos - self.pos0) @ self.pull_dir)
+        return np.array([self.sim.jaw_opening(self.tool_name), *fn, *ft, rep["slipping"], rep["contacts"],
+                         self.pull, disp, self.slip_distance], dtype=np.float32)
+
+    def _evaluate(self, a: np.ndarray):
+        c = self.config
+        pos, fn, ft, rep = self._readings()
+        before = self.slip_distance
+        self.slip_distance = self.slip.distance(pos, self.sim.tissue().positions)
+        total = float(np.sum(fn))
+        self.peak_force = max(self.peak_force, total)
+        reward = slip_penalty(self.slip_distance, before, c.slip_weight)
+        reward += excess_squeeze_penalty(total, self.pull, self.mu, c.squeeze_weight)
+        lost = rep["contacts"] == 0 or self.slip_distance > c.max_slip
+        terms: dict[str, Any] = {"pull_force_N": self.pull, "normal_force_N": total,
+                                 "least_squeeze_N": least_squeeze(self.pull, self.mu)}
+        if lost:
+            reward -= c.drop_penalty
+            terms["dropped"] = True
+        else:
+            reward += c.hold_reward
+        return reward, bool(lost), terms
+
+    def _on_truncate(self):
+        ok = self.slip_distance <= self.config.slip_tolerance
+        return 0.0, {"success": ok, "is_success": ok}
+
+
+def slippage_expert(env, base: float = 0.7, gain: float = 2.0, slip_gain: float = 0.1):
+    """Scripted policy: close in proportion to the pull force and tighten further while nodes slip."""
+    state = {"extra": 0.0}
+
+    def policy(obs):
+        slipping, pull = obs[7], obs[9]
+        if slipping > 0:
+            state["extra"] = min(1.0, state["extra"] + slip_gain)
+        return np.array([np.clip(base + gain * pull + state["extra"], -1.0, 1.0)], dtype=np.float32)
+
+    return policy

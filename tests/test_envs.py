@@ -1,0 +1,253 @@
+"""Gymnasium tasks: API conformance, physical bounds, determinism, experts beat random, bad input."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import surgsim_envs  # noqa: F401  (registers the tasks)
+from surgsim_envs.envs import TASKS, register_envs
+from surgsim_envs.envs.grasp import grasp_expert
+from surgsim_envs.envs.grasp_common import SlipTracker, excess_force_penalty, is_grasped
+from surgsim_envs.envs.palpation import (damage_penalty, indentation_depth, localisation_reward, palpation_expert,
+                                         stiffness_estimate)
+from surgsim_envs.envs.slippage import excess_squeeze_penalty, least_squeeze, pull_force, slippage_expert
+from surgsim_envs.errors import ConfigError
+
+IDS = list(TASKS)
+# physical bounds: forces a soft-tissue contact at these depths cannot exceed (N), positions (m)
+MAX_FORCE = 50.0
+MAX_POS = 1.0
+
+
+@pytest.fixture(scope="module")
+def envs():
+    out = {i: gym.make(i) for i in IDS}
+    yield out
+    for e in out.values():
+        e.close()
+
+
+def test_registration_idempotent():
+    register_envs()
+    register_envs()
+    for i in IDS:
+        assert i in gym.registry
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_check_env(envs, env_id):
+    check_env(envs[env_id].unwrapped, skip_render_check=True)
+
+
+def _force_columns(env_id):
+    return {"SurgSim/Palpation-v0": slice(3, 6), "SurgSim/Grasp-v0": slice(7, 13),
+            "SurgSim/Slippage-v0": slice(1, 7)}[env_id]
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_random_actions_stay_physical(envs, env_id):
+    env = envs[env_id]
+    env.action_space.seed(3)
+    obs, _ = env.reset(seed=3)
+    n_steps = 2000
+    for _ in range(n_steps):
+        obs, r, term, trunc, info = env.step(env.action_space.sample())
+        assert np.all(np.isfinite(obs)) and np.isfinite(r)
+        f = obs[_force_columns(env_id)]
+        assert np.all(np.abs(f) < MAX_FORCE)
+        assert 0.0 <= info["peak_force_N"] < MAX_FORCE
+        if env_id != "SurgSim/Slippage-v0":
+            assert np.all(np.abs(obs[:3]) < MAX_POS)
+        if term or trunc:
+            obs, _ = env.reset()
+    assert np.all(np.isfinite(env.unwrapped.sim.tissue().positions))
+
+
+def _rollout(env, seed, n=30):
+    obs, info = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    out = [obs]
+    for _ in range(n):
+        a = rng.uniform(-1, 1, env.action_space.shape).astype(np.float32)
+        if env.action_space.shape == (4,) and "Palpation" in env.spec.id:
+            a[3] = -1.0
+        obs, r, term, trunc, info = env.step(a)
+        out.append(obs)
+        if term or trunc:
+            break
+    return np.array(out), info
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_same_seed_same_trajectory(envs, env_id):
+    env = envs[env_id]
+    a, ia = _rollout(env, 11)
+    b, ib = _rollout(env, 11)
+    assert np.array_equal(a, b)
+
+
+def test_different_seeds_randomise_inclusion_and_mu(envs):
+    env = envs["SurgSim/Palpation-v0"]
+    c = [tuple(env.reset(seed=s)[1]["inclusion_centre_m"]) for s in (1, 2, 3)]
+    assert len(set(c)) == 3
+    env = envs["SurgSim/Slippage-v0"]
+    mu = [env.reset(seed=s)[1]["mu"] for s in (1, 2, 3)]
+    assert len(set(mu)) == 3 and all(0.3 <= m <= 1.0 for m in mu)
+
+
+def test_inclusion_is_stiffer_than_tissue(envs):
+    """Pressing above the inclusion needs more force than pressing beside it (same depth)."""
+    env = envs["SurgSim/Palpation-v0"].unwrapped
+    forces = []
+    for xy in ((0.0, 0.0), (0.03, 0.03)):
+        env.reset(seed=0, options={"inclusion_position": (0.0, 0.0), "stiffness_contrast": 4.0, "young_scale": 1.0})
+        env.target = np.array([xy[0], xy[1], env.home[2]])
+        env.sim.set_tool_target("probe", env.target, speed=10.0)
+        env.sim.run(0.05)
+        for _ in range(40):
+            obs, *_ = env.step(np.array([0.0, 0.0, 0.6, -1.0]))
+        forces.append(obs[5])
+    assert forces[0] > 1.5 * forces[1] > 0
+
+
+def _episodes(env, make_policy, seeds):
+    ok, ret = [], []
+    for s in seeds:
+        obs, info = env.reset(seed=s)
+        pol = make_policy(env)
+        total = 0.0
+        while True:
+            obs, r, term, trunc, info = env.step(pol(obs))
+            total += r
+            if term or trunc:
+                break
+        ok.append(bool(info["success"]))
+        ret.append(total)
+    return np.mean(ok), np.mean(ret)
+
+
+def _random_policy(env):
+    rng = np.random.default_rng(0)
+    return lambda obs: rng.uniform(-1, 1, env.action_space.shape).astype(np.float32)
+
+
+@pytest.mark.parametrize("env_id,expert", [("SurgSim/Palpation-v0", palpation_expert),
+                                           ("SurgSim/Grasp-v0", grasp_expert),
+                                           ("SurgSim/Slippage-v0", slippage_expert)])
+def test_expert_beats_random(envs, env_id, expert):
+    env = envs[env_id]
+    seeds = range(100, 104)
+    s_exp, r_exp = _episodes(env, expert, seeds)
+    s_rand, r_rand = _episodes(env, _random_policy, seeds)
+    assert s_exp >= 0.5 and s_exp > s_rand
+    assert r_exp > r_rand
+
+
+def test_bad_actions_rejected(envs):
+    env = envs["SurgSim/Palpation-v0"]
+    env.reset(seed=0)
+    with pytest.raises(ConfigError, match="shape"):
+        env.step(np.zeros(3))
+    with pytest.raises(ConfigError, match="NaN"):
+        env.step(np.array([0.0, np.nan, 0.0, 0.0]))
+    with pytest.raises(ValueError):
+        env.step("left")
+
+
+def test_unknown_options_and_config_rejected(envs):
+    env = envs["SurgSim/Grasp-v0"]
+    with pytest.raises(ConfigError, match="frobnicate"):
+        env.reset(seed=0, options={"frobnicate": 1})
+    with pytest.raises(ConfigError, match="organ"):
+        env.reset(seed=0, options={"organ": "heart"})
+    with pytest.raises(ConfigError, match="not_a_field"):
+        gym.make("SurgSim/Palpation-v0", not_a_field=1)
+    with pytest.raises(ConfigError, match="render_mode"):
+        gym.make("SurgSim/Palpation-v0", render_mode="ascii")
+    with pytest.raises(ConfigError, match="stiffness_contrast"):
+        envs["SurgSim/Palpation-v0"].reset(options={"stiffness_contrast": (5.0, 2.0)})
+
+
+def test_organ_option_switches_scene(envs):
+    env = envs["SurgSim/Grasp-v0"]
+    _, info = env.reset(seed=0, options={"organ": "liver_lobe", "mu": 0.8})
+    assert info["organ"] == "liver_lobe" and info["mu"] == 0.8
+    for _ in range(5):
+        obs, *_ = env.step(np.array([0, 0, 0, 1.0], dtype=np.float32))
+    assert np.all(np.isfinite(obs))
+    _, info = env.reset(seed=0)
+    assert info["organ"] == "spleen"
+
+
+@pytest.mark.parametrize("mode", ["sync", "async"])
+def test_make_vec(mode):
+    vec = gym.make_vec("SurgSim/Palpation-v0", num_envs=2, vectorization_mode=mode)
+    try:
+        obs, info = vec.reset(seed=[0, 1])
+        assert obs.shape == (2, 11)
+        for _ in range(3):
+            obs, r, term, trunc, info = vec.step(vec.action_space.sample())
+        assert np.all(np.isfinite(obs)) and r.shape == (2,)
+    finally:
+        vec.close()
+
+
+def test_dm_env_adapter():
+    pytest.importorskip("dm_env")
+    from surgsim_envs.envs.dm_env_adapter import make_dm_env
+
+    env = make_dm_env("SurgSim/Slippage-v0", seed=0)
+    ts = env.reset()
+    assert ts.first()
+    for _ in range(3):
+        ts = env.step(np.array([0.8], dtype=np.float32))
+    assert ts.observation.shape == env.observation_spec().shape and np.isfinite(ts.reward)
+    env.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# term functions alone
+def test_term_functions():
+    assert indentation_depth(0.027, 0.02, 0.01) == pytest.approx(0.003)
+    assert indentation_depth(0.04, 0.02, 0.01) == 0.0
+    assert stiffness_estimate(0.3, 0.003, 0.002) == pytest.approx(100.0)
+    assert stiffness_estimate(0.3, 0.001, 0.002) == 0.0
+    assert damage_penalty(np.array([0, 0, 2.0]), 1.5, 2.0) == pytest.approx(-1.0)
+    assert damage_penalty(np.array([0, 0, 1.0]), 1.5, 2.0) == 0.0
+    assert localisation_reward(0.0, 0.04, 0.01, 1.0, 1.0) == pytest.approx(2.0)
+    assert localisation_reward(0.05, 0.04, 0.01, 1.0, 1.0) == 0.0
+    assert is_grasped(np.array([0.1, 0.1, 0.0]), 0.05) and not is_grasped(np.array([0.1, 0, 0]), 0.05)
+    assert excess_force_penalty(np.array([1.5, 0.5, 2.0]), 1.0, 1.0) == pytest.approx(-1.5)
+    assert pull_force(0.0, 0.1, 0.0, 1.0, 0.0) == 0.0
+    assert pull_force(2.0, 0.1, 0.0, 1.0, 0.0) == pytest.approx(0.2)
+    assert pull_force(0.0, 0.0, 0.1, 1.0, -np.pi / 2) == 0.0   # never pushes
+    assert least_squeeze(0.3, 0.5) == pytest.approx(0.6)
+    assert excess_squeeze_penalty(1.0, 0.3, 0.5, 1.0) == pytest.approx(-0.4)
+    tr = SlipTracker()
+    x = np.zeros((3, 3))
+    tr.start(np.zeros(3), x, [0, 1])
+    assert tr.distance(np.array([0.01, 0, 0]), x + [0.01, 0, 0]) == pytest.approx(0.0)   # moved together
+    assert tr.distance(np.array([0.01, 0, 0]), x) == pytest.approx(0.01)                # tissue stayed
+
+
+def test_rgb_render_and_pixel_wrapper():
+    from surgsim_envs.envs.wrappers import PixelObservation
+    from surgsim_envs.errors import RenderingUnavailableError
+
+    env = gym.make("SurgSim/Palpation-v0", render_mode="rgb_array")
+    try:
+        env.reset(seed=0)
+        try:
+            frame = env.render()
+        except RenderingUnavailableError as exc:
+            pytest.skip(f"no OpenGL: {exc}")
+        assert frame.shape == (480, 480, 3) and frame.dtype == np.uint8 and frame.std() > 0
+        pix = PixelObservation(env, 64, 48, keep_state=True)
+        obs, _ = pix.reset(seed=0)
+        assert obs["pixels"].shape == (48, 64, 3) and obs["state"].shape == (11,)
+        assert pix.observation_space.contains(obs)
+    finally:
+        env.close()
