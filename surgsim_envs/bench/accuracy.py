@@ -8,6 +8,15 @@ finest resolution (its converged solution). Cost: microseconds of compute per si
 millisecond (wall time of one physics step, contact + tissue, times the steps per ms at the
 model's stable dt). Outputs ``accuracy.json`` (the table :func:`surgsim_envs.bench.choose` reads)
 and ``accuracy.png`` (log-log, Pareto front marked).
+
+Baselines, in the same process on the same scene (:func:`surgsim_envs.bench.mujoco_flex.flex_indent`):
+MuJoCo's own 3-D flex with built-in elasticity, ``mujoco_flex_full`` (three dofs per vertex, the
+same graded mesh whole, label = spacing in mm) and ``mujoco_flex_trilinear`` (dofs on a
+``cellcount``^3 interpolation grid, label ``cN``), the sphere pressed in steps and held until the
+flex settles, force = sum of the sphere's contact forces, depth = sphere bottom below the
+undeformed surface (so MuJoCo's soft-contact penetration, reported as ``penetration``, counts
+as compliance). Cost = median wall time of one ``mj_step`` at 1 ms. Baseline rows carry
+``"baseline": true`` and are never picked by :func:`surgsim_envs.bench.choose`.
 """
 
 from __future__ import annotations
@@ -25,6 +34,11 @@ from surgsim_envs.bench.references import dimitriadis_force, dimitriadis_valid_d
 RADIUS, THICKNESS, MATERIAL = 0.005, 0.03, "liver"  # liver made elastic (relax_fraction = 0)
 SPACINGS = (0.003, 0.002, 0.0015, 0.001, 0.0007)
 QUICK_SPACINGS = (0.003, 0.002, 0.0013)
+FLEX_SPACINGS = (0.006, 0.004, 0.003)        # m, mujoco_flex_full (whole slab: 1,125 / 2,527 / 3,528 vertices)
+QUICK_FLEX_SPACINGS = (0.006, 0.004)
+FLEX_CELLCOUNTS = (1, 2, 4, 8)               # mujoco_flex_trilinear interpolation grid (cells per axis)
+QUICK_FLEX_CELLCOUNTS = (1, 2, 4)
+FLEX_COLLISION_SPACING = 0.004               # m, the trilinear flex's (collision) mesh under the sphere
 
 
 def force_error(depth, force, ref_force, valid_depth: float) -> float:
@@ -61,10 +75,49 @@ def sweep(models=None, spacings=SPACINGS, progress: bool = True, time_steps: int
                          "nodes": res.nodes, "dt": res.dt, "us_per_step": res.us_per_step, "us_per_ms": res.us_per_ms,
                          "error": force_error(res.depth, res.force, ref, dv), "depth": res.depth.tolist(),
                          "force": res.force.tolist()})
-    for r in rows:  # error against the model's own finest resolution
+    add_self_error(rows)
+    return rows
+
+
+def flex_sweep(spacings=FLEX_SPACINGS, cellcounts=FLEX_CELLCOUNTS, progress: bool = True) -> list[dict]:
+    """Rows of the MuJoCo flex baselines on the same scene (``"baseline": True``; see module doc)."""
+    from tqdm import tqdm
+
+    from surgsim_envs.bench.mujoco_flex import flex_indent
+    from surgsim_envs.tissue import get_material
+
+    mat = get_material(MATERIAL).replace(relax_fraction=0.0, nonlinear=0.0)
+    dv = dimitriadis_valid_depth(RADIUS, THICKNESS)
+    jobs = [("full", s, 1) for s in spacings] + [("trilinear", FLEX_COLLISION_SPACING, c) for c in cellcounts]
+    rows = []
+    with tqdm(jobs, desc="bench accuracy (MuJoCo flex)", unit="case", file=sys.stderr, disable=not progress) as bar:
+        for dof, s, cells in bar:
+            bar.set_postfix_str(f"{dof} h={s * 1e3:g} mm" + (f" cells={cells}" if dof != "full" else ""))
+            try:
+                res = flex_indent(dof, mat, indenter_radius=RADIUS, depth=dv, thickness=THICKNESS, spacing=s,
+                                  cellcount=cells, n_depths=8)
+            except Exception as exc:  # keep sweeping
+                print(f"surgsim bench accuracy: mujoco_flex_{dof} h={s} cells={cells}: {exc}", file=sys.stderr)
+                continue
+            ref = dimitriadis_force(res.depth, RADIUS, mat.young, mat.poisson, THICKNESS, bonded=True)
+            full = dof == "full"
+            rows.append({"scene": "indent", "model": f"mujoco_flex_{dof}", "integrator": "discrete",
+                         # trilinear: resolution = interpolation cell width (the mesh only collides)
+                         "spacing": s if full else res.info["width"] / cells, "nodes": res.nodes, "dofs": res.dofs,
+                         "cellcount": cells, "label": f"{s * 1e3:g}" if full else f"c{cells}", "dt": res.dt,
+                         "us_per_step": res.us_per_step, "us_per_ms": res.us_per_ms,
+                         "error": force_error(res.depth, res.force, ref, dv), "depth": res.depth.tolist(),
+                         "force": res.force.tolist(), "penetration": res.penetration.tolist(), "baseline": True})
+    add_self_error(rows)
+    return rows
+
+
+def add_self_error(rows: list[dict]) -> None:
+    """``self_error`` of every row: its force error against the same model's finest row."""
+    dv = dimitriadis_valid_depth(RADIUS, THICKNESS)
+    for r in rows:
         finest = min((q for q in rows if q["model"] == r["model"]), key=lambda q: q["spacing"])
         r["self_error"] = force_error(r["depth"], r["force"], finest["force"], dv)
-    return rows
 
 
 def pareto(rows: list[dict]) -> list[dict]:
@@ -81,28 +134,33 @@ def plot(rows: list[dict], path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.6))
-    series = sorted({(r["model"], r["integrator"]) for r in rows})
+    fig, ax = plt.subplots(figsize=(7.6, 5.4))
+    series = sorted({(r["model"], r["integrator"]) for r in rows}, key=lambda k: (k[0].startswith("mujoco"), k))
     for m, integ in series:
         sub = sorted((r for r in rows if r["model"] == m and r["integrator"] == integ and math.isfinite(r["us_per_ms"])),
                      key=lambda r: r["spacing"])
         if not sub:
             continue
-        ax.plot([r["us_per_ms"] for r in sub], [max(r["error"], 1e-4) for r in sub], "o-", label=f"{m} / {integ}")
+        style = "s--" if sub[0].get("baseline") else "o-"
+        name = f"{m} (MuJoCo baseline)" if sub[0].get("baseline") else f"{m} / {integ}"
+        ax.plot([r["us_per_ms"] for r in sub], [max(r["error"], 1e-4) for r in sub], style, label=name, ms=5)
         for r in sub:
-            ax.annotate(f"{r['spacing'] * 1e3:g}", (r["us_per_ms"], max(r["error"], 1e-4)), fontsize=6,
-                        textcoords="offset points", xytext=(3, 3))
+            ax.annotate(r.get("label", f"{r['spacing'] * 1e3:g}"), (r["us_per_ms"], max(r["error"], 1e-4)),
+                        fontsize=7, textcoords="offset points", xytext=(4, 3))
     front = pareto(rows)
     if front:
         ax.step([r["us_per_ms"] for r in front], [max(r["error"], 1e-4) for r in front], where="post", color="k",
                 lw=2, alpha=0.35, label="Pareto front")
+        ax.plot([r["us_per_ms"] for r in front], [max(r["error"], 1e-4) for r in front], "o", mfc="none",
+                mec="k", ms=10, mew=1.2)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("cost: us of compute per simulated ms")
     ax.set_ylabel("force error vs Dimitriadis (fraction)")
-    ax.set_title("Sphere indentation of a bonded 30 mm liver slab (labels: mm spacing)", fontsize=9)
+    ax.set_title("Sphere indentation of a bonded 30 mm liver slab\n(labels: mm spacing under the sphere; "
+                 "cN: trilinear flex with N cells per axis; circled: Pareto front)", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -110,13 +168,20 @@ def plot(rows: list[dict], path: str) -> None:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="surgsim-out/accuracy", help="output directory (accuracy.json, accuracy.png)")
-    parser.add_argument("--quick", action="store_true", help="three resolutions only (about 1-2 min)")
+    parser.add_argument("--quick", action="store_true", help="three resolutions only (about 3 min, 2 of them the MuJoCo flex baselines)")
     parser.add_argument("--models", default=None, help="comma-separated model names (default: all registered)")
+    parser.add_argument("--no-baselines", action="store_true",
+                        help="skip the MuJoCo flex baselines (mujoco_flex_full/_trilinear)")
 
 
 def run(args: argparse.Namespace) -> int:
     models = None if not args.models else [m.strip() for m in args.models.split(",") if m.strip()]
     rows = sweep(models, QUICK_SPACINGS if args.quick else SPACINGS)
+    if not getattr(args, "no_baselines", False):
+        full = models is None or "mujoco_flex_full" in models
+        tri = models is None or "mujoco_flex_trilinear" in models
+        rows += flex_sweep((QUICK_FLEX_SPACINGS if args.quick else FLEX_SPACINGS) if full else (),
+                           (QUICK_FLEX_CELLCOUNTS if args.quick else FLEX_CELLCOUNTS) if tri else ())
     os.makedirs(args.out, exist_ok=True)
     table = {"scene": "indent", "radius": RADIUS, "thickness": THICKNESS, "material": MATERIAL,
              "reference": "dimitriadis bonded", "rows": rows}
@@ -125,10 +190,14 @@ def run(args: argparse.Namespace) -> int:
     if rows:
         plot(rows, os.path.join(args.out, "accuracy.png"))
     front = {id(r) for r in pareto(rows)}
-    print(f"{'model':<12} {'integrator':<11} {'h (mm)':>7} {'nodes':>6} {'us/ms':>10} {'error':>7} {'self':>7}")
+    print(f"{'model':<22} {'integrator':<11} {'res':>5} {'nodes':>6} {'us/ms':>10} {'error':>7} {'self':>7} "
+          f"{'pen mm':>6}")
     for r in rows:
         mark = " *" if id(r) in front else ""
-        print(f"{r['model']:<12} {r['integrator']:<11} {r['spacing'] * 1e3:>7.3g} {r['nodes']:>6} "
-              f"{r['us_per_ms']:>10.4g} {r['error']:>7.3f} {r['self_error']:>7.3f}{mark}")
-    print(f"(* = Pareto front) wrote {args.out}/accuracy.json and accuracy.png")
+        pen = f"{max(r['penetration']) * 1e3:6.3f}" if "penetration" in r else " " * 6
+        res = r.get("label", f"{r['spacing'] * 1e3:g}")
+        print(f"{r['model']:<22} {r['integrator']:<11} {res:>5} "
+              f"{r['nodes']:>6} {r['us_per_ms']:>10.4g} {r['error']:>7.3f} {r['self_error']:>7.3f} {pen}{mark}")
+    print("(res: mm spacing under the sphere, cN: trilinear cells per axis; pen: MuJoCo contact penetration at "
+          f"the deepest point; * = Pareto front) wrote {args.out}/accuracy.json and accuracy.png")
     return 0

@@ -84,19 +84,17 @@ def run_ours(integrator: str, dt: float) -> dict:
 
 
 def _flex_xml(dof: str, dt: float) -> str:
+    from surgsim_envs.bench.mujoco_flex import flexcomp_xml
+
     mass = DENSITY * SIZE ** 3
     spacing = SIZE / (COUNT - 1)
-    last = COUNT - 1 if dof == "full" else 1
-    dof_attr = "" if dof == "full" else f'dof="{dof}"'
     top = SIZE
+    flex = flexcomp_xml("cube", young=YOUNG, poisson=POISSON, mass=mass, dof=dof, damping=0.005, radius=0.0005,
+                        solref=0.002, condim=3, count=(COUNT, COUNT, COUNT), spacing=(spacing,) * 3,
+                        pos=(0, 0, SIZE / 2))
     return f"""<mujoco><option timestep="{dt}" integrator="discrete" gravity="0 0 0"/>
 <worldbody>
-<flexcomp name="cube" type="grid" dim="3" count="{COUNT} {COUNT} {COUNT}" spacing="{spacing} {spacing} {spacing}"
-  pos="0 0 {SIZE / 2}" mass="{mass}" radius="0.0005" {dof_attr}>
-  <edge equality="false"/><elasticity young="{YOUNG}" poisson="{POISSON}" damping="0.005"/>
-  <contact condim="3" solref="0.002 1" selfcollide="none"/>
-  <pin gridrange="0 0 0 {last} {last} 0"/>
-</flexcomp>
+{flex}
 <body name="probe" pos="0 0 {top + TIP + APPROACH}">
   <joint name="pz" type="slide" axis="0 0 1" range="-0.2 0.2"/>
   <geom name="tip" type="sphere" size="{TIP}" mass="0.05"/>

@@ -1,8 +1,11 @@
 """``surgsim bench stability``: the largest stable time step per model, integrator, stiffness and resolution.
 
 The test case: a 30 x 30 x 15 mm block of the material, clamped at its bottom face, its top face
-pressed by 0.2 N spread over the top nodes, every node given a small random velocity (1 mm/s,
-seeded) so the highest modes are excited. A time step is *stable* if ``steps`` steps (default 200)
+pressed by a load that scales with the stiffness (``strain`` x E x top area, 5 % nominal strain by
+default, so a soft block is not crushed into inverted elements and a stiff one is not left
+unloaded: the limit found is the explicit integrator's, not a large-deformation failure), spread
+over the top nodes, every node given a small random velocity (1 mm/s, seeded) so the highest
+modes are excited. A time step is *stable* if ``steps`` steps (default 200)
 run without the stability guard raising :class:`~surgsim_envs.errors.TissueUnstableError`. The
 limit is bracketed by bisection in log(dt) between a stable and an unstable dt until they are within
 ``rel_tol``; the row reports the largest stable dt found (``dt_limit``, s), the guard's verdict
@@ -28,6 +31,7 @@ DEFAULT_YOUNG = (1e3, 4e3, 2e4, 1e5)          # Pa
 DEFAULT_SPACING = (0.0075, 0.005, 0.003)      # m
 QUICK_YOUNG = (1e3, 1e4, 1e5)
 QUICK_SPACING = (0.0075, 0.005)
+LOAD_STRAIN = 0.05                             # nominal compressive strain of the top load
 
 
 def block_model(model, young: float, spacing: float, integrator: str | None = None, material="liver",
@@ -47,13 +51,30 @@ def block_model(model, young: float, spacing: float, integrator: str | None = No
     return cls(vol, mat, fixed=fixed, **kwargs)
 
 
-def run_case(tissue, dt: float, steps: int = 200, seed: int = 0, load: float = 0.2) -> bool:
+def top_load(tissue, strain: float = LOAD_STRAIN) -> float:
+    """Downward load (N) on the top face that compresses ``tissue`` by about ``strain``: strain x E x
+    area of the top face (from the rest positions of the top nodes; E in Pa)."""
+    if not (isinstance(strain, (int, float)) and math.isfinite(strain) and 0 < strain < 0.5):
+        raise ConfigError(f"strain must be a nominal strain in (0, 0.5), e.g. 0.05, got {strain!r}")
+    x = tissue.rest_positions
+    top = np.isclose(x[:, 2], x[:, 2].max())
+    area = float(np.ptp(x[top, 0]) * np.ptp(x[top, 1]))
+    return float(strain * tissue.material.young * area)
+
+
+def run_case(tissue, dt: float, steps: int = 200, seed: int = 0, load: float | None = None) -> bool:
     """True if ``steps`` steps at ``dt`` (s) pass the guard; False if it raised TissueUnstableError."""
     return guard_verdict(tissue, dt, steps, seed, load) is None
 
 
-def guard_verdict(tissue, dt: float, steps: int = 200, seed: int = 0, load: float = 0.2):
-    """None if ``steps`` steps at ``dt`` (s) pass, else the TissueUnstableError the guard raised."""
+def guard_verdict(tissue, dt: float, steps: int = 200, seed: int = 0, load: float | None = None):
+    """None if ``steps`` steps at ``dt`` (s) pass, else the TissueUnstableError the guard raised.
+
+    load: total downward force on the top nodes (N); default :func:`top_load` (5 % strain)."""
+    if load is None:
+        load = top_load(tissue)
+    elif not (isinstance(load, (int, float)) and math.isfinite(load) and load >= 0):
+        raise ConfigError(f"load must be a force >= 0 in N, got {load!r}")
     tissue.reset()
     rng = np.random.default_rng(seed)
     tissue.velocities = np.where(tissue.fixed[:, None], 0.0, rng.normal(0.0, 1e-3, tissue.positions.shape))
@@ -79,7 +100,8 @@ def stable_limit(tissue, *, steps: int = 200, dt_max: float = 0.05, dt_min: floa
         raise ConfigError(f"need 0 < dt_min < dt_max and 0 < rel_tol < 1, got {dt_min}, {dt_max}, {rel_tol}")
     crit = float(tissue.critical_dt())
     if run_case(tissue, dt_max, steps, seed):
-        return {"dt_limit": dt_max, "dt_unstable": None, "critical_dt": crit, "capped": True, "error": ""}
+        return {"dt_limit": dt_max, "dt_unstable": None, "critical_dt": crit, "capped": True, "error": "",
+                "load": top_load(tissue)}
     lo = min(0.5 * crit, dt_max) if math.isfinite(crit) and crit > 0 else 1e-4
     hi = dt_max
     while not run_case(tissue, lo, steps, seed):
@@ -94,7 +116,8 @@ def stable_limit(tissue, *, steps: int = 200, dt_max: float = 0.05, dt_min: floa
             hi = mid
     verdict = guard_verdict(tissue, hi, steps, seed)
     error = verdict.reason if verdict is not None else ""
-    return {"dt_limit": lo, "dt_unstable": hi, "critical_dt": crit, "capped": False, "error": error}
+    return {"dt_limit": lo, "dt_unstable": hi, "critical_dt": crit, "capped": False, "error": error,
+            "load": top_load(tissue)}
 
 
 def stability_map(models=None, youngs=DEFAULT_YOUNG, spacings=DEFAULT_SPACING, steps: int = 200,
@@ -144,7 +167,8 @@ def plot_map(rows: list[dict], path: str) -> None:
             ax.plot(e, lim, "o-", color=c, label=f"{m}/{integ} measured")
             capped = [r for r in sub if r["capped"]]
             if capped:
-                ax.plot([r["young"] for r in capped], [r["dt_limit"] for r in capped], "^", color=c, ms=9)
+                ax.plot([r["young"] for r in capped], [r["dt_limit"] for r in capped], "^", color=c,
+                        ms=max(5, 13 - 3 * k), mfc="none" if k % 2 else c, mew=1.5)   # overlapping caps stay visible
             crit = [r["critical_dt"] if math.isfinite(r["critical_dt"]) else np.nan for r in sub]
             if integ in ("symplectic", "explicit"):
                 ax.plot(e, crit, "--", color=c, alpha=0.7, label=f"{m}/{integ} critical_dt()")
@@ -154,8 +178,10 @@ def plot_map(rows: list[dict], path: str) -> None:
         ax.set_xlabel("Young's modulus E (Pa)")
         ax.set_title(f"spacing {s * 1e3:g} mm")
         ax.grid(True, which="both", alpha=0.3)
-    axes[0][0].set_ylabel("largest stable dt (s)  [triangle: stable at search cap]")
+    axes[0][0].set_ylabel("largest stable dt (s)")
     axes[0][-1].legend(fontsize=7, loc="lower left")
+    fig.suptitle(f"Clamped 30 x 30 x 15 mm block, top load = {LOAD_STRAIN:.0%} strain x E x area; "
+                 "triangles: stable at the search cap; dotted: 1 ms", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
