@@ -15,6 +15,12 @@ The damping acts only while the node approaches the surface, so the contact neve
 adhesion): a separating node feels at most the elastic ``k_n depth``, and nothing once it is out.
 Reaction torques are taken with the force applied at the node position, so tissue plus tools
 conserve linear *and* angular momentum exactly.
+
+Optional surface samples (``surface=...``, :mod:`surgsim_envs.contact.surface_points`): points
+embedded in the surface triangles are contact points too, with the same law at their interpolated
+position/velocity; each sample force goes to its triangle's nodes by its barycentric weights (and
+the reaction is applied at the sample), and every contact point then uses k_n, c_n, k_t divided by
+n^2 (n edge subdivisions) so the stiffness per surface area is unchanged.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from numba import njit
 from surgsim_envs.contact.friction import stick_slip
 from surgsim_envs.contact.report import ContactReport
 from surgsim_envs.contact.shapes import N_KINDS, bounding_radius, local_outside, world_sdf
+from surgsim_envs.contact.surface_points import check_surface, subdivisions_for_spacing, surface_samples
 from surgsim_envs.errors import ConfigError
 
 #: default explicit-stability ratio k_n dt^2 / m used by :func:`auto_stiffness`
@@ -117,11 +124,14 @@ _OK, _BAD_KIND, _BAD_TOOL, _BAD_SIZE = 0, 1, 2, 3
 
 
 @njit(cache=True)
-def _contact_kernel(positions, velocities, cand, kind, tool, size, gpos, gmat, gvel, tool_com, mu,
-                    k_n, c_n, k_t, anchor_local, anchor_on,
+def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel, tool_com,
+                    mu, k_n, c_n, k_t, anchor_local, anchor_on,
                     forces, stiffness, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv,
                     tool_fn, tool_ft, tool_ftv, contacts, slipping, penetration, last_contact, last_slip,
                     err):
+    """Contact points p < C are the candidate nodes ``cand[p]``; points p >= C are the surface
+    samples ``s = p - C`` at ``sum_j s_w[s, j] x[s_nodes[s, j]]`` whose forces go back to the nodes
+    with the same weights. ``touched`` lists every node that can receive a force (zeroed first)."""
     G = kind.shape[0]
     T = tool_force.shape[0]
     # validate geoms and precompute bounding radii
@@ -141,6 +151,17 @@ def _contact_kernel(positions, velocities, cand, kind, tool, size, gpos, gmat, g
             err[1] = g
             return
         radius[g] = r
+    # axis-aligned box around all geoms' bounding spheres: a cheap first rejection per point
+    blo = np.full(3, np.inf)
+    bhi = np.full(3, -np.inf)
+    for g in range(G):
+        for k in range(3):
+            lo = gpos[g, k] - radius[g]
+            hi = gpos[g, k] + radius[g]
+            if lo < blo[k]:
+                blo[k] = lo
+            if hi > bhi[k]:
+                bhi[k] = hi
     for t in range(T):
         for k in range(3):
             tool_force[t, k] = 0.0
@@ -156,21 +177,47 @@ def _contact_kernel(positions, velocities, cand, kind, tool, size, gpos, gmat, g
         geom_fn[g] = 0.0
         for k in range(3):
             geom_ftv[g, k] = 0.0
+    for j in range(touched.shape[0]):
+        i = touched[j]
+        forces[i, 0] = 0.0
+        forces[i, 1] = 0.0
+        forces[i, 2] = 0.0
+        stiffness[i] = 0.0
     nl = np.empty(3)
     cl = np.empty(3)
     nrm = np.empty(3)
     cpt = np.empty(3)
     ft = np.empty(3)
     C = cand.shape[0]
-    for c in range(C):
-        i = cand[c]
-        x0 = positions[i, 0]
-        x1 = positions[i, 1]
-        x2 = positions[i, 2]
+    P = C + s_nodes.shape[0]
+    i = 0
+    a = 0
+    b = 0
+    e = 0
+    wa = 0.0
+    wb = 0.0
+    we = 0.0
+    for c in range(P):
+        if c < C:
+            i = cand[c]
+            x0 = positions[i, 0]
+            x1 = positions[i, 1]
+            x2 = positions[i, 2]
+        else:
+            s = c - C
+            a, b, e = s_nodes[s, 0], s_nodes[s, 1], s_nodes[s, 2]
+            wa, wb, we = s_w[s, 0], s_w[s, 1], s_w[s, 2]
+            x0 = wa * positions[a, 0] + wb * positions[b, 0] + we * positions[e, 0]
+            x1 = wa * positions[a, 1] + wb * positions[b, 1] + we * positions[e, 1]
+            x2 = wa * positions[a, 2] + wb * positions[b, 2] + we * positions[e, 2]
         fx = 0.0
         fy = 0.0
         fz = 0.0
         kk = 0.0
+        if (x0 < blo[0] or x0 > bhi[0] or x1 < blo[1] or x1 > bhi[1] or x2 < blo[2] or x2 > bhi[2]):
+            for g in range(G):
+                anchor_on[c, g] = 0
+            continue
         for g in range(G):
             dx = x0 - gpos[g, 0]
             dy = x1 - gpos[g, 1]
@@ -191,12 +238,19 @@ def _contact_kernel(positions, velocities, cand, kind, tool, size, gpos, gmat, g
                 anchor_on[c, g] = 0
                 continue
             depth = -phi
+            if c < C:
+                v0 = velocities[i, 0]
+                v1 = velocities[i, 1]
+                v2 = velocities[i, 2]
+            else:
+                v0 = wa * velocities[a, 0] + wb * velocities[b, 0] + we * velocities[e, 0]
+                v1 = wa * velocities[a, 1] + wb * velocities[b, 1] + we * velocities[e, 1]
+                v2 = wa * velocities[a, 2] + wb * velocities[b, 2] + we * velocities[e, 2]
             # relative normal velocity: v - (u + w x (x - p))
             vsx = gvel[g, 3] + gvel[g, 1] * dz - gvel[g, 2] * dy
             vsy = gvel[g, 4] + gvel[g, 2] * dx - gvel[g, 0] * dz
             vsz = gvel[g, 5] + gvel[g, 0] * dy - gvel[g, 1] * dx
-            vn = ((velocities[i, 0] - vsx) * nrm[0] + (velocities[i, 1] - vsy) * nrm[1]
-                  + (velocities[i, 2] - vsz) * nrm[2])
+            vn = (v0 - vsx) * nrm[0] + (v1 - vsy) * nrm[1] + (v2 - vsz) * nrm[2]
             f_n = k_n * depth
             if vn < 0.0:
                 f_n -= c_n * vn
@@ -214,7 +268,7 @@ def _contact_kernel(positions, velocities, cand, kind, tool, size, gpos, gmat, g
                 kk += k_n
             else:
                 kk += k_n if k_n > k_t else k_t
-            # reactions on the tool (applied at the node position)
+            # reactions on the tool (applied at the contact point)
             tool_force[t, 0] -= gx
             tool_force[t, 1] -= gy
             tool_force[t, 2] -= gz
@@ -241,10 +295,26 @@ def _contact_kernel(positions, velocities, cand, kind, tool, size, gpos, gmat, g
                 slipping[t] += 1
             if depth > penetration[t]:
                 penetration[t] = depth
-        forces[i, 0] = fx
-        forces[i, 1] = fy
-        forces[i, 2] = fz
-        stiffness[i] = kk
+        if kk == 0.0:
+            continue
+        if c < C:
+            forces[i, 0] += fx
+            forces[i, 1] += fy
+            forces[i, 2] += fz
+            stiffness[i] += kk
+        else:
+            forces[a, 0] += wa * fx
+            forces[a, 1] += wa * fy
+            forces[a, 2] += wa * fz
+            stiffness[a] += wa * kk
+            forces[b, 0] += wb * fx
+            forces[b, 1] += wb * fy
+            forces[b, 2] += wb * fz
+            stiffness[b] += wb * kk
+            forces[e, 0] += we * fx
+            forces[e, 1] += we * fy
+            forces[e, 2] += we * fz
+            stiffness[e] += we * kk
     for g in range(G):
         geom_ft[g] = math.sqrt(geom_ftv[g, 0] ** 2 + geom_ftv[g, 1] ** 2 + geom_ftv[g, 2] ** 2)
     for t in range(T):
@@ -267,6 +337,14 @@ class ContactModel:
     tool_friction: (T,) Coulomb coefficient mu >= 0 per tool (also fixes the number of tools T).
     params: :class:`ContactParams`.
     node_masses: (N,) kg, needed only for ``stiffness="auto"``.
+    surface: (F,3) surface triangles (node indices, e.g. ``tissue.surface``) to add embedded
+        contact points on (see :mod:`surgsim_envs.contact.surface_points`); None = nodes only.
+    surface_subdivisions: n, edge subdivisions of every surface triangle (1 = nodes only, 2..8);
+        or give ``sample_spacing`` (m, e.g. the tool tip radius) with ``rest_positions`` (N,3) m and
+        n = ceil(mean edge / sample_spacing) is chosen. With samples every contact point (node or
+        sample) uses k_n / n^2, c_n / n^2 and k_t / n^2, so the stiffness per unit surface area (and
+        the force on a broad indenter) is the same as with nodes only; a tool smaller than the
+        lattice spacing now meets the surface between the nodes.
 
     Call :meth:`compute` once per physics step (between ``mj_step1`` and ``mj_step2``). It keeps
     the friction anchors between calls; :meth:`reset` clears them. The returned arrays are reused
@@ -274,7 +352,8 @@ class ContactModel:
     """
 
     def __init__(self, n_nodes: int, candidate_nodes, tool_friction, params: ContactParams | None = None,
-                 node_masses=None):
+                 node_masses=None, *, surface=None, surface_subdivisions: int | None = None,
+                 sample_spacing: float | None = None, rest_positions=None):
         if not (isinstance(n_nodes, (int, np.integer)) and n_nodes > 0):
             raise ConfigError(f"n_nodes must be a positive integer, got {n_nodes!r}")
         self.n_nodes = int(n_nodes)
@@ -307,6 +386,8 @@ class ContactModel:
         self._auto_dt = None
         self._k_n = None if self.params.stiffness == "auto" else float(self.params.stiffness)
 
+        self._setup_samples(surface, surface_subdivisions, sample_spacing, rest_positions)
+
         T = len(mu)
         self.report = ContactReport.zeros(T)
         self.result = ContactResult(np.zeros((self.n_nodes, 3)), np.zeros(self.n_nodes), np.zeros((T, 3)),
@@ -316,6 +397,46 @@ class ContactModel:
         self._err = np.zeros(2, dtype=np.int64)
         self._n_geoms = -1
         self._alloc_geoms(0)
+
+    def _setup_samples(self, surface, subdivisions, spacing, rest_positions) -> None:
+        n = 1
+        if surface is None:
+            if subdivisions not in (None, 1) or spacing is not None:
+                raise ConfigError("surface_subdivisions / sample_spacing need the surface triangles: "
+                                  "pass surface=tissue.surface")
+        else:
+            surface = check_surface(surface, self.n_nodes)
+            if subdivisions is not None and spacing is not None:
+                raise ConfigError("give either surface_subdivisions (int) or sample_spacing (m), not both")
+            if spacing is not None:
+                if rest_positions is None:
+                    raise ConfigError("sample_spacing needs rest_positions (N,3) m to measure the surface edges")
+                x = _array(rest_positions, (self.n_nodes, 3), np.float64, "rest_positions", "m")
+                n = subdivisions_for_spacing(x, surface, spacing)
+            elif subdivisions is not None:
+                n = subdivisions
+            surface_samples(surface, n)  # validates n
+        self.surface_subdivisions = int(n)
+        self.sample_nodes, self.sample_weights = (surface_samples(surface, n) if n > 1 else
+                                                  (np.zeros((0, 3), np.int64), np.zeros((0, 3))))
+        #: factor applied to k_n, c_n and k_t of every contact point (1 / n^2)
+        self.point_scale = 1.0 / (n * n)
+        self._touched = np.unique(np.concatenate([self.candidate_nodes, self.sample_nodes.reshape(-1)]))
+
+    @property
+    def n_samples(self) -> int:
+        """Number of embedded surface samples S (contact points besides the candidate nodes)."""
+        return len(self.sample_nodes)
+
+    @property
+    def n_points(self) -> int:
+        """Number of contact points: candidate nodes plus surface samples."""
+        return len(self.candidate_nodes) + len(self.sample_nodes)
+
+    def sample_positions(self, positions) -> np.ndarray:
+        """(S,3) m, world positions of the surface samples for node ``positions`` (N,3)."""
+        x = _array(positions, (self.n_nodes, 3), np.float64, "positions", "m")
+        return np.einsum("sj,sjk->sk", self.sample_weights, x[self.sample_nodes])
 
     @property
     def n_tools(self) -> int:
@@ -332,7 +453,7 @@ class ContactModel:
         return self._k_n
 
     def _alloc_geoms(self, G: int) -> None:
-        C = len(self.candidate_nodes)
+        C = self.n_points
         self._n_geoms = G
         self._anchor_local = np.zeros((C, G, 3))
         self._anchor_on = np.zeros((C, G), dtype=np.uint8)
@@ -353,6 +474,11 @@ class ContactModel:
     @property
     def in_contact(self) -> np.ndarray:
         """(C, G) bool: candidate node c is in contact with geom g after the last call."""
+        return self._anchor_on[:len(self.candidate_nodes)].astype(bool)
+
+    @property
+    def points_in_contact(self) -> np.ndarray:
+        """(C + S, G) bool: contact point p (candidate nodes, then surface samples) touches geom g."""
         return self._anchor_on.astype(bool)
 
     def compute(self, positions, velocities, shape_kind, shape_tool, shape_size, shape_pos, shape_mat,
@@ -383,10 +509,12 @@ class ContactModel:
             self._alloc_geoms(G)
         k_n = self.stiffness_for(dt)
         k_t = self.params.tangential_stiffness or k_n
+        scale = self.point_scale
         r, rep = self.result, self.report
         err = self._err
-        _contact_kernel(pos, vel, self.candidate_nodes, kind, tool, size, gpos, gmat, gvel, com,
-                        self.tool_friction, k_n, float(self.params.damping), float(k_t),
+        _contact_kernel(pos, vel, self.candidate_nodes, self.sample_nodes, self.sample_weights, self._touched,
+                        kind, tool, size, gpos, gmat, gvel, com,
+                        self.tool_friction, k_n * scale, float(self.params.damping) * scale, float(k_t) * scale,
                         self._anchor_local, self._anchor_on, r.forces, r.stiffness, r.tool_force,
                         r.tool_torque, r.geom_normal_force, r.geom_tangential_force, self._geom_ftv,
                         rep.normal_force, rep.tangential_force, self._tool_ftv, rep.contacts, rep.slipping,

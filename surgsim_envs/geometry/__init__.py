@@ -7,9 +7,11 @@
 - :func:`lattice_volume`: fill any closed surface with lattice tets, boundary snapped by tri-ray
   node snapping (paper 001).
 - :func:`add_spherical_inclusion`: label the tets of a spherical inclusion.
+- :func:`embed_points`, :func:`interpolate`: tie a fine visual surface to the tets (rendering).
 """
 
 from surgsim_envs.geometry.box import box_volume, lattice_tets
+from surgsim_envs.geometry.embedding import Embedding, embed_points, embed_surface, interpolate
 from surgsim_envs.geometry.inclusion import add_spherical_inclusion
 from surgsim_envs.geometry.lattice import lattice_volume, surface_distance
 from surgsim_envs.geometry.loaders import load_surface, load_tet_mesh
@@ -19,7 +21,8 @@ from surgsim_envs.geometry.volume import Volume, boundary_triangles, tet_signed_
 
 __all__ = ["Volume", "box_volume", "lattice_tets", "boundary_triangles", "tet_signed_volumes", "make_volume",
            "lattice_volume", "surface_distance", "load_surface", "load_tet_mesh", "add_spherical_inclusion",
-           "spleen_surface", "liver_lobe_surface", "tet_quality", "ORGANS"]
+           "spleen_surface", "liver_lobe_surface", "tet_quality", "ORGANS",
+           "Embedding", "embed_points", "embed_surface", "interpolate"]
 
 
 def make_volume(name: str, spacing: float | None = None, **kwargs) -> Volume:

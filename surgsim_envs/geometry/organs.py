@@ -148,9 +148,14 @@ def _onto_bed(vol: Volume, min_quality: float) -> Volume:
 def _organ(surface_fn, name):
     def build(spacing: float, snap: bool = True, max_snap: float = 0.5, min_quality: float = 0.15, **shape) -> Volume:
         # the surface rests on z = 0; snapped nodes follow it (no shift, which would pull them off it)
-        vol = lattice_volume(surface_fn(**shape), spacing, snap=snap, name=name, max_snap=max_snap,
+        surface = surface_fn(**shape)
+        vol = lattice_volume(surface, spacing, snap=snap, name=name, max_snap=max_snap,
                              min_quality=min_quality)
-        return _onto_bed(vol, min_quality) if snap else vol
+        vol = _onto_bed(vol, min_quality) if snap else vol
+        # the smooth surface it was meshed from, (vertices m, faces): rendered embedded in the tets
+        # (geometry/embedding.py, scene/tissue_binding.py)
+        vol.source_surface = (np.asarray(surface.vertices, dtype=np.float64), np.asarray(surface.faces, dtype=np.int64))
+        return vol
     build.__signature__ = inspect.Signature(  # for the error message listing options
         [p for p in inspect.signature(build).parameters.values() if p.kind != p.VAR_KEYWORD]
         + list(inspect.signature(surface_fn).parameters.values()))

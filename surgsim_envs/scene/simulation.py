@@ -102,7 +102,8 @@ class Simulation:
             if len(mu) == 0:
                 mu = np.zeros(1)
             self.contacts[name] = ContactModel(model.n_nodes, model.surface_nodes, mu, params,
-                                               node_masses=model.masses)
+                                               node_masses=model.masses, surface=model.surface,
+                                               surface_subdivisions=self._surface_subdivisions(model))
         self._pairs = [(self.tissues[n], self.contacts[n]) for n in self.tissues]
         self.steps = 0
         self.reset()
@@ -150,6 +151,26 @@ class Simulation:
                 self._body_friction[i] = tool.config.friction
         self._tool_geom_rows = {tool.name: np.array([self._geom_index[int(g)] for g in tool.geom_ids], dtype=np.int64)
                                 for tool in self.tools.values()}
+
+    def _surface_subdivisions(self, tissue) -> int:
+        """Edge subdivisions of the embedded surface contact points for ``tissue`` from
+        ``ContactConfig.surface_samples`` ("auto": ceil(median surface edge / smallest probe tip
+        radius), i.e. samples only when a probe tip is smaller than the lattice spacing; 1 = nodes only)."""
+        from surgsim_envs.contact.surface_points import MAX_SUBDIVISIONS, typical_edge_length
+
+        opt = getattr(self.scene.config.contact, "surface_samples", "auto")
+        if opt is None:
+            return 1
+        if opt == "auto":
+            tips = [float(t.config.tip_radius) for t in self.tools.values() if t.kind == "probe"]
+            if not tips:
+                return 1
+            edge = typical_edge_length(tissue.positions, tissue.surface)
+            return int(min(max(math.ceil(edge / min(tips) - 1e-9), 1), MAX_SUBDIVISIONS))
+        if isinstance(opt, bool) or not isinstance(opt, (int, np.integer)) or not 1 <= opt <= MAX_SUBDIVISIONS:
+            raise ConfigError(f"ContactConfig.surface_samples={opt!r}; use 'auto', None (nodes only) or an "
+                              f"integer 1..{MAX_SUBDIVISIONS} of edge subdivisions per surface triangle")
+        return int(opt)
 
     def _setup_controls(self) -> None:
         m = self.model
