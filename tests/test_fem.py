@@ -328,3 +328,24 @@ def test_bad_input_is_rejected_with_clear_messages():
         model.static_solve()
     with pytest.raises(ConfigError, match="stiffness"):
         model.step(1e-3, None, np.ones(3))
+
+
+def test_auto_integrator_default_picks_explicit_only_below_its_limit():
+    vol = box_volume((0.02, 0.02, 0.02), 0.005)
+    z = vol.nodes[:, 2]
+    model = tissue.make("fem", vol, {**SOFT, "damping": 5.0}, fixed=np.isclose(z, z.min()))
+    assert model.integrator == "auto" and "auto" in model.integrator_names()
+    crit = model.critical_dt()
+    force = np.zeros_like(model.positions)
+    force[np.isclose(z, z.max()), 2] = -0.01
+    model.step(0.5 * crit, force)
+    assert model.active_integrator == "symplectic"
+    for _ in range(200):                       # 10 x the explicit limit: implicit, and stable
+        model.step(10.0 * crit, force)
+    assert model.active_integrator == "implicit" and model.describe()["active_integrator"] == "implicit"
+    assert np.all(np.isfinite(model.positions)) and model.inverted_elements() == 0
+    assert model.choose_integrator(0.79 * crit) == "symplectic" and model.choose_integrator(0.81 * crit) == "implicit"
+    # explicit names still work and do not switch
+    sym = tissue.make("fem", vol, SOFT, integrator="symplectic")
+    sym.step(0.5 * crit)
+    assert sym.active_integrator == "symplectic" and sym.choose_integrator(1.0) == "implicit"

@@ -267,3 +267,193 @@ def test_speed_bench_rows_cover_every_integrator_and_reject_bad_sizes():
         assert abs(r["nodes"] - 30) <= 15
     with pytest.raises(ConfigError, match="sizes"):
         speed.parse_sizes("250,abc")
+
+
+# --- integrator="auto" (the default): explicit below 0.8 x critical_dt(), implicit above -----------
+def test_auto_integrator_is_the_default_and_switches_with_dt():
+    vol = box_volume((0.02, 0.02, 0.02), 0.005)
+    m = MassSpringModel(vol, "skin", fixed=_faces(vol)[1])
+    assert m.integrator == "auto" and "auto" in MassSpringModel.integrator_names()
+    crit = m.critical_dt()
+    assert m._cg is None                              # implicit buffers are allocated lazily
+    m.step(0.5 * crit)
+    assert m.active_integrator == "symplectic" and m._cg is None
+    m.step(2.0 * crit)                                # a new dt re-evaluates the choice
+    assert m.active_integrator == "implicit" and m._cg is not None
+    assert m.describe()["integrator"] == "auto" and m.describe()["active_integrator"] == "implicit"
+    m.step(0.5 * crit)
+    assert m.active_integrator == "symplectic"
+    # the boundary is the documented rule, and the choice is a function of the state only
+    from surgsim_envs.tissue.base import AUTO_SAFETY
+    assert m.choose_integrator(0.999 * AUTO_SAFETY * m.critical_dt()) == "symplectic"
+    assert m.choose_integrator(1.001 * AUTO_SAFETY * m.critical_dt()) == "implicit"
+
+
+def test_auto_takes_contact_stiffness_into_account():
+    vol = box_volume((0.02, 0.02, 0.02), 0.005)
+    m = MassSpringModel(vol, "liver", fixed=_faces(vol)[1])
+    dt = 0.5 * m.critical_dt()
+    assert m.choose_integrator(dt) == "symplectic"
+    kc = np.zeros(m.n_nodes)
+    kc[_faces(vol)[0]] = 100.0 * float(m.K1.max())     # stiff penalty springs on the top face
+    assert m.choose_integrator(dt, kc) == "implicit"
+    m.step(dt, np.zeros_like(m.positions), kc)
+    assert m.active_integrator == "implicit"
+
+
+def test_auto_is_deterministic_and_stable_where_the_explicit_integrator_fails():
+    vol = box_volume((0.02, 0.02, 0.02), 0.005)
+
+    def run(integ):
+        m = MassSpringModel(vol, "skin", integrator=integ, fixed=_faces(vol)[1])
+        f = np.zeros_like(m.positions)
+        f[_faces(vol)[0], 2] = -0.01
+        chosen = []
+        for dt in [0.5 * m.critical_dt()] * 5 + [1e-3] * 50:   # skin: critical dt ~ 0.3 ms
+            m.step(dt, f)
+            chosen.append(m.active_integrator)
+        return m.positions.copy(), chosen
+
+    x1, chosen = run("auto")
+    x2, chosen2 = run("auto")
+    assert np.array_equal(x1, x2) and chosen == chosen2            # same inputs, same choices
+    assert chosen[:5] == ["symplectic"] * 5 and set(chosen[5:]) == {"implicit"}
+    with pytest.raises(TissueUnstableError):
+        run("symplectic")
+
+
+# --- optional volume term (Teschner et al. 2004) ---------------------------------------------------
+def _uniaxial(m, vol):
+    """Roller-end uniaxial compression (small strain, linear): (E_eff / E, effective Poisson ratio)."""
+    K = m.stiffness_matrix(relaxed=True)
+    X = vol.nodes
+    top, bot = _faces(vol)
+    n, H, eps = vol.n_nodes, np.ptp(X[:, 2]), 1e-3
+    u, fixed = np.zeros(3 * n), np.zeros(3 * n, bool)
+    fixed[3 * np.flatnonzero(top) + 2] = fixed[3 * np.flatnonzero(bot) + 2] = True
+    b = np.flatnonzero(bot)
+    fixed[3 * b[0]] = fixed[3 * b[0] + 1] = fixed[3 * b[-1] + 1] = True
+    u[3 * np.flatnonzero(top) + 2] = -eps * H
+    free = ~fixed
+    u[free] = spla.spsolve(K[free][:, free].tocsc(), -K[free][:, fixed] @ u[fixed])
+    force = -(K @ u)[3 * np.flatnonzero(top) + 2].sum()
+    x = X[:, 0]
+    U = u.reshape(-1, 3)
+    lateral = (U[np.isclose(x, x.max()), 0].mean() - U[np.isclose(x, x.min()), 0].mean()) / np.ptp(x)
+    return force / (np.ptp(x) * np.ptp(X[:, 1])) / eps / m.material.young, lateral / eps
+
+
+@pytest.mark.parametrize("poisson", [0.3, 0.45, 0.49])
+def test_volume_term_auto_gives_the_material_poisson_ratio_and_modulus(poisson):
+    vol = box_volume()
+    mat = _elastic(poisson=poisson, relax_fraction=0.0, nonlinear=0.0)
+    e_plain, nu_plain = _uniaxial(MassSpringModel(vol, mat), vol)
+    e_auto, nu_auto = _uniaxial(MassSpringModel(vol, mat, volume_stiffness="auto"), vol)
+    assert nu_plain < 0.1                              # the bare network barely bulges
+    assert abs(nu_auto - poisson) < 0.05 and abs(e_auto - 1.0) < 0.1
+    # a fixed k_v leaves the springs alone and only adds bulk stiffness
+    e_kv, nu_kv = _uniaxial(MassSpringModel(vol, mat, volume_stiffness=2.0 * mat.young), vol)
+    assert nu_kv > nu_plain + 0.2 and e_kv > e_plain
+
+
+def test_volume_forces_are_the_energy_gradient_and_sum_to_zero():
+    vol = box_volume((0.02, 0.02, 0.02), 0.01)
+    m = MassSpringModel(vol, _elastic(relax_fraction=0.0), volume_stiffness="auto")
+    rng = np.random.default_rng(3)
+    m.positions = m.positions + rng.normal(0.0, 1e-3, m.positions.shape)
+    f = m.volume_forces()
+    assert np.abs(f).max() > 0
+    scale = np.abs(f).max()
+    assert np.abs(f.sum(axis=0)).max() < 1e-10 * scale                       # no net force
+    assert np.abs(np.cross(m.positions, f).sum(axis=0)).max() < 1e-10 * scale  # no net torque
+    # central differences of the energy
+    h = 1e-8
+    for node, axis in [(0, 0), (5, 1), (13, 2)]:
+        xp, xm = m.positions.copy(), m.positions.copy()
+        xp[node, axis] += h
+        xm[node, axis] -= h
+        grad = (m.volume_energy(xp) - m.volume_energy(xm)) / (2 * h)
+        assert grad == pytest.approx(-f[node, axis], rel=1e-5, abs=1e-9 * scale)
+    total = m.internal_forces()
+    assert np.abs(total.sum(axis=0)).max() < 1e-9 * np.abs(total).max()
+
+
+def test_volume_term_conserves_energy_undamped_and_lowers_critical_dt():
+    vol = box_volume((0.03, 0.03, 0.03), 0.01)
+    mat = _elastic(damping=0.0, relax_fraction=0.0, nonlinear=2.0)
+    m = MassSpringModel(vol, mat, volume_stiffness="auto")
+    assert m.critical_dt() < MassSpringModel(vol, mat).critical_dt()
+    rng = np.random.default_rng(1)
+    m.positions += rng.normal(0.0, 5e-4, m.positions.shape)
+    dt = 0.1 * m.critical_dt()
+    e0 = m.kinetic_energy() + m.elastic_energy()
+    e = np.empty(5000)
+    for k in range(5000):
+        m.step(dt)
+        e[k] = m.kinetic_energy() + m.elastic_energy()
+    assert m.active_integrator == "symplectic"
+    assert np.max(np.abs(e - e0)) < 0.1 * e0
+    assert abs(e[-500:].mean() - e[:500].mean()) < 0.005 * e0
+
+
+def test_volume_term_critical_dt_bounds_the_explicit_limit():
+    vol = box_volume((0.02, 0.02, 0.02), 0.005)
+    m = MassSpringModel(vol, _elastic(relax_fraction=0.0, damping=0.0), integrator="symplectic",
+                        volume_stiffness="auto", fixed=_faces(vol)[1])
+    K = m.stiffness_matrix().toarray()
+    free = np.repeat(~m.fixed, 3)
+    minv = 1.0 / np.sqrt(np.repeat(m.masses, 3))[free]
+    lam = np.linalg.eigvalsh(minv[:, None] * K[free][:, free] * minv[None, :]).max()
+    assert m.critical_dt() <= 2.0 / math.sqrt(lam) * (1 + 1e-9)     # Gershgorin: conservative
+    assert m.critical_dt() > 0.3 * 2.0 / math.sqrt(lam)              # ... but not absurdly so
+
+
+def _compress(vol, volume_stiffness, strain=0.2):
+    """Implicit, damped ramp of the top plate down by ``strain`` between no-slip plates."""
+    from surgsim_envs.tissue.mass_spring import _count_inverted
+
+    top, bot = _faces(vol)
+    mat = tissue.get_material("silicone").replace(poisson=0.45, damping=50.0)
+    m = MassSpringModel(vol, mat, integrator="implicit", volume_stiffness=volume_stiffness, fixed=top | bot)
+    H = np.ptp(vol.nodes[:, 2])
+    for k in range(300):
+        target = vol.nodes[top].copy()
+        target[:, 2] -= strain * H * min(1.0, (k + 1) / 150)
+        m.set_fixed(top, target)
+        m.step(1e-3)
+    return m, _count_inverted(m.positions, vol.tets)
+
+
+def test_volume_term_stops_tets_inverting_under_20_percent_compression():
+    vol = box_volume((0.012, 0.012, 0.012), 0.002)
+    plain, inv_plain = _compress(vol, None)
+    kept, inv_kept = _compress(vol, "auto")
+    assert inv_plain > 0              # the bare network folds (docs/models/mass_spring.md)
+    assert inv_kept == 0
+    # and it bulges: the mid-height perimeter moves outward (about the section's centroid: the box
+    # lattice also shears sideways) by a good fraction of what volume conservation needs
+    # (section area +25 % at 20 %: half-width x (1/sqrt(0.8) - 1) = 0.7 mm if uniform)
+    X = vol.nodes
+    half = 0.5 * np.ptp(X[:, 0])
+    mid = np.isclose(X[:, 2], 0.0) & (np.abs(X[:, :2]).max(axis=1) > half - 1e-9)
+
+    def radial_growth(x):
+        c = x[mid, :2].mean(axis=0)
+        return np.linalg.norm(x[mid, :2] - c, axis=1) - np.linalg.norm(X[mid, :2], axis=1)
+
+    assert radial_growth(kept.positions).min() > 0.3e-3 and radial_growth(kept.positions).mean() > 0.5e-3
+    assert radial_growth(plain.positions).mean() < 0.1e-3
+    # the relaxed equilibrium (static_solve includes the volume term) agrees and is unfolded too
+    from surgsim_envs.tissue.mass_spring import _count_inverted
+    x = kept.static_solve()
+    assert _count_inverted(x, vol.tets) == 0 and kept.static_lowest_eigenvalue > 0
+
+
+def test_volume_stiffness_bad_values_are_rejected():
+    vol = box_volume((0.02, 0.02, 0.02), 0.01)
+    with pytest.raises(ConfigError, match="volume_stiffness"):
+        MassSpringModel(vol, "liver", volume_stiffness="big")
+    with pytest.raises(ConfigError, match="volume_stiffness"):
+        MassSpringModel(vol, "liver", volume_stiffness=-1.0)
+    m = MassSpringModel(vol, "liver")
+    assert m.volume_energy() == 0.0 and not m.volume_forces().any() and m.describe()["volume_stiffness"] is None

@@ -59,3 +59,23 @@ def test_box_volume_is_watertight_and_exact():
     assert np.all(counts == 2)
     with pytest.raises(ConfigError, match="spacing"):
         box_volume((0.1, 0.1, 0.1), 0.0)
+
+
+def test_auto_integrator_needs_an_explicit_implicit_pair():
+    from surgsim_envs.tissue.mass_spring import MassSpringModel
+
+    class ExplicitOnly(MassSpringModel):
+        integrators = ("symplectic",)
+        auto_pair = None
+        default_integrator = None
+
+    vol = box_volume((0.02, 0.02, 0.02), 0.01)
+    assert ExplicitOnly(vol, "liver").integrator == "symplectic"
+    with pytest.raises(ConfigError, match="auto"):
+        ExplicitOnly(vol, "liver", integrator="auto")
+    with pytest.raises(ConfigError, match="auto"):        # the error lists "auto" among the choices
+        tissue.make("mass_spring", vol, "liver", integrator="rk4")
+    for name in ("mass_spring", "fem"):
+        m = tissue.make(name, vol, "liver")
+        assert m.integrator == "auto" and m.active_integrator in m.integrators
+        assert "auto" in repr(m) or m.integrator in repr(m)

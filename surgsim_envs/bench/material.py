@@ -33,8 +33,9 @@ import scipy.sparse.linalg as spla
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.tissue.materials import Material, get_material
 
-#: integrator names treated as unconditionally stable (no explicit dt limit)
-IMPLICIT_INTEGRATORS = ("implicit", "static", "quasi_static", "backward_euler")
+#: integrator names treated as unconditionally stable (no explicit dt limit); "auto" switches to
+#: the model's implicit integrator above its explicit limit (TissueModel.choose_integrator)
+IMPLICIT_INTEGRATORS = ("implicit", "static", "quasi_static", "backward_euler", "auto")
 DEFAULT_DT = 1e-3  # s
 
 

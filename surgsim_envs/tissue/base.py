@@ -24,6 +24,10 @@ from surgsim_envs.tissue.guard import StabilityGuard
 from surgsim_envs.tissue.materials import Material, get_material
 
 ELEMENT_FIELDS = ("young", "poisson", "density", "damping", "relax_fraction", "relax_time", "nonlinear")
+#: integrator="auto" runs the explicit integrator while dt <= AUTO_SAFETY x critical_dt(), else the implicit one
+AUTO_SAFETY = 0.8
+#: integrator="auto" re-evaluates critical_dt() when dt changes and every AUTO_RECHECK_STEPS steps
+AUTO_RECHECK_STEPS = 100
 
 
 class TissueModel(abc.ABC):
@@ -48,8 +52,12 @@ class TissueModel(abc.ABC):
     name: ClassVar[str] = "base"
     #: one-line description for ``surgsim models``
     summary: ClassVar[str] = ""
-    #: integrators this model supports; the first is the default
+    #: concrete integrators this model supports; the first is the default unless ``default_integrator`` is set
     integrators: ClassVar[tuple[str, ...]] = ("symplectic",)
+    #: (explicit, implicit) pair that ``integrator="auto"`` chooses between; None: no "auto"
+    auto_pair: ClassVar[tuple[str, str] | None] = None
+    #: integrator used when none is given (None: ``integrators[0]``; may be "auto" if ``auto_pair`` is set)
+    default_integrator: ClassVar[str | None] = None
     #: True for models that only use the surface mesh (e.g. paper 000)
     surface_only: ClassVar[bool] = False
     #: True for models solved quasi-statically (no inertia; velocities are finite differences)
@@ -70,9 +78,18 @@ class TissueModel(abc.ABC):
         if unknown:
             raise ConfigError(f"region_materials labels {sorted(unknown)} do not occur in volume '{volume.name}' "
                               f"(labels present: {sorted(np.unique(volume.labels).tolist())})")
-        self.integrator = integrator or self.integrators[0]
-        if self.integrator not in self.integrators:
-            raise ConfigError(f"model '{self.name}' has no integrator {self.integrator!r}; choose one of {list(self.integrators)}")
+        self.integrator = integrator or self.default_integrator or self.integrators[0]
+        if self.integrator == "auto" and self.auto_pair is None:
+            raise ConfigError(f"model '{self.name}' has no integrator 'auto' (it needs both an explicit and an "
+                              f"implicit integrator); choose one of {list(self.integrators)}")
+        if self.integrator != "auto" and self.integrator not in self.integrators:
+            raise ConfigError(f"model '{self.name}' has no integrator {self.integrator!r}; "
+                              f"choose one of {self.integrator_names()}")
+        # integrator="auto": the concrete integrator of the current step and the cached decision inputs
+        self._active: str | None = None if self.integrator == "auto" else self.integrator
+        self._auto_dt = float("nan")      # dt of the last critical_dt() evaluation (s)
+        self._auto_step = 0               # step count at that evaluation
+        self._auto_crit = float("nan")    # critical_dt() at that evaluation (s)
         self.gravity = np.asarray(gravity, dtype=np.float64).reshape(3)
 
         self.rest_positions = volume.nodes.copy()
@@ -191,6 +208,8 @@ class TissueModel(abc.ABC):
         elif forces.shape != self.positions.shape:
             raise ConfigError(f"forces must have shape {self.positions.shape}, got {forces.shape}")
         self._last_dt = float(dt)
+        if self.integrator == "auto":
+            self._active = self._auto_choice(float(dt), stiffness)
         self._advance(float(dt), forces, stiffness)
         fx = self._fixed_idx
         if fx.size:
@@ -202,7 +221,60 @@ class TissueModel(abc.ABC):
 
     @abc.abstractmethod
     def _advance(self, dt: float, forces: np.ndarray, stiffness: np.ndarray | None) -> None:
-        """Update ``positions``/``velocities`` (and internal state) in place."""
+        """Update ``positions``/``velocities`` (and internal state) in place, with
+        :attr:`active_integrator` (never "auto")."""
+
+    # ---------------------------------------------------------------------------------------
+    # Integrator choice ("auto")
+    @classmethod
+    def integrator_names(cls) -> list[str]:
+        """Names accepted by ``integrator=``: the concrete ones, plus "auto" if the model has a pair."""
+        return list(cls.integrators) + (["auto"] if cls.auto_pair is not None else [])
+
+    @property
+    def active_integrator(self) -> str:
+        """The concrete integrator in use: ``integrator`` itself, or for "auto" the one chosen at the
+        last step (before the first step: the choice for dt = 1 ms at the current state)."""
+        if self._active is None:
+            return self.choose_integrator(1e-3)
+        return self._active
+
+    def choose_integrator(self, dt: float, stiffness: np.ndarray | None = None) -> str:
+        """The integrator "auto" picks (or would pick, for models built with an explicit name) for a
+        step of ``dt`` s at the current state: the explicit one
+        if ``dt <= AUTO_SAFETY * critical_dt()`` (contact ``stiffness`` (N,) N/m, if given, lowers
+        the critical dt: omega^2 += max(k_c / m)), else the implicit one. Pure function of the state."""
+        if self.auto_pair is None:
+            return self.active_integrator
+        return self._pick(dt, float(self.critical_dt()), self._contact_rate(stiffness))
+
+    def _contact_rate(self, stiffness) -> float:
+        """max over nodes of k_c / m (1/s^2) of the contact stiffness; 0 if none or malformed
+        (the model validates it)."""
+        if stiffness is None:
+            return 0.0
+        kc = np.asarray(stiffness, dtype=np.float64)
+        if kc.shape != self.masses.shape or not kc.any():
+            return 0.0
+        rate = float(np.max(kc / self.masses))
+        return rate if math.isfinite(rate) and rate > 0 else 0.0
+
+    def _pick(self, dt: float, crit: float, contact_rate: float) -> str:
+        explicit, implicit = self.auto_pair
+        if not (crit > 0):                        # NaN or zero: no explicit limit known
+            return implicit
+        if contact_rate > 0 and math.isfinite(crit):
+            omega = 2.0 / crit                    # the model's limit as an undamped frequency (1/s)
+            crit = 2.0 / math.sqrt(omega * omega + contact_rate)
+        return explicit if dt <= AUTO_SAFETY * crit else implicit
+
+    def _auto_choice(self, dt: float, stiffness) -> str:
+        """Integrator for this step under "auto": critical_dt() is re-evaluated when dt changes,
+        every AUTO_RECHECK_STEPS steps and after reset(); the contact stiffness is applied every step."""
+        if dt != self._auto_dt or self.steps - self._auto_step >= AUTO_RECHECK_STEPS or not (self._auto_crit > 0):
+            self._auto_crit = float(self.critical_dt())
+            self._auto_dt, self._auto_step = dt, self.steps
+        return self._pick(dt, self._auto_crit, self._contact_rate(stiffness))
 
     def static_solve(self, forces: np.ndarray | None = None, **kwargs) -> np.ndarray:
         """Equilibrium positions under ``forces`` with the current Dirichlet nodes (if supported)."""
@@ -255,6 +327,8 @@ class TissueModel(abc.ABC):
         self.time = 0.0
         self.steps = 0
         self.guard.reset()
+        if self.integrator == "auto":
+            self._active, self._auto_dt, self._auto_step, self._auto_crit = None, float("nan"), 0, float("nan")
         self._reset_state()
 
     def _reset_state(self) -> None:
@@ -262,9 +336,12 @@ class TissueModel(abc.ABC):
 
     def describe(self) -> dict[str, Any]:
         """Summary for reports."""
-        return {"model": self.name, "integrator": self.integrator, "nodes": self.n_nodes,
+        return {"model": self.name, "integrator": self.integrator, "active_integrator": self.active_integrator,
+                "nodes": self.n_nodes,
                 "elements": int(len(self.volume.tets)), "mass_kg": self.total_mass,
                 "material": self.material.name, "critical_dt": self.critical_dt()}
 
     def __repr__(self) -> str:
-        return f"<{type(self).__name__} '{self.name}' {self.n_nodes} nodes, integrator={self.integrator}>"
+        integ = self.integrator if self._active is None or self._active == self.integrator else \
+            f"{self.integrator} ({self._active})"
+        return f"<{type(self).__name__} '{self.name}' {self.n_nodes} nodes, integrator={integ}>"

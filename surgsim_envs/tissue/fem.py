@@ -13,7 +13,8 @@ interactive surgery simulation:
   (locks at nu -> 0.5);
 * integrators: ``"implicit"`` (backward Euler, one linear solve per step; sparse LU of
   ``M + dt C + dt^2 K`` for the linear model, matrix-free Jacobi-PCG with the warped stiffness
-  for the corotational one) and ``"symplectic"`` (semi-implicit Euler, numba kernels);
+  for the corotational one) and ``"symplectic"`` (semi-implicit Euler, numba kernels); the default
+  ``"auto"`` runs symplectic while dt <= 0.8 x critical_dt(), else implicit (TissueModel.choose_integrator);
 * damping ``C = alpha M + beta K`` with alpha = material ``damping`` (1/s, per element) and
   beta = ``stiffness_damping`` (s, default ``material.extra.get("stiffness_damping", 0)``).
 
@@ -57,6 +58,8 @@ class TetFEMModel(TissueModel):
     name = "fem"
     summary = "Linear tetrahedral FEM (paper 004 basic model): corotational, locking-free ANP, implicit/symplectic"
     integrators = ("implicit", "symplectic")
+    auto_pair = ("symplectic", "implicit")
+    default_integrator = "auto"
 
     def __init__(self, volume, material="liver", *, integrator=None, corotational: bool = True,
                  formulation: str = "anp", stiffness_damping: float | None = None,
@@ -258,20 +261,20 @@ class TetFEMModel(TissueModel):
     # Stepping
     def _advance(self, dt: float, forces: np.ndarray, stiffness) -> None:
         forces = np.ascontiguousarray(forces, dtype=np.float64)
-        if self.integrator == "symplectic":
+        kc = None
+        if stiffness is not None:   # validated for both integrators (used by the implicit one)
+            kc = np.asarray(stiffness, dtype=np.float64).reshape(-1)
+            if kc.shape != (self.n_nodes,) or not np.all(np.isfinite(kc)) or np.any(kc < 0):
+                raise ConfigError(f"stiffness must be a finite (N,)={self.n_nodes} array of >= 0 N/m, got shape {kc.shape}")
+            if not kc.any():
+                kc = None
+        if self.active_integrator == "symplectic":
             kern.symplectic_step(self.positions, self.velocities, forces, self.masses, self.alpha_node, self.gravity,
                                  self.fixed, dt, self.stiffness_damping, self.corotational, self.rotation_iters, 1e-12,
                                  self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam, self._rots,
                                  self._anp, self.kappa_node, self.node_volume, self._work, self._ybuf,
                                  self._fbuf, self._set_threads())
             return
-        kc = None
-        if stiffness is not None:
-            kc = np.asarray(stiffness, dtype=np.float64).reshape(-1)
-            if kc.shape != (self.n_nodes,) or not np.all(np.isfinite(kc)) or np.any(kc < 0):
-                raise ConfigError(f"stiffness must be a finite (N,)={self.n_nodes} array of >= 0 N/m, got shape {kc.shape}")
-            if not kc.any():
-                kc = None
         if self.corotational:
             self._implicit_corotational(dt, forces, kc)
         else:

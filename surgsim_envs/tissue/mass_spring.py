@@ -38,6 +38,13 @@ EDGE_STIFFNESS_FACTOR = 1.0
 #: sees eps cos^2(theta); averaging the quartic energy over isotropic directions (<cos^4>/<cos^8> = 9/5)
 #: makes the tissue-level tangent stiffness grow as k0 (1 + nonlinear * eps^2), as Material describes.
 NONLINEAR_NETWORK_FACTOR = 9.0 / 5.0
+#: the spring network's own small-strain constants on the box lattice (Kuhn split), per unit E
+#: (measured: axial modulus 1.034 E, Poisson ratio 0.03; docs/models/mass_spring.md)
+NETWORK_YOUNG_FACTOR = 1.034
+NETWORK_POISSON = 0.03
+#: network Lame constants per unit E: mu_n = E_n / (2 (1 + nu_n)), lambda_n = E_n nu_n / ((1 + nu_n)(1 - 2 nu_n))
+NETWORK_SHEAR_FACTOR = NETWORK_YOUNG_FACTOR / (2.0 * (1.0 + NETWORK_POISSON))
+NETWORK_LAMBDA_FACTOR = NETWORK_YOUNG_FACTOR * NETWORK_POISSON / ((1.0 + NETWORK_POISSON) * (1.0 - 2.0 * NETWORK_POISSON))
 #: relative residual at which the implicit step's conjugate gradients stop
 CG_TOLERANCE = 1e-6
 #: iteration cap of the implicit step's conjugate gradients
@@ -77,8 +84,10 @@ class MassSpringModel(TissueModel):
     ----------
     volume, material: see :class:`TissueModel`. Per-tet fields (``self.fields``) set the springs,
         so region materials (inclusions) make the springs around them stiffer.
-    integrator: "symplectic" (semi-implicit Euler, explicit: dt < :meth:`critical_dt`) or
-        "implicit" (backward Euler, one Newton step, conjugate gradients; stable at 1 ms).
+    integrator: "auto" (default: "symplectic" while dt <= 0.8 x :meth:`critical_dt`, else
+        "implicit"; see :meth:`TissueModel.choose_integrator`), "symplectic" (semi-implicit Euler,
+        explicit: dt < :meth:`critical_dt`) or "implicit" (backward Euler, one Newton step,
+        conjugate gradients; stable at 1 ms).
     springs: "edges" (one spring per unique tet edge; the only layout so far).
     K1: long-term linear spring constant (N/m) for every spring, overriding the E-mapping.
     K2: cubic spring coefficient (N/m^3) for every spring, overriding ``nonlinear``.
@@ -86,16 +95,23 @@ class MassSpringModel(TissueModel):
     b1: Maxwell dashpot (N s/m) for every spring, overriding ``kM * relax_time``; needs
         ``relax_fraction > 0`` (the branch spring ``kM = g1/(1-g1) K1``).
     The overrides may also come from ``material.extra`` ({"K1": ..., ...}); keywords win.
+    volume_stiffness: optional per-tet volume-preservation term (Teschner et al. 2004),
+        ``E_t = 0.5 k_v (V - V0)^2 / V0``: None (off, the default: a plain spring network),
+        a number k_v >= 0 in Pa (springs unchanged), or "auto": springs scaled by
+        mu / mu_network and k_v = lambda - scale * lambda_network per tet, so that the network's
+        small-strain (E, nu) on the box lattice match the material's (see docs/models/mass_spring.md).
     **base_kwargs: region_materials, fixed, gravity, guard (see :class:`TissueModel`).
     """
 
     name: ClassVar[str] = "mass_spring"
     summary: ClassVar[str] = ("nonlinear viscoelastic mass-spring-damper on tet edges (paper 002): "
-                              "cubic springs + Maxwell branches, symplectic or implicit")
+                              "cubic springs + Maxwell branches (+ optional volume term), auto/symplectic/implicit")
     integrators: ClassVar[tuple[str, ...]] = ("symplectic", "implicit")
+    auto_pair: ClassVar[tuple[str, str] | None] = ("symplectic", "implicit")
+    default_integrator: ClassVar[str | None] = "auto"
 
     def __init__(self, volume, material="liver", *, integrator=None, springs="edges",
-                 K1=None, K2=None, b0=None, b1=None, **base_kwargs):
+                 K1=None, K2=None, b0=None, b1=None, volume_stiffness=None, **base_kwargs):
         if springs != "edges":
             raise ConfigError(f"mass_spring: springs={springs!r} is not supported; use springs='edges' "
                               "(one spring per tet edge)")
@@ -105,6 +121,7 @@ class MassSpringModel(TissueModel):
         for key, value in (("K1", K1), ("K2", K2), ("b0", b0), ("b1", b1)):
             value = extra.get(key) if value is None else value
             overrides[key] = None if value is None else _check_scalar(key, value, positive=(key == "K1"))
+        self._setup_volume_term(volume_stiffness)
         self._build_springs(overrides)
         n, ne = self.n_nodes, len(self.springs)
         self.inv_mass = 1.0 / self.masses
@@ -116,12 +133,7 @@ class MassSpringModel(TissueModel):
         # work buffers (no allocation in the hot path)
         self._f = np.zeros((n, 3))
         self._zero_kc = np.zeros(n)
-        if self.integrator == "implicit":
-            self._coef_a = np.zeros(ne)
-            self._coef_g = np.zeros(ne)
-            self._unit = np.zeros((ne, 3))
-            self._diag = np.zeros(n)
-            self._cg = [np.zeros((n, 3)) for _ in range(5)]
+        self._cg: list[np.ndarray] | None = None   # implicit work buffers, allocated on first use
         self.last_cg_iterations = 0
 
     # ---------------------------------------------------------------------------------------
@@ -153,7 +165,11 @@ class MassSpringModel(TissueModel):
         def mean(field: str) -> np.ndarray:
             return np.bincount(edge_of, weights=w * np.repeat(f[field], 6), minlength=ne) / wsum
 
-        k = EDGE_STIFFNESS_FACTOR * wsum / L0 ** 2
+        if self.volume_stiffness == "auto":   # springs carry the material's shear modulus only
+            wk = np.bincount(edge_of, weights=np.repeat(w_tet * self._shear_scale, 6), minlength=ne)
+        else:
+            wk = wsum
+        k = EDGE_STIFFNESS_FACTOR * wk / L0 ** 2
         g1, tau, nonlin = mean("relax_fraction"), mean("relax_time"), mean("nonlinear")
         self.edge_stiffness = k  # instantaneous small-strain constant (N/m)
 
@@ -176,6 +192,43 @@ class MassSpringModel(TissueModel):
         self.K1, self.K2, self.kM, self.b1, self.b0 = K1, K2, kM, b1, b0
         with np.errstate(divide="ignore", invalid="ignore"):
             self.tau = np.where(kM > 0, b1 / np.where(kM > 0, kM, 1.0), np.inf)
+
+    def _setup_volume_term(self, volume_stiffness) -> None:
+        """Per-tet volume stiffness ``volume_kv`` (Pa) and rest volumes ``volume_rest`` (m^3)."""
+        tets = np.ascontiguousarray(self.volume.tets, dtype=np.int64)
+        nt = len(tets)
+        self._shear_scale = np.ones(nt)
+        if volume_stiffness is None:
+            self.volume_stiffness = None
+            self._vtets = np.zeros((0, 4), dtype=np.int64)
+            self.volume_kv = np.zeros(0)
+            self.volume_rest = np.ones(0)
+            return
+        if isinstance(volume_stiffness, str):
+            if volume_stiffness != "auto":
+                raise ConfigError(f"mass_spring: volume_stiffness={volume_stiffness!r} must be None (off), 'auto' "
+                                  "(match the material's Poisson ratio) or a stiffness k_v >= 0 in Pa")
+            E, nu = self.fields["young"], self.fields["poisson"]
+            if np.any(nu >= 0.5) or np.any(nu <= -1.0):
+                raise ConfigError("mass_spring: volume_stiffness='auto' needs -1 < poisson < 0.5 in every region")
+            mu = E / (2.0 * (1.0 + nu))
+            lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+            self._shear_scale = mu / (NETWORK_SHEAR_FACTOR * E)
+            kv = np.maximum(lam - self._shear_scale * NETWORK_LAMBDA_FACTOR * E, 0.0)
+            self.volume_stiffness = "auto"
+        else:
+            value = _check_scalar("volume_stiffness", volume_stiffness, positive=False)
+            kv = np.full(nt, value)
+            self.volume_stiffness = value
+        x = self.rest_positions
+        e = x[tets[:, 1:]] - x[tets[:, :1]]
+        v0 = np.linalg.det(e) / 6.0
+        if np.any(v0 <= 0):
+            raise ConfigError(f"mass_spring: volume '{self.volume.name}' has {int(np.sum(v0 <= 0))} tets with "
+                              "non-positive rest volume; the volume term needs positively oriented tets")
+        self._vtets = tets
+        self.volume_kv = np.ascontiguousarray(kv, dtype=np.float64)
+        self.volume_rest = np.ascontiguousarray(v0)
 
     def _branch_coeffs(self, h: float) -> tuple[np.ndarray, np.ndarray]:
         """(kMg, decay) of the Maxwell branches over an interval of ``h`` s (cached per h)."""
@@ -211,19 +264,31 @@ class MassSpringModel(TissueModel):
             if kc.shape != (self.n_nodes,) or not np.all(np.isfinite(kc)) or np.any(kc < 0):
                 raise ConfigError(f"stiffness must be a finite, non-negative ({self.n_nodes},) array in N/m, "
                                   f"got shape {np.shape(stiffness)}")
-        if self.integrator == "symplectic":
+        if self.active_integrator == "symplectic":
             kern.symplectic_step(self.positions, self.velocities, self.inv_mass, self.b0, fext, self.gravity,
                                  self.fixed, dt, self.si, self.sj, self.rest_lengths, self.K1, self.K2,
-                                 kMg, decay, self._s, self._dl, self._f)
+                                 kMg, decay, self._s, self._dl, self._f, self._vtets, self.volume_rest, self.volume_kv)
         else:
             kMg_next, _ = self._branch_coeffs(dt)
+            if self._cg is None:
+                self._allocate_implicit_buffers()
             r, z, p, ap, pre = self._cg
             self.last_cg_iterations = kern.implicit_step(
                 self.positions, self.velocities, self.masses, self.b0, fext, self.gravity, self.fixed, kc, dt,
                 self.si, self.sj, self.rest_lengths, self.K1, self.K2, kMg, decay, kMg_next, self._s, self._dl,
                 self._f, self._coef_a, self._coef_g, self._unit, self._diag, pre, r, z, p, ap,
-                CG_TOLERANCE, CG_MAX_ITER)
+                CG_TOLERANCE, CG_MAX_ITER, self._vtets, self.volume_rest, self.volume_kv, self._vgrad, self._vcoef)
         self._pending_dt = dt
+
+    def _allocate_implicit_buffers(self) -> None:
+        n, ne = self.n_nodes, self.n_springs
+        self._coef_a = np.zeros(ne)
+        self._coef_g = np.zeros(ne)
+        self._unit = np.zeros((ne, 3))
+        self._diag = np.zeros(n)
+        self._cg = [np.zeros((n, 3)) for _ in range(5)]
+        self._vgrad = np.zeros((len(self._vtets), 4, 3))
+        self._vcoef = np.zeros(len(self._vtets))
 
     def _reset_state(self) -> None:
         self._s[:] = 0.0
@@ -247,15 +312,31 @@ class MassSpringModel(TissueModel):
                            self._s, self._dl, False, out)
         return out
 
+    def volume_forces(self, positions: np.ndarray | None = None) -> np.ndarray:
+        """(N,3) nodal forces (N) of the volume term at ``positions`` (default current; zero if off)."""
+        x = self.positions if positions is None else np.ascontiguousarray(positions, dtype=np.float64)
+        out = np.zeros_like(x)
+        kern.volume_forces(x, self._vtets, self.volume_rest, self.volume_kv, out)
+        return out
+
+    def volume_energy(self, positions: np.ndarray | None = None) -> float:
+        """Energy (J) of the volume term, sum 0.5 k_v (V - V0)^2 / V0 (0 if off)."""
+        x = self.positions if positions is None else np.ascontiguousarray(positions, dtype=np.float64)
+        return float(kern.volume_energy(x, self._vtets, self.volume_rest, self.volume_kv))
+
     def internal_forces(self) -> np.ndarray:
-        """(N,3) springs + Maxwell branches + nodal damping ``-b0 v`` (N) at the current state."""
-        return self.spring_forces() - self.b0[:, None] * self.velocities
+        """(N,3) springs + Maxwell branches + volume term + nodal damping ``-b0 v`` (N) at the current state."""
+        f = self.spring_forces() - self.b0[:, None] * self.velocities
+        if len(self._vtets):
+            kern.volume_forces(self.positions, self._vtets, self.volume_rest, self.volume_kv, f)
+        return f
 
     def elastic_energy(self) -> float:
-        """Energy (J) in the springs (0.5 K1 dl^2 + 0.25 K2 dl^4) and Maxwell springs (s^2 / 2 kM)."""
+        """Energy (J) in the springs (0.5 K1 dl^2 + 0.25 K2 dl^4), Maxwell springs (s^2 / 2 kM) and
+        the volume term (0.5 k_v (V - V0)^2 / V0)."""
         kMg, decay = self._branch_coeffs(self._pending_dt)
         return float(kern.elastic_energy(self.positions, self.si, self.sj, self.rest_lengths, self.K1, self.K2,
-                                         self.kM, kMg, decay, self._s, self._dl))
+                                         self.kM, kMg, decay, self._s, self._dl)) + self.volume_energy()
 
     def critical_dt(self) -> float:
         """Largest stable dt (s) of the symplectic integrator, from a Gershgorin bound.
@@ -268,7 +349,8 @@ class MassSpringModel(TissueModel):
         """
         kMg, decay = self._branch_coeffs(self._pending_dt)
         lam = float(kern.gershgorin_lambda_max(self.positions, self.inv_mass, self.si, self.sj, self.rest_lengths,
-                                               self.K1, self.K2, self.kM, self._s, self._dl, decay, kMg))
+                                               self.K1, self.K2, self.kM, self._s, self._dl, decay, kMg,
+                                               self._vtets, self.volume_rest, self.volume_kv))
         beta = float(np.max(self.b0 * self.inv_mass)) if self.n_nodes else 0.0
         if lam <= 0:
             return math.inf if beta == 0 else 2.0 / beta
@@ -302,6 +384,15 @@ class MassSpringModel(TissueModel):
             rows.append(np.repeat(r, 3, axis=1).ravel())
             cols.append(np.tile(c, (1, 3)).ravel())
             vals.append(sign * blocks.ravel())
+        if len(self._vtets):   # volume term, Gauss-Newton part kv/V0 g g^T
+            nt = len(self._vtets)
+            vg, vc = np.empty((nt, 4, 3)), np.empty(nt)
+            kern.volume_tangents(np.ascontiguousarray(positions), self._vtets, self.volume_rest, self.volume_kv, vg, vc)
+            g = vg.reshape(nt, 12)
+            dof = (3 * self._vtets[:, :, None] + np.arange(3)[None, None]).reshape(nt, 12)
+            rows.append(np.repeat(dof, 12, axis=1).ravel())
+            cols.append(np.tile(dof, (1, 12)).ravel())
+            vals.append((vc[:, None, None] * g[:, :, None] * g[:, None, :]).ravel())
         n3 = 3 * self.n_nodes
         return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n3, n3))
 
@@ -380,10 +471,11 @@ class MassSpringModel(TissueModel):
         return self.positions.copy()
 
     def _relaxed_energy(self, x: np.ndarray, F: np.ndarray) -> float:
-        """Potential (J) of the relaxed springs minus the work of the loads F at positions x."""
+        """Potential (J) of the relaxed springs and the volume term minus the work of the loads F at positions x."""
         dl = np.linalg.norm(x[self.sj] - x[self.si], axis=1) - self.rest_lengths
         d2 = dl * dl
-        return float(np.sum(0.5 * self.K1 * d2 + 0.25 * self.K2 * d2 * d2) - np.sum(F[~self.fixed] * x[~self.fixed]))
+        return float(np.sum(0.5 * self.K1 * d2 + 0.25 * self.K2 * d2 * d2) + self.volume_energy(x)
+                     - np.sum(F[~self.fixed] * x[~self.fixed]))
 
     def _newton(self, x: np.ndarray, F: np.ndarray, tol: float, max_iter: int, shift: float = 0.0):
         """Modified Newton for the relaxed equilibrium (an energy minimum) with the fixed nodes as in
@@ -404,6 +496,7 @@ class MassSpringModel(TissueModel):
         def residual(pos):
             kern.spring_forces(pos, self.si, self.sj, self.rest_lengths, self.K1, self.K2, zeros_e, zeros_e,
                                zeros_e.copy(), zeros_e.copy(), False, buf)
+            kern.volume_forces(pos, self._vtets, self.volume_rest, self.volume_kv, buf)
             scale = max(float(np.linalg.norm(F.ravel()[free])), float(np.linalg.norm(buf)), 1e-12)
             return (buf + F).ravel()[free], scale
 
@@ -495,5 +588,6 @@ class MassSpringModel(TissueModel):
         out = super().describe()
         out.update({"springs": self.n_springs, "K1_mean_N_per_m": float(self.K1.mean()),
                     "K2_mean_N_per_m3": float(self.K2.mean()), "b0_mean_Ns_per_m": float(self.b0.mean()),
-                    "b1_mean_Ns_per_m": float(self.b1.mean())})
+                    "b1_mean_Ns_per_m": float(self.b1.mean()), "volume_stiffness": self.volume_stiffness,
+                    "volume_kv_mean_Pa": float(self.volume_kv.mean()) if len(self.volume_kv) else 0.0})
         return out

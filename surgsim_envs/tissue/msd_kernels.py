@@ -12,7 +12,13 @@ varies linearly over the interval ``h`` since it was last committed (one-term Pr
     s_new = decay * s_old + kMg * (dl_new - dl_old),   decay = exp(-h/tau),
     kMg = kM * (1 - decay) / (h / tau)   (-> kM as h -> 0)
 
-so it is unconditionally stable. All arrays are float64 (SI) except index arrays (int32/int64)
+so it is unconditionally stable.
+
+Optional volume term (Teschner et al. 2004): every tet ``t`` (node indices ``tets[t]``, rest volume
+``V0[t]`` m^3, stiffness ``kv[t]`` Pa) stores ``E_t = 0.5 kv (V - V0)^2 / V0``, V the signed volume.
+Kernels take ``tets`` of shape (0, 4) when the term is off (the loops then do nothing).
+
+All arrays are float64 (SI) except index arrays (int32/int64)
 and masks (bool). The kernels do not allocate: callers pass work buffers.
 """
 
@@ -61,14 +67,129 @@ def spring_forces(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, commit
             f_out[j, 2] -= fz
 
 
+@njit(cache=True, fastmath=True, inline="always")
+def _tet_volume_gradient(pos, tets, t, g):
+    """Signed volume (m^3) of tet t and its gradient dV/dx_a (m^2) into g (4,3)."""
+    a = tets[t, 0]
+    b = tets[t, 1]
+    c = tets[t, 2]
+    d = tets[t, 3]
+    e10 = pos[b, 0] - pos[a, 0]
+    e11 = pos[b, 1] - pos[a, 1]
+    e12 = pos[b, 2] - pos[a, 2]
+    e20 = pos[c, 0] - pos[a, 0]
+    e21 = pos[c, 1] - pos[a, 1]
+    e22 = pos[c, 2] - pos[a, 2]
+    e30 = pos[d, 0] - pos[a, 0]
+    e31 = pos[d, 1] - pos[a, 1]
+    e32 = pos[d, 2] - pos[a, 2]
+    # (e2 x e3)/6, (e3 x e1)/6, (e1 x e2)/6
+    g[1, 0] = (e21 * e32 - e22 * e31) / 6.0
+    g[1, 1] = (e22 * e30 - e20 * e32) / 6.0
+    g[1, 2] = (e20 * e31 - e21 * e30) / 6.0
+    g[2, 0] = (e31 * e12 - e32 * e11) / 6.0
+    g[2, 1] = (e32 * e10 - e30 * e12) / 6.0
+    g[2, 2] = (e30 * e11 - e31 * e10) / 6.0
+    g[3, 0] = (e11 * e22 - e12 * e21) / 6.0
+    g[3, 1] = (e12 * e20 - e10 * e22) / 6.0
+    g[3, 2] = (e10 * e21 - e11 * e20) / 6.0
+    for k in range(3):
+        g[0, k] = -(g[1, k] + g[2, k] + g[3, k])
+    return e10 * g[1, 0] + e11 * g[1, 1] + e12 * g[1, 2]
+
+
+@njit(cache=True, fastmath=True)
+def volume_forces(pos, tets, V0, kv, f_out):
+    """Add the volume-term nodal forces ``-kv (V - V0)/V0 dV/dx`` (N) to ``f_out`` (N,3)."""
+    for t in range(tets.shape[0]):
+        a = tets[t, 0]
+        b = tets[t, 1]
+        c = tets[t, 2]
+        d = tets[t, 3]
+        e10 = pos[b, 0] - pos[a, 0]
+        e11 = pos[b, 1] - pos[a, 1]
+        e12 = pos[b, 2] - pos[a, 2]
+        e20 = pos[c, 0] - pos[a, 0]
+        e21 = pos[c, 1] - pos[a, 1]
+        e22 = pos[c, 2] - pos[a, 2]
+        e30 = pos[d, 0] - pos[a, 0]
+        e31 = pos[d, 1] - pos[a, 1]
+        e32 = pos[d, 2] - pos[a, 2]
+        g10 = e21 * e32 - e22 * e31      # 6 dV/dx_b = e2 x e3
+        g11 = e22 * e30 - e20 * e32
+        g12 = e20 * e31 - e21 * e30
+        g20 = e31 * e12 - e32 * e11      # 6 dV/dx_c = e3 x e1
+        g21 = e32 * e10 - e30 * e12
+        g22 = e30 * e11 - e31 * e10
+        g30 = e11 * e22 - e12 * e21      # 6 dV/dx_d = e1 x e2
+        g31 = e12 * e20 - e10 * e22
+        g32 = e10 * e21 - e11 * e20
+        vol = (e10 * g10 + e11 * g11 + e12 * g12) / 6.0
+        k = -kv[t] * (vol - V0[t]) / (6.0 * V0[t])
+        f_out[b, 0] += k * g10
+        f_out[b, 1] += k * g11
+        f_out[b, 2] += k * g12
+        f_out[c, 0] += k * g20
+        f_out[c, 1] += k * g21
+        f_out[c, 2] += k * g22
+        f_out[d, 0] += k * g30
+        f_out[d, 1] += k * g31
+        f_out[d, 2] += k * g32
+        f_out[a, 0] -= k * (g10 + g20 + g30)
+        f_out[a, 1] -= k * (g11 + g21 + g31)
+        f_out[a, 2] -= k * (g12 + g22 + g32)
+
+
+@njit(cache=True, fastmath=True)
+def volume_energy(pos, tets, V0, kv):
+    """Volume-term energy (J): sum over tets of 0.5 kv (V - V0)^2 / V0."""
+    g = np.empty((4, 3))
+    energy = 0.0
+    for t in range(tets.shape[0]):
+        dv = _tet_volume_gradient(pos, tets, t, g) - V0[t]
+        energy += 0.5 * kv[t] * dv * dv / V0[t]
+    return energy
+
+
+@njit(cache=True, fastmath=True)
+def volume_tangents(pos, tets, V0, kv, vgrad, vcoef):
+    """Gauss-Newton tangent of the volume term per tet: ``K_t = vcoef g g^T`` (N/m) with
+    g = dV/dx (m^2, into ``vgrad`` (T,4,3)) and vcoef = kv / V0 (Pa/m^3); the indefinite
+    second-derivative part ``kv (V - V0)/V0 d2V/dx2`` is left out (small near rest)."""
+    g = np.empty((4, 3))
+    for t in range(tets.shape[0]):
+        _tet_volume_gradient(pos, tets, t, g)
+        for q in range(4):
+            for k in range(3):
+                vgrad[t, q, k] = g[q, k]
+        vcoef[t] = kv[t] / V0[t]
+
+
+@njit(cache=True, fastmath=True)
+def _volume_matvec(x, h2, tets, vgrad, vcoef, out):
+    """out += h2 * sum_t vcoef_t g_t (g_t . x) (the volume term's Gauss-Newton tangent times x)."""
+    for t in range(tets.shape[0]):
+        q = 0.0
+        for a in range(4):
+            n = tets[t, a]
+            q += vgrad[t, a, 0] * x[n, 0] + vgrad[t, a, 1] * x[n, 1] + vgrad[t, a, 2] * x[n, 2]
+        c = h2 * vcoef[t] * q
+        for a in range(4):
+            n = tets[t, a]
+            out[n, 0] += c * vgrad[t, a, 0]
+            out[n, 1] += c * vgrad[t, a, 1]
+            out[n, 2] += c * vgrad[t, a, 2]
+
+
 @njit(cache=True, fastmath=True)
 def symplectic_step(pos, vel, inv_mass, b0, fext, gravity, fixed, dt,
-                    si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, f_buf):
+                    si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, f_buf, tets, V0, kv):
     """One semi-implicit (symplectic) Euler step in place:
 
-    v += dt * ((f_spring + f_ext - b0 v) / m + g);  x += dt * v   (fixed nodes untouched).
+    v += dt * ((f_spring + f_volume + f_ext - b0 v) / m + g);  x += dt * v   (fixed nodes untouched).
     """
     spring_forces(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, True, f_buf)
+    volume_forces(pos, tets, V0, kv, f_buf)
     g0 = gravity[0]
     g1 = gravity[1]
     g2 = gravity[2]
@@ -131,8 +252,8 @@ def spring_tangents(pos, si, sj, L0, K1, K2, kMg, s_branch, clamp, coef_a, coef_
 
 
 @njit(cache=True, fastmath=True)
-def _system_matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out):
-    """out = (diag_m + h2 * K) x with fixed rows/cols removed."""
+def _system_matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out, tets, vgrad, vcoef):
+    """out = (diag_m + h2 * K) x with fixed rows/cols removed (K: springs + volume term)."""
     n = x.shape[0]
     for a in range(n):
         d = diag_m[a]
@@ -159,6 +280,7 @@ def _system_matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out):
         out[j, 0] -= y0
         out[j, 1] -= y1
         out[j, 2] -= y2
+    _volume_matvec(x, h2, tets, vgrad, vcoef, out)
     for a in range(n):
         if fixed[a]:
             out[a, 0] = 0.0
@@ -169,13 +291,15 @@ def _system_matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out):
 @njit(cache=True, fastmath=True)
 def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
                   si, sj, L0, K1, K2, kMg, decay, kMg_next, s_state, dl_state,
-                  f_buf, coef_a, coef_g, unit, diag_m, precond, r, z, p, ap, tol, max_iter):
+                  f_buf, coef_a, coef_g, unit, diag_m, precond, r, z, p, ap, tol, max_iter,
+                  tets, V0, kv, vgrad, vcoef):
     """One linearly implicit backward-Euler step (one Newton step) in place.
 
     Solves (M + dt B + dt^2 (K + Kc)) v_new = M v + dt (f(x) + f_ext + M g) by Jacobi-
     preconditioned conjugate gradients (matrix-free), then x += dt * v_new. K is the spring
     tangent (Maxwell branch included through kMg), B = diag(b0), Kc = diag(kc) the external
-    contact stiffness. ``kMg``/``decay`` bring the Maxwell branches from their last commit up to
+    contact stiffness; the volume term (``tets``, ``V0``, ``kv``) adds its forces and its
+    Gauss-Newton tangent (``vgrad``/``vcoef`` buffers). ``kMg``/``decay`` bring the Maxwell branches from their last commit up to
     ``pos``; ``kMg_next`` is the branches' stiffness over this step of length ``dt``.
     Returns the number of CG iterations.
     """
@@ -183,6 +307,8 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
     # branch state is committed at x_n; tangents at x_n with the branch's stiffness over the coming step
     spring_forces(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, True, f_buf)
     spring_tangents(pos, si, sj, L0, K1, K2, kMg_next, s_state, True, coef_a, coef_g, unit)
+    volume_forces(pos, tets, V0, kv, f_buf)
+    volume_tangents(pos, tets, V0, kv, vgrad, vcoef)
     h2 = dt * dt
     for a in range(n):
         diag_m[a] = mass[a] + dt * b0[a] + h2 * kc[a]
@@ -198,6 +324,11 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
             d = h2 * (coef_a[e] * unit[e, c] * unit[e, c] + coef_g[e])
             precond[i, c] += d
             precond[j, c] += d
+    for t in range(tets.shape[0]):
+        for q in range(4):
+            a = tets[t, q]
+            for c in range(3):
+                precond[a, c] += h2 * vcoef[t] * vgrad[t, q, c] * vgrad[t, q, c]
     # right-hand side into z, residual r = rhs - A v
     rhs_norm2 = 0.0
     for a in range(n):
@@ -208,7 +339,7 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
             else:
                 z[a, c] = mass[a] * vel[a, c] + dt * (f_buf[a, c] + fext[a, c] + mass[a] * gravity[c])
                 rhs_norm2 += z[a, c] * z[a, c]
-    _system_matvec(vel, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap)
+    _system_matvec(vel, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap, tets, vgrad, vcoef)
     rz = 0.0
     r_norm2 = 0.0
     for a in range(n):
@@ -223,7 +354,7 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
     limit = tol * tol * rhs_norm2
     it = 0
     while it < max_iter and r_norm2 > limit and r_norm2 > 1e-300:
-        _system_matvec(p, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap)
+        _system_matvec(p, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap, tets, vgrad, vcoef)
         pap = 0.0
         for a in range(n):
             pap += p[a, 0] * ap[a, 0] + p[a, 1] * ap[a, 1] + p[a, 2] * ap[a, 2]
@@ -277,11 +408,12 @@ def elastic_energy(pos, si, sj, L0, K1, K2, kM, kMg, decay, s_state, dl_state):
 
 
 @njit(cache=True, fastmath=True)
-def gershgorin_lambda_max(pos, inv_mass, si, sj, L0, K1, K2, kM, s_state, dl_state, decay, kMg):
+def gershgorin_lambda_max(pos, inv_mass, si, sj, L0, K1, K2, kM, s_state, dl_state, decay, kMg, tets, V0, kv):
     """Upper bound (1/s^2) of the largest eigenvalue of M^-1 K_tangent (row-sum norm).
 
-    Uses the instantaneous Maxwell stiffness kM (the stiffest the branch can be) and the
-    tension part of the geometric stiffness.
+    Uses the instantaneous Maxwell stiffness kM (the stiffest the branch can be), the
+    tension part of the geometric stiffness and the volume term's Gauss-Newton tangent
+    ``kv/V0 g g^T`` (row sum ``kv/V0 |g_ac| sum_bd |g_bd|``).
     """
     n = pos.shape[0]
     rows = np.zeros((n, 3))
@@ -316,6 +448,18 @@ def gershgorin_lambda_max(pos, inv_mass, si, sj, L0, K1, K2, kM, s_state, dl_sta
         rows[j, 0] += r0
         rows[j, 1] += r1
         rows[j, 2] += r2
+    g4 = np.empty((4, 3))
+    for t in range(tets.shape[0]):
+        _tet_volume_gradient(pos, tets, t, g4)
+        total = 0.0
+        for q in range(4):
+            total += abs(g4[q, 0]) + abs(g4[q, 1]) + abs(g4[q, 2])
+        c = kv[t] / V0[t] * total
+        for q in range(4):
+            a = tets[t, q]
+            rows[a, 0] += c * abs(g4[q, 0])
+            rows[a, 1] += c * abs(g4[q, 1])
+            rows[a, 2] += c * abs(g4[q, 2])
     best = 0.0
     for a in range(n):
         for c in range(3):
