@@ -7,7 +7,9 @@ comparison against a random policy.
 Writes to ``--out`` (default ./surgsim-train/<task>-<algo>-<seed>/): ``model.zip``,
 ``vecnormalize.pkl``, ``learning_curve.png``, ``eval.json`` (mean return and success rate of the
 trained policy and of a random policy over ``--eval-episodes`` episodes).
-Observations are normalised with VecNormalize (the env itself reports SI units).
+Observations are normalised with VecNormalize (the env itself reports SI units). Envs are made
+with ``on_unstable="terminate"`` (``--on-unstable``): a diverging tissue ends the episode
+(counted in ``eval.json``) instead of killing a long run.
 """
 
 from __future__ import annotations
@@ -35,18 +37,20 @@ def parse(argv=None):
     p.add_argument("--eval-episodes", type=int, default=10)
     p.add_argument("--vec", choices=["sync", "async"], default="async", help="vector env mode (n-envs > 1)")
     p.add_argument("--out", default=None)
+    p.add_argument("--on-unstable", choices=["terminate", "raise"], default="terminate",
+                   help="a diverging tissue ends the episode (info['unstable']) instead of killing the run")
     args = p.parse_args(argv)
     if args.steps <= 0 or args.n_envs <= 0 or args.eval_episodes <= 0:
         p.error("--steps, --n-envs and --eval-episodes must be positive")
     return args
 
 
-def evaluate(policy, task, episodes, seed):
-    """Mean return and success rate of ``policy(obs) -> action`` over ``episodes`` episodes."""
+def evaluate(policy, task, episodes, seed, env_kwargs=None):
+    """Mean return, success rate and unstable episodes of ``policy(obs) -> action`` over ``episodes``."""
     import gymnasium as gym
 
-    env = gym.make(task)
-    returns, success = [], []
+    env = gym.make(task, **(env_kwargs or {}))
+    returns, success, unstable = [], [], 0
     for k in range(episodes):
         obs, info = env.reset(seed=seed + 10_000 + k)
         total = 0.0
@@ -57,9 +61,10 @@ def evaluate(policy, task, episodes, seed):
                 break
         returns.append(total)
         success.append(bool(info.get("success", False)))
+        unstable += bool(info.get("unstable", False))
     env.close()
     return {"mean_return": float(np.mean(returns)), "std_return": float(np.std(returns)),
-            "success_rate": float(np.mean(success)), "episodes": episodes}
+            "success_rate": float(np.mean(success)), "episodes": episodes, "unstable_episodes": unstable}
 
 
 def main(argv=None) -> int:
@@ -89,7 +94,9 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     vec_cls = SubprocVecEnv if (args.vec == "async" and args.n_envs > 1) else DummyVecEnv
     # "module:id" makes worker processes (forkserver/spawn) import surgsim_envs, which registers the tasks
-    venv = make_vec_env(f"surgsim_envs:{args.task}", n_envs=args.n_envs, seed=args.seed, vec_env_cls=vec_cls)
+    env_kwargs = {"on_unstable": args.on_unstable}
+    venv = make_vec_env(f"surgsim_envs:{args.task}", n_envs=args.n_envs, seed=args.seed, vec_env_cls=vec_cls,
+                        env_kwargs=env_kwargs)
     venv = VecNormalize(venv, norm_obs=True, norm_reward=True)
     if args.algo == "ppo":
         model = sb3.PPO("MlpPolicy", venv, seed=args.seed, n_steps=512, batch_size=256, verbose=0, device="cpu")
@@ -97,6 +104,7 @@ def main(argv=None) -> int:
         model = sb3.SAC("MlpPolicy", venv, seed=args.seed, verbose=0, device="cpu", learning_starts=1000)
 
     curve = []
+    unstable = [0]
 
     class Progress(BaseCallback):
         def _on_training_start(self):
@@ -106,6 +114,7 @@ def main(argv=None) -> int:
             self.bar.update(self.training_env.num_envs)
             for info in self.locals.get("infos", []):
                 ep = info.get("episode")
+                unstable[0] += bool(info.get("unstable", False))
                 if ep:
                     curve.append((self.num_timesteps, float(ep["r"]), bool(info.get("success", False))))
             return True
@@ -126,8 +135,9 @@ def main(argv=None) -> int:
     space = gym.make(args.task).action_space
     space.seed(args.seed)
     result = {"task": args.task, "algo": args.algo, "steps": args.steps, "n_envs": args.n_envs, "seed": args.seed,
-              "trained": evaluate(trained, args.task, args.eval_episodes, args.seed),
-              "random": evaluate(lambda obs: space.sample(), args.task, args.eval_episodes, args.seed)}
+              "unstable_training_episodes": unstable[0],
+              "trained": evaluate(trained, args.task, args.eval_episodes, args.seed, env_kwargs),
+              "random": evaluate(lambda obs: space.sample(), args.task, args.eval_episodes, args.seed, env_kwargs)}
     with open(out / "eval.json", "w") as fh:
         json.dump(result, fh, indent=2)
     import matplotlib

@@ -40,3 +40,83 @@ def test_shipped_table_and_resolve_resolution():
     assert resolve_resolution(None, model="fem") == ("fem", None)
     with pytest.raises(ConfigError):
         resolve_resolution("fine")
+
+
+# ---------------------------------------------------------------------------------------------
+# resolution="auto" in scenes (TissueConfig) — synthetic table so the rule, not the shipped
+# numbers, is under test
+import json  # noqa: E402
+
+from surgsim_envs.scene import SceneConfig, TissueConfig, build_scene  # noqa: E402
+
+TABLE = {"rows": [
+    {"scene": "indent", "model": "mass_spring", "integrator": "symplectic", "spacing": 0.01, "nodes": 50,
+     "error": 0.30, "us_per_ms": 50.0, "dt": 1e-3},
+    {"scene": "indent", "model": "mass_spring", "integrator": "symplectic", "spacing": 0.005, "nodes": 300,
+     "error": 0.10, "us_per_ms": 400.0, "dt": 5e-4},
+    {"scene": "indent", "model": "fem", "integrator": "implicit", "spacing": 0.005, "nodes": 300,
+     "error": 0.05, "us_per_ms": 3000.0, "dt": 1e-3},
+]}
+
+
+@pytest.fixture
+def table(tmp_path):
+    path = tmp_path / "accuracy.json"
+    path.write_text(json.dumps(TABLE))
+    return str(path)
+
+
+def _scene(table, **kw):
+    t = TissueConfig(name="slab", organ="slab", volume_options={"size": (0.04, 0.04, 0.01)}, position=(0, 0, 0.005),
+                     options={"integrator": "symplectic"}, accuracy_table=table, **kw)
+    return build_scene(SceneConfig(tissues=[t], cameras=[], floor=False))
+
+
+def test_auto_resolution_tight_budget_is_coarser(table):
+    coarse = _scene(table, resolution="auto", error_tolerance=0.5, step_budget_us=100.0)
+    fine = _scene(table, resolution="auto", error_tolerance=0.15, step_budget_us=10_000.0)
+    assert coarse.config.tissues[0].spacing == 0.01 and fine.config.tissues[0].spacing == 0.005
+    assert coarse.resolutions["slab"].us_per_ms <= 100.0
+    # the chosen spacing is the one the tissue is built with: the node count follows it
+    n_coarse, n_fine = len(coarse.tissues["slab"].positions), len(fine.tissues["slab"].positions)
+    assert n_fine > 4 * n_coarse
+
+
+def test_auto_resolution_can_choose_model_and_integrator(table):
+    t = TissueConfig(name="slab", organ="slab", model="auto", resolution="auto", error_tolerance=0.06,
+                     step_budget_us=1e4, volume_options={"size": (0.02, 0.02, 0.01)}, accuracy_table=table)
+    scene = build_scene(SceneConfig(tissues=[t], cameras=[], floor=False))
+    resolved = scene.config.tissues[0]
+    assert (resolved.model, resolved.spacing, resolved.options["integrator"]) == ("fem", 0.005, "implicit")
+    assert type(scene.tissues["slab"]).__name__ == "TetFEMModel"
+    # a fixed integrator restricts the candidates: no symplectic FEM row in the table
+    with pytest.raises(ConfigError, match="closest: mass_spring/symplectic"):
+        _scene(table, model="auto", resolution="auto", error_tolerance=0.06, step_budget_us=1e4)
+
+
+def test_auto_resolution_impossible_names_closest(table):
+    with pytest.raises(ConfigError, match=r"tissue 'slab'.*closest: mass_spring/symplectic at spacing 10 mm"):
+        _scene(table, resolution="auto", error_tolerance=0.2, step_budget_us=40.0)
+
+
+def test_numeric_resolution_and_bad_values(table):
+    a = _scene(table, resolution=0.02)
+    b = _scene(table, resolution=0.01)
+    assert a.config.tissues[0].spacing == 0.02 and len(a.tissues["slab"].positions) < len(b.tissues["slab"].positions)
+    with pytest.raises(ConfigError, match="resolution"):
+        _scene(table, resolution="fine")
+    with pytest.raises(ConfigError, match="resolution"):
+        _scene(table, resolution=-0.01)
+    with pytest.raises(ConfigError, match="model='auto'"):
+        _scene(table, model="auto")
+    with pytest.raises(ConfigError, match="error_tolerance"):
+        _scene(table, resolution="auto", error_tolerance=0.0)
+
+
+def test_auto_resolution_with_shipped_table():
+    pick = choose(1.0, 1e9, models=["mass_spring"], integrators=["symplectic"])
+    t = TissueConfig(name="slab", organ="slab", resolution="auto", error_tolerance=1.0, step_budget_us=1e9,
+                     volume_options={"size": (0.02, 0.02, 0.006)}, options={"integrator": "symplectic"})
+    scene = build_scene(SceneConfig(tissues=[t], cameras=[], floor=False))
+    assert scene.config.tissues[0].spacing == pick.spacing
+    assert scene.resolutions["slab"] == pick

@@ -251,3 +251,78 @@ def test_rgb_render_and_pixel_wrapper():
         assert pix.observation_space.contains(obs)
     finally:
         env.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# resolution="auto" in task configs (via gym.make keywords), against a synthetic measured table
+def test_task_resolution_auto(tmp_path, monkeypatch):
+    import json
+
+    from surgsim_envs.tissue import resolution as res
+
+    rows = [{"scene": "indent", "model": "mass_spring", "integrator": "symplectic", "spacing": s, "nodes": 1,
+             "error": e, "us_per_ms": c, "dt": 1e-3} for s, e, c in ((0.02, 0.6, 20.0), (0.01, 0.3, 200.0))]
+    rows.append({"scene": "indent", "model": "fem", "integrator": "symplectic", "spacing": 0.02, "nodes": 1,
+                 "error": 0.05, "us_per_ms": 10.0, "dt": 1e-3})  # another model: the task keeps its own
+    path = tmp_path / "table.json"
+    path.write_text(json.dumps({"rows": rows}))
+    monkeypatch.setattr(res, "TABLE_PATH", str(path))
+
+    def nodes(**kw):
+        env = gym.make("SurgSim/Palpation-v0", resolution="auto", **kw)
+        try:
+            return env.unwrapped.sim.scene.config.tissues[0].spacing, len(env.unwrapped.sim.tissue().positions)
+        finally:
+            env.close()
+
+    coarse = nodes(error_tolerance=0.7, step_budget_us=50.0)
+    fine = nodes(error_tolerance=0.4, step_budget_us=1000.0)
+    assert coarse[0] == 0.02 and fine[0] == 0.01 and fine[1] > 3 * coarse[1]
+    with pytest.raises(ConfigError, match="closest: mass_spring/symplectic at spacing 10 mm"):
+        gym.make("SurgSim/Palpation-v0", resolution="auto", error_tolerance=0.1, step_budget_us=1000.0)
+    with pytest.raises(ConfigError, match="resolution"):
+        gym.make("SurgSim/Grasp-v0", resolution="coarse")
+    env = gym.make("SurgSim/Grasp-v0", resolution=0.015)
+    assert env.unwrapped.sim.scene.config.tissues[0].spacing == 0.015
+    env.close()
+
+
+def test_contact_reward_and_grasp_shaping_terms():
+    from surgsim_envs.envs.grasp_common import contact_reward
+
+    assert contact_reward(np.array([0.1, 0.1, 0.0]), 0.03, 0.03) == pytest.approx(0.02)
+    assert contact_reward(np.zeros(3), 0.03, 0.03) == 0.0
+    from surgsim_envs.envs.grasp_common import record_progress
+
+    # backing off and approaching again pays only the new record: total = start - best
+    best, total = 0.02, 0.0
+    for d in (0.018, 0.03, 0.04, 0.025, 0.015, 0.016, 0.01):
+        gain, best = record_progress(best, d)
+        assert gain >= 0.0
+        total += gain
+    assert total == pytest.approx(0.02 - 0.01) and best == 0.01
+
+
+def test_on_unstable_terminate(monkeypatch):
+    from surgsim_envs.errors import TissueUnstableError
+
+    env = gym.make("SurgSim/Grasp-v0", on_unstable="terminate")
+    env.reset(seed=0)
+
+    def boom(a):
+        raise TissueUnstableError("mass_spring", 4e-4, 7e-4, "test")
+
+    monkeypatch.setattr(env.unwrapped, "_apply_action", boom)
+    obs, r, term, trunc, info = env.step(env.action_space.sample())
+    assert term and not trunc and info["unstable"] and not info["success"] and np.all(np.isfinite(obs))
+    monkeypatch.undo()
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    env.close()
+    strict = gym.make("SurgSim/Grasp-v0")
+    strict.reset(seed=0)
+    monkeypatch.setattr(strict.unwrapped, "_apply_action", boom)
+    with pytest.raises(TissueUnstableError):
+        strict.step(strict.action_space.sample())
+    with pytest.raises(ConfigError, match="on_unstable"):
+        gym.make("SurgSim/Grasp-v0", on_unstable="ignore")

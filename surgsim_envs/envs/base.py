@@ -9,6 +9,12 @@ with physical metrics (SI: m, s, N). Subclasses supply a config dataclass and im
 Configuration: ``gym.make("SurgSim/Palpation-v0", config=PalpationConfig(...))`` or keyword
 overrides of config fields (``gym.make(..., control_hz=50)``). ``reset(options=...)`` accepts only
 the task's ``OPTIONS`` names (domain randomisation); anything else raises ConfigError by name.
+
+Diverging tissue: by default a :class:`TissueUnstableError` propagates out of ``step`` (as
+everywhere in the package). A config with ``on_unstable="terminate"`` (for long RL runs, where one
+extreme action must not kill the run) ends the episode instead: ``terminated=True``, reward 0,
+``info["unstable"] = True`` and ``info["unstable_reason"]``; the next ``reset`` restores the
+simulation.
 """
 
 from __future__ import annotations
@@ -20,7 +26,7 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 
-from surgsim_envs.errors import ConfigError, RenderingUnavailableError
+from surgsim_envs.errors import ConfigError, RenderingUnavailableError, TissueUnstableError
 
 
 def apply_overrides(config, overrides: dict[str, Any]):
@@ -49,6 +55,24 @@ def check_positive(value, what: str, hint: str = "") -> float:
             or not math.isfinite(value) or value <= 0:
         raise ConfigError(f"{what} must be a positive finite number, got {value!r}{'; ' + hint if hint else ''}")
     return float(value)
+
+
+def check_task_resolution(config, what: str) -> None:
+    """Validate a task config's ``resolution`` (None, a spacing in m, or "auto") and, for "auto",
+    its ``error_tolerance`` (fraction) and ``step_budget_us`` (us per simulated ms)."""
+    from surgsim_envs.tissue.resolution import check_resolution
+
+    check_resolution(config.resolution, f"{what}.resolution")
+    if config.resolution == "auto":
+        check_positive(config.error_tolerance, f"{what}.error_tolerance", "a fraction, e.g. 0.6 for 60 %")
+        check_positive(config.step_budget_us, f"{what}.step_budget_us", "us of compute per simulated ms, e.g. 1000")
+
+
+def check_on_unstable(value, what: str) -> None:
+    """``on_unstable`` must be "raise" (default) or "terminate" (see the module docstring)."""
+    if value not in ("raise", "terminate"):
+        raise ConfigError(f"{what}.on_unstable={value!r}; choose 'raise' (default) or 'terminate' (end the "
+                          "episode with info['unstable'] instead of raising TissueUnstableError)")
 
 
 def sample(rng: np.random.Generator, value, what: str, lo: float = -math.inf, hi: float = math.inf) -> float:
@@ -172,8 +196,13 @@ class SurgSimEnv(gym.Env):
         if self.sim is None:
             raise ConfigError("call reset() before step()")
         a = self.check_action(action)
-        self._apply_action(a)
         self.steps += 1
+        try:
+            self._apply_action(a)
+        except TissueUnstableError as exc:
+            if getattr(self.config, "on_unstable", "raise") != "terminate":
+                raise
+            return self._unstable_step(exc)
         reward, terminated, terms = self._evaluate(a)
         truncated = (not terminated) and self.steps >= self.max_episode_steps
         if truncated:
@@ -186,6 +215,13 @@ class SurgSimEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return obs, float(reward), bool(terminated), bool(truncated), info
+
+    def _unstable_step(self, exc: TissueUnstableError):
+        """End the episode after a tissue divergence (``on_unstable="terminate"``)."""
+        self.sim.reset()  # finite state for the last observation; reset() re-randomises as usual
+        obs = self._observe()
+        info = self._info({"unstable": True, "unstable_reason": str(exc), "success": False, "is_success": False})
+        return obs, 0.0, True, False, info
 
     def _on_truncate(self) -> tuple[float, dict[str, Any]]:
         return 0.0, {}

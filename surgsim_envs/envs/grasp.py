@@ -13,10 +13,20 @@ Observation (15,) float32, SI: wrist position (3) m (the grasper only translates
 pose); target minus wrist (3) m; jaw opening (1) m; per-jaw normal force (3) N; per-jaw
 tangential force (3) N; slipping contact nodes (1); contact nodes (1).
 
-Reward: ``progress_weight * (d_prev - d) / target distance`` while grasped;
+Reward (shaped so that every stage of the task pays and trying is never worse than doing
+nothing): ``contact_weight * (jaws pressing with more than hold_force) / 3`` per step (closing on
+the tissue pays at once); ``progress_weight * (d_best - d)+ / initial target distance`` while
+grasped, where ``d_best`` is the closest the wrist has come to the target while grasped (a record,
+so moving away before grasping or re-grasping cannot farm progress; at most ``progress_weight``
+per episode);
 ``- force_weight * sum(jaw normal - damage_force)+``; ``- slip_weight * slipping fraction``
 while grasped; ``- drop_penalty`` on losing a grasp (terminates); ``+ success_bonus`` when the
 wrist is within ``tolerance`` m of the target with the organ grasped (terminates, success).
+
+Tissue resolution: ``resolution`` None keeps the task's coarse lattice (spleen 11 mm, liver lobe
+15 mm); a number (m) sets the lattice spacing; ``"auto"`` picks the cheapest measured spacing of
+the task's model (mass-spring, symplectic) meeting ``error_tolerance`` and ``step_budget_us``
+(see :mod:`surgsim_envs.tissue.resolution`).
 """
 
 from __future__ import annotations
@@ -27,9 +37,11 @@ from typing import Any, Sequence
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import SurgSimEnv, check_positive, check_range, sample
+from surgsim_envs.envs.base import (SurgSimEnv, check_on_unstable, check_positive, check_range,
+                                   check_task_resolution, sample)
 from surgsim_envs.envs.grasp_common import (ORGAN_SPACING, SlipTracker, build_grasp_simulation, contact_nodes,
-                                            excess_force_penalty, is_grasped, slip_fraction)
+                                            contact_reward, excess_force_penalty, is_grasped, record_progress,
+                                            slip_fraction)
 from surgsim_envs.envs.stiffness_field import StiffnessField
 from surgsim_envs.errors import ConfigError
 
@@ -42,6 +54,10 @@ class GraspConfig:
     dt: float = 4e-4                   # s; squeezed, strain-stiffened tissue needs < 0.5 ms
     episode_seconds: float = 3.0
     organ: str = "spleen"
+    resolution: float | str | None = None   # None: the organ's task lattice; a spacing in m; "auto"
+    error_tolerance: float = 0.1       # resolution="auto": force error limit (fraction)
+    step_budget_us: float = 5_000.0    # resolution="auto": compute limit, us per simulated ms
+    on_unstable: str = "raise"         # "terminate": a tissue divergence ends the episode (info["unstable"])
     closing_speed: float = 0.03        # m/s, jaw rate limit
     max_step: float = 0.001            # m per control step (5 cm/s at 50 Hz)
     workspace: float = 0.06            # m, wrist target |offset| from home per axis
@@ -56,7 +72,8 @@ class GraspConfig:
     force_weight: float = 1.0
     slip_weight: float = 0.1
     progress_weight: float = 5.0
-    drop_penalty: float = 2.0
+    contact_weight: float = 0.03      # per step, times the fraction of jaws pressing on the tissue
+    drop_penalty: float = 0.5
     success_bonus: float = 5.0
     tolerance: float = 0.005           # m
     camera: str = "overview"
@@ -67,6 +84,8 @@ class GraspConfig:
         for key in ("control_hz", "dt", "episode_seconds", "closing_speed", "max_step", "workspace", "hold_force",
                     "damage_force", "tolerance"):
             check_positive(getattr(self, key), f"GraspConfig.{key}")
+        check_task_resolution(self, type(self).__name__)
+        check_on_unstable(self.on_unstable, type(self).__name__)
         if self.organ not in ORGAN_SPACING:
             raise ConfigError(f"GraspConfig.organ={self.organ!r}; choose one of {sorted(ORGAN_SPACING)}")
         check_range(self.mu, "mu", 0.0, 2.0)
@@ -94,7 +113,8 @@ class GraspEnv(SurgSimEnv):
             raise ConfigError(f"unknown organ {organ!r}; choose one of {sorted(ORGAN_SPACING)}")
         if organ not in self._sims:
             c = self.config
-            self._sims[organ] = build_grasp_simulation(organ, c.dt, self.substeps, c.closing_speed)
+            self._sims[organ] = build_grasp_simulation(organ, c.dt, self.substeps, c.closing_speed, c.resolution,
+                                                       c.error_tolerance, c.step_budget_us)
             self._fields[organ] = StiffnessField(self._sims[organ].tissue())
         self.sim = self._sims[organ]
         self.field = self._fields[organ]
@@ -132,6 +152,7 @@ class GraspEnv(SurgSimEnv):
         self.target = self.home.copy()
         self.prev_dist = float(np.linalg.norm(self.goal - self.home))
         self.goal_dist0 = max(self.prev_dist, 1e-6)
+        self.best_dist = self.goal_dist0
 
     def _clip_target(self, pos: np.ndarray) -> np.ndarray:
         local = np.clip(self.frame.T @ (pos - self.home), -self.config.workspace, self.config.workspace)
@@ -173,10 +194,12 @@ class GraspEnv(SurgSimEnv):
         grasped = self._update_grasp(pos, fn)
         dist = float(np.linalg.norm(self.goal - pos))
         reward = excess_force_penalty(fn, c.damage_force, c.force_weight)
+        reward += contact_reward(fn, c.hold_force, c.contact_weight)
         terms: dict[str, Any] = {"grasped": grasped, "distance_to_target_m": dist}
         terminated = False
         if grasped:
-            reward += c.progress_weight * (self.prev_dist - dist) / self.goal_dist0
+            gain, self.best_dist = record_progress(self.best_dist, dist)
+            reward += c.progress_weight * gain / self.goal_dist0
             reward -= c.slip_weight * slip_fraction(rep["slipping"], rep["contacts"])
             self.was_grasped = True
             if dist <= c.tolerance:

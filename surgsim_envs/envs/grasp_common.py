@@ -15,8 +15,14 @@ from surgsim_envs.errors import ConfigError
 ORGAN_SPACING = {"spleen": 0.011, "liver_lobe": 0.015}
 
 
-def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: float):
-    """A Simulation of the grasp scene for ``organ`` ("spleen" or "liver_lobe")."""
+def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: float, resolution=None,
+                           error_tolerance: float = 0.1, step_budget_us: float = 5_000.0):
+    """A Simulation of the grasp scene for ``organ`` ("spleen" or "liver_lobe").
+
+    resolution: None (the organ's :data:`ORGAN_SPACING`), a spacing in m, or "auto" (the cheapest
+    measured mass-spring/symplectic spacing meeting ``error_tolerance`` (fraction) and
+    ``step_budget_us`` (us per simulated ms); see :class:`surgsim_envs.scene.TissueConfig`).
+    """
     from surgsim_envs.scene import Simulation, grasp_config, grasp_scene
 
     if organ not in ORGAN_SPACING:
@@ -24,6 +30,7 @@ def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: 
     cfg = grasp_config(organ=organ)
     t = cfg.tissues[0]
     t.spacing = ORGAN_SPACING[organ]
+    t.resolution, t.error_tolerance, t.step_budget_us = resolution, error_tolerance, step_budget_us
     t.options = {"integrator": "symplectic"}
     cfg.graspers[0].closing_speed = float(closing_speed)
     cfg.dt = float(dt)
@@ -38,6 +45,21 @@ def jaws_in_contact(normal: np.ndarray, threshold: float) -> int:
 def is_grasped(normal: np.ndarray, threshold: float, min_jaws: int = 2) -> bool:
     """A grasp holds when at least ``min_jaws`` jaws press with more than ``threshold`` N."""
     return jaws_in_contact(normal, threshold) >= min_jaws
+
+
+def contact_reward(normal: np.ndarray, threshold: float, weight: float) -> float:
+    """weight * fraction of the three jaws pressing with more than ``threshold`` N (dense shaping:
+    closing on the tissue pays before the grasp is complete)."""
+    normal = np.asarray(normal)
+    return weight * jaws_in_contact(normal, threshold) / max(len(normal), 1)
+
+
+def record_progress(best: float, dist: float) -> tuple[float, float]:
+    """``(gain, new best)``: how far (m) ``dist`` beats the best (smallest) distance so far, never
+    negative. Summed over an episode the gains are at most the initial distance minus the final
+    best, whatever the path (no reward for backing off and approaching again)."""
+    gain = max(0.0, float(best) - float(dist))
+    return gain, min(float(best), float(dist))
 
 
 def excess_force_penalty(normal: np.ndarray, threshold: float, weight: float) -> float:

@@ -1,6 +1,7 @@
 """SurgSim/Palpation-v0: find a hidden stiff inclusion in a tissue slab with a probe.
 
-A liver slab (default 10 x 10 x 2 cm, bed fixed, mass-spring, 10 mm lattice: 363 nodes) hides a
+A liver slab (default 10 x 10 x 2 cm, bed fixed, mass-spring, 10 mm lattice: 363 nodes; or
+``resolution`` = a spacing in m / "auto", see :class:`PalpationConfig`) hides a
 spherical inclusion of random position, radius and stiffness contrast. The agent moves a
 spherical-tip probe and presses; when it is sure it raises the "report" action and the probe's
 current (x, y) is its guess of the inclusion centre (at the time limit the probe's position is
@@ -30,7 +31,8 @@ from typing import Any, Sequence
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import SurgSimEnv, check_positive, check_range, sample
+from surgsim_envs.envs.base import (SurgSimEnv, check_on_unstable, check_positive, check_range,
+                                   check_task_resolution, sample)
 from surgsim_envs.envs.stiffness_field import StiffnessField
 from surgsim_envs.errors import ConfigError
 
@@ -44,6 +46,10 @@ class PalpationConfig:
     dt: float = 1e-3                   # s, physics step (substeps = round(1 / (control_hz dt)))
     episode_seconds: float = 6.0       # s, time limit
     spacing: float = 0.01              # m, tissue lattice spacing (363 nodes for the default slab)
+    resolution: float | str | None = None   # None: ``spacing``; a spacing in m; "auto": from the accuracy table
+    error_tolerance: float = 0.1       # resolution="auto": force error limit (fraction)
+    step_budget_us: float = 5_000.0    # resolution="auto": compute limit, us per simulated ms
+    on_unstable: str = "raise"         # "terminate": a tissue divergence ends the episode (info["unstable"])
     slab_size: Sequence[float] = (0.1, 0.1, 0.02)   # m
     material: str = "liver"
     tip_radius: float = 0.01           # m, probe tip
@@ -81,6 +87,8 @@ class PalpationConfig:
                     "hover", "max_depth", "xy_limit", "press_min_depth", "site_spacing", "damage_force",
                     "localisation_scale", "tolerance_mm"):
             check_positive(getattr(self, key), f"PalpationConfig.{key}")
+        check_task_resolution(self, "PalpationConfig")
+        check_on_unstable(self.on_unstable, "PalpationConfig")
         if 1.0 / self.control_hz < self.dt:
             raise ConfigError(f"control period 1/control_hz={1 / self.control_hz:g} s is shorter than dt={self.dt:g} s; "
                               "lower control_hz or dt")
@@ -145,6 +153,7 @@ class PalpationEnv(SurgSimEnv):
         cfg = palpation_config(organ="slab")
         t = cfg.tissues[0]
         t.spacing = c.spacing
+        t.resolution, t.error_tolerance, t.step_budget_us = c.resolution, c.error_tolerance, c.step_budget_us
         t.material = c.material
         t.region_materials = None
         t.volume_options = {"size": tuple(float(s) for s in c.slab_size)}

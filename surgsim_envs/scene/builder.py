@@ -41,6 +41,7 @@ class Scene:
     tissue_configs: dict = field(default_factory=dict)  # name -> TissueConfig
     tools: dict = field(default_factory=dict)           # name -> ToolSpec
     proxies: dict = field(default_factory=dict)         # proxy name -> ToolSpec it drives
+    resolutions: dict = field(default_factory=dict)     # tissue name -> tissue.resolution.Choice ("auto" only)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -53,20 +54,73 @@ def _euler_matrix(euler) -> np.ndarray:
     return mat.reshape(3, 3)
 
 
+def resolve_tissue(cfg: TissueConfig):
+    """``(resolved copy of cfg, Choice or None)``: ``cfg.resolution`` turned into a concrete model,
+    spacing and integrator (see :class:`TissueConfig`); ``cfg`` itself is returned when
+    ``resolution`` is None. The copy has ``resolution=None``, so resolving twice changes nothing.
+
+    ``"auto"`` uses :func:`surgsim_envs.tissue.resolution.choose` (the tissue layer, not bench:
+    bench sits above scene); a ConfigError from it is re-raised naming the tissue.
+    """
+    from surgsim_envs.tissue.resolution import check_resolution, choose
+
+    check_resolution(cfg.resolution, f"tissue '{cfg.name}' resolution")
+    if cfg.resolution is None:
+        return cfg, None
+    out = copy.deepcopy(cfg)
+    out.resolution = None
+    if cfg.resolution != "auto":
+        out.spacing = float(cfg.resolution)
+        return out, None
+    options = dict(cfg.options)
+    integrator = options.get("integrator")
+    fixed_integrator = integrator not in (None, "auto")
+    try:
+        pick = choose(cfg.error_tolerance, cfg.step_budget_us, cfg.accuracy_scene, table=cfg.accuracy_table,
+                      models=None if cfg.model == "auto" else [cfg.model],
+                      integrators=[integrator] if fixed_integrator else None)
+    except ConfigError as exc:
+        raise ConfigError(f"tissue '{cfg.name}' resolution='auto': {exc}") from None
+    out.model, out.spacing = pick.model, pick.spacing
+    if not fixed_integrator:
+        options["integrator"] = pick.integrator
+    out.options = options
+    return out, pick
+
+
+def resolve_scene_config(cfg: SceneConfig):
+    """``(copy of cfg with every tissue resolved, {tissue name: Choice})`` (see :func:`resolve_tissue`)."""
+    out = copy.deepcopy(cfg)
+    choices = {}
+    for i, t in enumerate(cfg.tissues):
+        out.tissues[i], pick = resolve_tissue(t)
+        if pick is not None:
+            choices[t.name] = pick
+    return out, choices
+
+
 def placed_volume(cfg: TissueConfig):
     """The tissue's volume, rotated by ``cfg.euler`` and with its bounding-box centre at ``cfg.position``."""
     from surgsim_envs.geometry import Volume, make_volume
 
+    cfg, _ = resolve_tissue(cfg)
     vol = make_volume(cfg.organ, spacing=cfg.spacing, **dict(cfg.volume_options))
     lo, hi = vol.bounds()
     centre = (lo + hi) / 2.0
     nodes = vol.nodes - centre
+    rot, shift = np.eye(3), np.zeros(3)
     if any(float(a) != 0.0 for a in cfg.euler):
-        nodes = nodes @ _euler_matrix(cfg.euler).T
+        rot = _euler_matrix(cfg.euler)
+        nodes = nodes @ rot.T
         lo2, hi2 = nodes.min(axis=0), nodes.max(axis=0)
-        nodes = nodes - (lo2 + hi2) / 2.0
+        shift = (lo2 + hi2) / 2.0
+        nodes = nodes - shift
     nodes = nodes + np.asarray(cfg.position, dtype=float)
-    return Volume(nodes, vol.tets.copy(), vol.surface.copy(), vol.labels.copy(), vol.name, vol.node_labels.copy())
+    out = Volume(nodes, vol.tets.copy(), vol.surface.copy(), vol.labels.copy(), vol.name, vol.node_labels.copy())
+    src = getattr(vol, "source_surface", None)
+    if src is not None:  # the smooth organ surface, placed like the nodes (rendered by TissueBinding)
+        out.source_surface = ((src[0] - centre) @ rot.T - shift + np.asarray(cfg.position, dtype=float), src[1].copy())
+    return out
 
 
 def anchor_nodes(nodes: np.ndarray, anchors, tolerance: float, what: str = "tissue") -> np.ndarray:
@@ -105,6 +159,7 @@ def build_tissue(cfg: TissueConfig):
     """Build the TissueModel of ``cfg`` (placed, anchored)."""
     from surgsim_envs import tissue
 
+    cfg, _ = resolve_tissue(cfg)
     vol = placed_volume(cfg)
     fixed = anchor_nodes(vol.nodes, cfg.anchors, cfg.anchor_tolerance, what=f"tissue '{cfg.name}'")
     options = dict(cfg.options)
@@ -155,12 +210,18 @@ def _add_camera(spec: mujoco.MjSpec, cam: CameraConfig) -> None:
 
 
 def build_scene(cfg: SceneConfig) -> Scene:
-    """Compile ``cfg`` into a :class:`Scene` (validates it first; ConfigError on bad input)."""
+    """Compile ``cfg`` into a :class:`Scene` (validates it first; ConfigError on bad input).
+
+    Tissue ``resolution`` settings are resolved first (:func:`resolve_scene_config`):
+    ``scene.config`` holds the resolved copy and ``scene.resolutions`` the table rows chosen for
+    ``resolution="auto"``.
+    """
     validate_scene_config(cfg)
+    cfg, choices = resolve_scene_config(cfg)
     spec = mujoco.MjSpec()
     spec.modelname = cfg.name
     _add_environment(spec, cfg)
-    scene = Scene(config=cfg, spec=spec, model=None)  # type: ignore[arg-type]
+    scene = Scene(config=cfg, spec=spec, model=None, resolutions=choices)  # type: ignore[arg-type]
     for tcfg in cfg.tissues:
         model = build_tissue(tcfg)
         scene.tissues[tcfg.name] = model

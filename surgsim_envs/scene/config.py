@@ -25,9 +25,19 @@ class TissueConfig:
 
     organ: volume name for :func:`surgsim_envs.geometry.make_volume` ("slab", "block",
         "slab_inclusion", "spleen", "liver_lobe", ...).
-    model: tissue model registry name ("mass_spring", "fem", or a plugin).
+    model: tissue model registry name ("mass_spring", "fem", or a plugin); "auto" lets
+        ``resolution="auto"`` choose the model too.
     material: preset name, dict of :class:`~surgsim_envs.tissue.Material` fields, or a Material.
     spacing: node spacing (m) of the volumetric discretisation (None = the organ's default).
+    resolution: None (use ``spacing``), a spacing in m (overrides ``spacing``) or "auto": the
+        builder picks the cheapest measured (model, integrator, spacing) whose force error is <=
+        ``error_tolerance`` (fraction) and whose compute is <= ``step_budget_us`` (us per
+        simulated ms) from the accuracy table (:mod:`surgsim_envs.tissue.resolution`), restricted
+        to ``model`` unless it is "auto" and to ``options["integrator"]`` if one is given (else
+        the chosen integrator is set). No row meets both: ConfigError naming the closest.
+    error_tolerance, step_budget_us: the two limits of ``resolution="auto"``.
+    accuracy_scene: benchmark scene of the table rows to choose from ("indent").
+    accuracy_table: path of a measured table JSON (None = the shipped one).
     anchors: fixed nodes (organ bed, ligaments): a list of selectors, each one of
         "bottom"/"top"/"x_min"/"x_max"/"y_min"/"y_max" (nodes within ``anchor_tolerance`` of that
         face of the bounding box, after placement) or an explicit sequence of node indices.
@@ -46,6 +56,11 @@ class TissueConfig:
     model: str = "mass_spring"
     material: Any = "liver"
     spacing: float | None = 0.005
+    resolution: float | str | None = None
+    error_tolerance: float = 0.1
+    step_budget_us: float = 5_000.0
+    accuracy_scene: str = "indent"
+    accuracy_table: str | None = None
     anchors: Sequence[Any] = ("bottom",)
     anchor_tolerance: float = 1e-4
     position: Sequence[float] = (0.0, 0.0, 0.01)
@@ -166,11 +181,17 @@ class ContactConfig:
 
     stiffness: N/m per node (or "auto"); damping: N s/m per node; tangential_stiffness: N/m per
     node (None = stiffness).
+    surface_samples: contact points embedded in the surface triangles between the nodes
+    (surgsim_envs.contact.surface_points): "auto" = on when a probe tip radius is below the
+    tissue's median surface edge (subdivisions ceil(edge / tip_radius), at most 8), an int n =
+    edge subdivisions (1 = nodes only), None = nodes only. Each contact point then carries
+    1/n^2 of the per-node stiffness and damping (same stiffness per surface area).
     """
 
     stiffness: Any = 200.0
     damping: float = 0.02
     tangential_stiffness: float | None = None
+    surface_samples: Any = "auto"
 
 
 def _default_cameras() -> list[CameraConfig]:
@@ -232,6 +253,23 @@ def validate_step(dt: float, substeps: int) -> None:
                           "(physics steps per control step; default 1)")
 
 
+def validate_tissue_resolution(t: TissueConfig) -> None:
+    """Check ``resolution``, ``model="auto"`` and the auto-selection limits of one tissue."""
+    from surgsim_envs.tissue.resolution import check_resolution
+
+    check_resolution(t.resolution, f"tissue '{t.name}' resolution")
+    if t.model == "auto" and t.resolution != "auto":
+        raise ConfigError(f"tissue '{t.name}': model='auto' needs resolution='auto' (the table picks both); "
+                          "or name a model such as 'mass_spring' or 'fem'")
+    if t.resolution == "auto":
+        _positive(t.error_tolerance, f"tissue '{t.name}' error_tolerance", "a fraction, e.g. 0.1 for 10 %")
+        _positive(t.step_budget_us, f"tissue '{t.name}' step_budget_us",
+                  "microseconds of compute per simulated millisecond, e.g. 1000")
+        if not isinstance(t.accuracy_scene, str) or not t.accuracy_scene:
+            raise ConfigError(f"tissue '{t.name}' accuracy_scene={t.accuracy_scene!r}; give a benchmark scene "
+                              "name such as 'indent'")
+
+
 def validate_scene_config(cfg: SceneConfig) -> None:
     """Check a SceneConfig; raise ConfigError naming the first bad value and how to fix it."""
     if not isinstance(cfg, SceneConfig):
@@ -248,6 +286,7 @@ def validate_scene_config(cfg: SceneConfig) -> None:
                                   "and cameras must be unique")
             names.add(item.name)
     for t in cfg.tissues:
+        validate_tissue_resolution(t)
         if t.spacing is not None:
             _positive(t.spacing, f"tissue '{t.name}' spacing", "try 0.005 (5 mm), or None for the organ's default")
         _vec(t.position, 3, f"tissue '{t.name}' position")
