@@ -35,6 +35,7 @@ def parse(argv=None):
     p.add_argument("--n-envs", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--eval-episodes", type=int, default=10)
+    p.add_argument("--gamma", type=float, default=0.99, help="discount factor (SB3 default 0.99)")
     p.add_argument("--vec", choices=["sync", "async"], default="async", help="vector env mode (n-envs > 1)")
     p.add_argument("--out", default=None)
     p.add_argument("--on-unstable", choices=["terminate", "raise"], default="terminate",
@@ -42,6 +43,8 @@ def parse(argv=None):
     args = p.parse_args(argv)
     if args.steps <= 0 or args.n_envs <= 0 or args.eval_episodes <= 0:
         p.error("--steps, --n-envs and --eval-episodes must be positive")
+    if not 0.0 < args.gamma <= 1.0:
+        p.error(f"--gamma must lie in (0, 1], got {args.gamma}")
     return args
 
 
@@ -99,9 +102,10 @@ def main(argv=None) -> int:
                         env_kwargs=env_kwargs)
     venv = VecNormalize(venv, norm_obs=True, norm_reward=True)
     if args.algo == "ppo":
-        model = sb3.PPO("MlpPolicy", venv, seed=args.seed, n_steps=512, batch_size=256, verbose=0, device="cpu")
+        model = sb3.PPO("MlpPolicy", venv, seed=args.seed, n_steps=512, batch_size=256, gamma=args.gamma, verbose=0,
+                         device="cpu")
     else:
-        model = sb3.SAC("MlpPolicy", venv, seed=args.seed, verbose=0, device="cpu", learning_starts=1000)
+        model = sb3.SAC("MlpPolicy", venv, seed=args.seed, verbose=0, device="cpu", learning_starts=1000, gamma=args.gamma)
 
     curve = []
     unstable = [0]
@@ -135,6 +139,7 @@ def main(argv=None) -> int:
     space = gym.make(args.task).action_space
     space.seed(args.seed)
     result = {"task": args.task, "algo": args.algo, "steps": args.steps, "n_envs": args.n_envs, "seed": args.seed,
+              "gamma": args.gamma,
               "unstable_training_episodes": unstable[0],
               "trained": evaluate(trained, args.task, args.eval_episodes, args.seed, env_kwargs),
               "random": evaluate(lambda obs: space.sample(), args.task, args.eval_episodes, args.seed, env_kwargs)}

@@ -11,8 +11,8 @@ import surgsim_envs  # noqa: F401  (registers the tasks)
 from surgsim_envs.envs import TASKS, register_envs
 from surgsim_envs.envs.grasp import grasp_expert
 from surgsim_envs.envs.grasp_common import SlipTracker, excess_force_penalty, is_grasped
-from surgsim_envs.envs.palpation import (damage_penalty, indentation_depth, localisation_reward, palpation_expert,
-                                         stiffness_estimate)
+from surgsim_envs.envs.palpation import (damage_penalty, indentation_depth, localisation_error, localisation_reward,
+                                         palpation_expert, stiffness_estimate, stiffness_weighted_estimate)
 from surgsim_envs.envs.slippage import excess_squeeze_penalty, least_squeeze, pull_force, slippage_expert
 from surgsim_envs.errors import ConfigError
 
@@ -187,7 +187,7 @@ def test_make_vec(mode):
     vec = gym.make_vec("SurgSim/Palpation-v0", num_envs=2, vectorization_mode=mode)
     try:
         obs, info = vec.reset(seed=[0, 1])
-        assert obs.shape == (2, 11)
+        assert obs.shape == (2, 14)
         for _ in range(3):
             obs, r, term, trunc, info = vec.step(vec.action_space.sample())
         assert np.all(np.isfinite(obs)) and r.shape == (2,)
@@ -233,6 +233,72 @@ def test_term_functions():
     assert tr.distance(np.array([0.01, 0, 0]), x) == pytest.approx(0.01)                # tissue stayed
 
 
+def test_stiffness_weighted_estimate():
+    xy = np.array([[0.0, 0.0], [0.01, 0.0], [0.02, 0.0], [0.03, 0.0], [0.04, 0.0]])
+    k = np.array([30.0, 30.0, 60.0, 60.0, 30.0])       # stiff pair at x = 2-3 cm, baseline 30 N/m
+    assert stiffness_weighted_estimate(xy, k) == pytest.approx([0.025, 0.0])
+    k = np.array([30.0, 30.0, 30.0, 90.0, 30.0])       # one stiff sample: its position
+    assert stiffness_weighted_estimate(xy, k) == pytest.approx([0.03, 0.0])
+    assert stiffness_weighted_estimate(xy, np.full(5, 30.0)) == pytest.approx([0.0, 0.0])  # no contrast: stiffest
+    with pytest.raises(ConfigError, match="samples"):
+        stiffness_weighted_estimate(np.zeros((0, 2)), np.zeros(0))
+    with pytest.raises(ConfigError, match="matching"):
+        stiffness_weighted_estimate(xy, k[:3])
+
+
+def _expert_episode(env, seed):
+    obs, _ = env.reset(seed=seed)
+    pol, total = palpation_expert(env), 0.0
+    while True:
+        obs, r, term, trunc, info = env.step(pol(obs))
+        total += r
+        if term or trunc:
+            return total, obs, info
+
+
+def test_palpation_guess_is_the_stiffness_estimate_and_shaping_telescopes():
+    """The report guess is the env's stiffness-weighted estimate (not where the probe happens to
+    be), and the potential-based shaping adds exactly shaping_weight * (1 - err / scale) per
+    episode, whatever the path (it cannot be farmed)."""
+    shaped = gym.make("SurgSim/Palpation-v0", shaping_weight=1.0)
+    plain = gym.make("SurgSim/Palpation-v0", shaping_weight=0.0)
+    try:
+        r1, obs, info = _expert_episode(shaped, 101)
+        r0, _, info0 = _expert_episode(plain, 101)
+        c = shaped.unwrapped.config
+        err = info["localisation_error_m"]
+        assert info["guess_xy_m"] == pytest.approx(info["estimate_xy_m"])
+        assert info["guess_xy_m"] == pytest.approx(obs[11:13], abs=1e-6)          # observed estimate
+        assert np.hypot(*(obs[:2] - np.array(info["guess_xy_m"]))) > 0.01        # probe is elsewhere
+        assert err == pytest.approx(localisation_error(info["guess_xy_m"], info["inclusion_centre_m"][:2]))
+        assert info0["localisation_error_m"] == pytest.approx(err)
+        assert r1 - r0 == pytest.approx(1.0 - min(err / c.localisation_scale, 1.0), abs=1e-6)
+        assert obs[13] > 1.2                        # the stiff inclusion shows as contrast in the samples
+    finally:
+        shaped.close()
+        plain.close()
+
+
+def test_palpation_moving_presses_are_not_stiffness_samples():
+    """A probe dragged at full speed through the tissue gives (almost) no stiffness samples (its
+    force includes drag and damping); the same depth held still does."""
+    env = gym.make("SurgSim/Palpation-v0")
+    try:
+        env.reset(seed=0)
+        for i in range(60):
+            obs, *_ = env.step(np.array([1.0 if (i // 15) % 2 == 0 else -1.0, 0.0, 0.6, -1.0], dtype=np.float32))
+        u = env.unwrapped
+        moving = len(u.samples_k)
+        assert obs[6] > 0.003 and moving <= 3          # only the turnarounds are momentarily still
+        for _ in range(20):
+            obs, *_ = env.step(np.array([0.0, 0.0, 0.6, -1.0], dtype=np.float32))
+        assert len(u.samples_k) - moving > 10 and np.all(np.isfinite(u.samples_k))
+        with pytest.raises(ConfigError, match="time_cost"):
+            gym.make("SurgSim/Palpation-v0", time_cost=-1.0)
+    finally:
+        env.close()
+
+
 def test_rgb_render_and_pixel_wrapper():
     from surgsim_envs.envs.wrappers import PixelObservation
     from surgsim_envs.errors import RenderingUnavailableError
@@ -247,7 +313,7 @@ def test_rgb_render_and_pixel_wrapper():
         assert frame.shape == (480, 480, 3) and frame.dtype == np.uint8 and frame.std() > 0
         pix = PixelObservation(env, 64, 48, keep_state=True)
         obs, _ = pix.reset(seed=0)
-        assert obs["pixels"].shape == (48, 64, 3) and obs["state"].shape == (11,)
+        assert obs["pixels"].shape == (48, 64, 3) and obs["state"].shape == (14,)
         assert pix.observation_space.contains(obs)
     finally:
         env.close()

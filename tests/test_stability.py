@@ -9,7 +9,7 @@ from surgsim_envs.errors import TissueUnstableError
 from surgsim_envs.tissue.materials import PRESETS
 
 
-# FEM with nearly incompressible silicone (nu 0.499, ~140 CG iterations/step) and stiff skin take 20-50 s
+# FEM with stiff skin (~35 CG iterations per implicit step) and nearly incompressible silicone take 10-20 s
 _SLOW_PRESETS = {("fem", "silicone"), ("fem", "skin")}
 
 

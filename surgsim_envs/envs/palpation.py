@@ -3,24 +3,34 @@
 A liver slab (default 10 x 10 x 2 cm, bed fixed, mass-spring, 10 mm lattice: 363 nodes; or
 ``resolution`` = a spacing in m / "auto", see :class:`PalpationConfig`) hides a
 spherical inclusion of random position, radius and stiffness contrast. The agent moves a
-spherical-tip probe and presses; when it is sure it raises the "report" action and the probe's
-current (x, y) is its guess of the inclusion centre (at the time limit the probe's position is
-taken as the guess too).
+spherical-tip probe and presses; every control step with the tip deeper than ``press_min_depth``
+while the tip moves slower than ``sample_max_speed`` (a quasi-static press: a moving tip's force
+includes damping and drag) is a stiffness sample (x, y, F_z / depth). The env keeps a running stiffness-weighted estimate of
+the inclusion centre from these samples (:func:`stiffness_weighted_estimate`); when the agent is
+sure it raises the "report" action and that estimate is its guess (at the time limit too). The
+agent's job is to press at informative sites and to report once the estimate is good.
 
 Action (4,) in [-1, 1]: ``[vx, vy, press, report]``; vx, vy move the probe target by up to
 ``max_xy_step`` m per control step; press sets the target depth from ``hover`` m above the rest
-surface (-1) to ``max_depth`` m below it (+1); report > 0 ends the episode with the guess (ignored
-during the first ``min_report_seconds``).
+surface (-1) to ``max_depth`` m below it (+1); report > 0 held for ``report_hold_steps``
+consecutive control steps ends the episode with the guess (ignored during the first
+``min_report_seconds``; the hold makes reporting a deliberate act rather than a one-step
+coin flip of a stochastic policy).
 
-Observation (11,) float32, SI: probe tip-centre position (3) m; contact force on the probe (3)
+Observation (14,) float32, SI: probe tip-centre position (3) m; contact force on the probe (3)
 N; indentation depth (1) m below the rest surface; best stiffness site so far (x, y) (2) m and
-its stiffness estimate F_z / depth (1) N/m; elapsed fraction of the episode (1).
+its stiffness estimate F_z / depth (1) N/m; elapsed fraction of the episode (1); the running
+estimate of the inclusion centre (x, y) (2) m (the probe's (x, y) before the first sample);
+stiffness contrast seen so far, max / median sampled stiffness (1) (1 before any sample).
 
 Reward: ``press_reward`` for each press deeper than ``press_min_depth`` at a site at least
-``site_spacing`` m from earlier ones (informative presses); ``- damage_weight * (|F| -
-damage_force)`` per step above the tissue-damage force; at the end ``localisation_weight *
-(1 - min(err / localisation_scale, 1)) + success_bonus * success``. ``info["success"]``: guess
-within ``tolerance_mm``.
+``site_spacing`` m from earlier ones (exploration); potential-based shaping ``shaping_weight *
+(phi_t - phi_{t-1})`` with ``phi = 1 - min(err_estimate / localisation_scale, 1)`` (0 before the
+first sample): presses that move the estimate toward the inclusion pay at once, and the sum over
+an episode is just ``shaping_weight * phi_final``, so it cannot be farmed; ``- time_cost`` per
+step; ``- damage_weight * (|F| - damage_force)`` per step above the tissue-damage force; at the
+end ``localisation_weight * (1 - min(err / localisation_scale, 1)) + success_bonus * success``.
+``info["success"]``: guess within ``tolerance_mm``.
 """
 
 from __future__ import annotations
@@ -67,6 +77,7 @@ class PalpationConfig:
     young_scale: Sequence[float] = (0.8, 1.1)         # scales the whole slab's Young's modulus
     # reward
     press_min_depth: float = 0.003     # m, a press counts from this depth
+    sample_max_speed: float = 0.05     # m/s, stiffness samples only from quasi-static presses (tip slower)
     site_spacing: float = 0.01         # m, new press sites must be this far from earlier ones
     press_reward: float = 0.05
     max_rewarded_sites: int = 25
@@ -75,8 +86,11 @@ class PalpationConfig:
     localisation_weight: float = 1.0
     localisation_scale: float = 0.04   # m
     success_bonus: float = 1.0
+    shaping_weight: float = 1.0        # potential-based shaping on the running estimate's error
+    time_cost: float = 0.0005          # per control step (0.3 over a full 6 s episode)
     tolerance_mm: float = 10.0         # mm
     min_report_seconds: float = 1.0    # s, "report" is ignored before this (stops reflexive guesses)
+    report_hold_steps: int = 5         # report > 0 must be held this many consecutive control steps
     # rendering
     camera: str = "overview"
     render_width: int = 480
@@ -84,11 +98,17 @@ class PalpationConfig:
 
     def validate(self) -> None:
         for key in ("control_hz", "dt", "episode_seconds", "spacing", "tip_radius", "probe_speed", "max_xy_step",
-                    "hover", "max_depth", "xy_limit", "press_min_depth", "site_spacing", "damage_force",
+                    "hover", "max_depth", "xy_limit", "press_min_depth", "sample_max_speed", "site_spacing", "damage_force",
                     "localisation_scale", "tolerance_mm"):
             check_positive(getattr(self, key), f"PalpationConfig.{key}")
+        for key in ("shaping_weight", "time_cost", "press_reward"):
+            v = getattr(self, key)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
+                raise ConfigError(f"PalpationConfig.{key}={v!r} must be a finite number >= 0")
         check_task_resolution(self, "PalpationConfig")
         check_on_unstable(self.on_unstable, "PalpationConfig")
+        if not (isinstance(self.report_hold_steps, (int, np.integer)) and self.report_hold_steps >= 1):
+            raise ConfigError(f"PalpationConfig.report_hold_steps={self.report_hold_steps!r} must be an integer >= 1")
         if 1.0 / self.control_hz < self.dt:
             raise ConfigError(f"control period 1/control_hz={1 / self.control_hz:g} s is shorter than dt={self.dt:g} s; "
                               "lower control_hz or dt")
@@ -127,6 +147,20 @@ def is_new_site(xy: np.ndarray, sites: list, spacing: float) -> bool:
 def damage_penalty(force: np.ndarray, threshold: float, weight: float) -> float:
     """-weight * (|force| - threshold) above the tissue-damage threshold (N), else 0."""
     return -weight * max(0.0, float(np.linalg.norm(force)) - threshold)
+
+
+def stiffness_weighted_estimate(xy: np.ndarray, k: np.ndarray, power: float = 3.0) -> np.ndarray:
+    """(2,) m: centroid of sample positions ``xy`` (n, 2) m weighted by ``(k - median(k))+ ** power``
+    (k: (n,) N/m stiffness samples); the stiffest sample's position if no sample is above the median."""
+    xy, k = np.asarray(xy, dtype=float).reshape(-1, 2), np.asarray(k, dtype=float).reshape(-1)
+    if len(k) == 0 or len(k) != len(xy):
+        raise ConfigError(f"stiffness_weighted_estimate needs n >= 1 samples with matching xy (n, 2) and k (n,), "
+                          f"got xy {xy.shape} and k {k.shape}")
+    w = np.clip(k - np.median(k), 0.0, None) ** power
+    total = float(w.sum())
+    if total <= 0.0:
+        return xy[int(np.argmax(k))].copy()
+    return (w[:, None] * xy).sum(axis=0) / total
 
 
 def localisation_error(guess_xy: np.ndarray, true_xy: np.ndarray) -> float:
@@ -168,7 +202,7 @@ class PalpationEnv(SurgSimEnv):
         self.home = np.asarray(p.position, dtype=float)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
         big = np.float32(1e6)
-        self.observation_space = spaces.Box(-big, big, shape=(11,), dtype=np.float32)
+        self.observation_space = spaces.Box(-big, big, shape=(14,), dtype=np.float32)
         self.inclusion = {}
 
     # -- episode ----------------------------------------------------------------------------
@@ -204,6 +238,13 @@ class PalpationEnv(SurgSimEnv):
         self.sim.set_tool_target("probe", self.target, speed=c.probe_speed)
         self.sites: list[np.ndarray] = []
         self.best = (0.0, 0.0, 0.0)  # x, y, stiffness estimate
+        self.samples_xy: list[np.ndarray] = []   # m, positions of the stiffness samples
+        self.samples_k: list[float] = []         # N/m
+        self.estimate = None                     # (2,) m, running stiffness-weighted estimate
+        self.contrast_seen = 1.0                 # max / median sampled stiffness
+        self.phi = 0.0                           # shaping potential of the running estimate
+        self.prev_tip = self.sim.tool_position("probe").copy()
+        self.report_held = 0                     # consecutive control steps with report > 0
         self.guess = None
         self.error = None
 
@@ -225,7 +266,9 @@ class PalpationEnv(SurgSimEnv):
     def _observe(self) -> np.ndarray:
         pos, force, depth = self._readings()
         frac = self.steps / self.max_episode_steps
-        return np.array([*pos, *force, depth, self.best[0], self.best[1], self.best[2], frac], dtype=np.float32)
+        est = self.estimate if self.estimate is not None else pos[:2]
+        return np.array([*pos, *force, depth, self.best[0], self.best[1], self.best[2], frac, est[0], est[1],
+                         self.contrast_seen], dtype=np.float32)
 
     def _evaluate(self, a: np.ndarray):
         c = self.config
@@ -236,12 +279,28 @@ class PalpationEnv(SurgSimEnv):
         k = stiffness_estimate(force[2], depth, c.press_min_depth)
         if k > self.best[2]:
             self.best = (float(pos[0]), float(pos[1]), k)
+        speed = float(np.linalg.norm(pos - self.prev_tip)) / self.control_dt
+        self.prev_tip = pos.copy()
+        if k > 0.0 and speed <= c.sample_max_speed:
+            self.samples_xy.append(pos[:2].copy())
+            self.samples_k.append(k)
+            self.estimate = stiffness_weighted_estimate(np.array(self.samples_xy), np.array(self.samples_k))
+            med = float(np.median(self.samples_k))
+            self.contrast_seen = float(max(self.samples_k)) / med if med > 0 else 1.0
+            err = localisation_error(self.estimate, self.inclusion["centre"][:2])
+            phi = 1.0 - min(err / c.localisation_scale, 1.0)
+            reward += c.shaping_weight * (phi - self.phi)
+            self.phi = phi
+        reward -= c.time_cost
         if depth >= c.press_min_depth and is_new_site(pos[:2], self.sites, c.site_spacing):
             self.sites.append(pos[:2].copy())
             if len(self.sites) <= c.max_rewarded_sites:
                 reward += c.press_reward
-        terms: dict[str, Any] = {"stiffness_estimate_N_per_m": k, "force_N": fmag}
-        terminated = bool(a[3] > 0.0) and self.steps * self.control_dt >= self.config.min_report_seconds
+        terms: dict[str, Any] = {"stiffness_estimate_N_per_m": k, "force_N": fmag,
+                                 "estimate_xy_m": None if self.estimate is None else self.estimate.tolist()}
+        self.report_held = self.report_held + 1 if a[3] > 0.0 else 0
+        terminated = (self.report_held >= c.report_hold_steps
+                      and self.steps * self.control_dt >= c.min_report_seconds)
         if terminated:
             r, t = self._finish(pos)
             reward += r
@@ -250,7 +309,7 @@ class PalpationEnv(SurgSimEnv):
 
     def _finish(self, pos) -> tuple[float, dict[str, Any]]:
         c = self.config
-        self.guess = pos[:2].copy()
+        self.guess = (self.estimate if self.estimate is not None else pos[:2]).copy()
         self.error = localisation_error(self.guess, self.inclusion["centre"][:2])
         r = localisation_reward(self.error, c.localisation_scale, c.tolerance_mm * 1e-3, c.localisation_weight,
                                 c.success_bonus)
@@ -269,38 +328,27 @@ class PalpationEnv(SurgSimEnv):
 
 
 def palpation_expert(env, grid: int = 5, depth_action: float = 0.6) -> Any:
-    """A scripted policy: press on a ``grid`` x ``grid`` raster, then report at the stiffest site
-    refined by a stiffness-weighted centroid. Returns a callable ``policy(obs) -> action``."""
+    """A scripted policy: press ``depth_action`` (6 mm deep) for 12 control steps at each site of a
+    ``grid`` x ``grid`` raster over the inclusion's range, then report (the env's stiffness-weighted
+    estimate of the samples is the guess). Returns a callable ``policy(obs) -> action``."""
     c = env.unwrapped.config
     lim = float(min(c.inclusion_xy[1], c.xy_limit))
     xs = np.linspace(-lim, lim, grid)
     pts = [np.array([x, y]) for j, y in enumerate(np.linspace(-lim, lim, grid)) for x in (xs if j % 2 == 0 else xs[::-1])]
-    state = {"i": 0, "phase": "move", "n": 0, "k": [], "final": None}
+    state = {"i": 0, "phase": "move", "n": 0}
 
     def policy(obs):
-        pos = obs[:3]
-        if state["final"] is not None:
-            goal = state["final"]
-            d = goal - pos[:2]
-            if np.hypot(*d) < 0.001:
-                return np.array([0, 0, -1, 1], dtype=np.float32)
-            return np.array([*np.clip(d / c.max_xy_step, -1, 1), -1, -1], dtype=np.float32)
-        goal = pts[state["i"]]
-        d = goal - pos[:2]
+        if state["i"] == len(pts):
+            return np.array([0, 0, -1, 1], dtype=np.float32)
+        d = pts[state["i"]] - obs[:2]
         if state["phase"] == "move":
             if np.hypot(*d) < 0.0015:
                 state["phase"], state["n"] = "press", 0
             return np.array([*np.clip(d / c.max_xy_step, -1, 1), -1, -1], dtype=np.float32)
         state["n"] += 1
         if state["n"] >= 12:
-            f, depth = obs[5], obs[6]
-            state["k"].append(f / max(depth, 1e-4))
             state["i"] += 1
             state["phase"] = "move"
-            if state["i"] == len(pts):
-                k = np.array(state["k"])
-                w = np.clip(k - np.median(k), 0, None) ** 2
-                state["final"] = (w[:, None] * np.array(pts)).sum(0) / w.sum() if w.sum() > 0 else pts[int(np.argmax(k))]
             return np.array([0, 0, -1, -1], dtype=np.float32)
         return np.array([*np.clip(d / c.max_xy_step, -1, 1), depth_action, -1], dtype=np.float32)
 

@@ -182,6 +182,9 @@ def _add_environment(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     wb = spec.worldbody
     wb.add_light(name="key", pos=[0.3, -0.3, 0.8], dir=[-0.3, 0.3, -0.8], diffuse=[0.7, 0.7, 0.7], castshadow=True)
     wb.add_light(name="fill", pos=[-0.3, 0.2, 0.6], dir=[0.3, -0.2, -0.6], diffuse=[0.3, 0.3, 0.3], castshadow=False)
+    # a soft gradient sky, so views above the horizon are not black
+    spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX, builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
+                     rgb1=[0.55, 0.62, 0.70], rgb2=[0.12, 0.14, 0.17], width=256, height=256)
     if cfg.floor:
         tex = spec.add_texture(name="floor_tex", type=mujoco.mjtTexture.mjTEXTURE_2D,
                                builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, rgb1=[0.32, 0.36, 0.40],

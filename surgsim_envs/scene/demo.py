@@ -46,10 +46,11 @@ class _Runner:
 
     def run(self, duration: float, record) -> None:
         sim = self.sim
-        end = sim.time + duration
+        remaining = int(round(duration / sim.dt))  # whole physics steps (a time-based loop can stall on round-off)
         steps_per_frame = max(1, int(round(1.0 / FPS / sim.dt)))
-        while sim.time < end - 1e-9:
-            n = min(steps_per_frame, int(round((end - sim.time) / sim.dt)))
+        while remaining > 0:
+            n = min(steps_per_frame, remaining)
+            remaining -= n
             t0 = time.perf_counter()
             for _ in range(n):
                 sim.physics_step()

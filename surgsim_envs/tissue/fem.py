@@ -12,8 +12,10 @@ interactive surgery simulation:
   averaged over each node's incident tets. ``formulation="standard"`` is plain ``B^T D B V``
   (locks at nu -> 0.5);
 * integrators: ``"implicit"`` (backward Euler, one linear solve per step; sparse LU of
-  ``M + dt C + dt^2 K`` for the linear model, matrix-free Jacobi-PCG with the warped stiffness
-  for the corotational one) and ``"symplectic"`` (semi-implicit Euler, numba kernels); the default
+  ``M + dt C + dt^2 K`` for the linear model, matrix-free PCG with the warped stiffness for the
+  corotational one, preconditioned by Jacobi or, for nearly incompressible ANP materials, by the
+  "pressure" preconditioner: the exact inverse (Woodbury, cached sparse LU of an N x N pressure
+  Schur complement) of the diagonal part plus the rest-state ANP volumetric term) and ``"symplectic"`` (semi-implicit Euler, numba kernels); the default
   ``"auto"`` runs symplectic while dt <= 0.8 x critical_dt(), else implicit (TissueModel.choose_integrator);
 * damping ``C = alpha M + beta K`` with alpha = material ``damping`` (1/s, per element) and
   beta = ``stiffness_damping`` (s, default ``material.extra.get("stiffness_damping", 0)``).
@@ -36,6 +38,10 @@ from surgsim_envs.tissue import fem_kernels as kern
 from surgsim_envs.tissue.base import TissueModel
 
 FORMULATIONS = ("anp", "standard")
+PRECONDITIONERS = ("auto", "jacobi", "pressure")
+#: ``preconditioner="auto"`` uses "pressure" when the largest bulk/shear ratio kappa/mu of the
+#: elements exceeds this (nu > ~0.46; silicone nu = 0.499: 500, fat nu = 0.49: 50, liver/skin nu = 0.45: 9.7)
+PRESSURE_PRECONDITIONER_RATIO = 12.0
 
 
 class TetFEMModel(TissueModel):
@@ -49,6 +55,10 @@ class TetFEMModel(TissueModel):
     rotation_iters: Newton iterations of the polar decomposition per step (warm-started; 1 is
         enough at interactive dt, the rotation keeps converging over the following steps).
     cg_tol: relative residual of the implicit corotational solve.
+    preconditioner: of that solve: ``"jacobi"`` (nodal diagonal), ``"pressure"`` (ANP only: diagonal +
+        rest-state volumetric term, inverted exactly through a cached N x N sparse LU; few iterations
+        at nu -> 0.5) or ``"auto"`` (default: "pressure" for ANP when max kappa/mu >
+        ``PRESSURE_PRECONDITIONER_RATIO``, else "jacobi").
     threads: numba threads for the element loops (1: single-thread kernels, the default, robust on
         a shared machine; >= 2: ``prange`` passes, deterministic and bitwise independent of the
         thread count; capped at ``numba.config.NUMBA_NUM_THREADS``). Parallel passes wait for
@@ -63,12 +73,17 @@ class TetFEMModel(TissueModel):
 
     def __init__(self, volume, material="liver", *, integrator=None, corotational: bool = True,
                  formulation: str = "anp", stiffness_damping: float | None = None,
-                 rotation_iters: int = 1, cg_tol: float = 1e-6, threads: int = 1, **base_kwargs):
+                 rotation_iters: int = 1, cg_tol: float = 1e-6, threads: int = 1,
+                 preconditioner: str = "auto", **base_kwargs):
         if not isinstance(corotational, (bool, np.bool_)):
             raise ConfigError(f"corotational must be True or False, got {corotational!r}")
         if formulation not in FORMULATIONS:
             raise ConfigError(f"formulation must be one of {list(FORMULATIONS)}, got {formulation!r}; "
                               "'anp' (averaged nodal pressure) avoids volumetric locking for nu near 0.5")
+        if preconditioner not in PRECONDITIONERS:
+            raise ConfigError(f"preconditioner must be one of {list(PRECONDITIONERS)}, got {preconditioner!r}")
+        if preconditioner == "pressure" and formulation != "anp":
+            raise ConfigError("preconditioner='pressure' needs formulation='anp'; use 'jacobi' or 'auto'")
         super().__init__(volume, material, integrator=integrator, **base_kwargs)
         if stiffness_damping is None:
             stiffness_damping = float(self.material.extra.get("stiffness_damping", 0.0))
@@ -89,6 +104,10 @@ class TetFEMModel(TissueModel):
         self.cg_tol = float(cg_tol)
         self.last_cg_iterations = 0
         self._setup()
+        if preconditioner == "auto":
+            ratio = float(np.max((self.lam + 2.0 * self.mu / 3.0) / self.mu))
+            preconditioner = "pressure" if (self._anp and ratio > PRESSURE_PRECONDITIONER_RATIO) else "jacobi"
+        self.preconditioner = preconditioner
 
     # ------------------------------------------------------------------------------------------
     # Precomputation
@@ -116,12 +135,18 @@ class TetFEMModel(TissueModel):
             self._ke = asm.element_stiffness(b, asm.d_matrices(young, poisson), self.tet_volume)
         self.stiffness_matrix = self._assemble_stiffness(None)
         self._kdiag_node = self.stiffness_matrix.diagonal().reshape(-1, 3).mean(axis=1)
+        if self.formulation == "anp":   # diagonal of the deviatoric part (for the pressure preconditioner)
+            self._kdev_diag_node = asm.assemble(self.tets, self._ke, n).diagonal().reshape(-1, 3).mean(axis=1)
         t = len(self.tets)
         self._rots = np.ascontiguousarray(np.broadcast_to(np.eye(3), (t, 3, 3)).copy())
         self._work = kern.make_work(self.tets, n)
         self._ybuf = np.zeros((n, 3))
         self._fbuf = np.zeros((n, 3))
         self._lin = None          # cached (dt, fixed mask, LU of A_ff) for the linear implicit step
+        self._v_prev = None       # velocity before the last implicit step (CG warm start 2 v - v_prev)
+        self._pre_refresh = False
+        self._pre_base_iters = None
+        self._pre = None          # cached pressure preconditioner (see _pressure_preconditioner)
         self._crit = None
 
     def _assemble_stiffness(self, rotations) -> sp.csr_matrix:
@@ -330,15 +355,93 @@ class TetFEMModel(TissueModel):
         if vc.any():   # moving Dirichlet nodes
             rhs -= c_k * self._stiffness_product(vc, False)
         rhs[self.fixed] = 0.0
-        precond = diag + c_k * self._kdiag_node
-        sol = np.where(free[:, None], v, 0.0)
-        self.last_cg_iterations = int(kern.pcg_solve(
-            rhs, sol, diag, c_k, precond, free, self.cg_tol, 10 * 3 * self.n_nodes, self.tets, self.dm_inv,
-            self.tet_volume, self.mu, self.lam, self._rots, self._anp, self.kappa_node, self.node_volume,
-            self._work, self._set_threads()))
+        guess = v if self._v_prev is None else 2.0 * v - self._v_prev
+        self._v_prev = v.copy()
+        sol = np.where(free[:, None], guess, 0.0)
+        if self.preconditioner == "pressure":
+            self.last_cg_iterations = self._pcg_pressure(rhs, sol, diag, c_k, dt, free)
+        else:
+            precond = diag + c_k * self._kdiag_node
+            self.last_cg_iterations = int(kern.pcg_solve(
+                rhs, sol, diag, c_k, precond, free, self.cg_tol, 10 * 3 * self.n_nodes, self.tets, self.dm_inv,
+                self.tet_volume, self.mu, self.lam, self._rots, self._anp, self.kappa_node, self.node_volume,
+                self._work, self._set_threads()))
         sol[self.fixed] = vc[self.fixed]
         self.velocities = sol
         self.positions = x + dt * sol
+
+    def _pressure_preconditioner(self, dt, c_k):
+        """Cached ``(dinv (N,), Bv_f (N,3N) sparse, LU of S)`` for z = P^-1 r with
+        ``P = D + c_k Bv^T W Bv`` (free DOFs): D = M(1 + alpha dt) + c_k diag(K_dev) (nodal scalar),
+        W = diag(kappa_a V_a), Bv the rest-state ANP volume operator with fixed-node columns removed.
+        Woodbury: ``P^-1 = D^-1 - D^-1 Bv^T S^-1 Bv D^-1``, ``S = (c_k W)^-1 + Bv D^-1 Bv^T`` (N x N,
+        SPD, a discrete pressure Poisson matrix). P is SPD, so CG stays a valid PCG under rotations
+        and contact (which it ignores); rebuilt when dt, beta or the fixed set change, and with Bv
+        warped by the current element rotations when the iteration count has grown past
+        ``max(20, 2 x`` the count right after the last build) (large rotations, see _pcg_pressure)."""
+        pre = self._pre
+        if (pre is not None and pre[0] == (dt, c_k) and np.array_equal(pre[1], self.fixed)
+                and not self._pre_refresh):
+            return pre[2]
+        rots = None
+        if self._pre_refresh and self.corotational:   # the rotations have drifted: warp Bv with the current ones
+            rots = self._rots.copy()
+        self._pre_refresh = False
+        self._pre_base_iters = None
+        free3 = np.repeat(~self.fixed, 3).astype(np.float64)
+        d = self.masses * (1.0 + self.alpha_node * dt) + c_k * self._kdev_diag_node
+        dinv = 1.0 / d
+        bv = asm.anp_volume_operator(self.tets, self.grads, self.tet_volume, self.n_nodes, rots) @ sp.diags(free3)
+        bv = bv.tocsr()
+        w = self.kappa_node * self.node_volume
+        s = (sp.diags(1.0 / (c_k * w)) + bv @ sp.diags(np.repeat(dinv, 3)) @ bv.T).tocsc()
+        lu = spla.splu(s, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True))
+        data = (dinv, bv, bv.T.tocsr(), lu)
+        self._pre = ((dt, c_k), self.fixed.copy(), data)
+        return data
+
+    def _pcg_pressure(self, rhs, x, diag, c_k, dt, free) -> int:
+        """PCG for ``(diag + c_k R K R^T) x = rhs`` on the free nodes with the pressure
+        preconditioner; x (N,3) is the warm start (zero at fixed nodes), updated in place.
+        Same stopping rule as :func:`fem_kernels.pcg_solve` (|r| <= cg_tol |rhs|). Returns the iterations."""
+        dinv, bv, bvt, lu = self._pressure_preconditioner(dt, c_k)
+        par = self._set_threads()
+        args = (self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam, self._rots, self._anp,
+                self.kappa_node, self.node_volume, self._work, free)
+        shape = x.shape
+
+        def precondition(r):
+            y = (dinv[:, None] * r).ravel()
+            return (y - np.repeat(dinv, 3) * (bvt @ lu.solve(bv @ y))).reshape(shape)
+
+        ap = np.empty(shape)
+        kern.apply_system(x, diag, c_k, *args, ap, par)
+        r = np.where(free[:, None], rhs - ap, 0.0)
+        thresh = self.cg_tol ** 2 * max(float(np.vdot(rhs, rhs)), 1e-300)
+        z = precondition(r)
+        p = z.copy()
+        rz = float(np.vdot(r, z))
+        it = 0
+        max_iter = 10 * 3 * self.n_nodes
+        while it < max_iter and float(np.vdot(r, r)) > thresh:
+            kern.apply_system(p, diag, c_k, *args, ap, par)
+            pap = float(np.vdot(p, ap))
+            if pap <= 0.0:
+                break
+            alpha = rz / pap
+            x += alpha * p
+            r -= alpha * ap
+            z = precondition(r)
+            rz_new = float(np.vdot(r, z))
+            p *= rz_new / rz
+            p += z
+            rz = rz_new
+            it += 1
+        if self._pre_base_iters is None:
+            self._pre_base_iters = it
+        elif it > max(20, 2 * self._pre_base_iters):
+            self._pre_refresh = True      # next step: rebuild P at the current rotations
+        return it
 
     # ------------------------------------------------------------------------------------------
     # Static equilibrium
@@ -387,9 +490,11 @@ class TetFEMModel(TissueModel):
 
     def _reset_state(self) -> None:
         self._rots[:] = np.eye(3)
+        self._v_prev = None
 
     def describe(self) -> dict:
         out = super().describe()
         out.update(corotational=self.corotational, formulation=self.formulation,
-                   stiffness_damping=self.stiffness_damping, threads=self.threads)
+                   stiffness_damping=self.stiffness_damping, threads=self.threads,
+                   preconditioner=self.preconditioner)
         return out

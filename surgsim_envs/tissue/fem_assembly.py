@@ -148,6 +148,15 @@ def anp_volumetric_matrix(tets, grads, volumes, kappa_node, n_nodes, rotations=N
     rows ``b_a = d theta_a / d u``. ``rotations`` (T,3,3) warps it for the corotational model
     (d theta_e / d x_n = R_e grad N_n).
     """
+    vnode = nodal_volumes(tets, volumes, n_nodes)
+    bv = anp_volume_operator(tets, grads, volumes, n_nodes, rotations)
+    return (bv.T @ sp.diags(kappa_node * vnode) @ bv).tocsr()
+
+
+def anp_volume_operator(tets, grads, volumes, n_nodes, rotations=None) -> sp.csr_matrix:
+    """Bv (N, 3N): averaged nodal volume change ``theta = Bv u`` (dimensionless) of a nodal
+    displacement u (m), rows ``b_a = d theta_a / du`` with ``theta_a = sum_e (V_e/4) div_e u / V_a``;
+    ``rotations`` (T,3,3) warps it (d theta_e / d x_n = R_e grad N_n)."""
     tets = np.asarray(tets, dtype=np.int64)
     vnode = nodal_volumes(tets, volumes, n_nodes)
     g = grads if rotations is None else np.einsum("tij,tnj->tni", rotations, grads)
@@ -156,8 +165,7 @@ def anp_volumetric_matrix(tets, grads, volumes, kappa_node, n_nodes, rotations=N
     col = np.tile(element_dofs(tets), (1, 4))                        # (T, 4*12)
     w = (volumes[:, None] / 4.0) / vnode[tets]                       # (T, 4) weight per a
     val = w[:, :, None] * g.reshape(-1, 1, 12)                       # (T, 4, 12)
-    bv = sp.coo_matrix((val.ravel(), (a_idx.ravel(), col.ravel())), shape=(n_nodes, 3 * n_nodes)).tocsr()
-    return (bv.T @ sp.diags(kappa_node * vnode) @ bv).tocsr()
+    return sp.coo_matrix((val.ravel(), (a_idx.ravel(), col.ravel())), shape=(n_nodes, 3 * n_nodes)).tocsr()
 
 
 def barycentric_locate(nodes: np.ndarray, tets: np.ndarray, points: np.ndarray, tol: float = 1e-9):

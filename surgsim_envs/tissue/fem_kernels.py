@@ -521,7 +521,7 @@ def symplectic_step(x, v, fext, masses, alpha, gravity, fixed, dt, beta, corotat
 
 
 @njit(cache=True, error_model="numpy")
-def _apply_system(y, diag, c_k, tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, work, free, out,
+def apply_system(y, diag, c_k, tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, work, free, out,
                   parallel):
     """out = (diag + c_k R K R^T) y on free DOFs (zero rows/cols at fixed nodes)."""
     stiffness_product(y, tets, dm_inv, vol, mu, lam, rots, False, anp, kappa_node, node_vol, work, out,
@@ -545,7 +545,7 @@ def pcg_solve(rhs, x, diag, c_k, precond, free, tol, max_iter, tets, dm_inv, vol
     z = np.empty((n, 3))
     p = np.empty((n, 3))
     ap = np.empty((n, 3))
-    _apply_system(x, diag, c_k, tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, work, free, ap, parallel)
+    apply_system(x, diag, c_k, tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, work, free, ap, parallel)
     rz = 0.0
     bnorm = 0.0
     for i in range(n):
@@ -567,7 +567,7 @@ def pcg_solve(rhs, x, diag, c_k, precond, free, tol, max_iter, tets, dm_inv, vol
                 rr += r[i, k] * r[i, k]
         if rr <= thresh:
             break
-        _apply_system(p, diag, c_k, tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, work, free, ap, parallel)
+        apply_system(p, diag, c_k, tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, work, free, ap, parallel)
         pap = 0.0
         for i in range(n):
             for k in range(3):
@@ -589,3 +589,4 @@ def pcg_solve(rhs, x, diag, c_k, precond, free, tol, max_iter, tets, dm_inv, vol
                 p[i, k] = z[i, k] + beta * p[i, k]
         it += 1
     return it
+
