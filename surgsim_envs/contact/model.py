@@ -123,7 +123,7 @@ class ContactResult:
 _OK, _BAD_KIND, _BAD_TOOL, _BAD_SIZE = 0, 1, 2, 3
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel, tool_com,
                     mu, k_n, c_n, k_t, anchor_local, anchor_on,
                     forces, stiffness, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv,

@@ -21,10 +21,15 @@ Observation (14,) float32, SI: probe tip-centre position (3) m; contact force on
 N; indentation depth (1) m below the rest surface; best stiffness site so far (x, y) (2) m and
 its stiffness estimate F_z / depth (1) N/m; elapsed fraction of the episode (1); the running
 estimate of the inclusion centre (x, y) (2) m (the probe's (x, y) before the first sample);
-stiffness contrast seen so far, max / median sampled stiffness (1) (1 before any sample).
+stiffness contrast seen so far, max / median sampled stiffness (1) (1 before any sample); then a
+coarse stiffness map (``map_cells`` x ``map_cells``, row-major, y rows then x columns) over the square
++-``map_half_width`` m: per cell the largest stiffness sample taken in it divided by the largest
+sample so far (dimensionless, in (0, 1]; 0 if the cell was never sampled), so the agent sees which
+cells it has covered and where the tissue is stiff (:func:`stiffness_map`). Default (39,).
 
 Reward: ``press_reward`` for each press deeper than ``press_min_depth`` at a site at least
-``site_spacing`` m from earlier ones (exploration); potential-based shaping ``shaping_weight *
+``site_spacing`` m from earlier ones and ``cell_reward`` for the first stiffness sample in each
+map cell (coverage; both are bounded per episode); potential-based shaping ``shaping_weight *
 (phi_t - phi_{t-1})`` with ``phi = 1 - min(err_estimate / localisation_scale, 1)`` (0 before the
 first sample): presses that move the estimate toward the inclusion pay at once, and the sum over
 an episode is just ``shaping_weight * phi_final``, so it cannot be farmed; ``- time_cost`` per
@@ -81,6 +86,10 @@ class PalpationConfig:
     site_spacing: float = 0.01         # m, new press sites must be this far from earlier ones
     press_reward: float = 0.05
     max_rewarded_sites: int = 25
+    cell_reward: float = 0.04          # first stiffness sample in each map cell (coverage; <= cells^2 x this)
+    # observation: coarse stiffness map
+    map_cells: int = 5                 # map_cells x map_cells grid
+    map_half_width: float = 0.0375     # m, the map covers |x|, |y| <= this (5 cells of 15 mm around +-3 cm)
     damage_force: float = 1.5          # N, tissue-damage threshold
     damage_weight: float = 1.0         # per N above the threshold per step
     localisation_weight: float = 1.0
@@ -99,14 +108,16 @@ class PalpationConfig:
     def validate(self) -> None:
         for key in ("control_hz", "dt", "episode_seconds", "spacing", "tip_radius", "probe_speed", "max_xy_step",
                     "hover", "max_depth", "xy_limit", "press_min_depth", "sample_max_speed", "site_spacing", "damage_force",
-                    "localisation_scale", "tolerance_mm"):
+                    "localisation_scale", "tolerance_mm", "map_half_width"):
             check_positive(getattr(self, key), f"PalpationConfig.{key}")
-        for key in ("shaping_weight", "time_cost", "press_reward"):
+        for key in ("shaping_weight", "time_cost", "press_reward", "cell_reward"):
             v = getattr(self, key)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
                 raise ConfigError(f"PalpationConfig.{key}={v!r} must be a finite number >= 0")
         check_task_resolution(self, "PalpationConfig")
         check_on_unstable(self.on_unstable, "PalpationConfig")
+        if not (isinstance(self.map_cells, (int, np.integer)) and 1 <= self.map_cells <= 20):
+            raise ConfigError(f"PalpationConfig.map_cells={self.map_cells!r} must be an integer in [1, 20]")
         if not (isinstance(self.report_hold_steps, (int, np.integer)) and self.report_hold_steps >= 1):
             raise ConfigError(f"PalpationConfig.report_hold_steps={self.report_hold_steps!r} must be an integer >= 1")
         if 1.0 / self.control_hz < self.dt:
@@ -163,6 +174,28 @@ def stiffness_weighted_estimate(xy: np.ndarray, k: np.ndarray, power: float = 3.
     return (w[:, None] * xy).sum(axis=0) / total
 
 
+def map_cell(xy: np.ndarray, cells: int, half_width: float) -> int:
+    """Row-major index (row = y, column = x) of the ``cells`` x ``cells`` map cell over the square
+    +-``half_width`` m that contains ``xy`` (2,) m; points outside fall into the nearest edge cell."""
+    if not (isinstance(cells, (int, np.integer)) and cells >= 1) or not half_width > 0:
+        raise ConfigError(f"map_cell needs cells >= 1 and half_width > 0 m, got {cells!r}, {half_width!r}")
+    xy = np.asarray(xy, dtype=float).reshape(-1)
+    if xy.shape != (2,) or not np.all(np.isfinite(xy)):
+        raise ConfigError(f"map_cell needs a finite (x, y) in m, got {xy!r}")
+    ij = np.clip(np.floor((xy + half_width) / (2 * half_width) * cells), 0, cells - 1).astype(int)
+    return int(ij[1] * cells + ij[0])
+
+
+def stiffness_map(cell_max_k: np.ndarray) -> np.ndarray:
+    """Dimensionless map: per-cell max stiffness sample ``cell_max_k`` (N/m, 0 = never sampled)
+    divided by the largest one (all zeros before any sample)."""
+    k = np.asarray(cell_max_k, dtype=float)
+    if np.any(~np.isfinite(k)) or np.any(k < 0):
+        raise ConfigError("stiffness_map needs finite per-cell stiffness values >= 0 N/m")
+    top = float(k.max()) if k.size else 0.0
+    return k / top if top > 0 else np.zeros_like(k)
+
+
 def localisation_error(guess_xy: np.ndarray, true_xy: np.ndarray) -> float:
     """m, planar distance from the guess to the inclusion centre."""
     return float(np.hypot(*(np.asarray(guess_xy, dtype=float) - np.asarray(true_xy, dtype=float))))
@@ -202,7 +235,8 @@ class PalpationEnv(SurgSimEnv):
         self.home = np.asarray(p.position, dtype=float)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
         big = np.float32(1e6)
-        self.observation_space = spaces.Box(-big, big, shape=(14,), dtype=np.float32)
+        self.n_cells = int(c.map_cells) ** 2
+        self.observation_space = spaces.Box(-big, big, shape=(14 + self.n_cells,), dtype=np.float32)
         self.inclusion = {}
 
     # -- episode ----------------------------------------------------------------------------
@@ -242,6 +276,7 @@ class PalpationEnv(SurgSimEnv):
         self.samples_k: list[float] = []         # N/m
         self.estimate = None                     # (2,) m, running stiffness-weighted estimate
         self.contrast_seen = 1.0                 # max / median sampled stiffness
+        self.cell_k = np.zeros(self.n_cells)     # N/m, max stiffness sample per map cell (0 = none)
         self.phi = 0.0                           # shaping potential of the running estimate
         self.prev_tip = self.sim.tool_position("probe").copy()
         self.report_held = 0                     # consecutive control steps with report > 0
@@ -268,7 +303,7 @@ class PalpationEnv(SurgSimEnv):
         frac = self.steps / self.max_episode_steps
         est = self.estimate if self.estimate is not None else pos[:2]
         return np.array([*pos, *force, depth, self.best[0], self.best[1], self.best[2], frac, est[0], est[1],
-                         self.contrast_seen], dtype=np.float32)
+                         self.contrast_seen, *stiffness_map(self.cell_k)], dtype=np.float32)
 
     def _evaluate(self, a: np.ndarray):
         c = self.config
@@ -284,6 +319,10 @@ class PalpationEnv(SurgSimEnv):
         if k > 0.0 and speed <= c.sample_max_speed:
             self.samples_xy.append(pos[:2].copy())
             self.samples_k.append(k)
+            cell = map_cell(pos[:2], int(c.map_cells), c.map_half_width)
+            if self.cell_k[cell] == 0.0:
+                reward += c.cell_reward
+            self.cell_k[cell] = max(self.cell_k[cell], k)
             self.estimate = stiffness_weighted_estimate(np.array(self.samples_xy), np.array(self.samples_k))
             med = float(np.median(self.samples_k))
             self.contrast_seen = float(max(self.samples_k)) / med if med > 0 else 1.0
@@ -323,7 +362,8 @@ class PalpationEnv(SurgSimEnv):
         inc = self.inclusion
         success = self.error is not None and self.error <= self.config.tolerance_mm * 1e-3
         return {"inclusion_centre_m": inc["centre"].tolist(), "inclusion_radius_m": inc["radius"],
-                "stiffness_contrast": inc["contrast"], "press_sites": len(self.sites), "success": bool(success),
+                "stiffness_contrast": inc["contrast"], "press_sites": len(self.sites),
+                "map_cells_sampled": int(np.count_nonzero(self.cell_k)), "success": bool(success),
                 "is_success": bool(success)}
 
 

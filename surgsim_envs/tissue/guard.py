@@ -17,7 +17,7 @@ from numba import njit
 from surgsim_envs.errors import TissueUnstableError
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def max_speed_squared(pos, vel):
     """Largest squared node speed (m^2/s^2); inf if any position or velocity is non-finite."""
     vmax2 = 0.0

@@ -181,7 +181,7 @@ def _volume_matvec(x, h2, tets, vgrad, vcoef, out):
             out[n, 2] += c * vgrad[t, a, 2]
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, nogil=True)
 def symplectic_step(pos, vel, inv_mass, b0, fext, gravity, fixed, dt,
                     si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, f_buf, tets, V0, kv):
     """One semi-implicit (symplectic) Euler step in place:
@@ -288,7 +288,7 @@ def _system_matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out, tets
             out[a, 2] = 0.0
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, nogil=True)
 def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
                   si, sj, L0, K1, K2, kMg, decay, kMg_next, s_state, dl_state,
                   f_buf, coef_a, coef_g, unit, diag_m, precond, r, z, p, ap, tol, max_iter,
