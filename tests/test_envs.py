@@ -12,7 +12,8 @@ from surgsim_envs.envs import TASKS, register_envs
 from surgsim_envs.envs.grasp import grasp_expert
 from surgsim_envs.envs.grasp_common import SlipTracker, excess_force_penalty, is_grasped
 from surgsim_envs.envs.palpation import (damage_penalty, indentation_depth, localisation_error, localisation_reward,
-                                         palpation_expert, stiffness_estimate, stiffness_weighted_estimate)
+                                         map_cell, palpation_expert, stiffness_estimate, stiffness_map,
+                                         stiffness_weighted_estimate)
 from surgsim_envs.envs.slippage import excess_squeeze_penalty, least_squeeze, pull_force, slippage_expert
 from surgsim_envs.errors import ConfigError
 
@@ -187,7 +188,7 @@ def test_make_vec(mode):
     vec = gym.make_vec("SurgSim/Palpation-v0", num_envs=2, vectorization_mode=mode)
     try:
         obs, info = vec.reset(seed=[0, 1])
-        assert obs.shape == (2, 14)
+        assert obs.shape == (2, 39)
         for _ in range(3):
             obs, r, term, trunc, info = vec.step(vec.action_space.sample())
         assert np.all(np.isfinite(obs)) and r.shape == (2,)
@@ -279,6 +280,57 @@ def test_palpation_guess_is_the_stiffness_estimate_and_shaping_telescopes():
         plain.close()
 
 
+def test_palpation_map_cell_and_normalisation():
+    """Map cells are row-major (row = y, column = x) over +-half_width; outside points clamp to the
+    edge; the map is each cell's max stiffness over the largest (0 where never sampled)."""
+    assert map_cell((0.0, 0.0), 5, 0.0375) == 12                     # centre cell
+    assert map_cell((-0.03, -0.03), 5, 0.0375) == 0
+    assert map_cell((0.03, -0.03), 5, 0.0375) == 4                   # x -> column
+    assert map_cell((-0.03, 0.03), 5, 0.0375) == 20                  # y -> row
+    assert map_cell((0.2, 0.2), 5, 0.0375) == 24                     # clamped
+    m = stiffness_map(np.array([0.0, 50.0, 200.0, 100.0]))
+    assert m == pytest.approx([0.0, 0.25, 1.0, 0.5])
+    assert np.all(stiffness_map(np.zeros(4)) == 0)
+    with pytest.raises(ConfigError, match="cells"):
+        map_cell((0.0, 0.0), 0, 0.0375)
+    with pytest.raises(ConfigError, match="finite"):
+        map_cell((np.nan, 0.0), 5, 0.0375)
+    with pytest.raises(ConfigError, match="stiffness_map"):
+        stiffness_map(np.array([-1.0, 2.0]))
+    with pytest.raises(ConfigError, match="map_cells"):
+        gym.make("SurgSim/Palpation-v0", map_cells=0)
+
+
+def test_palpation_map_shows_coverage_and_the_stiff_cell():
+    """Pressing (quasi-statically) over the inclusion and at a far site marks exactly those two map
+    cells; the inclusion's cell is the stiffest (1) and the tissue's clearly lower; the existing 14
+    observation entries keep their meaning, and the coverage reward pays once per new cell."""
+    env = gym.make("SurgSim/Palpation-v0", map_cells=5, map_half_width=0.0375)
+    try:
+        u = env.unwrapped
+        obs, _ = env.reset(seed=0, options={"inclusion_position": (0.0, 0.0), "stiffness_contrast": 4.0,
+                                            "young_scale": 1.0})
+        assert obs.shape == (39,) and env.observation_space.shape == (39,)
+        assert np.all(obs[14:] == 0)                                   # nothing sampled yet
+        cell_rewards = []
+        for xy in ((0.0, 0.0), (0.03, 0.03)):
+            for _ in range(60):                                        # lift, move there, press, hold
+                d = np.clip((np.array(xy) - obs[:2]) / u.config.max_xy_step, -1, 1)
+                near = np.hypot(*(np.array(xy) - obs[:2])) < 0.0015
+                n0 = np.count_nonzero(u.cell_k)
+                obs, r, *_ = env.step(np.array([*d, 0.6 if near else -1.0, -1.0], dtype=np.float32))
+                if np.count_nonzero(u.cell_k) > n0:
+                    cell_rewards.append(r)
+        m = obs[14:].reshape(5, 5)
+        assert np.count_nonzero(m) == 2 and len(cell_rewards) == 2
+        assert m[2, 2] == pytest.approx(1.0) and 0 < m[4, 4] < 0.7    # inclusion ~2-3x stiffer
+        assert obs[:3] == pytest.approx(u.sim.tool_position("probe"), abs=1e-6)   # indices unchanged
+        assert obs[13] > 1.2 and obs[12] == pytest.approx(u.estimate[1], abs=1e-6)
+        assert all(r > 0.5 * u.config.cell_reward for r in cell_rewards)
+    finally:
+        env.close()
+
+
 def test_palpation_moving_presses_are_not_stiffness_samples():
     """A probe dragged at full speed through the tissue gives (almost) no stiffness samples (its
     force includes drag and damping); the same depth held still does."""
@@ -313,7 +365,7 @@ def test_rgb_render_and_pixel_wrapper():
         assert frame.shape == (480, 480, 3) and frame.dtype == np.uint8 and frame.std() > 0
         pix = PixelObservation(env, 64, 48, keep_state=True)
         obs, _ = pix.reset(seed=0)
-        assert obs["pixels"].shape == (48, 64, 3) and obs["state"].shape == (14,)
+        assert obs["pixels"].shape == (48, 64, 3) and obs["state"].shape == (39,)
         assert pix.observation_space.contains(obs)
     finally:
         env.close()
