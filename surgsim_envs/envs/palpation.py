@@ -331,7 +331,10 @@ class PalpationEnv(SurgSimEnv):
             reward += c.shaping_weight * (phi - self.phi)
             self.phi = phi
         reward -= c.time_cost
-        if depth >= c.press_min_depth and is_new_site(pos[:2], self.sites, c.site_spacing):
+        # a press site counts only when it gives a quasi-static stiffness sample (dragging a pressed tip
+        # across the slab measures drag, not stiffness, and must not pay)
+        if (depth >= c.press_min_depth and speed <= c.sample_max_speed
+                and is_new_site(pos[:2], self.sites, c.site_spacing)):
             self.sites.append(pos[:2].copy())
             if len(self.sites) <= c.max_rewarded_sites:
                 reward += c.press_reward
