@@ -404,7 +404,7 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
 
     Coulomb friction ``mu`` on the jaws; penalty contact ``contact_stiffness`` N/m per node.
     Gross slip (reference: mu * sum(N)) is taken to start when the tissue has slid ``onset_slide`` m.
-    ``material`` defaults to a 20 kPa gel. Same rig as ``tests/test_grasp_slip.py``.
+    ``material`` defaults to a 20 kPa gel. ``tests/test_grasp_slip.py`` asserts the Coulomb behaviour of this rig.
     """
     from surgsim_envs.contact import BOX, ContactModel, ContactParams
 
