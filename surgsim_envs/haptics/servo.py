@@ -3,7 +3,9 @@
 One servo tick (:meth:`ServoLoop.tick`)::
 
     state = device.read(t)                       # pose, buttons, grip
-    reject a non-finite pose (keep the last good one; count it)
+    no target (zero force) while a live device has no pose yet (``device.has_pose`` False)
+    reject a non-finite pose (keep the last good one; count it); normalise the quaternion
+    without overflow (components up to 1e308)
     clamp the position to the device workspace;  map it into the scene (scale + origin)
     publish the proxy target for the physics
     F = extrapolator.force(t, proxy target)      # physics runs at its own, slower rate
@@ -39,6 +41,7 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.haptics.device import DeviceState, HapticDevice
 from surgsim_envs.haptics.extrapolation import ForceExtrapolator, make_extrapolator
 from surgsim_envs.haptics.protocol import check_physics
+from surgsim_envs.haptics.quaternion import unit_quaternion
 
 
 @dataclass
@@ -179,17 +182,20 @@ class ServoLoop:
         st.ticks += 1
         state = self.device.read(t)
         self.last_state = state
-        if state.is_finite():
+        with np.errstate(over="ignore"):  # |q|^2 of a 1e300 quaternion overflows; unit_quaternion copes
+            unit_q = unit_quaternion(state.quaternion) if state.is_finite() else None
+        if not getattr(self.device, "has_pose", True):
+            pass  # a live device before its first pose: no target, zero force
+        elif unit_q is not None:
             self._last_good = state
             pos = state.position
             clamped = self.device.limits.clamp_position(pos)
             if not np.array_equal(clamped, np.asarray(pos, dtype=float)):
                 st.workspace_clamped += 1
-            q = np.asarray(state.quaternion, dtype=float)
             target = self.config.mapping.to_scene(clamped)
             with self._target_lock:
                 self._target_pos = target
-                self._target_quat = q / np.linalg.norm(q)
+                self._target_quat = np.array(unit_q)
                 self._target_grip = float(np.clip(state.grip, 0.0, 1.0))
         else:
             st.rejected_poses += 1
