@@ -261,7 +261,7 @@ class SurgSimEnv(gym.Env):
             try:
                 import mujoco.viewer
 
-                self._viewer = mujoco.viewer.launch_passive(self.sim.model, self.sim.data)
+                self._viewer = mujoco.viewer.launch_passive(self.sim.render_model, self.sim.sync_visual())
             except Exception as exc:  # no display, or not the main thread on macOS
                 raise RenderingUnavailableError(
                     f"render_mode='human' needs a display for mujoco.viewer ({exc}); use render_mode='rgb_array' "

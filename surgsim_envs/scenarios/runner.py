@@ -18,8 +18,6 @@ is imported only when a scenario runs. Units: m, s, N.
 from __future__ import annotations
 
 import copy
-import importlib
-import importlib.util
 import math
 import time
 from dataclasses import dataclass, field
@@ -31,6 +29,7 @@ import numpy as np
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError, TissueUnstableError
 from surgsim_envs.scenarios.phases import SCENE_TOOL, PhaseContext
 from surgsim_envs.scenarios.schema import Scenario
+from surgsim_envs.scenarios.policies import load_policy, policy_for  # noqa: F401 (load_policy re-exported)
 
 CONTROL_PERIOD = 0.01  # s between policy evaluations in phase scenarios
 FPS = 25
@@ -185,11 +184,17 @@ def make_device(spec: str, script: str, runner: "_Runner", tremor: float, seed: 
         if script:
             from surgsim_envs.haptics.teleop import _load_script
 
+            from surgsim_envs.scenarios.schema import resolve_data_file
+
+            script = str(resolve_data_file(script, runner.sc.folder))
             return ScriptedDevice(TrajectorySpec.from_dict(_load_script(script)), limits=limits)
         dev = PlanDevice.make(runner, tremor, seed)
         dev.limits = limits
         return dev
     if kind == "replay":
+        from surgsim_envs.scenarios.schema import resolve_data_file
+
+        arg = str(resolve_data_file(arg, runner.sc.folder))
         if not Path(arg).is_file():
             raise ConfigError(f"device replay:{arg}: file not found; give a .csv or .json pose recording")
         return ReplayDevice(arg, limits=limits)
@@ -202,59 +207,6 @@ def make_device(spec: str, script: str, runner: "_Runner", tremor: float, seed: 
             raise ConfigError(f"device udp:{arg}: PORT must be an integer, e.g. udp:9870") from None
         return UdpDevice(port=port, limits=limits)
     raise ConfigError(f"device {spec!r} not understood; use scripted, replay:FILE, keyboard or udp:PORT")
-
-
-def load_policy(ref: str, base: Path | None = None) -> Callable:
-    """A policy callable from ``"module:function"``, ``"path/file.py:function"`` or an SB3 ``.zip``.
-
-    A class is instantiated (no arguments) and its instance called. An SB3 model becomes
-    ``lambda obs: model.predict(obs, deterministic=True)[0]``.
-    """
-    if not isinstance(ref, str) or not ref:
-        raise ConfigError(f"policy must be 'module:function' or a .zip file, got {ref!r}")
-    if ref.endswith(".zip"):
-        path = Path(ref)
-        if not path.is_file() and base is not None and (base / ref).is_file():
-            path = base / ref
-        if not path.is_file():
-            raise ConfigError(f"policy file {ref!r} not found")
-        try:
-            import stable_baselines3 as sb3
-        except ImportError:
-            raise ConfigError(f"policy {ref!r} is a stable-baselines3 model, but stable-baselines3 is not installed; "
-                              "pip install 'surgsim_envs[train]' or use a 'module:function' policy") from None
-        for algo in ("PPO", "SAC", "TD3", "A2C", "DDPG"):
-            try:
-                model = getattr(sb3, algo).load(str(path))
-                return lambda obs: model.predict(obs, deterministic=True)[0]
-            except Exception:  # noqa: BLE001 - wrong algorithm class: try the next
-                continue
-        raise ConfigError(f"could not load {ref!r} with any stable-baselines3 algorithm")
-    mod_name, sep, attr = ref.rpartition(":")
-    if not sep or not mod_name or not attr:
-        raise ConfigError(f"policy {ref!r} must look like 'package.module:function' or 'file.py:function'")
-    try:
-        if mod_name.endswith(".py"):
-            path = Path(mod_name)
-            if not path.is_file() and base is not None:
-                path = base / mod_name
-            spec = importlib.util.spec_from_file_location(path.stem, path)
-            if spec is None or not path.is_file():
-                raise ConfigError(f"policy file {mod_name!r} not found")
-            module = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(module)
-        else:
-            module = importlib.import_module(mod_name)
-    except ImportError as exc:
-        raise ConfigError(f"policy {ref!r}: cannot import {mod_name!r} ({exc})") from None
-    obj = getattr(module, attr, None)
-    if obj is None:
-        raise ConfigError(f"policy {ref!r}: module {mod_name!r} has no {attr!r}")
-    if isinstance(obj, type):
-        obj = obj()
-    if not callable(obj):
-        raise ConfigError(f"policy {ref!r} is not callable")
-    return obj
 
 
 # ----------------------------------------------------------------------------------------------
@@ -300,8 +252,7 @@ class _Runner:
 
     def _policy(self, phase):
         if phase.policy not in self._policies:
-            base = self.sc.source.parent if self.sc.source else None
-            self._policies[phase.policy] = load_policy(phase.policy, base)
+            self._policies[phase.policy] = policy_for(self.sc, phase.policy)
         return self._policies[phase.policy]
 
     def _observation(self, i, t_phase) -> dict:
@@ -443,7 +394,7 @@ def run_one(sc: Scenario, values: dict | None = None, *, video_path=None, viewer
     if viewer:  # pragma: no cover - needs a display
         import mujoco.viewer
 
-        view = mujoco.viewer.launch_passive(sim.model, sim.data)
+        view = mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual())
     try:
         runner = _Runner(sc, sim, sc.meta.duration_scale, bar, renderer, writer, view, camera, tremor)
         completed, error = runner.run()
@@ -474,6 +425,7 @@ def apply_overrides(sc: Scenario, duration_scale: float = 1.0, device: str | Non
             ph.driver, ph.device = "device", device
         out.trainee.driver, out.trainee.device = "device", device
     if policy is not None:
+        out.trusted_policy = policy  # typed by the user, not read from the shared file
         if out.policy is not None:
             out.policy.file = policy
         else:

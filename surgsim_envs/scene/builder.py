@@ -24,6 +24,7 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.config import (CameraConfig, GrasperConfig, ProbeConfig, SceneConfig, TissueConfig,
                                        validate_scene_config)
 from surgsim_envs.scene.tissue_binding import TissueBinding
+from surgsim_envs.scene.visual import VisualTwin
 from surgsim_envs.scene.tools import ToolSpec, add_grasper, add_haptic_proxy, add_probe
 
 ANCHOR_FACES = {"bottom": (2, 0), "top": (2, 1), "x_min": (0, 0), "x_max": (0, 1), "y_min": (1, 0), "y_max": (1, 1)}
@@ -42,6 +43,7 @@ class Scene:
     tools: dict = field(default_factory=dict)           # name -> ToolSpec
     proxies: dict = field(default_factory=dict)         # proxy name -> ToolSpec it drives
     resolutions: dict = field(default_factory=dict)     # tissue name -> tissue.resolution.Choice ("auto" only)
+    visual: VisualTwin | None = None                    # render-only twin with the tissue flexes
 
 
 # ----------------------------------------------------------------------------------------------
@@ -229,9 +231,8 @@ def build_scene(cfg: SceneConfig) -> Scene:
         model = build_tissue(tcfg)
         scene.tissues[tcfg.name] = model
         scene.tissue_configs[tcfg.name] = tcfg
-        binding = TissueBinding(tcfg.name, model, rgba=tcfg.rgba)
-        binding.add_to(spec)
-        scene.bindings[tcfg.name] = binding
+        # the surface flex goes only into the render twin (scene/visual.py): never into the physics model
+        scene.bindings[tcfg.name] = TissueBinding(tcfg.name, model, rgba=tcfg.rgba)
     for pcfg in cfg.probes:
         scene.tools[pcfg.name] = add_probe(spec, pcfg)
     for gcfg in cfg.graspers:
@@ -246,8 +247,7 @@ def build_scene(cfg: SceneConfig) -> Scene:
         raise ConfigError(f"scene '{cfg.name}' does not compile in MuJoCo: {exc}") from exc
     for tool in scene.tools.values():
         tool.bind(scene.model)
-    for binding in scene.bindings.values():
-        binding.bind(scene.model)
+    scene.visual = VisualTwin(spec, scene.bindings)
     return scene
 
 

@@ -62,6 +62,37 @@ def _gather_geoms(geom_ids, geom_body, body_root, bodies, geom_xpos, geom_xmat, 
             out_com[t, j] = xipos[bodies[t], j]
 
 
+@njit(cache=True)
+def _rate_limit(ctrl, goal, rate, dt):
+    """Move ``ctrl`` towards ``goal`` by at most ``rate * dt`` per entry; True while any entry still moves."""
+    moving = False
+    for i in range(ctrl.shape[0]):
+        delta = goal[i] - ctrl[i]
+        lim = rate[i] * dt
+        if delta > lim:
+            delta = lim
+        elif delta < -lim:
+            delta = -lim
+        ctrl[i] += delta
+        if abs(goal[i] - ctrl[i]) > 1e-12:
+            moving = True
+    return moving
+
+
+@njit(cache=True)
+def _write_rows(xfrc, bodies, wrench):
+    for k in range(bodies.shape[0]):
+        for j in range(6):
+            xfrc[bodies[k], j] = wrench[k, j]
+
+
+@njit(cache=True)
+def _zero_rows(xfrc, bodies):
+    for k in range(bodies.shape[0]):
+        for j in range(6):
+            xfrc[bodies[k], j] = 0.0
+
+
 class Simulation:
     """Owns the MjModel/MjData, the tissue models and one ContactModel per tissue.
 
@@ -84,6 +115,9 @@ class Simulation:
         self.model = scene.model
         self.model.opt.timestep = self.dt
         self.data = mujoco.MjData(self.model)
+        # cached views of the MjData arrays the step loop touches (an attribute access builds a new view)
+        self._views = {k: getattr(self.data, k) for k in ("geom_xpos", "geom_xmat", "cvel", "subtree_com", "xipos",
+                                                          "ctrl", "xfrc_applied")}
         self.tissues = dict(scene.tissues)
         self.tools = dict(scene.tools)
         self.proxies = dict(scene.proxies)
@@ -105,6 +139,7 @@ class Simulation:
                                                node_masses=model.masses, surface=model.surface,
                                                surface_subdivisions=self._surface_subdivisions(model))
         self._pairs = [(self.tissues[n], self.contacts[n]) for n in self.tissues]
+        self._has_tools = bool(len(self._geom_ids))
         self.steps = 0
         self.reset()
         self._check_initial_penetration()
@@ -240,17 +275,21 @@ class Simulation:
             self.physics_step()
 
     def _gather(self) -> None:
-        d = self.data
-        _gather_geoms(self._geom_ids, self._geom_body, self._geom_root, self._bodies, d.geom_xpos, d.geom_xmat,
-                      d.cvel, d.subtree_com, d.xipos, self._gpos, self._gmat, self._gvel, self._tcom)
+        v = self._views
+        _gather_geoms(self._geom_ids, self._geom_body, self._geom_root, self._bodies, v["geom_xpos"], v["geom_xmat"],
+                      v["cvel"], v["subtree_com"], v["xipos"], self._gpos, self._gmat, self._gvel, self._tcom)
 
     def physics_step(self) -> None:
-        """One physics step in the documented order (module docstring)."""
+        """One physics step in the documented order (module docstring).
+
+        Kept to a handful of Python calls (measured: docs/benchmarks.md "Env step"): the MjData
+        arrays are cached views, the control rate limiter and the reaction write are numba kernels.
+        """
         m, d, dt = self.model, self.data, self.dt
         if self._moving:
-            self._advance_controls()
+            self._moving = _rate_limit(self._views["ctrl"], self._goal, self._rate, dt)
         mujoco.mj_step1(m, d)
-        if len(self._geom_ids):
+        if self._has_tools:
             self._gather()
             w = self._wrench
             w[:] = 0.0
@@ -260,9 +299,10 @@ class Simulation:
                 tissue.step(dt, res.forces, res.stiffness)
                 w[:, :3] += res.tool_force
                 w[:, 3:] += res.tool_torque
-            d.xfrc_applied[self._bodies] = w
+            xfrc = self._views["xfrc_applied"]
+            _write_rows(xfrc, self._bodies, w)
             mujoco.mj_step2(m, d)
-            d.xfrc_applied[self._bodies] = 0.0
+            _zero_rows(xfrc, self._bodies)
         else:
             for tissue in self.tissues.values():
                 tissue.step(dt)
@@ -270,11 +310,7 @@ class Simulation:
         self.steps += 1
 
     def _advance_controls(self) -> None:
-        d = self.data
-        delta = self._goal - d.ctrl
-        lim = self._rate * self.dt
-        d.ctrl[:] = d.ctrl + np.clip(delta, -lim, lim)
-        self._moving = bool(np.any(np.abs(self._goal - d.ctrl) > 1e-12))
+        self._moving = _rate_limit(self._views["ctrl"], self._goal, self._rate, self.dt)
 
     # ------------------------------------------------------------------------------------------
     # tool commands
@@ -458,7 +494,18 @@ class Simulation:
         return p
 
     # ------------------------------------------------------------------------------------------
-    def sync_visual(self) -> None:
-        """Write every tissue surface into ``d.flexvert_xpos`` (call right before rendering)."""
-        for binding in self.bindings.values():
-            binding.write(self.data)
+    @property
+    def render_model(self) -> mujoco.MjModel:
+        """The render MjModel: the physics model plus the tissue surface flexes (scene/visual.py);
+        give it to ``mujoco.Renderer`` / ``mujoco.viewer``, never step it."""
+        return self.scene.visual.model
+
+    @property
+    def render_data(self) -> mujoco.MjData:
+        """The render MjData as of the last :meth:`sync_visual`."""
+        return self.scene.visual.data
+
+    def sync_visual(self) -> mujoco.MjData:
+        """Copy the physics state into the render twin and write every tissue surface into its
+        ``flexvert_xpos`` (call right before rendering); returns :attr:`render_data`."""
+        return self.scene.visual.sync(self.model, self.data)
