@@ -68,6 +68,25 @@ def check_task_resolution(config, what: str) -> None:
         check_positive(config.step_budget_us, f"{what}.step_budget_us", "us of compute per simulated ms, e.g. 1000")
 
 
+def check_control_rate(config, what: str) -> None:
+    """``control_hz`` must give a control period between one physics step ``dt`` and 1000 physics
+    steps (the scene's substep limit), and no longer than the episode: the physical range is
+    ``[max(1 / episode_seconds, 1 / (1000 dt)), 1 / dt]`` Hz. ``dt`` and ``episode_seconds`` must be
+    valid positive numbers first."""
+    from surgsim_envs.scene.config import DT_RANGE, SUBSTEPS_RANGE
+
+    dt = check_positive(config.dt, f"{what}.dt", "the physics step in s, e.g. 4e-4")
+    if not DT_RANGE[0] <= dt <= DT_RANGE[1]:
+        raise ConfigError(f"{what}.dt={dt!r} s is outside the physics step range [{DT_RANGE[0]:g}, {DT_RANGE[1]:g}] s")
+    episode = check_positive(config.episode_seconds, f"{what}.episode_seconds", "e.g. 3.0")
+    hz = check_positive(config.control_hz, f"{what}.control_hz", "the control rate in Hz, e.g. 50")
+    lo, hi = max(1.0 / episode, 1.0 / (SUBSTEPS_RANGE[1] * dt)), 1.0 / dt
+    if not lo * (1 - 1e-9) <= hz <= hi * (1 + 1e-9):
+        raise ConfigError(f"{what}.control_hz={hz!r} Hz is outside its physical range [{lo:.4g}, {hi:.4g}] Hz: the "
+                          f"control period must be at least one physics step (dt={dt:g} s), at most "
+                          f"{SUBSTEPS_RANGE[1]} steps and at most the episode ({episode:g} s); e.g. 50 Hz")
+
+
 def check_on_unstable(value, what: str) -> None:
     """``on_unstable`` must be "raise" (default) or "terminate" (see the module docstring)."""
     if value not in ("raise", "terminate"):
@@ -109,6 +128,10 @@ class SurgSimEnv(gym.Env):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(f"render_mode={render_mode!r} is not supported; use one of "
                               f"{self.metadata['render_modes']} or None")
+        if render_mode == "human":
+            from surgsim_envs.scene.display import require_display
+
+            require_display("render_mode='human'")   # raises here; MuJoCo would exit the process later
         self.render_mode = render_mode
         self.metadata = dict(self.metadata, render_fps=int(round(self.config.control_hz)))
         self._renderer = None
@@ -160,10 +183,12 @@ class SurgSimEnv(gym.Env):
 
         Raises ConfigError (a ValueError) on a wrong shape or non-finite entries.
         """
-        try:
-            a = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ConfigError(f"action must be numeric with shape {self.action_space.shape}, got {action!r}") from None
+        raw = np.asarray(action)
+        if raw.dtype.kind not in "iuf":
+            raise ConfigError(f"action must be real numbers (float or int) with shape {self.action_space.shape} in "
+                              f"[-1, 1], got {action!r} of dtype {raw.dtype} (bool, complex, string and object "
+                              "actions are rejected)")
+        a = raw.astype(np.float64)
         if a.shape != self.action_space.shape:
             if a.size == int(np.prod(self.action_space.shape)) and a.ndim <= 1:
                 a = a.reshape(self.action_space.shape)
@@ -258,6 +283,9 @@ class SurgSimEnv(gym.Env):
 
     def _render_human(self) -> None:
         if self._viewer is None:
+            from surgsim_envs.scene.display import require_display
+
+            require_display("render_mode='human'")
             try:
                 import mujoco.viewer
 

@@ -37,7 +37,7 @@ from typing import Any, Sequence
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import (SurgSimEnv, check_on_unstable, check_positive, check_range,
+from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_on_unstable, check_positive, check_range,
                                    check_task_resolution, sample)
 from surgsim_envs.envs.grasp_common import (ORGAN_SPACING, SlipTracker, build_grasp_simulation, contact_nodes,
                                             contact_reward, excess_force_penalty, is_grasped, record_progress,
@@ -84,6 +84,7 @@ class GraspConfig:
         for key in ("control_hz", "dt", "episode_seconds", "closing_speed", "max_step", "workspace", "hold_force",
                     "damage_force", "tolerance"):
             check_positive(getattr(self, key), f"GraspConfig.{key}")
+        check_control_rate(self, type(self).__name__)
         check_task_resolution(self, type(self).__name__)
         check_on_unstable(self.on_unstable, type(self).__name__)
         if self.organ not in ORGAN_SPACING:

@@ -46,7 +46,7 @@ from typing import Any, Sequence
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import (SurgSimEnv, check_on_unstable, check_positive, check_range,
+from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_on_unstable, check_positive, check_range,
                                    check_task_resolution, sample)
 from surgsim_envs.envs.stiffness_field import StiffnessField
 from surgsim_envs.errors import ConfigError
@@ -110,6 +110,7 @@ class PalpationConfig:
                     "hover", "max_depth", "xy_limit", "press_min_depth", "sample_max_speed", "site_spacing", "damage_force",
                     "localisation_scale", "tolerance_mm", "map_half_width"):
             check_positive(getattr(self, key), f"PalpationConfig.{key}")
+        check_control_rate(self, "PalpationConfig")
         for key in ("shaping_weight", "time_cost", "press_reward", "cell_reward"):
             v = getattr(self, key)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
