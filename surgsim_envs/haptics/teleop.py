@@ -206,6 +206,9 @@ def _run_headless(loop, physics, args, duration: float):
 def _run_viewer(loop, physics, device, kind: str, duration: float):  # pragma: no cover - needs a display
     import mujoco.viewer
 
+    from surgsim_envs.scene.display import require_display
+
+    require_display("surgsim teleop (viewer)")   # raises; MuJoCo would exit the process
     sim = physics.sim
     callback = device.key_callback if kind == "keyboard" else None
     with mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual(), key_callback=callback) as viewer:

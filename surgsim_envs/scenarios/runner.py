@@ -394,6 +394,9 @@ def run_one(sc: Scenario, values: dict | None = None, *, video_path=None, viewer
     if viewer:  # pragma: no cover - needs a display
         import mujoco.viewer
 
+        from surgsim_envs.scene.display import require_display
+
+        require_display("surgsim run --viewer")   # raises; MuJoCo would exit the process
         view = mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual())
     try:
         runner = _Runner(sc, sim, sc.meta.duration_scale, bar, renderer, writer, view, camera, tremor)

@@ -247,8 +247,34 @@ def build_scene(cfg: SceneConfig) -> Scene:
         raise ConfigError(f"scene '{cfg.name}' does not compile in MuJoCo: {exc}") from exc
     for tool in scene.tools.values():
         tool.bind(scene.model)
+    check_tools_clear(scene)
     scene.visual = VisualTwin(spec, scene.bindings)
     return scene
+
+
+def check_tools_clear(scene: Scene) -> None:
+    """Raise ConfigError if a tool starts touching rigid geometry (floor) at its home pose: a tool
+    pressed into the floor at rest pushes back on its drive (and on a haptic user's hand)."""
+    m = scene.model
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    tool_bodies = {}
+    for tool in scene.tools.values():
+        for b in range(m.nbody):
+            root = b
+            while root and m.body_parentid[root] != 0:
+                root = m.body_parentid[root]
+            if root == tool.body_id:
+                tool_bodies[b] = tool.name
+    for c in d.contact[:d.ncon]:
+        for g, other in ((c.geom1, c.geom2), (c.geom2, c.geom1)):
+            name = tool_bodies.get(int(m.geom_bodyid[g]))
+            if name is not None and c.dist < 0:
+                gname = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, int(g))
+                oname = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, int(other))
+                raise ConfigError(f"tool '{name}' starts inside {oname!r}: geom {gname!r} penetrates it by "
+                                  f"{-c.dist * 1e3:.2f} mm at the home pose; move the tool (or the tissue it is "
+                                  "placed around) up, or make its jaws/tip smaller")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -294,6 +320,7 @@ def place_grasper_around_tip(tissue_nodes: np.ndarray, grasper: GrasperConfig, m
 
 def grasp_config(organ: str = "spleen", model: str = "mass_spring") -> SceneConfig:
     """Three-jaw grasper (paper 002) around the tip of a spleen held at its other end (ligaments)."""
+    # grasp_scene lifts organ and grasper together if the open jaws would reach into the floor
     tissue = TissueConfig(name="spleen", organ=organ, model=model, material="spleen", spacing=None,
                           anchors=("x_min:0.03",), position=(0.0, 0.0, 0.025),
                           options={"integrator": "implicit"}, rgba=(0.55, 0.18, 0.25, 1.0))
@@ -314,7 +341,34 @@ def grasp_scene(cfg: SceneConfig | None = None, auto_place: bool = True) -> Scen
         validate_scene_config(cfg)
         nodes = placed_volume(cfg.tissues[0]).nodes
         cfg.graspers[0] = place_grasper_around_tip(nodes, cfg.graspers[0])
+        lift = FLOOR_CLEARANCE - lowest_jaw_point(cfg.graspers[0]) if cfg.floor else 0.0
+        if lift > 0:  # an organ whose tip sits low: raise organ and grasper together, clear of the floor
+            t, g = cfg.tissues[0], cfg.graspers[0]
+            t.position = (t.position[0], t.position[1], float(t.position[2]) + lift)
+            g.position = (g.position[0], g.position[1], float(g.position[2]) + lift)
     return build_scene(cfg)
+
+
+#: m, the least gap between an auto-placed grasper's open jaws and the floor
+FLOOR_CLEARANCE = 0.001
+
+
+def lowest_jaw_point(g: GrasperConfig) -> float:
+    """World z (m) of the lowest corner of the open jaws of grasper ``g`` at its home pose."""
+    from surgsim_envs.scene.tools import _rotation_to
+
+    rot = _rotation_to(-np.asarray(g.axis, dtype=float))
+    t, half = g.jaw_thickness, np.array([g.jaw_thickness, g.jaw_width, g.jaw_length]) / 2.0
+    signs = np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)], dtype=float)
+    low = math.inf
+    for i in range(3):
+        theta = float(g.roll) + 2.0 * math.pi * i / 3.0
+        c, s = math.cos(theta), math.sin(theta)
+        rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        centre = np.array([c, s, 0.0]) * (g.open_radius + t / 2.0) + [0.0, 0.0, -g.jaw_length / 2.0]
+        corners = centre + (signs * half) @ rz.T
+        low = min(low, float((np.asarray(g.position, dtype=float) + corners @ rot.T)[:, 2].min()))
+    return low
 
 
 SCENES: dict[str, Callable[..., Scene]] = {"palpation": palpation_scene, "grasp": grasp_scene}
