@@ -297,6 +297,10 @@ class Simulation:
                 res = contact.compute(tissue.positions, tissue.velocities, self._shape_kind, self._shape_tool,
                                       self._shape_size, self._gpos, self._gmat, self._gvel, self._tcom, dt)
                 tissue.step(dt, res.forces, res.stiffness)
+                # CONTRACT (issue 10), for SCENE's restructuring: an implicit integrator integrates
+                # forces + an increment from the contact stiffness; the tools must get the reaction
+                # of exactly tissue.integrated_external_forces or momentum leaks (11-14 % measured).
+                contact.attribute_increment(tissue.integrated_external_forces)
                 w[:, :3] += res.tool_force
                 w[:, 3:] += res.tool_torque
             xfrc = self._views["xfrc_applied"]
