@@ -366,18 +366,25 @@ class ServoLoop:
 
     def run_realtime(self, duration: float, on_frame=None, frame_period: float = 1 / 30) -> ServoStats:
         """Run the threads for ``duration`` s of wall clock; call ``on_frame(loop)`` every
-        ``frame_period`` s from this thread (viewer sync, video frames). ``on_frame`` must hold
+        ``frame_period`` s (absolute deadlines; late calls are not made up) from this thread
+        (viewer sync, video frames; see recording.PacedVideoWriter for a video at its rate). ``on_frame`` must hold
         ``loop.physics_lock`` while it touches the physics (briefly: copy, then render outside);
         returning False stops early."""
         if not (math.isfinite(duration) and duration > 0):
             raise ConfigError(f"duration must be > 0 s, got {duration!r}")
+        if not (math.isfinite(frame_period) and frame_period > 0):
+            raise ConfigError(f"frame_period must be > 0 s, got {frame_period!r}")
         self.start()
         try:
-            end = time.perf_counter() + duration
+            start = time.perf_counter()
+            end = start + duration
+            k = 0
             while time.perf_counter() < end and not self._stop.is_set():
                 if on_frame is not None and on_frame(self) is False:
                     break
-                time.sleep(frame_period)
+                # absolute deadlines: a slow on_frame (rendering) does not stretch the frame period
+                k = max(k + 1, int((time.perf_counter() - start) / frame_period) + 1)
+                time.sleep(max(0.0, min(start + k * frame_period, end) - time.perf_counter()))
         finally:
             stats = self.stop()
         return stats

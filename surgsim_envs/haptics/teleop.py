@@ -187,7 +187,10 @@ def _run_headless(loop, physics, args, duration: float):
     cam = args.camera if mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_CAMERA, args.camera) >= 0 else -1
     scratch = mujoco.MjData(sim.render_model)
     path = out / f"teleop_{args.task}.mp4"
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(args.fps), (width, height))
+    from surgsim_envs.haptics.recording import PacedVideoWriter
+
+    writer = PacedVideoWriter(cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(args.fps),
+                                              (width, height)), float(args.fps))  # frames at the video's rate
 
     def frame(_loop) -> None:
         with _loop.physics_lock:  # copy the state briefly; render outside the lock
@@ -198,7 +201,7 @@ def _run_headless(loop, physics, args, duration: float):
     try:
         stats = loop.run_realtime(duration, on_frame=frame, frame_period=1.0 / args.fps)
     finally:
-        writer.release()
+        writer.close(loop.stats.duration_s or None)  # pad to the run's wall-clock length
         renderer.close()
     return stats
 
