@@ -27,6 +27,7 @@ BENCH: dict[str, tuple[str, str]] = {
     "haptics": ("surgsim_envs.bench.haptics_speed", "haptic servo loop period"),
     "accuracy": ("surgsim_envs.bench.accuracy", "speed against accuracy chart (Pareto front)"),
     "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
+    "soak": ("surgsim_envs.bench.soak", "long random-action runs: NaN, exceptions, force bounds, memory growth"),
 }
 
 
