@@ -103,10 +103,11 @@ def resolve_scene_config(cfg: SceneConfig):
 
 def placed_volume(cfg: TissueConfig):
     """The tissue's volume, rotated by ``cfg.euler`` and with its bounding-box centre at ``cfg.position``."""
-    from surgsim_envs.geometry import Volume, make_volume
+    from surgsim_envs.geometry import Volume, organ_volume
 
     cfg, _ = resolve_tissue(cfg)
-    vol = make_volume(cfg.organ, spacing=cfg.spacing, **dict(cfg.volume_options))
+    # a registered name, a mesh file (STL/OBJ/PLY/VTK, set on its bed) or a Volume (contract v2)
+    vol = organ_volume(cfg.organ, spacing=cfg.spacing, **dict(cfg.volume_options))
     lo, hi = vol.bounds()
     centre = (lo + hi) / 2.0
     nodes = vol.nodes - centre

@@ -23,8 +23,11 @@ SUBSTEPS_RANGE = (1, 1000)
 class TissueConfig:
     """One deformable organ.
 
-    organ: volume name for :func:`surgsim_envs.geometry.make_volume` ("slab", "block",
-        "slab_inclusion", "spleen", "liver_lobe", ...).
+    organ: a registered volume name ("slab", "block", "slab_inclusion", "spleen", "liver_lobe"),
+        a mesh file path (closed surface STL/OBJ/PLY/OFF, filled with lattice tets; or a legacy
+        VTK tet mesh; ``volume_options={"units": "mm"}`` if not in metres) or a
+        :class:`~surgsim_envs.geometry.Volume` (:func:`surgsim_envs.geometry.organ_volume`).
+        Meshes are set on their bed and rendered with their smooth surface.
     model: tissue model registry name ("mass_spring", "fem", or a plugin); "auto" lets
         ``resolution="auto"`` choose the model too.
     material: preset name, dict of :class:`~surgsim_envs.tissue.Material` fields, or a Material.
@@ -52,7 +55,7 @@ class TissueConfig:
     """
 
     name: str = "tissue"
-    organ: str = "slab"
+    organ: Any = "slab"
     model: str = "mass_spring"
     material: Any = "liver"
     spacing: float | None = 0.005
