@@ -40,8 +40,9 @@ def test_tool_inside_the_floor_is_rejected_by_name():
     cfg = grasp_config()
     cfg.tissues[0].spacing = 0.015
     cfg.tissues[0].position = (0.0, 0.0, 0.02)     # jaws around the tip reach below z = 0
-    cfg.graspers[0] = place_grasper_around_tip(placed_volume(cfg.tissues[0]).nodes, cfg.graspers[0])
-    assert lowest_jaw_point(cfg.graspers[0]) < 0
+    g = place_grasper_around_tip(placed_volume(cfg.tissues[0]).nodes, cfg.tool("grasper"))
+    cfg.replace_tool("grasper", g)
+    assert lowest_jaw_point(g) < 0
     with pytest.raises(ConfigError, match=r"tool 'grasper' starts inside 'floor': geom 'grasper/jaw\d_box' penetrates"):
         build_scene(cfg)
 

@@ -21,12 +21,37 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError, TissueUnstableError
+
+
+@dataclass(frozen=True)
+class ObsTerm:
+    """One named observation term: ``size`` entries in ``unit``, physical bounds [low, high]
+    (+-inf where none exists, e.g. a contact force)."""
+
+    name: str
+    unit: str
+    size: int = 1
+    low: float = -math.inf
+    high: float = math.inf
+
+
+def observation_space_of(terms) -> tuple[gym.spaces.Box, list[str]]:
+    """``(Box, names)`` of a list of :class:`ObsTerm`: float32 bounds per entry and one
+    "name [unit]" string per index (``name[i] [unit]`` for multi-entry terms)."""
+    lows, highs, names = [], [], []
+    for t in terms:
+        lows += [t.low] * t.size
+        highs += [t.high] * t.size
+        names += [f"{t.name} [{t.unit}]"] if t.size == 1 else [f"{t.name}[{i}] [{t.unit}]" for i in range(t.size)]
+    box = gym.spaces.Box(np.array(lows, dtype=np.float32), np.array(highs, dtype=np.float32), dtype=np.float32)
+    return box, names
 
 
 def apply_overrides(config, overrides: dict[str, Any]):
@@ -87,6 +112,49 @@ def check_control_rate(config, what: str) -> None:
                           f"{SUBSTEPS_RANGE[1]} steps and at most the episode ({episode:g} s); e.g. 50 Hz")
 
 
+def sphere_mask(centroids: np.ndarray, centre, radius: float) -> np.ndarray:
+    """(T,) bool: elements whose rest centroid (``model.element_centroids()``, (T,3) m) lies within
+    ``radius`` m of ``centre`` (3,) m; at least the nearest one."""
+    d = np.linalg.norm(np.asarray(centroids) - np.asarray(centre, dtype=float)[None], axis=1)
+    mask = d < radius
+    if not mask.any():
+        mask[np.argmin(d)] = True
+    return mask
+
+
+def tissue_options(model: str, integrator: str) -> dict[str, Any]:
+    """Constructor options of a task's tissue: ``integrator`` if model ``model`` has it, else its
+    "auto" choice (explicit when stable, implicit otherwise), else the model's default."""
+    from surgsim_envs.tissue.registry import get as model_class
+
+    cls = model_class(model)
+    names = cls.integrator_names() if hasattr(cls, "integrator_names") else list(getattr(cls, "integrators", ()))
+    if integrator in names:
+        return {"integrator": integrator}
+    return {"integrator": "auto"} if "auto" in names else {}
+
+
+def require_capabilities(model: str, capabilities, task: str) -> None:
+    """Before building: CapabilityError (a ConfigError naming model, capability and task) unless
+    tissue model ``model`` declares every one of ``capabilities`` (tissue contract v2)."""
+    from surgsim_envs.tissue.registry import get as model_class
+
+    cls = model_class(model)
+    for cap in capabilities:
+        cls.require(cap, task=task)
+
+
+def check_explicit_step(tissue, dt: float, what: str) -> None:
+    """After a re-randomised material: ConfigError if the tissue steps explicitly (integrator
+    "symplectic") and ``dt`` exceeds its critical step (an implicit or "auto" model is safe)."""
+    if getattr(tissue, "integrator", None) != "symplectic":
+        return
+    crit = tissue.critical_dt()
+    if crit < dt:
+        raise ConfigError(f"{what} makes the explicit tissue step unstable (critical dt {crit:.2e} s < dt {dt:g} s); "
+                          "lower the stiffness ranges or dt, or use integrator 'auto'")
+
+
 def check_on_unstable(value, what: str) -> None:
     """``on_unstable`` must be "raise" (default) or "terminate" (see the module docstring)."""
     if value not in ("raise", "terminate"):
@@ -103,6 +171,12 @@ def sample(rng: np.random.Generator, value, what: str, lo: float = -math.inf, hi
         return v
     a, b = check_range(value, what, lo, hi)
     return float(rng.uniform(a, b)) if b > a else a
+
+
+def reward_from_terms(terms: dict[str, float]) -> tuple[float, dict[str, float]]:
+    """``(sum, terms as floats)`` of weighted reward terms: the reward and ``info["reward_terms"]``."""
+    clean = {k: float(v) for k, v in terms.items()}
+    return float(sum(clean.values())), clean
 
 
 class SurgSimEnv(gym.Env):
@@ -157,7 +231,8 @@ class SurgSimEnv(gym.Env):
         raise NotImplementedError
 
     def _evaluate(self, action: np.ndarray) -> tuple[float, bool, dict[str, Any]]:
-        """(reward, terminated, info terms) after a control step."""
+        """(reward, terminated, info terms) after a control step; ``info terms["reward_terms"]`` is
+        {term name: weighted value} summing to the reward (:func:`reward_from_terms`)."""
         raise NotImplementedError
 
     def _metrics(self) -> dict[str, Any]:
@@ -173,6 +248,16 @@ class SurgSimEnv(gym.Env):
     def substeps(self) -> int:
         """Physics steps per control step."""
         return max(1, int(round(self.control_dt / self.config.dt)))
+
+    @property
+    def observation_names(self) -> list[str]:
+        """Index -> "name [unit]" of every observation entry (from the task's observation terms)."""
+        return list(self._obs_names)
+
+    def _set_observation_terms(self, terms) -> None:
+        """Build ``observation_space`` (physical bounds) and ``observation_names`` from ObsTerms."""
+        self.observation_terms = list(terms)
+        self.observation_space, self._obs_names = observation_space_of(self.observation_terms)
 
     @property
     def max_episode_steps(self) -> int:
@@ -234,6 +319,8 @@ class SurgSimEnv(gym.Env):
             extra_r, extra = self._on_truncate()
             reward += extra_r
             terms.update(extra)
+            if "reward_terms" in terms:
+                terms["reward_terms"]["final"] = terms["reward_terms"].get("final", 0.0) + float(extra_r)
         self.episode_return += reward
         obs = self._observe()
         info = self._info(terms)

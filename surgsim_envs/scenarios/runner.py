@@ -100,11 +100,11 @@ class RunResult:
 # Scene
 def scene_config(sc: Scenario):
     """The :class:`~surgsim_envs.scene.SceneConfig` of a scenario (ready-made scene + overrides)."""
-    from surgsim_envs.scene import grasp_config, palpation_config
+    from surgsim_envs.scene import scene_config as ready_made
 
     o = sc.scene
     kw = {k: v for k, v in (("organ", o.organ), ("model", o.model)) if v is not None}
-    cfg = palpation_config(**kw) if sc.meta.scene == "palpation" else grasp_config(**kw)
+    cfg = ready_made(sc.meta.scene, **kw)
     tissue = cfg.tissues[0]
     if o.material is not None:
         tissue.material = o.material
@@ -117,7 +117,7 @@ def scene_config(sc: Scenario):
             raise ConfigError(f"scene.inclusion_xy needs organ 'slab_inclusion', got {tissue.organ!r}")
         tissue.volume_options = {**dict(tissue.volume_options),
                                  "inclusion_centre": (float(o.inclusion_xy[0]), float(o.inclusion_xy[1]), -0.002)}
-    for tool in [*cfg.probes, *cfg.graspers]:
+    for tool in cfg.tool_configs():
         if o.mu is not None:
             tool.friction = float(o.mu)
     cfg.seed = int(sc.meta.seed)
@@ -126,11 +126,10 @@ def scene_config(sc: Scenario):
 
 def build_simulation(sc: Scenario):
     """Build the scenario's :class:`~surgsim_envs.scene.Simulation`."""
-    from surgsim_envs.scene import Simulation, build_scene, grasp_scene
+    from surgsim_envs.scene import Simulation, make_scene
 
     cfg = scene_config(sc)
-    scene = build_scene(cfg) if sc.meta.scene == "palpation" else grasp_scene(cfg)
-    return Simulation(scene)
+    return Simulation(make_scene(sc.meta.scene, cfg))
 
 
 def inclusion_centre(sim) -> np.ndarray | None:
@@ -171,42 +170,30 @@ class PlanDevice:
 
 
 def make_device(spec: str, script: str, runner: "_Runner", tremor: float, seed: int):
-    """A connected-to-be HapticDevice from a spec: scripted | replay:FILE | keyboard | udp:PORT."""
-    from surgsim_envs.haptics.device import DeviceLimits
-    from surgsim_envs.haptics.keyboard import KeyboardDevice
-    from surgsim_envs.haptics.replay import ReplayDevice
-    from surgsim_envs.haptics.scripted import ScriptedDevice, TrajectorySpec
-    from surgsim_envs.haptics.udp_bridge import UdpDevice
+    """A connected-to-be HapticDevice from a spec: scripted | replay:FILE | keyboard | udp:PORT
+    (:func:`surgsim_envs.haptics.device.make_device`; "scripted" is the scenario's phase plan, or
+    ``script``; a replay FILE is resolved in the scenario's folder)."""
+    from surgsim_envs.haptics.device import DeviceLimits, parse_device_spec
+    from surgsim_envs.haptics.device import make_device as make
+    from surgsim_envs.scenarios.schema import resolve_data_file
 
     limits = DeviceLimits(max_force=1e6)  # the scenario scores forces; the device only records them
-    kind, _, arg = spec.partition(":")
-    if kind == "scripted":
+    kind, arg = parse_device_spec(spec)
+
+    def scripted():
         if script:
+            from surgsim_envs.haptics.scripted import ScriptedDevice, TrajectorySpec
             from surgsim_envs.haptics.teleop import _load_script
 
-            from surgsim_envs.scenarios.schema import resolve_data_file
-
-            script = str(resolve_data_file(script, runner.sc.folder))
-            return ScriptedDevice(TrajectorySpec.from_dict(_load_script(script)), limits=limits)
+            path = str(resolve_data_file(script, runner.sc.folder))
+            return ScriptedDevice(TrajectorySpec.from_dict(_load_script(path)), limits=limits)
         dev = PlanDevice.make(runner, tremor, seed)
         dev.limits = limits
         return dev
-    if kind == "replay":
-        from surgsim_envs.scenarios.schema import resolve_data_file
 
-        arg = str(resolve_data_file(arg, runner.sc.folder))
-        if not Path(arg).is_file():
-            raise ConfigError(f"device replay:{arg}: file not found; give a .csv or .json pose recording")
-        return ReplayDevice(arg, limits=limits)
-    if kind == "keyboard":
-        return KeyboardDevice(limits=limits)
-    if kind == "udp":
-        try:
-            port = int(arg)
-        except ValueError:
-            raise ConfigError(f"device udp:{arg}: PORT must be an integer, e.g. udp:9870") from None
-        return UdpDevice(port=port, limits=limits)
-    raise ConfigError(f"device {spec!r} not understood; use scripted, replay:FILE, keyboard or udp:PORT")
+    if kind == "replay":
+        spec = f"replay:{resolve_data_file(arg, runner.sc.folder)}"
+    return make(spec, limits=limits, scripted=scripted)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -230,14 +217,14 @@ class _Runner:
         return self._phase.command(self.ctx, self._s)
 
     def grip_of(self, radius) -> float:
-        if self.ctx.kind != "grasper":
+        if not self.ctx.has_jaws:
             return 0.0
         cfg = self.ctx.tool.config
         r = self.ctx.radius if radius is None else radius
         return float((cfg.open_radius - r) / (cfg.open_radius - cfg.min_radius))
 
     def _radius_of(self, grip: float):
-        if self.ctx.kind != "grasper" or not math.isfinite(grip):
+        if not self.ctx.has_jaws or not math.isfinite(grip):
             return None
         cfg = self.ctx.tool.config
         return cfg.open_radius - float(np.clip(grip, 0.0, 1.0)) * (cfg.open_radius - cfg.min_radius)
@@ -268,7 +255,7 @@ class _Runner:
     def _sample(self, i) -> None:
         sim, ctx = self.sim, self.ctx
         rep = sim.contact_report()[ctx.tool.name]
-        opening = sim.jaw_opening(ctx.tool.name) if ctx.kind == "grasper" else math.nan
+        opening = sim.jaw_opening(ctx.tool.name) if ctx.has_jaws else math.nan
         self.rec.add(sim.time, i, rep["normal_force"], rep["tangential_force"], ctx.pull_force(), rep["slipping"],
                      rep["contacts"], rep["penetration"], sim.tool_position(ctx.tool.name), opening)
 

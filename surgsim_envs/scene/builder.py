@@ -25,7 +25,7 @@ from surgsim_envs.scene.config import (CameraConfig, GrasperConfig, ProbeConfig,
                                        validate_scene_config)
 from surgsim_envs.scene.tissue_binding import TissueBinding
 from surgsim_envs.scene.visual import VisualTwin
-from surgsim_envs.scene.tools import ToolSpec, add_grasper, add_haptic_proxy, add_probe
+from surgsim_envs.scene.tools import ToolSpec, add_haptic_proxy, build_tool
 
 ANCHOR_FACES = {"bottom": (2, 0), "top": (2, 1), "x_min": (0, 0), "x_max": (0, 1), "y_min": (1, 0), "y_max": (1, 1)}
 
@@ -234,10 +234,8 @@ def build_scene(cfg: SceneConfig) -> Scene:
         scene.tissue_configs[tcfg.name] = tcfg
         # the surface flex goes only into the render twin (scene/visual.py): never into the physics model
         scene.bindings[tcfg.name] = TissueBinding(tcfg.name, model, rgba=tcfg.rgba)
-    for pcfg in cfg.probes:
-        scene.tools[pcfg.name] = add_probe(spec, pcfg)
-    for gcfg in cfg.graspers:
-        scene.tools[gcfg.name] = add_grasper(spec, gcfg)
+    for tcfg in cfg.tool_configs():
+        scene.tools[tcfg.name] = build_tool(spec, tcfg)
     for hcfg in cfg.proxies:
         tool = scene.tools[hcfg.tool]
         add_haptic_proxy(spec, hcfg, tool)
@@ -291,7 +289,7 @@ def palpation_config(organ: str = "slab_inclusion", model: str = "mass_spring") 
             CameraConfig("top", (0.0, -0.001, 0.25), (0.0, 0.0, 0.0)),
             CameraConfig("side", (0.0, -0.16, 0.03), (0.0, 0.0, 0.015))]
     # explicit tissue + explicit penalty contact: 0.5 ms keeps k_n dt^2 / m well below the limit
-    return SceneConfig(name="palpation", tissues=[tissue], probes=[probe], cameras=cams, dt=5e-4)
+    return SceneConfig(name="palpation", tissues=[tissue], tools=[probe], cameras=cams, dt=5e-4)
 
 
 def palpation_scene(cfg: SceneConfig | None = None) -> Scene:
@@ -328,7 +326,7 @@ def grasp_config(organ: str = "spleen", model: str = "mass_spring") -> SceneConf
     cams = [CameraConfig("overview", (0.05, -0.22, 0.16), (0.03, 0.0, 0.02)),
             CameraConfig("top", (0.03, -0.001, 0.30), (0.03, 0.0, 0.0)),
             CameraConfig("side", (0.03, -0.25, 0.03), (0.03, 0.0, 0.025))]
-    return SceneConfig(name="grasp", tissues=[tissue], graspers=[GrasperConfig(name="grasper")], cameras=cams)
+    return SceneConfig(name="grasp", tissues=[tissue], tools=[GrasperConfig(name="grasper")], cameras=cams)
 
 
 def grasp_scene(cfg: SceneConfig | None = None, auto_place: bool = True) -> Scene:
@@ -338,13 +336,15 @@ def grasp_scene(cfg: SceneConfig | None = None, auto_place: bool = True) -> Scen
     (:func:`place_grasper_around_tip`), so any organ can be grasped.
     """
     cfg = copy.deepcopy(cfg if cfg is not None else grasp_config())
-    if auto_place and cfg.graspers and cfg.tissues:
+    grasper = next((t for t in cfg.tool_configs() if isinstance(t, GrasperConfig)), None)
+    if auto_place and grasper is not None and cfg.tissues:
         validate_scene_config(cfg)
         nodes = placed_volume(cfg.tissues[0]).nodes
-        cfg.graspers[0] = place_grasper_around_tip(nodes, cfg.graspers[0])
-        lift = FLOOR_CLEARANCE - lowest_jaw_point(cfg.graspers[0]) if cfg.floor else 0.0
+        g = place_grasper_around_tip(nodes, grasper)
+        cfg.replace_tool(grasper.name, g)
+        lift = FLOOR_CLEARANCE - lowest_jaw_point(g) if cfg.floor else 0.0
         if lift > 0:  # an organ whose tip sits low: raise organ and grasper together, clear of the floor
-            t, g = cfg.tissues[0], cfg.graspers[0]
+            t = cfg.tissues[0]
             t.position = (t.position[0], t.position[1], float(t.position[2]) + lift)
             g.position = (g.position[0], g.position[1], float(g.position[2]) + lift)
     return build_scene(cfg)
@@ -356,7 +356,7 @@ FLOOR_CLEARANCE = 0.001
 
 def lowest_jaw_point(g: GrasperConfig) -> float:
     """World z (m) of the lowest corner of the open jaws of grasper ``g`` at its home pose."""
-    from surgsim_envs.scene.tools import _rotation_to
+    from surgsim_envs.scene.tools.base import _rotation_to
 
     rot = _rotation_to(-np.asarray(g.axis, dtype=float))
     t, half = g.jaw_thickness, np.array([g.jaw_thickness, g.jaw_width, g.jaw_length]) / 2.0
@@ -372,13 +372,36 @@ def lowest_jaw_point(g: GrasperConfig) -> float:
     return low
 
 
-SCENES: dict[str, Callable[..., Scene]] = {"palpation": palpation_scene, "grasp": grasp_scene}
+@dataclass(frozen=True)
+class SceneEntry:
+    """A ready-made scene: ``config(**kw) -> SceneConfig`` (organ=, model=) and ``build(cfg) -> Scene``."""
+
+    config: Callable[..., SceneConfig]
+    build: Callable[..., Scene]
+
+
+#: THE registry of ready-made scenes, used by envs, scenarios, haptics and the CLI
+SCENES: dict[str, SceneEntry] = {"palpation": SceneEntry(palpation_config, palpation_scene),
+                                 "grasp": SceneEntry(grasp_config, grasp_scene)}
+
+
+def register_scene(name: str, config: Callable[..., SceneConfig], build: Callable[..., Scene] = build_scene) -> None:
+    """Add a ready-made scene ``name`` (a config factory and a builder) to :data:`SCENES`."""
+    SCENES[name] = SceneEntry(config, build)
+
+
+def _entry(name: str) -> SceneEntry:
+    try:
+        return SCENES[name]
+    except (KeyError, TypeError):
+        raise ConfigError(f"unknown scene {name!r}; available scenes: {sorted(SCENES)}") from None
+
+
+def scene_config(name: str, **kw) -> SceneConfig:
+    """The default SceneConfig of ready-made scene ``name`` (keywords: organ=, model=)."""
+    return _entry(name).config(**kw)
 
 
 def make_scene(name: str, cfg: SceneConfig | None = None) -> Scene:
-    """Build the ready-made scene ``name`` ("palpation", "grasp")."""
-    try:
-        fn = SCENES[name]
-    except KeyError:
-        raise ConfigError(f"unknown scene {name!r}; available scenes: {sorted(SCENES)}") from None
-    return fn(cfg)
+    """Build the ready-made scene ``name`` ("palpation", "grasp"), from ``cfg`` if given."""
+    return _entry(name).build(cfg)

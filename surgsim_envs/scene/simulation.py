@@ -197,7 +197,7 @@ class Simulation:
         if opt is None:
             return 1
         if opt == "auto":
-            tips = [float(t.config.tip_radius) for t in self.tools.values() if t.kind == "probe"]
+            tips = [float(t.contact_feature_radius) for t in self.tools.values() if t.contact_feature_radius is not None]
             if not tips:
                 return 1
             edge = typical_edge_length(tissue.positions, tissue.surface)
@@ -212,11 +212,8 @@ class Simulation:
         self._goal = np.zeros(m.nu)
         self._rate = np.full(m.nu, np.inf)
         for tool in self.tools.values():
-            cfg = tool.config
-            for a in tool.actuator_ids:
-                self._rate[a] = float(cfg.speed)
-            if tool.kind == "grasper":
-                self._rate[tool.jaw_actuator_id] = float(cfg.closing_speed)
+            for a, rate in tool.actuator_rates().items():
+                self._rate[a] = rate
         self._moving = False
 
     def _check_initial_penetration(self) -> None:
@@ -363,26 +360,29 @@ class Simulation:
             raise ConfigError(f"speed must be a positive number (m/s), or math.inf for no limit, got {speed!r}")
         self._rate[actuators] = float(speed)
 
-    def set_jaw_opening(self, name: str, radius: float, speed: float | None = None) -> None:
-        """Close or open grasper ``name`` to ``radius`` m (axis to each jaw's inner face) at ``speed`` m/s."""
-        tool = self.tool(name)
-        if tool.kind != "grasper":
-            raise ConfigError(f"tool '{name}' is a {tool.kind}, not a grasper; it has no jaws")
-        cfg = tool.config
-        if not (isinstance(radius, (int, float)) and cfg.min_radius - 1e-12 <= radius <= cfg.open_radius + 1e-12):
-            raise ConfigError(f"jaw opening {radius!r} m is outside [{cfg.min_radius}, {cfg.open_radius:.4f}] m "
-                              f"(min_radius .. open_radius) of grasper '{name}'")
-        self._goal[tool.jaw_actuator_id] = cfg.open_radius - float(radius)
+    def set_actuator_goal(self, actuator: int, goal: float, speed: float | None = None) -> None:
+        """Move actuator ``actuator``'s target towards ``goal`` at ``speed`` (None = its default rate);
+        the command primitive tool kinds build on (:mod:`surgsim_envs.scene.tools`)."""
+        self._goal[actuator] = float(goal)
         if speed is not None:
-            self._set_rate([tool.jaw_actuator_id], speed)
+            self._set_rate([actuator], speed)
         self._moving = True
 
-    def jaw_opening(self, name: str) -> float:
-        """Current distance (m) from the axis to jaw 1's inner face."""
+    def geom_rows(self, geom_ids) -> list[int]:
+        """Rows of the contact arrays (``ContactModel.result.geom_*``) of the tool geoms ``geom_ids``."""
+        return [self._geom_index[int(g)] for g in geom_ids]
+
+    def set_jaw_opening(self, name: str, radius: float, speed: float | None = None) -> None:
+        """Close or open tool ``name``'s jaws to ``radius`` m (axis to each jaw's inner face) at ``speed`` m/s."""
         tool = self.tool(name)
-        if tool.kind != "grasper":
-            raise ConfigError(f"tool '{name}' is not a grasper")
-        return float(tool.config.open_radius - self.data.qpos[tool.jaw_qpos_adr[0]])
+        tool.require("set_jaw_opening")
+        tool.set_jaw_opening(self, radius, speed)
+
+    def jaw_opening(self, name: str) -> float:
+        """Current distance (m) from the axis to jaw 1's inner face of tool ``name``."""
+        tool = self.tool(name)
+        tool.require("jaw_opening")
+        return tool.jaw_opening(self)
 
     def _proxy_tool(self, name: str):
         if name in self.proxies:
@@ -459,16 +459,10 @@ class Simulation:
         return out
 
     def jaw_forces(self, name: str) -> dict[str, np.ndarray]:
-        """Per-jaw contact forces of grasper ``name``: {"normal": (3,) N, "tangential": (3,) N}."""
+        """Per-jaw contact forces of tool ``name``: {"normal": (3,) N, "tangential": (3,) N}."""
         tool = self.tool(name)
-        if tool.kind != "grasper":
-            raise ConfigError(f"tool '{name}' is a {tool.kind}, not a grasper")
-        rows = [self._geom_index[int(g)] for g in tool.jaw_geom_ids]
-        fn, ft = np.zeros(3), np.zeros(3)
-        for contact in self.contacts.values():
-            fn += contact.result.geom_normal_force[rows]
-            ft += contact.result.geom_tangential_force[rows]
-        return {"normal": fn, "tangential": ft}
+        tool.require("jaw_forces")
+        return tool.jaw_forces(self)
 
     def tissue(self, name: str | None = None):
         """The TissueModel ``name`` (the only one if None)."""

@@ -1,8 +1,11 @@
-"""Rigid tools built in code with :class:`mujoco.MjSpec`: probe, three-jaw grasper, haptic proxy.
+"""What every tool kind shares: the :class:`ToolSpec` record and MjSpec helpers.
 
-Each ``add_*`` function adds the tool to a spec and returns a :class:`ToolSpec` that records the
-MuJoCo names of its bodies, contact geoms, joints and actuators; :meth:`ToolSpec.bind` resolves
-them to ids after compilation. Units: m, kg, N, rad.
+A tool kind (probe, three-jaw grasper, ... ) is ONE module in this package that owns its MjSpec
+build, its commands and readouts, and registers itself (:mod:`surgsim_envs.scene.tools`). Its
+``build(spec, cfg)`` adds the tool to a spec and returns a :class:`ToolSpec` (or a subclass with
+the kind's commands) recording the MuJoCo names of its bodies, contact geoms, joints and
+actuators; :meth:`ToolSpec.bind` resolves them to ids after compilation. The step loop
+(:class:`~surgsim_envs.scene.Simulation`) sees only this base interface. Units: m, kg, N, rad.
 
 Conventions
 -----------
@@ -26,7 +29,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from surgsim_envs.scene.config import GrasperConfig, HapticProxyConfig, ProbeConfig
+from surgsim_envs.errors import ConfigError
 
 #: contact bits: tools collide with the floor but not with each other
 TOOL_CONTYPE, TOOL_CONAFFINITY = 2, 1
@@ -72,6 +75,31 @@ class ToolSpec:
     jaw_actuator_id: int = -1
     mocap_id: int = -1
     proxy_eq_id: int = -1
+
+    # -- hooks a tool kind may override --------------------------------------------------------
+    @property
+    def contact_feature_radius(self) -> float | None:
+        """Smallest contact feature (m), e.g. a probe's tip radius: the scene embeds surface contact
+        points in the tissue when a feature is smaller than the lattice spacing (None = no limit)."""
+        return None
+
+    def actuator_rates(self) -> dict[int, float]:
+        """{actuator id: default rate limit of its target (m/s or rad/s)} after :meth:`bind`."""
+        return {int(a): float(getattr(self.config, "speed", math.inf)) for a in self.actuator_ids}
+
+    def set_grip(self, sim, value: float, speed: float | None = None) -> None:
+        """Grip command in [0, 1] (0 open, 1 closed) from a haptic device or script; tools without
+        jaws ignore it."""
+
+    @property
+    def has_grip(self) -> bool:
+        """True if :meth:`set_grip` does something (the tool has jaws)."""
+        return False
+
+    def require(self, command: str) -> None:
+        """ConfigError naming the tool, its kind and ``command`` if this kind has no such command."""
+        if not callable(getattr(self, command, None)):
+            raise ConfigError(f"tool '{self.name}' is a {self.kind}; it has no command {command!r}")
 
     def bind(self, m: mujoco.MjModel) -> None:
         """Resolve names to ids in the compiled model ``m``."""
@@ -131,110 +159,3 @@ def _slide_drive(spec: mujoco.MjSpec, body, name: str, axes, cfg, mass: float, t
     return joints, acts
 
 
-def add_probe(spec: mujoco.MjSpec, cfg: ProbeConfig) -> ToolSpec:
-    """Add a probe (rigid rod with spherical tip) to ``spec``; return its :class:`ToolSpec`."""
-    name = cfg.name
-    body = spec.worldbody.add_body(name=name, pos=list(map(float, cfg.position)), gravcomp=1.0)
-    # inertia: a thin rod of length L about its end plus the tip, roughly
-    L = cfg.rod_length
-    ixx = cfg.mass * (L * L / 3.0 + cfg.rod_radius ** 2 / 4.0)
-    izz = 0.5 * cfg.mass * max(cfg.rod_radius, cfg.tip_radius) ** 2
-    body.explicitinertial = True
-    body.mass = cfg.mass
-    body.ipos = [0.0, 0.0, 0.0]
-    body.inertia = [ixx, ixx, izz]
-    joints, acts = _slide_drive(spec, body, name, np.eye(3), cfg, cfg.mass, cfg.travel)
-    if cfg.orientation:
-        for label, ax in (("x", [1, 0, 0]), ("y", [0, 1, 0])):
-            jname = f"{name}/tilt_{label}"
-            body.add_joint(name=jname, type=_HINGE, axis=ax, range=[-1.0, 1.0], limited=mujoco.mjtLimited.mjLIMITED_TRUE)
-            joints.append(jname)
-            if cfg.drive == "position":
-                aname = f"{name}/tilt_{label}"
-                act = spec.add_actuator(name=aname, target=jname, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-                act.set_to_position(kp=cfg.kp * L * L, dampratio=cfg.dampratio)
-                act.ctrlrange = [-1.0, 1.0]
-                act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-                acts.append(aname)
-    tip = f"{name}/tip"
-    rod = f"{name}/rod"
-    body.add_geom(name=tip, type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[cfg.tip_radius, 0, 0], rgba=list(cfg.rgba),
-                  contype=TOOL_CONTYPE, conaffinity=TOOL_CONAFFINITY, mass=0.0, density=0.0)
-    half = L / 2.0
-    body.add_geom(name=rod, type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[cfg.rod_radius, half, 0],
-                  pos=[0.0, 0.0, cfg.tip_radius + half], rgba=list(cfg.rgba),
-                  contype=TOOL_CONTYPE, conaffinity=TOOL_CONAFFINITY, mass=0.0, density=0.0)
-    body.add_site(name=f"{name}/tip_site", size=[0.001, 0, 0])
-    return ToolSpec(name=name, kind="probe", config=cfg, body=name, contact_geoms=[tip, rod], joints=joints,
-                    actuators=acts, home=np.asarray(cfg.position, dtype=float), frame=np.eye(3))
-
-
-def add_grasper(spec: mujoco.MjSpec, cfg: GrasperConfig) -> ToolSpec:
-    """Add the three-jaw grasper (paper 002) to ``spec``; return its :class:`ToolSpec`."""
-    name = cfg.name
-    axis = np.asarray(cfg.axis, dtype=float)
-    axis /= np.linalg.norm(axis)
-    rot = _rotation_to(-axis)  # local +z points back along the shaft
-    wrist = spec.worldbody.add_body(name=name, pos=list(map(float, cfg.position)), quat=_mat2quat(rot), gravcomp=1.0)
-    wrist.explicitinertial = True
-    wrist.mass = cfg.mass
-    L = cfg.shaft_length
-    ixx = cfg.mass * L * L / 3.0
-    wrist.ipos = [0.0, 0.0, L / 2.0]
-    wrist.inertia = [ixx, ixx, 0.5 * cfg.mass * cfg.shaft_radius ** 2]
-    # slide axes are in the wrist's own frame: across (x, y) and along (z) the tool axis
-    joints, acts = _slide_drive(spec, wrist, name, np.eye(3), cfg, cfg.mass, cfg.travel)
-    shaft = f"{name}/shaft"
-    wrist.add_geom(name=shaft, type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[cfg.shaft_radius, L / 2.0, 0],
-                   pos=[0.0, 0.0, L / 2.0], rgba=list(cfg.rgba), contype=TOOL_CONTYPE, conaffinity=TOOL_CONAFFINITY,
-                   mass=0.0, density=0.0)
-    travel = cfg.open_radius - cfg.min_radius
-    jaw_bodies, jaw_geoms, jaw_joints = [], [], []
-    t = cfg.jaw_thickness
-    for i in range(3):
-        theta = float(cfg.roll) + 2.0 * math.pi * i / 3.0
-        u = np.array([math.cos(theta), math.sin(theta), 0.0])
-        bname = f"{name}/jaw{i + 1}"
-        jaw = wrist.add_body(name=bname, pos=(u * (cfg.open_radius + t / 2.0) + [0, 0, -cfg.jaw_length / 2.0]).tolist(),
-                             quat=[math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2)], gravcomp=1.0)
-        jaw.explicitinertial = True
-        jaw.mass = cfg.jaw_mass
-        jaw.ipos = [0.0, 0.0, 0.0]
-        Ij = cfg.jaw_mass * (cfg.jaw_length ** 2 + cfg.jaw_width ** 2) / 12.0
-        jaw.inertia = [Ij, Ij, cfg.jaw_mass * (cfg.jaw_width ** 2 + t * t) / 12.0]
-        jname = f"{name}/jaw{i + 1}_slide"
-        # closing travel is positive: the jaw moves along -x of its own frame (towards the axis)
-        jaw.add_joint(name=jname, type=_SLIDE, axis=[-1.0, 0.0, 0.0], range=[0.0, travel],
-                      limited=mujoco.mjtLimited.mjLIMITED_TRUE)
-        gname = f"{name}/jaw{i + 1}_box"
-        jaw.add_geom(name=gname, type=mujoco.mjtGeom.mjGEOM_BOX, size=[t / 2.0, cfg.jaw_width / 2.0, cfg.jaw_length / 2.0],
-                     rgba=list(cfg.rgba), contype=TOOL_CONTYPE, conaffinity=TOOL_CONAFFINITY, mass=0.0, density=0.0)
-        jaw_bodies.append(bname)
-        jaw_geoms.append(gname)
-        jaw_joints.append(jname)
-    for i in (1, 2):
-        spec.add_equality(name=f"{name}/couple{i + 1}", type=mujoco.mjtEq.mjEQ_JOINT, name1=jaw_joints[i],
-                          name2=jaw_joints[0], objtype=mujoco.mjtObj.mjOBJ_JOINT,
-                          data=[0.0, 1.0, 0.0, 0.0, 0.0] + [0.0] * 7, solref=[0.002, 1.0])
-    jact = f"{name}/close"
-    act = spec.add_actuator(name=jact, target=jaw_joints[0], trntype=mujoco.mjtTrn.mjTRN_JOINT)
-    act.set_to_position(kp=cfg.jaw_kp, dampratio=cfg.dampratio)
-    act.ctrlrange = [0.0, travel]
-    act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-    return ToolSpec(name=name, kind="grasper", config=cfg, body=name, contact_geoms=[shaft, *jaw_geoms],
-                    joints=joints, actuators=acts, jaw_bodies=jaw_bodies, jaw_geoms=jaw_geoms, jaw_joints=jaw_joints,
-                    jaw_actuator=jact, home=np.asarray(cfg.position, dtype=float), frame=rot)
-
-
-def add_haptic_proxy(spec: mujoco.MjSpec, cfg: HapticProxyConfig, tool: ToolSpec) -> None:
-    """Add a mocap body at ``tool``'s home pose and weld ``tool.body`` to it (virtual coupling)."""
-    quat = _mat2quat(tool.frame)
-    body = spec.worldbody.add_body(name=cfg.name, pos=tool.home.tolist(), quat=quat, mocap=True)
-    body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.003, 0, 0], rgba=[0.2, 0.8, 0.2, 0.4],
-                  contype=0, conaffinity=0, group=3)
-    eq = f"{cfg.name}/coupling"
-    spec.add_equality(name=eq, type=mujoco.mjtEq.mjEQ_WELD, name1=tool.body, name2=cfg.name,
-                      objtype=mujoco.mjtObj.mjOBJ_BODY, solref=[cfg.timeconst, cfg.dampratio],
-                      data=[0.0] * 3 + [0.0] * 3 + [1.0, 0.0, 0.0, 0.0] + [1.0, 0.0])
-    tool.proxy = cfg.name
-    tool.proxy_eq = eq
