@@ -233,7 +233,8 @@ def build_scene(cfg: SceneConfig) -> Scene:
         scene.tissues[tcfg.name] = model
         scene.tissue_configs[tcfg.name] = tcfg
         # the surface flex goes only into the render twin (scene/visual.py): never into the physics model
-        scene.bindings[tcfg.name] = TissueBinding(tcfg.name, model, rgba=tcfg.rgba)
+        scene.bindings[tcfg.name] = TissueBinding(tcfg.name, model, rgba=tcfg.rgba, render_field=tcfg.render_field,
+                                                  render_range=tcfg.render_range)
     for tcfg in cfg.tool_configs():
         scene.tools[tcfg.name] = build_tool(spec, tcfg)
     for hcfg in cfg.proxies:

@@ -52,6 +52,9 @@ class TissueConfig:
     options: extra keyword options for the model constructor (integrator, ...).
     volume_options: extra keyword options for make_volume (size, ...).
     rgba: colour of the rendered surface.
+    render_field: None (plain ``rgba``) or a per-node field of the model to colour the surface by
+        (``model.field_names()``: "displacement" m, "stress" Pa, ...), viridis from low to high.
+    render_range: (lo, hi) of that colour scale in the field's unit; None: 0 .. largest value seen.
     """
 
     name: str = "tissue"
@@ -73,6 +76,8 @@ class TissueConfig:
     options: Mapping[str, Any] = field(default_factory=dict)
     volume_options: Mapping[str, Any] = field(default_factory=dict)
     rgba: Sequence[float] = (0.78, 0.33, 0.30, 1.0)
+    render_field: str | None = None
+    render_range: Sequence[float] | None = None
 
 
 @dataclass

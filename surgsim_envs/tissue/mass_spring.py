@@ -380,14 +380,16 @@ class MassSpringModel(TissueModel):
         ln = np.linalg.norm(d, axis=1)
         dl = ln - self.rest_lengths
         f = self.K1 * dl + self.K2 * dl ** 3 + self.branch_forces()
-        outer = (f / np.maximum(ln, 1e-300))[:, None, None] * d[:, :, None] * d[:, None, :]
+        outer = ((f / np.maximum(ln, 1e-300))[:, None, None] * d[:, :, None] * d[:, None, :]).reshape(-1, 9)
         n = self.n_nodes
-        sig = np.zeros((n, 3, 3))
-        np.add.at(sig, self.si, outer)
-        np.add.at(sig, self.sj, outer)
-        vnode = np.zeros(n)
-        np.add.at(vnode, self.volume.tets.reshape(-1), np.repeat(np.abs(self._tet_vol) / 4.0, 4))
-        sig /= (2.0 * vnode)[:, None, None]
+        if getattr(self, "_vnode", None) is None:
+            self._vnode = np.bincount(self.volume.tets.reshape(-1), weights=np.repeat(np.abs(self._tet_vol) / 4.0, 4),
+                                      minlength=n)
+        sig = np.empty((n, 9))
+        for k in range(9):
+            sig[:, k] = (np.bincount(self.si, weights=outer[:, k], minlength=n)
+                         + np.bincount(self.sj, weights=outer[:, k], minlength=n))
+        sig = sig.reshape(n, 3, 3) / (2.0 * self._vnode)[:, None, None]
         from surgsim_envs.tissue.base import von_mises
         return von_mises(sig)
 
