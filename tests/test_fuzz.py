@@ -1,7 +1,9 @@
 """Property-based fuzzing (issue 14) of everything that takes outside input: the UDP pose decoder
 and sequence gate, the scenario schema, the legacy VTK reader and the mesh loaders, and env
 actions. No input may crash the process, hang or return NaN; a rejection is a ConfigError (or
-ValueError) whose message names the value. Small ``max_examples`` keep the default run fast."""
+ValueError) whose message names the value. Small ``max_examples`` keep the default run fast. No
+per-example deadline (the machine's load varies); a hang is caught by the module's pytest
+timeout instead."""
 
 from __future__ import annotations
 
@@ -24,7 +26,9 @@ from surgsim_envs.haptics.udp_bridge import (  # noqa: E402
     encode_pose,
 )
 
-FAST = settings(max_examples=60, deadline=2000, suppress_health_check=[HealthCheck.function_scoped_fixture,
+pytestmark = pytest.mark.timeout(300)
+
+FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
                                                                         HealthCheck.too_slow])
 any_float = st.floats(allow_nan=True, allow_infinity=True, width=64)
 
@@ -100,7 +104,7 @@ VALID = {"scenario": {"name": "ok", "scene": "palpation"},
          "phases": [{"type": "press", "duration": 1.0, "depth": 0.004}]}
 
 
-@settings(max_examples=80, deadline=3000, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(["scenario", "scene", "trainee", "phase"]), st.data())
 def test_fuzz_schema_mutations_are_accepted_in_range_or_named(table, data):
     import copy
@@ -126,7 +130,7 @@ def test_fuzz_schema_mutations_are_accepted_in_range_or_named(table, data):
         assert sc.run_duration() <= 3600.0
 
 
-@settings(max_examples=60, deadline=3000)
+@settings(max_examples=60, deadline=None)
 @given(st.text(max_size=300))
 def test_fuzz_scenario_text(text):
     from surgsim_envs.scenarios.schema import loads_scenario
@@ -181,7 +185,7 @@ def test_fuzz_vtk_reader_and_tet_loader(tmp_path_factory, binary, edits, cut):
         assert np.all(np.isfinite(vol.nodes)) and np.all(vol.tet_volumes() > 0)
 
 
-@settings(max_examples=25, deadline=5000, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.sampled_from([".stl", ".obj", ".ply", ".off"]), st.binary(max_size=400))
 def test_fuzz_surface_loader(tmp_path_factory, suffix, data):
     pytest.importorskip("trimesh")

@@ -603,6 +603,8 @@ def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = No
         raise ctx.error(("phases",), f"{len(phases_tab)} phases: at most 1000")
     phases = []
     for i, tab in enumerate(phases_tab):
+        if isinstance(tab, dict) and not isinstance(tab.get("type"), str):
+            raise ctx.error(("phases", i, "type"), f"give the phase type as a string, got {tab.get('type')!r}")
         phase = build_phase(tab, ("phases", i), ctx, trainee)
         _check_phase_values(ctx, ("phases", i), phase)
         validate_driver(ctx, ("phases", i), phase.driver, phase.device, phase.policy, **drivers)
