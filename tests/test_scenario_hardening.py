@@ -247,3 +247,11 @@ def test_cli_check_reports_the_line_and_refuses_code_without_the_flag(tmp_path, 
 def test_shipped_scenarios_still_load():
     for p in sorted((ROOT / "tasks").glob("*.toml")):
         load_scenario(p)
+
+
+def test_cli_checks_the_device_file_and_a_non_string_phase_type(tmp_path, capsys):
+    good = _write(tmp_path, PHASES, "good.toml")
+    assert main(["run", str(good), "--check", "--device", "replay:missing.csv"]) == 2
+    assert "replay file 'missing.csv' not found" in capsys.readouterr().err
+    with pytest.raises(ConfigError, match=r"phases\[0\]\.type: give the phase type as a string, got \[1\]"):
+        loads_scenario(PHASES.replace('type = "press"', "type = [1]"), "x.toml")

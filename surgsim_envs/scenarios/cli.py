@@ -68,6 +68,11 @@ def run(args) -> int:
         raise ConfigError(f"--tremor {args.tremor!r} must be in [0, {tremor_max}] m")
     if args.policy is not None:
         check_policy_reference(args.policy, None, allow_code=allow_code, trusted=True)
+    if args.device is not None:
+        from surgsim_envs.scenarios.schema import KeyLocator, _Ctx, validate_driver
+
+        validate_driver(_Ctx("command line", KeyLocator(None)), ("--device",), "device", args.device, "",
+                        folder=sc.folder, check_files=True)
     if args.check:
         runs = len(sc.runs())
         print(f"{args.scenario}: valid scenario '{sc.name}' ({len(sc.phases)} phases, {runs} run{'s' * (runs != 1)})")
