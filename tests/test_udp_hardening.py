@@ -142,3 +142,20 @@ def test_no_force_reaches_the_device_before_its_first_pose():
         assert _poll_until(dev, lambda: dev.has_pose)
         loop.tick(0.05, physics_until=phys.time + 1e-3)
         assert loop.proxy_target[2] == pytest.approx(0.0)
+
+
+def test_one_overflowing_packet_does_not_end_a_teleoperation_of_the_scene():
+    scene_adapter = pytest.importorskip("surgsim_envs.haptics.scene_adapter", exc_type=ImportError)
+    phys = scene_adapter.make_haptic_simulation("palpation")
+    dev = UdpDevice(port=0)
+    config = ServoConfig(mapping=DeviceMapping(origin=tuple(phys.home_position)))
+    with dev, UdpHapticClient(dev.address) as client:
+        loop = ServoLoop(dev, phys, config)
+        client.send_pose(0.0, (0.0, 0.0, 0.0))
+        assert _poll_until(dev, lambda: dev.has_pose)
+        client.send_raw(encode_pose(1, 0.001, (0.0, 0.0, 0.0), (1e300, 0.0, 0.0, 1e300)))
+        for i in range(20):
+            loop.tick(i * 1e-3, physics_until=phys.time + 1e-3)
+        assert dev.stats.accepted == 2 and dev.stats.malformed == 0
+        np.testing.assert_allclose(loop._target_quat, (math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)), rtol=1e-12)
+        assert np.all(np.isfinite(dev.force_log.forces))
