@@ -74,7 +74,8 @@ class TissueModel(abc.ABC):
         self.volume = volume
         self.material = get_material(material)
         self.region_materials = {int(k): get_material(v) for k, v in (region_materials or {}).items()}
-        unknown = set(self.region_materials) - set(np.unique(volume.labels).tolist())
+        labels = volume.node_labels if self.surface_only else volume.labels   # surface-only: per-node labels
+        unknown = set(self.region_materials) - set(np.unique(labels).tolist())
         if unknown:
             raise ConfigError(f"region_materials labels {sorted(unknown)} do not occur in volume '{volume.name}' "
                               f"(labels present: {sorted(np.unique(volume.labels).tolist())})")
@@ -98,8 +99,10 @@ class TissueModel(abc.ABC):
         n = len(self.rest_positions)
         self.fields = self._build_fields()
         self.masses = self._lumped_masses()
-        if np.any(self.masses <= 0):
-            bad = int(np.flatnonzero(self.masses <= 0)[0])
+        # surface-only models carry mass on surface nodes only (interior nodes of a tet volume stay still)
+        weighed = self.surface_nodes if self.surface_only else np.arange(n)
+        if np.any(self.masses[weighed] <= 0):
+            bad = int(weighed[np.flatnonzero(self.masses[weighed] <= 0)[0]])
             raise ConfigError(f"model '{self.name}': node {bad} has mass {self.masses[bad]:.3g} kg (isolated node?); "
                               "remove unused nodes from the volume")
         self.fixed = np.zeros(n, dtype=bool)

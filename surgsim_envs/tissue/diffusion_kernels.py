@@ -1,0 +1,104 @@
+"""numba kernels of the chemical-diffusion surface model (paper 000): one explicit step.
+
+Flat arrays only (no Python objects), so the same kernel can later run batched. The operators
+come from :mod:`surgsim_envs.tissue.diffusion_operator`; the model is
+:mod:`surgsim_envs.tissue.diffusion`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+#: |C| (Pa) above which the concentration is taken as diverging
+MAX_CONCENTRATION = 1e12
+
+
+@njit(cache=True, nogil=True)
+def diffuse(conc, tmp, source, nodes, rate_ptr, rate_idx, rate_val, inv_tau, dt, substeps):
+    """``substeps`` explicit Euler steps of dC/dt = sum_j a_ij (C_j - C_i) + (p_i - C_i) / tau
+    (eqs. 9.9 / 9.16 with the load and the exchange with the bulk) over ``nodes``; ``source`` is
+    p (Pa). Returns False if the concentration diverged (non-finite or > MAX_CONCENTRATION)."""
+    h = dt / substeps
+    for _ in range(substeps):
+        for q in range(nodes.shape[0]):
+            i = nodes[q]
+            ci = conc[i]
+            acc = (source[i] - ci) * inv_tau
+            for k in range(rate_ptr[i], rate_ptr[i + 1]):
+                acc += rate_val[k] * (conc[rate_idx[k]] - ci)
+            tmp[i] = ci + h * acc
+        ok = True
+        for q in range(nodes.shape[0]):
+            i = nodes[q]
+            c = tmp[i]
+            if not (abs(c) < MAX_CONCENTRATION):
+                ok = False
+            conc[i] = c
+        if not ok:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def load_source(forces, normals, areas, nodes, source):
+    """Contact pressure p_i = max(0, -G_i . n_i) / S_i (Pa) at every node in ``nodes``."""
+    for q in range(nodes.shape[0]):
+        i = nodes[q]
+        gn = forces[i, 0] * normals[i, 0] + forces[i, 1] * normals[i, 1] + forces[i, 2] * normals[i, 2]
+        source[i] = -gn / areas[i] if gn < 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def move_nodes(pos, vel, rest, conc, forces, normals, areas, masses, damping, kappa, beta, wgrad,
+               grad_ptr, grad_idx, grad_val, free, dt):
+    """Eq. 9.22, symplectic Euler, at the ``free`` nodes:
+    m a = -S C n (the diffused load) + G~ (external force minus its compressive normal part)
+          - Wg grad C (eqs. 9.19-9.21) - S kappa (1 + beta |u|^2) u (the bulk under the surface)
+          - damping m v."""
+    for q in range(free.shape[0]):
+        i = free[q]
+        gx = 0.0
+        gy = 0.0
+        gz = 0.0
+        for k in range(grad_ptr[i], grad_ptr[i + 1]):
+            c = conc[grad_idx[k]]
+            gx += grad_val[k, 0] * c
+            gy += grad_val[k, 1] * c
+            gz += grad_val[k, 2] * c
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        fx, fy, fz = forces[i, 0], forces[i, 1], forces[i, 2]
+        gn = fx * nx + fy * ny + fz * nz
+        if gn < 0.0:                      # the compressive part enters through the concentration
+            fx -= gn * nx
+            fy -= gn * ny
+            fz -= gn * nz
+        load = areas[i] * conc[i]
+        ux = pos[i, 0] - rest[i, 0]
+        uy = pos[i, 1] - rest[i, 1]
+        uz = pos[i, 2] - rest[i, 2]
+        k_el = areas[i] * kappa[i] * (1.0 + beta[i] * (ux * ux + uy * uy + uz * uz))
+        m = masses[i]
+        c_d = damping[i] * m
+        w = wgrad[i]
+        ax = fx - load * nx - (w[0, 0] * gx + w[0, 1] * gy + w[0, 2] * gz) - k_el * ux - c_d * vel[i, 0]
+        ay = fy - load * ny - (w[1, 0] * gx + w[1, 1] * gy + w[1, 2] * gz) - k_el * uy - c_d * vel[i, 1]
+        az = fz - load * nz - (w[2, 0] * gx + w[2, 1] * gy + w[2, 2] * gz) - k_el * uz - c_d * vel[i, 2]
+        vel[i, 0] += dt * ax / m
+        vel[i, 1] += dt * ay / m
+        vel[i, 2] += dt * az / m
+        pos[i, 0] += dt * vel[i, 0]
+        pos[i, 1] += dt * vel[i, 1]
+        pos[i, 2] += dt * vel[i, 2]
+
+
+@njit(cache=True, nogil=True)
+def diffusion_step(pos, vel, rest, conc, tmp, source, forces, normals, areas, masses, damping, kappa, beta, wgrad,
+                   rate_ptr, rate_idx, rate_val, grad_ptr, grad_idx, grad_val, active, free, inv_tau, dt, substeps):
+    """One model step: load -> diffusion -> forces and motion. False if the concentration diverged."""
+    load_source(forces, normals, areas, active, source)
+    if not diffuse(conc, tmp, source, active, rate_ptr, rate_idx, rate_val, inv_tau, dt, substeps):
+        return False
+    move_nodes(pos, vel, rest, conc, forces, normals, areas, masses, damping, kappa, beta, wgrad,
+               grad_ptr, grad_idx, grad_val, free, dt)
+    return True
