@@ -88,7 +88,7 @@ class DiffusionModel(*CONTRACT_BASES):
     summary: ClassVar[str] = ("surface-only: contact load diffuses over the surface (omega per node and direction) "
                               "and dents it; paper 000, explicit")
     integrators: ClassVar[tuple[str, ...]] = ("symplectic",)
-    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "surface_only"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "surface_only", "static_solve"})
     surface_only: ClassVar[bool] = True
     material_fields: ClassVar[tuple[str, ...]] = ("young", "density", "damping", "nonlinear", "omega")
     node_field_names: ClassVar[tuple[str, ...]] = ("displacement", "stress", "concentration", "omega")
@@ -137,6 +137,7 @@ class DiffusionModel(*CONTRACT_BASES):
             self.integrated_external_forces = np.zeros_like(self.positions)
         self._active_nodes = used.astype(np.int64)
         self.concentration = np.zeros(n)
+        self._c_bound: float | None = None   # largest |C| loaded so far (Pa), for the divergence check
         self._tmp = np.zeros(n)
         self._source = np.zeros(n)
         self._pairs, self._full = (op.grid_pairs(surf.quads, n) if self.scheme == "grid"
@@ -246,17 +247,22 @@ class DiffusionModel(*CONTRACT_BASES):
                 f"{float(self.fields['omega'].max()):.3g}); lower dt, raise substeps to "
                 f"{int(math.ceil(self.substeps * dt / crit))} or more, or raise load_time")
         forces = np.ascontiguousarray(forces, dtype=np.float64)
-        ok = diffusion_step(self.positions, self.velocities, self.rest_positions, self.concentration, self._tmp,
+        if self._c_bound is None:             # first step after a build/reset/manual change: initial state
+            self._c_bound = float(np.abs(self.concentration).max())
+        bound = diffusion_step(self.positions, self.velocities, self.rest_positions, self.concentration, self._tmp,
                             self._source, forces, self._normals, self._areas, self.masses, self._damping,
                             self._kappa, self._beta, self._wgrad, *self._rates, *self._grad, self._active_nodes,
-                            self._free, 1.0 / self.load_time, dt, self.substeps)
+                            self._free, 1.0 / self.load_time, dt, self.substeps, self._c_bound)
         self.integrated_external_forces = forces
-        if not ok:
+        if bound < 0:
             raise TissueUnstableError(self.name, dt, self.critical_dt(),
-                                      f"the concentration diverged (|C| > 1e12 Pa) at t={self.time:.4g} s")
+                                      f"the concentration diverged (max |C| {float(np.abs(self.concentration).max()):.3g} Pa "
+                                      f"against at most {self._c_bound:.3g} Pa loaded) at t={self.time:.4g} s")
+        self._c_bound = bound
 
     def _reset_state(self) -> None:
         self.concentration[:] = 0.0
+        self._c_bound = None
         self.integrated_external_forces = np.zeros_like(self.positions)
 
     # ---------------------------------------------------------------------------------------
@@ -336,6 +342,64 @@ class DiffusionModel(*CONTRACT_BASES):
         if name == "omega":
             return self.fields["omega"].copy()
         return super()._node_field(name)
+
+    # ---------------------------------------------------------------------------------------
+    # Equilibrium
+    def steady_concentration(self, forces: np.ndarray | None = None) -> np.ndarray:
+        """(N,) Pa, the concentration a constant ``forces`` (N,3) N settles to: the sparse solve of
+        ``sum_j a_ij (C_j - C_i) + (p_i - C_i)/tau = 0`` over the surface nodes."""
+        from scipy.sparse import csr_matrix, identity
+        from scipy.sparse.linalg import spsolve
+
+        f = self._check_forces(forces)
+        act = self._active_nodes
+        p = np.zeros(self.n_nodes_total)
+        gn = np.einsum("ij,ij->i", f, self._normals)
+        p[act] = np.where(gn[act] < 0, -gn[act] / self._areas[act], 0.0)
+        n = self.n_nodes_total
+        ptr, idx, val = self._rates
+        A = csr_matrix((val, idx, ptr), shape=(n, n))
+        M = (identity(n, format="csr") * (1.0 / self.load_time) + csr_matrix(
+            (np.asarray(A.sum(axis=1)).ravel(), (np.arange(n), np.arange(n))), shape=(n, n)) - A).tocsr()
+        sub = M[act][:, act]
+        c = np.zeros(n)
+        c[act] = spsolve(sub.tocsc(), p[act] / self.load_time)
+        return c
+
+    def static_solve(self, forces: np.ndarray | None = None, **kwargs) -> np.ndarray:
+        """(N,3) m equilibrium positions under constant ``forces`` (contract ``static_solve``):
+        the steady concentration, then per free node the bulk displacement that balances the
+        diffused load, the gradient force and the direct part of the external force (a cubic in
+        |u| when nonlinear > 0, solved by Newton). Does not change the state."""
+        f = self._check_forces(forces)
+        c = self.steady_concentration(f)
+        ptr, idx, val = self._grad
+        n = self.n_nodes_total
+        rows = np.repeat(np.arange(n), np.diff(ptr))
+        g = np.zeros((n, 3))
+        np.add.at(g, rows, val * c[idx][:, None])
+        gn = np.einsum("ij,ij->i", f, self._normals)
+        direct = f - np.minimum(gn, 0.0)[:, None] * self._normals
+        total = -(self._areas * c)[:, None] * self._normals + direct - np.einsum("nij,nj->ni", self._wgrad, g)
+        out = self.rest_positions.copy()
+        free = self._free
+        mag = np.linalg.norm(total[free], axis=1)
+        k0 = self._areas[free] * self._kappa[free]
+        beta = self._beta[free]
+        u = mag / k0
+        for _ in range(60):                       # Newton on k0 (u + beta u^3) = |f|
+            r = k0 * (u + beta * u ** 3) - mag
+            u = np.maximum(u - r / (k0 * (1.0 + 3.0 * beta * u * u)), 0.0)
+        unit = total[free] / np.where(mag > 0, mag, 1.0)[:, None]
+        out[free] += u[:, None] * unit
+        out[self.fixed] = self.fixed_targets[self.fixed]
+        return out
+
+    def _check_forces(self, forces) -> np.ndarray:
+        f = self.external_forces if forces is None else np.asarray(forces, dtype=np.float64)
+        if f.shape != self.positions.shape or not np.all(np.isfinite(f)):
+            raise ConfigError(f"forces must be a finite {self.positions.shape} array in N, got shape {f.shape}")
+        return f
 
     def total_load(self) -> float:
         """sum_i S_i C_i (N): the load the concentration currently carries (in steady state under

@@ -12,6 +12,9 @@ from numba import njit
 
 #: |C| (Pa) above which the concentration is taken as diverging
 MAX_CONCENTRATION = 1e12
+#: |C| may exceed the largest load or initial value by this factor before it counts as diverging
+#: (the explicit update obeys the maximum principle when stable; obtuse triangles overshoot a little)
+GROWTH = 4.0
 
 
 @njit(cache=True, nogil=True)
@@ -42,11 +45,29 @@ def diffuse(conc, tmp, source, nodes, rate_ptr, rate_idx, rate_val, inv_tau, dt,
 
 @njit(cache=True, nogil=True)
 def load_source(forces, normals, areas, nodes, source):
-    """Contact pressure p_i = max(0, -G_i . n_i) / S_i (Pa) at every node in ``nodes``."""
+    """Contact pressure p_i = max(0, -G_i . n_i) / S_i (Pa) at every node in ``nodes``; returns max p."""
+    pmax = 0.0
     for q in range(nodes.shape[0]):
         i = nodes[q]
         gn = forces[i, 0] * normals[i, 0] + forces[i, 1] * normals[i, 1] + forces[i, 2] * normals[i, 2]
-        source[i] = -gn / areas[i] if gn < 0.0 else 0.0
+        p = -gn / areas[i] if gn < 0.0 else 0.0
+        source[i] = p
+        if p > pmax:
+            pmax = p
+    return pmax
+
+
+@njit(cache=True, nogil=True)
+def max_abs(values, nodes):
+    """max |values[i]| over ``nodes`` (inf if any is non-finite)."""
+    out = 0.0
+    for q in range(nodes.shape[0]):
+        v = abs(values[nodes[q]])
+        if not (v < np.inf):
+            return np.inf
+        if v > out:
+            out = v
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -94,11 +115,20 @@ def move_nodes(pos, vel, rest, conc, forces, normals, areas, masses, damping, ka
 
 @njit(cache=True, nogil=True)
 def diffusion_step(pos, vel, rest, conc, tmp, source, forces, normals, areas, masses, damping, kappa, beta, wgrad,
-                   rate_ptr, rate_idx, rate_val, grad_ptr, grad_idx, grad_val, active, free, inv_tau, dt, substeps):
-    """One model step: load -> diffusion -> forces and motion. False if the concentration diverged."""
-    load_source(forces, normals, areas, active, source)
+                   rate_ptr, rate_idx, rate_val, grad_ptr, grad_idx, grad_val, active, free, inv_tau, dt, substeps,
+                   bound):
+    """One model step: load -> diffusion -> forces and motion.
+
+    ``bound`` (Pa) is the largest |C| seen or injected so far: a stable update obeys the maximum
+    principle (|C| never exceeds it), so |C| above ``GROWTH x bound`` means divergence. Returns
+    the new bound, or -1 if the concentration diverged (the nodes are then not moved)."""
+    pmax = load_source(forces, normals, areas, active, source)
+    if pmax > bound:
+        bound = pmax
     if not diffuse(conc, tmp, source, active, rate_ptr, rate_idx, rate_val, inv_tau, dt, substeps):
-        return False
+        return -1.0
+    if max_abs(conc, active) > GROWTH * bound + 1e-9:
+        return -1.0
     move_nodes(pos, vel, rest, conc, forces, normals, areas, masses, damping, kappa, beta, wgrad,
                grad_ptr, grad_idx, grad_val, free, dt)
-    return True
+    return bound
