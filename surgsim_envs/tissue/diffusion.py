@@ -29,7 +29,8 @@ from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.geometry.volume import Volume
 from surgsim_envs.tissue import diffusion_operator as op
 from surgsim_envs.tissue.contract_v2_shim import CONTRACT_BASES
-from surgsim_envs.tissue.diffusion_kernels import diffusion_step
+from surgsim_envs.tissue.diffusion_kernels import (AREA, BETA, COEF_COLUMNS, DAMPING, INV_MASS, K_AREA, NX, NZ,
+                                                   diffusion_step)
 from surgsim_envs.tissue.materials import Material
 
 SCHEMES = ("auto", "triangles", "grid")
@@ -214,6 +215,22 @@ class DiffusionModel(*CONTRACT_BASES):
         # gradient force coefficient: gradient_scale * S_i h omega_i R_i (N per Pa/m)
         self._wgrad = np.ascontiguousarray(
             (self.gradient_scale * self._areas * self.depth * omega)[:, None, None] * self._rel)
+        # the gradient force as one operator: F_i = -sum_k gf[k] C[idx[k]] with gf = Wg_i grad_val[k]
+        ptr, idx, val = self._grad
+        rows = np.repeat(np.arange(len(ptr) - 1), np.diff(ptr))
+        self._gforce = (ptr, idx, np.ascontiguousarray(np.einsum("kij,kj->ki", self._wgrad[rows], val)))
+        self._update_coef()
+
+    def _update_coef(self) -> None:
+        """The per-node coefficient table of the step kernel (diffusion_kernels.COEF_COLUMNS)."""
+        coef = np.zeros((self.n_nodes_total, COEF_COLUMNS))
+        coef[:, NX:NZ + 1] = self._normals
+        coef[:, AREA] = self._areas
+        coef[:, INV_MASS] = np.where(self.masses > 0, 1.0 / np.where(self.masses > 0, self.masses, 1.0), 0.0)
+        coef[:, DAMPING] = self._damping
+        coef[:, K_AREA] = self._areas * self._kappa
+        coef[:, BETA] = self._beta
+        self._coef = coef
 
     @property
     def n_nodes_total(self) -> int:
@@ -250,9 +267,9 @@ class DiffusionModel(*CONTRACT_BASES):
         if self._c_bound is None:             # first step after a build/reset/manual change: initial state
             self._c_bound = float(np.abs(self.concentration).max())
         bound = diffusion_step(self.positions, self.velocities, self.rest_positions, self.concentration, self._tmp,
-                            self._source, forces, self._normals, self._areas, self.masses, self._damping,
-                            self._kappa, self._beta, self._wgrad, *self._rates, *self._grad, self._active_nodes,
-                            self._free, 1.0 / self.load_time, dt, self.substeps, self._c_bound)
+                               self._source, forces, self._coef, self._normals, self._areas, *self._rates,
+                               *self._gforce, self._active_nodes, self._free, 1.0 / self.load_time, dt,
+                               self.substeps, self._c_bound)
         self.integrated_external_forces = forces
         if bound < 0:
             raise TissueUnstableError(self.name, dt, self.critical_dt(),

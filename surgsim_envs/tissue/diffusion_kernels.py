@@ -70,53 +70,60 @@ def max_abs(values, nodes):
     return out
 
 
+#: columns of the per-node coefficient table ``coef`` (N, COEF_COLUMNS)
+NX, NY, NZ, AREA, INV_MASS, DAMPING, K_AREA, BETA = range(8)
+COEF_COLUMNS = 8
+
+
 @njit(cache=True, nogil=True)
-def move_nodes(pos, vel, rest, conc, forces, normals, areas, masses, damping, kappa, beta, wgrad,
-               grad_ptr, grad_idx, grad_val, free, dt):
+def move_nodes(pos, vel, rest, conc, forces, coef, gf_ptr, gf_idx, gf_val, free, dt):
     """Eq. 9.22, symplectic Euler, at the ``free`` nodes:
     m a = -S C n (the diffused load) + G~ (external force minus its compressive normal part)
-          - Wg grad C (eqs. 9.19-9.21) - S kappa (1 + beta |u|^2) u (the bulk under the surface)
-          - damping m v."""
+          - sum_k gf_val[k] C[gf_idx[k]] (gradient force, eqs. 9.19-9.21)
+          - S kappa (1 + beta |u|^2) u (the bulk under the surface) - damping m v.
+    ``coef`` rows: normal (3), S, 1/m, damping (1/s), S kappa (N/m), beta (1/m^2)."""
     for q in range(free.shape[0]):
         i = free[q]
         gx = 0.0
         gy = 0.0
         gz = 0.0
-        for k in range(grad_ptr[i], grad_ptr[i + 1]):
-            c = conc[grad_idx[k]]
-            gx += grad_val[k, 0] * c
-            gy += grad_val[k, 1] * c
-            gz += grad_val[k, 2] * c
-        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
-        fx, fy, fz = forces[i, 0], forces[i, 1], forces[i, 2]
+        for k in range(gf_ptr[i], gf_ptr[i + 1]):
+            c = conc[gf_idx[k]]
+            gx += gf_val[k, 0] * c
+            gy += gf_val[k, 1] * c
+            gz += gf_val[k, 2] * c
+        nx = coef[i, NX]
+        ny = coef[i, NY]
+        nz = coef[i, NZ]
+        fx = forces[i, 0]
+        fy = forces[i, 1]
+        fz = forces[i, 2]
         gn = fx * nx + fy * ny + fz * nz
         if gn < 0.0:                      # the compressive part enters through the concentration
             fx -= gn * nx
             fy -= gn * ny
             fz -= gn * nz
-        load = areas[i] * conc[i]
+        load = coef[i, AREA] * conc[i]
         ux = pos[i, 0] - rest[i, 0]
         uy = pos[i, 1] - rest[i, 1]
         uz = pos[i, 2] - rest[i, 2]
-        k_el = areas[i] * kappa[i] * (1.0 + beta[i] * (ux * ux + uy * uy + uz * uz))
-        m = masses[i]
-        c_d = damping[i] * m
-        w = wgrad[i]
-        ax = fx - load * nx - (w[0, 0] * gx + w[0, 1] * gy + w[0, 2] * gz) - k_el * ux - c_d * vel[i, 0]
-        ay = fy - load * ny - (w[1, 0] * gx + w[1, 1] * gy + w[1, 2] * gz) - k_el * uy - c_d * vel[i, 1]
-        az = fz - load * nz - (w[2, 0] * gx + w[2, 1] * gy + w[2, 2] * gz) - k_el * uz - c_d * vel[i, 2]
-        vel[i, 0] += dt * ax / m
-        vel[i, 1] += dt * ay / m
-        vel[i, 2] += dt * az / m
-        pos[i, 0] += dt * vel[i, 0]
-        pos[i, 1] += dt * vel[i, 1]
-        pos[i, 2] += dt * vel[i, 2]
+        k_el = coef[i, K_AREA] * (1.0 + coef[i, BETA] * (ux * ux + uy * uy + uz * uz))
+        c_d = coef[i, DAMPING]
+        h_m = dt * coef[i, INV_MASS]
+        vx = vel[i, 0] + h_m * (fx - load * nx - gx - k_el * ux) - dt * c_d * vel[i, 0]
+        vy = vel[i, 1] + h_m * (fy - load * ny - gy - k_el * uy) - dt * c_d * vel[i, 1]
+        vz = vel[i, 2] + h_m * (fz - load * nz - gz - k_el * uz) - dt * c_d * vel[i, 2]
+        vel[i, 0] = vx
+        vel[i, 1] = vy
+        vel[i, 2] = vz
+        pos[i, 0] += dt * vx
+        pos[i, 1] += dt * vy
+        pos[i, 2] += dt * vz
 
 
 @njit(cache=True, nogil=True)
-def diffusion_step(pos, vel, rest, conc, tmp, source, forces, normals, areas, masses, damping, kappa, beta, wgrad,
-                   rate_ptr, rate_idx, rate_val, grad_ptr, grad_idx, grad_val, active, free, inv_tau, dt, substeps,
-                   bound):
+def diffusion_step(pos, vel, rest, conc, tmp, source, forces, coef, normals, areas,
+                   rate_ptr, rate_idx, rate_val, gf_ptr, gf_idx, gf_val, active, free, inv_tau, dt, substeps, bound):
     """One model step: load -> diffusion -> forces and motion.
 
     ``bound`` (Pa) is the largest |C| seen or injected so far: a stable update obeys the maximum
@@ -129,6 +136,5 @@ def diffusion_step(pos, vel, rest, conc, tmp, source, forces, normals, areas, ma
         return -1.0
     if max_abs(conc, active) > GROWTH * bound + 1e-9:
         return -1.0
-    move_nodes(pos, vel, rest, conc, forces, normals, areas, masses, damping, kappa, beta, wgrad,
-               grad_ptr, grad_idx, grad_val, free, dt)
+    move_nodes(pos, vel, rest, conc, forces, coef, gf_ptr, gf_idx, gf_val, free, dt)
     return bound
