@@ -78,6 +78,8 @@ class DiffusionModel(*CONTRACT_BASES):
     depth: h (m), depth of tissue under the surface (default half the smallest bounding-box side).
     length: L (m), the size that makes omega dimensionless (default the largest bounding-box side).
     gradient_scale: factor on the gradient force of eqs. 9.19-9.21 (1 = as derived, 0 = off).
+    damping_ratio: extra damping of each node on the bulk, as a fraction of critical (1 = critical;
+        0 leaves only the material's mass-proportional ``damping``, the paper's "damping").
     scheme: "triangles" (eqs. 9.16-9.18), "grid" (eq. 9.9 where the volume carries ``quads`` and a
         node has a full 4-neighbour stencil, triangles elsewhere) or "auto" (grid if quads exist).
     substeps: diffusion sub-steps per step: an integer (1 = the paper's single explicit update; a
@@ -97,7 +99,7 @@ class DiffusionModel(*CONTRACT_BASES):
     def __init__(self, volume: Volume, material: Material | str | Mapping[str, Any] = "liver", *,
                  omega=0.08, omega_long: float | None = None, omega_tensor=None, axis=(0.0, 0.0, 1.0), centre=None,
                  load_time: float = 0.05, depth: float | None = None, length: float | None = None,
-                 gradient_scale: float = 1.0, scheme: str = "auto", substeps: int | str = "auto", **base_kwargs):
+                 gradient_scale: float = 1.0, damping_ratio: float = 1.0, scheme: str = "auto", substeps: int | str = "auto", **base_kwargs):
         if not isinstance(volume, Volume):
             raise ConfigError(f"volume must be a surgsim_envs.geometry.Volume, got {type(volume).__name__}")
         surf = surface_view(volume)
@@ -123,6 +125,9 @@ class DiffusionModel(*CONTRACT_BASES):
                               f"got {substeps!r}")
         self.auto_substeps = substeps == "auto"
         self.substeps = 1 if self.auto_substeps else int(substeps)
+        self.damping_ratio = float(damping_ratio)
+        if not (math.isfinite(self.damping_ratio) and self.damping_ratio >= 0):
+            raise ConfigError(f"diffusion model: damping_ratio must be >= 0, got {damping_ratio!r}; 1 = critical")
         self.gradient_scale = float(gradient_scale)
         if not (math.isfinite(self.gradient_scale) and self.gradient_scale >= 0):
             raise ConfigError(f"diffusion model: gradient_scale must be >= 0, got {gradient_scale!r}")
@@ -211,7 +216,10 @@ class DiffusionModel(*CONTRACT_BASES):
         self._bound_cache = None
         self._kappa = f["young"] / self.depth
         self._beta = f["nonlinear"] / self.depth ** 2
-        self._damping = f["damping"].copy()
+        # damping (1/s): the material's mass-proportional part plus damping_ratio x critical of each
+        # node on the bulk (2 zeta omega_n, omega_n^2 = E / (rho h^2)): the bulk below is viscous
+        omega_n = np.sqrt(f["young"] / (f["density"] * self.depth ** 2))
+        self._damping = f["damping"] + 2.0 * self.damping_ratio * omega_n
         # gradient force coefficient: gradient_scale * S_i h omega_i R_i (N per Pa/m)
         self._wgrad = np.ascontiguousarray(
             (self.gradient_scale * self._areas * self.depth * omega)[:, None, None] * self._rel)
@@ -239,7 +247,7 @@ class DiffusionModel(*CONTRACT_BASES):
     def _on_material_changed(self, name: str) -> None:
         if name == "omega" and np.any(self.fields["omega"][self._active_nodes] <= 0):
             raise ConfigError("omega must be > 0 at every surface node")
-        if name in ("young", "damping", "nonlinear") and np.any(self.fields[name] < (0 if name != "young" else 1e-300)):
+        if name in ("young", "damping", "nonlinear", "density") and np.any(self.fields[name] < (0 if name != "young" else 1e-300)):
             raise ConfigError(f"{name} must be {'> 0' if name == 'young' else '>= 0'} at every node")
         self._derive()
 
