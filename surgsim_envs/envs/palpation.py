@@ -48,7 +48,7 @@ from gymnasium import spaces
 
 from surgsim_envs.envs.base import (SurgSimEnv, check_on_unstable, check_positive, check_range,
                                    check_task_resolution, sample)
-from surgsim_envs.envs.stiffness_field import StiffnessField
+from surgsim_envs.envs.stiffness_field import stiffness_field
 from surgsim_envs.errors import ConfigError
 
 
@@ -67,6 +67,8 @@ class PalpationConfig:
     on_unstable: str = "raise"         # "terminate": a tissue divergence ends the episode (info["unstable"])
     slab_size: Sequence[float] = (0.1, 0.1, 0.02)   # m
     material: str = "liver"
+    model: str = "mass_spring"         # tissue model registry name (any model with the contract-v2 material API)
+    model_options: dict | None = None  # extra keyword options of the tissue model (None: {"integrator": "symplectic"})
     tip_radius: float = 0.01           # m, probe tip
     probe_speed: float = 0.2           # m/s, rate limit of the probe target
     # action scaling
@@ -217,8 +219,10 @@ class PalpationEnv(SurgSimEnv):
         from surgsim_envs.scene import Simulation, palpation_config, palpation_scene
 
         c = self.config
-        cfg = palpation_config(organ="slab")
+        cfg = palpation_config(organ="slab", model=c.model)
         t = cfg.tissues[0]
+        if c.model_options is not None:
+            t.options = dict(c.model_options)
         t.spacing = c.spacing
         t.resolution, t.error_tolerance, t.step_budget_us = c.resolution, c.error_tolerance, c.step_budget_us
         t.material = c.material
@@ -231,7 +235,7 @@ class PalpationEnv(SurgSimEnv):
         p.position = (0.0, 0.0, self.surface_z + c.tip_radius + c.hover)
         cfg.dt = c.dt
         self.sim = Simulation(palpation_scene(cfg), dt=c.dt, substeps=self.substeps)
-        self.field = StiffnessField(self.sim.tissue())
+        self.field = stiffness_field(self.sim.tissue())
         self.home = np.asarray(p.position, dtype=float)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
         big = np.float32(1e6)

@@ -63,3 +63,34 @@ class StiffnessField:
         cache = getattr(t, "_coeff_cache", None)
         if cache is not None:
             cache.clear()
+
+
+class ContractStiffnessField:
+    """The same interface for any tissue model with the contract-v2 material API
+    (``element_centroids()``, ``scale_material("young", factor)``): per-element factors relative
+    to the build (for a surface-only model, its nodes are the elements)."""
+
+    def __init__(self, tissue):
+        for attr in ("element_centroids", "scale_material"):
+            if not hasattr(tissue, attr):
+                raise ConfigError(f"{type(tissue).__name__} has no {attr}(); it cannot take a stiffness pattern")
+        self.tissue = tissue
+        self.centroids = np.asarray(tissue.element_centroids(), dtype=np.float64)
+        self.tet_scale = np.ones(len(self.centroids))
+
+    sphere_mask = StiffnessField.sphere_mask
+
+    def apply(self, tet_scale: np.ndarray) -> None:
+        s = np.asarray(tet_scale, dtype=np.float64)
+        if s.shape != self.tet_scale.shape or not np.all(np.isfinite(s)) or np.any(s <= 0):
+            raise ConfigError(f"tet_scale must be a positive finite ({len(self.tet_scale)},) array")
+        self.tet_scale = s.copy()
+        self.tissue.scale_material("young", s)
+
+
+def stiffness_field(tissue):
+    """A stiffness pattern for ``tissue``: the contract-v2 path if the model has it, else the
+    mass-spring fast path."""
+    if hasattr(tissue, "scale_material"):
+        return ContractStiffnessField(tissue)
+    return StiffnessField(tissue)
