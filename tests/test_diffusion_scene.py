@@ -54,3 +54,34 @@ def test_palpation_task_runs_with_the_diffusion_model():
         assert np.all(np.isfinite(obs)) and np.isfinite(reward)
     assert max(forces) > 0.2                              # pressing 8 mm into the slab pushes back
     env.close()
+
+
+def _haptic_press(rate_hz, method):
+    from surgsim_envs.haptics import DeviceLimits, DeviceMapping, ScriptedDevice, ServoConfig, ServoLoop, TrajectorySpec
+    from surgsim_envs.haptics import scene_adapter
+
+    phys = scene_adapter.make_haptic_simulation("palpation", spacing=0.01, model="diffusion", organ="slab")
+    top = scene_adapter.tissue_top(phys) + float(phys.tool.config.tip_radius)
+    home = phys.home_position.copy()
+    bottom = top - 0.004 - home[2]
+    dev = ScriptedDevice(TrajectorySpec(waypoints=[[0, 0, 0], [0, 0, bottom], [0, 0, bottom]], speeds=0.02,
+                                        dwell=[0.0, 0.1, 0.05], profile="minimum_jerk"), limits=DeviceLimits(max_force=10.0))
+    with dev:
+        loop = ServoLoop(dev, phys, ServoConfig(extrapolation=method, mapping=DeviceMapping(origin=tuple(home))))
+        stats = loop.run_simulated(dev.duration, physics_rate_hz=rate_hz)
+    return dev.force_log.forces[:, 2], stats
+
+
+def test_force_extrapolation_covers_250hz_physics_at_1khz_haptics():
+    """Sec. 9.6.3: when the physics runs below 1 kHz, extrapolation fills the servo ticks. A 4 mm
+    press on the diffusion slab: physics at 250 Hz, servo at 1 kHz, against physics at 1 kHz."""
+    ref, st = _haptic_press(None, "linear")
+    assert st.physics_updates == len(ref)
+    assert ref.max() > 0.1
+    rms = {}
+    for method in ("hold", "linear", "stiffness"):
+        f, st = _haptic_press(250, method)
+        assert st.physics_updates == pytest.approx(len(f) / 4, abs=1)
+        rms[method] = float(np.sqrt(np.mean((f - ref) ** 2)))
+    assert rms["linear"] < 0.5 * rms["hold"] and rms["stiffness"] < 0.5 * rms["hold"]
+    assert rms["linear"] < 0.01 * ref.max()
