@@ -36,6 +36,12 @@ from surgsim_envs.tissue.materials import Material
 SCHEMES = ("auto", "triangles", "grid")
 #: most diffusion sub-steps per step (substeps="auto" uses up to this many)
 MAX_SUBSTEPS = 64
+#: calibration against FEM indentation on another setup (docs/models/diffusion.md "Calibration"):
+#: ``surgsim fit --model diffusion --test indent --data fem_indent_spleen.csv --material spleen
+#: --radius 0.004 --thickness 0.02 --spacing 0.0015 --option length=depth`` on the tet FEM's force
+#: curve (E 10 kPa, nu 0.45, 4 mm sphere, 20 mm slab) gave young 13,573.5 Pa (x 1.357) and omega
+#: 0.0438 (1.5 % RMS misfit). The accuracy chart (liver 4 kPa, 5 mm sphere, 30 mm slab) uses it.
+INDENT_CALIBRATION = {"omega": 0.043827, "length": "depth", "stiffness_factor": 13573.5 / 10000.0}
 
 
 def _positive(value, name: str, unit: str, fix: str) -> float:
@@ -76,7 +82,10 @@ class DiffusionModel(*CONTRACT_BASES):
     axis, centre: polar axis and centre of the latitude/longitude directions (default z, bbox centre).
     load_time: tau (s), the time over which the load spreads and relaxes into the bulk.
     depth: h (m), depth of tissue under the surface (default half the smallest bounding-box side).
-    length: L (m), the size that makes omega dimensionless (default the largest bounding-box side).
+    length: L (m), the size that makes omega dimensionless (default the largest bounding-box side;
+        "depth": L = depth, so that omega transfers between bodies of one thickness and any width).
+    stiffness_factor: the bulk modulus is ``stiffness_factor x young / depth`` (Pa/m); calibrated
+        against indentation (INDENT_CALIBRATION), 1 otherwise.
     gradient_scale: factor on the gradient force of eqs. 9.19-9.21 (1 = as derived, 0 = off).
     damping_ratio: extra damping of each node on the bulk, as a fraction of critical (1 = critical;
         0 leaves only the material's mass-proportional ``damping``, the paper's "damping").
@@ -95,11 +104,15 @@ class DiffusionModel(*CONTRACT_BASES):
     surface_only: ClassVar[bool] = True
     material_fields: ClassVar[tuple[str, ...]] = ("young", "density", "damping", "nonlinear", "omega")
     node_field_names: ClassVar[tuple[str, ...]] = ("displacement", "stress", "concentration", "omega")
+    #: parameters ``surgsim fit --test indent`` searches besides young (bounds), see bench/fit.py
+    fit_shape_parameters: ClassVar[dict] = {"omega": (1e-4, 2.0)}
+    #: options of the calibrated model on the accuracy chart (bench/accuracy.py), see INDENT_CALIBRATION
+    accuracy_options: ClassVar[dict] = INDENT_CALIBRATION
 
     def __init__(self, volume: Volume, material: Material | str | Mapping[str, Any] = "liver", *,
                  omega=0.08, omega_long: float | None = None, omega_tensor=None, axis=(0.0, 0.0, 1.0), centre=None,
                  load_time: float = 0.05, depth: float | None = None, length: float | None = None,
-                 gradient_scale: float = 1.0, damping_ratio: float = 1.0, scheme: str = "auto", substeps: int | str = "auto", **base_kwargs):
+                 gradient_scale: float = 1.0, damping_ratio: float = 1.0, stiffness_factor: float = 1.0, scheme: str = "auto", substeps: int | str = "auto", **base_kwargs):
         if not isinstance(volume, Volume):
             raise ConfigError(f"volume must be a surgsim_envs.geometry.Volume, got {type(volume).__name__}")
         surf = surface_view(volume)
@@ -110,8 +123,12 @@ class DiffusionModel(*CONTRACT_BASES):
         self.load_time = _positive(load_time, "load_time", "s", "try 0.05")
         self.depth = _positive(depth if depth is not None else 0.5 * float(ext.min() if ext.min() > 0 else ext.max()),
                                "depth", "m", "give the tissue depth under the surface, e.g. 0.02")
+        if isinstance(length, str) and length == "depth":
+            length = self.depth
         self.length = _positive(length if length is not None else float(ext.max()), "length", "m",
-                                "give the body's size, e.g. 0.1")
+                                "give the body's size in m (or 'depth'), e.g. 0.1")
+        self.stiffness_factor = _positive(stiffness_factor, "stiffness_factor", "(dimensionless)",
+                                          "the bulk modulus is stiffness_factor x young / depth; 1 = uncalibrated")
         if scheme not in SCHEMES:
             raise ConfigError(f"diffusion model: scheme={scheme!r}; choose one of {SCHEMES}")
         has_quads = getattr(surf, "quads", None) is not None
@@ -214,11 +231,11 @@ class DiffusionModel(*CONTRACT_BASES):
             rows, cols, vals = op.triangle_rates(nodes, tris, omega, self._rel, scale, self._areas)
         self._rates = op.to_csr(self.n_nodes_total, rows, cols, vals)
         self._bound_cache = None
-        self._kappa = f["young"] / self.depth
+        self._kappa = self.stiffness_factor * f["young"] / self.depth
         self._beta = f["nonlinear"] / self.depth ** 2
         # damping (1/s): the material's mass-proportional part plus damping_ratio x critical of each
         # node on the bulk (2 zeta omega_n, omega_n^2 = E / (rho h^2)): the bulk below is viscous
-        omega_n = np.sqrt(f["young"] / (f["density"] * self.depth ** 2))
+        omega_n = np.sqrt(self.stiffness_factor * f["young"] / (f["density"] * self.depth ** 2))
         self._damping = f["damping"] + 2.0 * self.damping_ratio * omega_n
         # gradient force coefficient: gradient_scale * S_i h omega_i R_i (N per Pa/m)
         self._wgrad = np.ascontiguousarray(
@@ -373,7 +390,6 @@ class DiffusionModel(*CONTRACT_BASES):
     def steady_concentration(self, forces: np.ndarray | None = None) -> np.ndarray:
         """(N,) Pa, the concentration a constant ``forces`` (N,3) N settles to: the sparse solve of
         ``sum_j a_ij (C_j - C_i) + (p_i - C_i)/tau = 0`` over the surface nodes."""
-        from scipy.sparse import csr_matrix, identity
         from scipy.sparse.linalg import spsolve
 
         f = self._check_forces(forces)
@@ -382,11 +398,7 @@ class DiffusionModel(*CONTRACT_BASES):
         gn = np.einsum("ij,ij->i", f, self._normals)
         p[act] = np.where(gn[act] < 0, -gn[act] / self._areas[act], 0.0)
         n = self.n_nodes_total
-        ptr, idx, val = self._rates
-        A = csr_matrix((val, idx, ptr), shape=(n, n))
-        M = (identity(n, format="csr") * (1.0 / self.load_time) + csr_matrix(
-            (np.asarray(A.sum(axis=1)).ravel(), (np.arange(n), np.arange(n))), shape=(n, n)) - A).tocsr()
-        sub = M[act][:, act]
+        sub = self._steady_matrix()[act][:, act]
         c = np.zeros(n)
         c[act] = spsolve(sub.tocsc(), p[act] / self.load_time)
         return c
@@ -419,6 +431,56 @@ class DiffusionModel(*CONTRACT_BASES):
         out[free] += u[:, None] * unit
         out[self.fixed] = self.fixed_targets[self.fixed]
         return out
+
+    def contact_compliance(self, nodes, axis: int = 2) -> np.ndarray:
+        """(k,k) m/N: displacement of ``nodes`` along ``axis`` per unit force along ``axis`` at each of
+        them, the force pressing into the surface (the static response is linear there when
+        nonlinear = 0; benchmarks use it for frictionless indentation, bench/material.indent)."""
+        from scipy.sparse.linalg import splu
+
+        nodes = np.asarray(nodes, dtype=np.int64).reshape(-1)
+        n = self.n_nodes_total
+        act = self._active_nodes
+        pos_in_act = -np.ones(n, dtype=np.int64)
+        pos_in_act[act] = np.arange(len(act))
+        if np.any(pos_in_act[nodes] < 0):
+            raise ConfigError("contact_compliance: every node must be a surface node")
+        e = np.zeros(3)
+        e[axis] = 1.0
+        sign = -np.sign(self._normals[nodes] @ e)            # unit force pressing into the surface
+        sign[sign == 0] = -1.0
+        lu = splu(self._steady_matrix()[act][:, act].tocsc())
+        P = np.zeros((len(act), len(nodes)))                 # pressure per unit force, times 1/tau
+        for col, (i, sg) in enumerate(zip(nodes, sign)):
+            fn = sg * float(self._normals[i] @ e)
+            P[pos_in_act[i], col] = max(-fn, 0.0) / self._areas[i] / self.load_time
+        C = np.zeros((n, len(nodes)))
+        C[act] = lu.solve(P)
+        ptr, idx, val = self._grad
+        rows = np.repeat(np.arange(n), np.diff(ptr))
+        g = np.zeros((n, len(nodes), 3))
+        np.add.at(g, rows, val[:, None, :] * C[idx][:, :, None])
+        load = -(self._areas[:, None, None] * C[:, :, None]) * self._normals[:, None, :] \
+            - np.einsum("nij,nkj->nki", self._wgrad, g)
+        # the direct (tangential) part of each unit force at its own node
+        for col, (i, sg) in enumerate(zip(nodes, sign)):
+            f = sg * e
+            fn = float(f @ self._normals[i])
+            load[i, col] += f - min(fn, 0.0) * self._normals[i]
+        k0 = np.where(self._areas * self._kappa > 0, self._areas * self._kappa, np.inf)
+        u = load[nodes, :, axis] / k0[nodes, None]
+        u[self.fixed[nodes]] = 0.0
+        return u * sign[None, :]                              # per unit force along +axis
+
+    def _steady_matrix(self):
+        """Sparse (N,N) 1/s matrix M with dC/dt = -M C + p/tau."""
+        from scipy.sparse import csr_matrix, identity
+
+        n = self.n_nodes_total
+        ptr, idx, val = self._rates
+        A = csr_matrix((val, idx, ptr), shape=(n, n))
+        diag = csr_matrix((np.asarray(A.sum(axis=1)).ravel(), (np.arange(n), np.arange(n))), shape=(n, n))
+        return (identity(n, format="csr") * (1.0 / self.load_time) + diag - A).tocsr()
 
     def _check_forces(self, forces) -> np.ndarray:
         f = self.external_forces if forces is None else np.asarray(forces, dtype=np.float64)
