@@ -293,3 +293,17 @@ def test_auto_substeps_cover_dt():
     m = paper_case("anisotropic", points=400)
     m.step(2e-3, contact_forces(m))
     assert m.substeps * m._diffusion_bound() >= 2e-3
+
+
+def test_per_node_tensor_reproduces_latitude_longitude_anisotropy():
+    vol = rounded_cube_volume(points=300)
+    lat_long = tissue.make("diffusion", vol, "liver", omega=0.08, omega_long=0.24, scheme="triangles")
+    tensor = 0.08 * lat_long._rel                        # the same tensors given per node
+    per_node = tissue.make("diffusion", vol, "liver", omega_tensor=tensor, scheme="triangles")
+    np.testing.assert_allclose(per_node._rates[2], lat_long._rates[2], rtol=1e-9, atol=1e-12)
+    bad = tensor.copy()
+    bad[5] = -bad[5]
+    with pytest.raises(ConfigError, match="not positive definite"):
+        tissue.make("diffusion", vol, "liver", omega_tensor=bad)
+    with pytest.raises(ConfigError, match="needs a volume with a structured quad grid"):
+        tissue.make("diffusion", make_volume("slab", spacing=0.01), "liver", scheme="grid")
