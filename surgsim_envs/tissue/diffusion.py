@@ -79,7 +79,8 @@ class DiffusionModel(*CONTRACT_BASES):
         ``omega`` is then the latitudinal one (anisotropy, Fig. 9.3).
     omega_tensor: (N,3,3) per-node dimensionless tensor (overrides omega/omega_long); only its
         tangent-plane part matters.
-    axis, centre: polar axis and centre of the latitude/longitude directions (default z, bbox centre).
+    axis: polar axis of the latitude/longitude directions (default z); the directions follow the
+        surface normal (latitude = axis x normal), so no centre is needed.
     load_time: tau (s), the time over which the load spreads and relaxes into the bulk.
     depth: h (m), depth of tissue under the surface (default half the smallest bounding-box side).
     length: L (m), the size that makes omega dimensionless (default the largest bounding-box side;
@@ -110,9 +111,10 @@ class DiffusionModel(*CONTRACT_BASES):
     accuracy_options: ClassVar[dict] = INDENT_CALIBRATION
 
     def __init__(self, volume: Volume, material: Material | str | Mapping[str, Any] = "liver", *,
-                 omega=0.08, omega_long: float | None = None, omega_tensor=None, axis=(0.0, 0.0, 1.0), centre=None,
+                 omega=0.08, omega_long: float | None = None, omega_tensor=None, axis=(0.0, 0.0, 1.0),
                  load_time: float = 0.05, depth: float | None = None, length: float | None = None,
-                 gradient_scale: float = 1.0, damping_ratio: float = 1.0, stiffness_factor: float = 1.0, scheme: str = "auto", substeps: int | str = "auto", **base_kwargs):
+                 gradient_scale: float = 1.0, damping_ratio: float = 1.0, stiffness_factor: float = 1.0,
+                 scheme: str = "auto", substeps: int | str = "auto", **base_kwargs):
         if not isinstance(volume, Volume):
             raise ConfigError(f"volume must be a surgsim_envs.geometry.Volume, got {type(volume).__name__}")
         surf = surface_view(volume)
@@ -152,7 +154,7 @@ class DiffusionModel(*CONTRACT_BASES):
         self._areas = op.control_areas(surf.nodes, surf.surface)
         self._normals = op.vertex_normals(surf.nodes, surf.surface)
         self._omega_in = omega
-        self._rel = self._relative_tensors(surf, omega, omega_long, omega_tensor, axis, centre)
+        self._rel = self._relative_tensors(surf, omega, omega_long, omega_tensor, axis)
         super().__init__(surf, material, **base_kwargs)
         if not hasattr(self, "_fields0"):       # base class before contract v2
             self._fields0 = {k: v.copy() for k, v in self.fields.items()}
@@ -171,7 +173,7 @@ class DiffusionModel(*CONTRACT_BASES):
 
     # ---------------------------------------------------------------------------------------
     # Build
-    def _relative_tensors(self, surf, omega, omega_long, omega_tensor, axis, centre) -> np.ndarray:
+    def _relative_tensors(self, surf, omega, omega_long, omega_tensor, axis) -> np.ndarray:
         n = surf.n_nodes
         if omega_tensor is not None:
             t = np.asarray(omega_tensor, dtype=np.float64)
@@ -201,9 +203,7 @@ class DiffusionModel(*CONTRACT_BASES):
             raise ConfigError("diffusion model: omega_long needs a scalar omega (the latitudinal value); for "
                               "per-node anisotropy give omega_tensor")
         w_long = _positive(omega_long, "omega_long", "(dimensionless)", "e.g. 0.24 with omega=0.08 (Fig. 9.3)")
-        used = np.unique(surf.surface)
-        c = (surf.nodes[used].min(axis=0) + surf.nodes[used].max(axis=0)) / 2 if centre is None else np.asarray(centre, float)
-        lat, lon, s = op.lat_long_frames(surf.nodes - c, self._normals, axis, c)
+        lat, lon, s = op.lat_long_frames(self._normals, axis)
         return op.relative_tensors(self._normals, lat, lon, s, 1.0, w_long / float(om))
 
     def _build_fields(self) -> dict[str, np.ndarray]:

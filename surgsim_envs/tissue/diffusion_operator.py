@@ -95,7 +95,7 @@ def shape_gradients(nodes: np.ndarray, tris: np.ndarray):
     return grad, 0.5 * a2
 
 
-def lat_long_frames(nodes: np.ndarray, normals: np.ndarray, axis, centre):
+def lat_long_frames(normals: np.ndarray, axis):
     """``(t_lat, t_long, s)``: per node the unit latitudinal direction (along parallels, around
     ``axis``), the longitudinal one (along meridians, in the tangent plane) and ``s`` in [0, 1],
     the sine of the angle between the normal and the axis (0 at the poles, where the parametric
