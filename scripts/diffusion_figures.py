@@ -111,6 +111,31 @@ def figure_load_curve(out: Path) -> None:
     plt.close(fig)
 
 
+def figure_scene(out: Path) -> None:
+    """MuJoCo render of the palpation scene with the diffusion tissue: probe pressed 6 mm."""
+    from surgsim_envs.scene import Simulation, palpation_config, palpation_scene
+    from surgsim_envs.scene.render import SceneRenderer
+
+    cfg = palpation_config(organ="slab", model="diffusion")
+    cfg.tissues[0].spacing = 0.005
+    sim = Simulation(palpation_scene(cfg))
+    top = float(sim.tissue().positions[:, 2].max())
+    tip = float(cfg.probes[0].tip_radius)
+    sim.set_tool_target("probe", [0.0, 0.0, top + tip - 0.006], speed=0.05)
+    sim.run(0.6)
+    with SceneRenderer(sim, 640, 480) as r:
+        img = r.render("overview")
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    ax.imshow(img)
+    ax.set_axis_off()
+    f = sim.tool_force("probe")
+    ax.set_title(f"Palpation scene, diffusion model ({sim.tissue().n_nodes} nodes, surface only): "
+                 f"probe 6 mm in, {f[2]:.2f} N", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "diffusion_palpation.png", dpi=100)
+    plt.close(fig)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="docs/img")
@@ -120,7 +145,8 @@ def main() -> None:
     results = figure_cases(out)
     figure_profiles(results, out)
     figure_load_curve(out)
-    print(f"wrote {out}/diffusion_cases.png, diffusion_profiles.png, diffusion_load_curve.png")
+    figure_scene(out)
+    print(f"wrote {out}/diffusion_cases.png, diffusion_profiles.png, diffusion_load_curve.png, diffusion_palpation.png")
 
 
 if __name__ == "__main__":

@@ -295,7 +295,7 @@ class DiffusionModel(*CONTRACT_BASES):
                                self._source, forces, self._coef, self._normals, self._areas, *self._rates,
                                *self._gforce, self._active_nodes, self._free, 1.0 / self.load_time, dt,
                                self.substeps, self._c_bound)
-        self.integrated_external_forces = forces
+        np.copyto(self.integrated_external_forces, forces)   # the caller may reuse its buffer
         if bound < 0:
             raise TissueUnstableError(self.name, dt, self.critical_dt(),
                                       f"the concentration diverged (max |C| {float(np.abs(self.concentration).max()):.3g} Pa "
