@@ -307,3 +307,16 @@ def test_per_node_tensor_reproduces_latitude_longitude_anisotropy():
         tissue.make("diffusion", vol, "liver", omega_tensor=bad)
     with pytest.raises(ConfigError, match="needs a volume with a structured quad grid"):
         tissue.make("diffusion", make_volume("slab", spacing=0.01), "liver", scheme="grid")
+
+
+def test_gravity_sags_each_node_by_m_g_over_k():
+    """A body force acts directly on the nodes (not through the concentration): with the bulk
+    linear, each free node sags by m g / (S E / h)."""
+    vol = rounded_cube_volume(points=100)
+    m = tissue.make("diffusion", vol, {"preset": "liver", "nonlinear": 0.0}, gravity=(0.0, 0.0, -9.81))
+    for _ in range(3000):
+        m.step(1e-3)
+    expect = -9.81 * m.masses / (m._areas * m._kappa)
+    np.testing.assert_allclose(m.positions[:, 2] - m.rest_positions[:, 2], expect, rtol=1e-3)
+    assert np.all(m.concentration == 0.0)
+    np.testing.assert_allclose(m.static_solve(np.zeros_like(m.positions)), m.positions, atol=1e-9)

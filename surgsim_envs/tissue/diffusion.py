@@ -293,7 +293,7 @@ class DiffusionModel(*CONTRACT_BASES):
             self._c_bound = float(np.abs(self.concentration).max())
         bound = diffusion_step(self.positions, self.velocities, self.rest_positions, self.concentration, self._tmp,
                                self._source, forces, self._coef, self._normals, self._areas, *self._rates,
-                               *self._gforce, self._active_nodes, self._free, 1.0 / self.load_time, dt,
+                               *self._gforce, self._active_nodes, self._free, self.gravity, 1.0 / self.load_time, dt,
                                self.substeps, self._c_bound)
         np.copyto(self.integrated_external_forces, forces)   # the caller may reuse its buffer
         if bound < 0:
@@ -417,7 +417,8 @@ class DiffusionModel(*CONTRACT_BASES):
         np.add.at(g, rows, val * c[idx][:, None])
         gn = np.einsum("ij,ij->i", f, self._normals)
         direct = f - np.minimum(gn, 0.0)[:, None] * self._normals
-        total = -(self._areas * c)[:, None] * self._normals + direct - np.einsum("nij,nj->ni", self._wgrad, g)
+        total = (-(self._areas * c)[:, None] * self._normals + direct - np.einsum("nij,nj->ni", self._wgrad, g)
+                 + self.masses[:, None] * self.gravity[None, :])
         out = self.rest_positions.copy()
         free = self._free
         mag = np.linalg.norm(total[free], axis=1)

@@ -76,11 +76,11 @@ COEF_COLUMNS = 8
 
 
 @njit(cache=True, nogil=True)
-def move_nodes(pos, vel, rest, conc, forces, coef, gf_ptr, gf_idx, gf_val, free, dt):
+def move_nodes(pos, vel, rest, conc, forces, coef, gf_ptr, gf_idx, gf_val, free, gravity, dt):
     """Eq. 9.22, symplectic Euler, at the ``free`` nodes:
     m a = -S C n (the diffused load) + G~ (external force minus its compressive normal part)
           - sum_k gf_val[k] C[gf_idx[k]] (gradient force, eqs. 9.19-9.21)
-          - S kappa (1 + beta |u|^2) u (the bulk under the surface) - damping m v.
+          - S kappa (1 + beta |u|^2) u (the bulk under the surface) - damping m v + m g.
     ``coef`` rows: normal (3), S, 1/m, damping (1/s), S kappa (N/m), beta (1/m^2)."""
     for q in range(free.shape[0]):
         i = free[q]
@@ -110,9 +110,9 @@ def move_nodes(pos, vel, rest, conc, forces, coef, gf_ptr, gf_idx, gf_val, free,
         k_el = coef[i, K_AREA] * (1.0 + coef[i, BETA] * (ux * ux + uy * uy + uz * uz))
         c_d = coef[i, DAMPING]
         h_m = dt * coef[i, INV_MASS]
-        vx = vel[i, 0] + h_m * (fx - load * nx - gx - k_el * ux) - dt * c_d * vel[i, 0]
-        vy = vel[i, 1] + h_m * (fy - load * ny - gy - k_el * uy) - dt * c_d * vel[i, 1]
-        vz = vel[i, 2] + h_m * (fz - load * nz - gz - k_el * uz) - dt * c_d * vel[i, 2]
+        vx = vel[i, 0] + h_m * (fx - load * nx - gx - k_el * ux) + dt * (gravity[0] - c_d * vel[i, 0])
+        vy = vel[i, 1] + h_m * (fy - load * ny - gy - k_el * uy) + dt * (gravity[1] - c_d * vel[i, 1])
+        vz = vel[i, 2] + h_m * (fz - load * nz - gz - k_el * uz) + dt * (gravity[2] - c_d * vel[i, 2])
         vel[i, 0] = vx
         vel[i, 1] = vy
         vel[i, 2] = vz
@@ -123,7 +123,8 @@ def move_nodes(pos, vel, rest, conc, forces, coef, gf_ptr, gf_idx, gf_val, free,
 
 @njit(cache=True, nogil=True)
 def diffusion_step(pos, vel, rest, conc, tmp, source, forces, coef, normals, areas,
-                   rate_ptr, rate_idx, rate_val, gf_ptr, gf_idx, gf_val, active, free, inv_tau, dt, substeps, bound):
+                   rate_ptr, rate_idx, rate_val, gf_ptr, gf_idx, gf_val, active, free, gravity, inv_tau, dt, substeps,
+                   bound):
     """One model step: load -> diffusion -> forces and motion.
 
     ``bound`` (Pa) is the largest |C| seen or injected so far: a stable update obeys the maximum
@@ -136,5 +137,5 @@ def diffusion_step(pos, vel, rest, conc, tmp, source, forces, coef, normals, are
         return -1.0
     if max_abs(conc, active) > GROWTH * bound + 1e-9:
         return -1.0
-    move_nodes(pos, vel, rest, conc, forces, coef, gf_ptr, gf_idx, gf_val, free, dt)
+    move_nodes(pos, vel, rest, conc, forces, coef, gf_ptr, gf_idx, gf_val, free, gravity, dt)
     return bound
