@@ -51,3 +51,11 @@ def test_fit_to_fem_then_held_out_setup():
         errors[name] = force_error(res.depth, res.force, ref, dv)
     assert errors["calibrated"] < 0.15
     assert errors["default"] > 5.0                              # uncalibrated: many times too stiff
+
+
+def test_relaxation_fit_is_refused_for_a_model_without_viscoelasticity():
+    from surgsim_envs.errors import ConfigError
+
+    t = np.linspace(0.0, 1.0, 10)
+    with pytest.raises(ConfigError, match="lacks the capability 'viscoelastic'"):
+        fit("diffusion", "relax", t, np.exp(-t))

@@ -118,6 +118,11 @@ def fit_relax(model, x, force, material="liver", *, max_evaluations: int = 40, *
     from surgsim_envs.bench.material import model_class, relax
 
     x, force = _check(x, force)
+    caps = getattr(model_class(model), "capabilities", None)
+    if caps is not None and "viscoelastic" not in caps:        # contract v2 capability
+        name = model_class(model).name
+        raise ConfigError(f"model '{name}' does not honour relax_fraction / relax_time (it lacks the capability "
+                          f"'viscoelastic'); a relaxation fit means nothing for it: use --test indent")
     mat = get_material(material)
     ramp = float(relax_opts.get("ramp_time", 0.2))
     opts = {"hold_time": max(float(x.max()) - ramp, 1e-3), "samples": 400, **relax_opts}
