@@ -31,6 +31,8 @@ from surgsim_envs.tissue import diffusion_operator as op
 from surgsim_envs.tissue.contract_v2_shim import CONTRACT_BASES
 from surgsim_envs.tissue.diffusion_kernels import (AREA, BETA, COEF_COLUMNS, DAMPING, INV_MASS, K_AREA, NX, NZ,
                                                    diffusion_step)
+from surgsim_envs.tissue.diffusion_static import (contact_compliance, node_gradients, static_positions,
+                                                  steady_concentration)
 from surgsim_envs.tissue.materials import Material
 
 SCHEMES = ("auto", "triangles", "grid")
@@ -358,11 +360,8 @@ class DiffusionModel(*CONTRACT_BASES):
     def internal_forces(self) -> np.ndarray:
         """(N,3) N: the forces of eq. 9.22 other than the external ones (diffused load, gradient,
         bulk, damping) at the current state."""
-        ptr, idx, val = self._grad
         n = self.n_nodes_total
-        rows = np.repeat(np.arange(n), np.diff(ptr))
-        g = np.zeros((n, 3))
-        np.add.at(g, rows, val * self.concentration[idx][:, None])
+        g = node_gradients(self, self.concentration)
         u = self._displacements()
         u2 = np.sum(u * u, axis=1)
         k = self._areas * self._kappa * (1.0 + self._beta * u2)
@@ -386,102 +385,20 @@ class DiffusionModel(*CONTRACT_BASES):
         return super()._node_field(name)
 
     # ---------------------------------------------------------------------------------------
-    # Equilibrium
+    # Equilibrium (tissue/diffusion_static.py)
     def steady_concentration(self, forces: np.ndarray | None = None) -> np.ndarray:
-        """(N,) Pa, the concentration a constant ``forces`` (N,3) N settles to: the sparse solve of
-        ``sum_j a_ij (C_j - C_i) + (p_i - C_i)/tau = 0`` over the surface nodes."""
-        from scipy.sparse.linalg import spsolve
-
-        f = self._check_forces(forces)
-        act = self._active_nodes
-        p = np.zeros(self.n_nodes_total)
-        gn = np.einsum("ij,ij->i", f, self._normals)
-        p[act] = np.where(gn[act] < 0, -gn[act] / self._areas[act], 0.0)
-        n = self.n_nodes_total
-        sub = self._steady_matrix()[act][:, act]
-        c = np.zeros(n)
-        c[act] = spsolve(sub.tocsc(), p[act] / self.load_time)
-        return c
+        """(N,) Pa, the concentration a constant ``forces`` (N,3) N settles to."""
+        return steady_concentration(self, self._check_forces(forces))
 
     def static_solve(self, forces: np.ndarray | None = None, **kwargs) -> np.ndarray:
-        """(N,3) m equilibrium positions under constant ``forces`` (contract ``static_solve``):
-        the steady concentration, then per free node the bulk displacement that balances the
-        diffused load, the gradient force and the direct part of the external force (a cubic in
-        |u| when nonlinear > 0, solved by Newton). Does not change the state."""
-        f = self._check_forces(forces)
-        c = self.steady_concentration(f)
-        ptr, idx, val = self._grad
-        n = self.n_nodes_total
-        rows = np.repeat(np.arange(n), np.diff(ptr))
-        g = np.zeros((n, 3))
-        np.add.at(g, rows, val * c[idx][:, None])
-        gn = np.einsum("ij,ij->i", f, self._normals)
-        direct = f - np.minimum(gn, 0.0)[:, None] * self._normals
-        total = (-(self._areas * c)[:, None] * self._normals + direct - np.einsum("nij,nj->ni", self._wgrad, g)
-                 + self.masses[:, None] * self.gravity[None, :])
-        out = self.rest_positions.copy()
-        free = self._free
-        mag = np.linalg.norm(total[free], axis=1)
-        k0 = self._areas[free] * self._kappa[free]
-        beta = self._beta[free]
-        u = mag / k0
-        for _ in range(60):                       # Newton on k0 (u + beta u^3) = |f|
-            r = k0 * (u + beta * u ** 3) - mag
-            u = np.maximum(u - r / (k0 * (1.0 + 3.0 * beta * u * u)), 0.0)
-        unit = total[free] / np.where(mag > 0, mag, 1.0)[:, None]
-        out[free] += u[:, None] * unit
-        out[self.fixed] = self.fixed_targets[self.fixed]
-        return out
+        """(N,3) m equilibrium positions under constant ``forces`` (contract ``static_solve``);
+        the state is not changed."""
+        return static_positions(self, self._check_forces(forces))
 
     def contact_compliance(self, nodes, axis: int = 2) -> np.ndarray:
-        """(k,k) m/N: displacement of ``nodes`` along ``axis`` per unit force along ``axis`` at each of
-        them, the force pressing into the surface (the static response is linear there when
-        nonlinear = 0; benchmarks use it for frictionless indentation, bench/material.indent)."""
-        from scipy.sparse.linalg import splu
-
-        nodes = np.asarray(nodes, dtype=np.int64).reshape(-1)
-        n = self.n_nodes_total
-        act = self._active_nodes
-        pos_in_act = -np.ones(n, dtype=np.int64)
-        pos_in_act[act] = np.arange(len(act))
-        if np.any(pos_in_act[nodes] < 0):
-            raise ConfigError("contact_compliance: every node must be a surface node")
-        e = np.zeros(3)
-        e[axis] = 1.0
-        sign = -np.sign(self._normals[nodes] @ e)            # unit force pressing into the surface
-        sign[sign == 0] = -1.0
-        lu = splu(self._steady_matrix()[act][:, act].tocsc())
-        P = np.zeros((len(act), len(nodes)))                 # pressure per unit force, times 1/tau
-        for col, (i, sg) in enumerate(zip(nodes, sign)):
-            fn = sg * float(self._normals[i] @ e)
-            P[pos_in_act[i], col] = max(-fn, 0.0) / self._areas[i] / self.load_time
-        C = np.zeros((n, len(nodes)))
-        C[act] = lu.solve(P)
-        ptr, idx, val = self._grad
-        rows = np.repeat(np.arange(n), np.diff(ptr))
-        g = np.zeros((n, len(nodes), 3))
-        np.add.at(g, rows, val[:, None, :] * C[idx][:, :, None])
-        load = -(self._areas[:, None, None] * C[:, :, None]) * self._normals[:, None, :] \
-            - np.einsum("nij,nkj->nki", self._wgrad, g)
-        # the direct (tangential) part of each unit force at its own node
-        for col, (i, sg) in enumerate(zip(nodes, sign)):
-            f = sg * e
-            fn = float(f @ self._normals[i])
-            load[i, col] += f - min(fn, 0.0) * self._normals[i]
-        k0 = np.where(self._areas * self._kappa > 0, self._areas * self._kappa, np.inf)
-        u = load[nodes, :, axis] / k0[nodes, None]
-        u[self.fixed[nodes]] = 0.0
-        return u * sign[None, :]                              # per unit force along +axis
-
-    def _steady_matrix(self):
-        """Sparse (N,N) 1/s matrix M with dC/dt = -M C + p/tau."""
-        from scipy.sparse import csr_matrix, identity
-
-        n = self.n_nodes_total
-        ptr, idx, val = self._rates
-        A = csr_matrix((val, idx, ptr), shape=(n, n))
-        diag = csr_matrix((np.asarray(A.sum(axis=1)).ravel(), (np.arange(n), np.arange(n))), shape=(n, n))
-        return (identity(n, format="csr") * (1.0 / self.load_time) + diag - A).tocsr()
+        """(k,k) m/N: displacement of ``nodes`` along ``axis`` per unit force along ``axis`` at each
+        of them, pressing into the surface (used by bench/material.indent)."""
+        return contact_compliance(self, nodes, axis)
 
     def _check_forces(self, forces) -> np.ndarray:
         f = self.external_forces if forces is None else np.asarray(forces, dtype=np.float64)
