@@ -320,3 +320,17 @@ def test_gravity_sags_each_node_by_m_g_over_k():
     np.testing.assert_allclose(m.positions[:, 2] - m.rest_positions[:, 2], expect, rtol=1e-3)
     assert np.all(m.concentration == 0.0)
     np.testing.assert_allclose(m.static_solve(np.zeros_like(m.positions)), m.positions, atol=1e-9)
+
+
+def test_neumann_border_loses_no_load():
+    """Eq. 9.8: on an open sheet no flux leaves through the border, so the steady concentration
+    still carries exactly the applied load (only the bulk exchange removes it)."""
+    vol = _flat_sheet(n=11, h=0.01)
+    m = tissue.make("diffusion", vol, "liver", scheme="triangles", omega=0.5)
+    f = np.zeros_like(m.positions)
+    corner = 0                                            # a border node: the worst case
+    f[corner] = [0.0, 0.0, -2.0]
+    f[60] = [0.0, 0.0, -1.0]
+    c = m.steady_concentration(f)
+    assert float(m._areas @ c) == pytest.approx(3.0, rel=1e-9)
+    assert c[corner] > c[60] > 0                           # a corner control volume is a quarter
