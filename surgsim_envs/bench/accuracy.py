@@ -81,9 +81,11 @@ def sweep(models=None, spacings=SPACINGS, progress: bool = True, time_steps: int
     with tqdm(jobs, desc="bench accuracy", unit="case", file=sys.stderr, disable=not progress) as bar:
         for cls, integ, s in bar:
             bar.set_postfix_str(f"{cls.name}/{integ} h={s * 1e3:g} mm")
+            # a model calibrated elsewhere (not on this scene) runs with its calibrated options
+            calibrated = dict(getattr(cls, "accuracy_options", {}) or {})
             try:
                 res = indent(cls, mat, indenter_radius=RADIUS, depth=dv, thickness=THICKNESS, spacing=s,
-                             n_depths=8, integrator=integ, time_steps=time_steps)
+                             n_depths=8, integrator=integ, time_steps=time_steps, **calibrated)
             except Exception as exc:  # keep sweeping
                 print(f"surgsim bench accuracy: {cls.name}/{integ} h={s}: {exc}", file=sys.stderr)
                 continue
@@ -91,7 +93,7 @@ def sweep(models=None, spacings=SPACINGS, progress: bool = True, time_steps: int
             rows.append({"scene": "indent", "model": cls.name, "integrator": integ, "spacing": s,
                          "nodes": res.nodes, "dt": res.dt, "us_per_step": res.us_per_step, "us_per_ms": res.us_per_ms,
                          "error": force_error(res.depth, res.force, ref, dv), "depth": res.depth.tolist(),
-                         "force": res.force.tolist()})
+                         "force": res.force.tolist(), **({"calibration": calibrated} if calibrated else {})})
     add_self_error(rows)
     return rows
 

@@ -81,13 +81,33 @@ def fit_indent(model, x, force, material="liver", **indent_opts) -> FitResult:
     """Fit E (Pa) to an indentation curve: depths ``x`` (m), forces (N)."""
     from surgsim_envs.bench.material import indent
 
+    from surgsim_envs.bench.material import model_class
+
     x, force = _check(x, force)
     mat = get_material(material)
-    res = indent(model, mat, depth=float(x.max()), time_steps=0, **{"n_depths": 16, **indent_opts})
-    shape = np.interp(x, np.concatenate([[0.0], res.depth]), np.concatenate([[0.0], res.force]))
+    cls = model_class(model)
+    count = [0]
+
+    def shape_for(extra):
+        res = indent(cls, mat, depth=float(x.max()), time_steps=0, **{"n_depths": 16, **indent_opts, **extra})
+        count[0] += 1
+        return res, np.interp(x, np.concatenate([[0.0], res.depth]), np.concatenate([[0.0], res.force]))
+
+    # models may name shape parameters to search as well (class attribute fit_shape_parameters,
+    # {name: (low, high)} > 0, searched on a log scale one after the other); young stays closed-form
+    extra: dict = {}
+    for name, (lo, hi) in dict(getattr(cls, "fit_shape_parameters", {})).items():
+        def misfit(log_v, name=name):
+            _, sh = shape_for({**extra, name: float(math.exp(log_v))})
+            return float(np.sum((_scale(sh, force) * sh - force) ** 2))
+
+        sol = so.minimize_scalar(misfit, bounds=(math.log(lo), math.log(hi)), method="bounded",
+                                 options={"xatol": 0.02, "maxiter": 30})
+        extra[name] = float(math.exp(sol.x))
+    res, shape = shape_for(extra)
     s = _scale(shape, force)
     pred = s * shape
-    return _result(res.model, "indent", {"young": s * mat.young}, x, force, pred, 1)
+    return _result(res.model, "indent", {"young": s * mat.young, **extra}, x, force, pred, count[0])
 
 
 def fit_relax(model, x, force, material="liver", *, max_evaluations: int = 40, **relax_opts) -> FitResult:
@@ -98,6 +118,11 @@ def fit_relax(model, x, force, material="liver", *, max_evaluations: int = 40, *
     from surgsim_envs.bench.material import model_class, relax
 
     x, force = _check(x, force)
+    caps = getattr(model_class(model), "capabilities", None)
+    if caps is not None and "viscoelastic" not in caps:        # contract v2 capability
+        name = model_class(model).name
+        raise ConfigError(f"model '{name}' does not honour relax_fraction / relax_time (it lacks the capability "
+                          f"'viscoelastic'); a relaxation fit means nothing for it: use --test indent")
     mat = get_material(material)
     ramp = float(relax_opts.get("ramp_time", 0.2))
     opts = {"hold_time": max(float(x.max()) - ramp, 1e-3), "samples": 400, **relax_opts}
@@ -184,6 +209,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ramp-time", type=float, default=0.2, help="relax: ramp duration s")
     parser.add_argument("--plot", default="fit.png", help="plot of data against fit (default fit.png)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                        help="model option for the fit runs (repeatable), e.g. --option length=depth")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -196,6 +223,14 @@ def run(args: argparse.Namespace) -> int:
         opts = {"strain": args.strain, "ramp_time": args.ramp_time}
         if args.spacing:
             opts["spacing"] = args.spacing
+    for item in args.option:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"--option must be KEY=VALUE, got {item!r}")
+        try:
+            opts[key] = float(value)
+        except ValueError:
+            opts[key] = value
     result = fit(args.model, args.test, x, force, args.material, **opts)
     if args.plot:
         plot_fit(result, args.plot)

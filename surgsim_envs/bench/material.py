@@ -201,6 +201,8 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
     if not (isinstance(n_depths, (int, np.integer)) and n_depths >= 1):
         raise ConfigError(f"n_depths must be a positive integer, got {n_depths!r}")
     zone = min(0.999 * R, 1.6 * a_max + 2.0 * spacing)
+    if "surface_only" in getattr(cls, "capabilities", ()):
+        quarter = False      # a surface model would take the quarter mesh's symmetry cuts for free surface
     vol = graded_slab(width, thickness, spacing, zone + 2.0 * spacing, grading=grading, max_cell=max_cell,
                       quarter=quarter)
     X = vol.nodes
@@ -223,20 +225,23 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
         cons[side[:1], 1] = True
     r = np.hypot(X[:, 0], X[:, 1])
     cand = np.flatnonzero(np.isclose(X[:, 2], 0.0) & (r < zone))
-    K = linear_stiffness(tissue)
-    free = ~cons.ravel()
-    kff = K[free][:, free].tocsc()
-    try:
-        lu = spla.splu(kff)
-    except RuntimeError as exc:
-        raise ConfigError(f"indent: singular stiffness for model '{cls.name}' ({exc})") from None
-    index = -np.ones(3 * n, dtype=np.int64)
-    index[free] = np.arange(int(free.sum()))
-    zdofs = index[3 * cand + 2]
-    rhs = np.zeros((kff.shape[0], len(cand)))
-    rhs[zdofs, np.arange(len(cand))] = 1.0
-    sol = lu.solve(rhs)
-    comp = sol[zdofs]                                   # m/N: z displacement per unit upward z force
+    if callable(getattr(tissue, "contact_compliance", None)):
+        comp = tissue.contact_compliance(cand, axis=2)  # models whose static response is not a stiffness matrix
+    else:
+        K = linear_stiffness(tissue)
+        free = ~cons.ravel()
+        kff = K[free][:, free].tocsc()
+        try:
+            lu = spla.splu(kff)
+        except RuntimeError as exc:
+            raise ConfigError(f"indent: singular stiffness for model '{cls.name}' ({exc})") from None
+        index = -np.ones(3 * n, dtype=np.int64)
+        index[free] = np.arange(int(free.sum()))
+        zdofs = index[3 * cand + 2]
+        rhs = np.zeros((kff.shape[0], len(cand)))
+        rhs[zdofs, np.arange(len(cand))] = 1.0
+        sol = lu.solve(rhs)
+        comp = sol[zdofs]                               # m/N: z displacement per unit upward z force
     comp = 0.5 * (comp + comp.T)
     gap0 = R - np.sqrt(R * R - r[cand] ** 2)            # sphere surface height above its lowest point
     depths = np.linspace(depth / n_depths, depth, n_depths)

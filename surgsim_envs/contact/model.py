@@ -419,8 +419,10 @@ class ContactModel:
         if node_masses is not None:
             self.node_masses = _array(np.asarray(node_masses, dtype=np.float64).reshape(-1), (self.n_nodes,),
                                       np.float64, "node_masses", "kg")
-            if np.any(self.node_masses <= 0):
-                raise ConfigError("node_masses must be > 0 kg")
+            # only nodes that can touch a tool need mass (surface-only models leave interior nodes massless)
+            weighed = self.node_masses[cand] if len(cand) else self.node_masses
+            if np.any(weighed <= 0):
+                raise ConfigError("node_masses must be > 0 kg at every candidate (contact) node")
         if self.params.stiffness == "auto" and self.node_masses is None:
             raise ConfigError("stiffness='auto' needs node_masses (kg, e.g. tissue.masses) in ContactModel(...)")
         self._auto_dt = None

@@ -11,6 +11,7 @@ name                      shape                                  default size (x
 ``slab_inclusion``        slab with a stiff sphere (label 1) inside    8 x 8 x 2 cm, r 6 mm
 ``spleen``                curved, kidney-bean shaped, flattened  11.5 x 7 x 3.8 cm
 ``liver_lobe``            wedge: thick dome tapering to a thin rim   15 x 10 x 6 cm
+``rounded_cube``          round-cornered cube, surface grid only      10 x 10 x 10 cm, ~900 points
 ========================  =====================================  =======================
 
 Organs rest on a bed: lowest point at z = 0, bounding box centred in x and y. The slabs keep the
@@ -27,11 +28,13 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.box import box_volume
 from surgsim_envs.geometry.inclusion import add_spherical_inclusion
 from surgsim_envs.geometry.lattice import lattice_volume
+from surgsim_envs.geometry.rounded_cube import rounded_cube_volume
 from surgsim_envs.geometry.snapping import guard_snaps
 from surgsim_envs.geometry.volume import Volume
 
 #: default lattice spacing (m) per organ: about 800-1,500 nodes, fit for a real-time simulation
-DEFAULT_SPACING = {"slab": 0.005, "slab_inclusion": 0.005, "spleen": 0.0058, "liver_lobe": 0.0085}
+DEFAULT_SPACING = {"slab": 0.005, "slab_inclusion": 0.005, "spleen": 0.0058, "liver_lobe": 0.0085,
+                   "rounded_cube": 0.1 / 12}
 
 SLAB_SIZE = (0.1, 0.1, 0.02)
 INCLUSION_SLAB_SIZE = (0.08, 0.08, 0.02)
@@ -167,6 +170,7 @@ _BUILDERS = {
     "slab_inclusion": _slab_inclusion,
     "spleen": _organ(spleen_surface, "spleen"),
     "liver_lobe": _organ(liver_lobe_surface, "liver_lobe"),
+    "rounded_cube": rounded_cube_volume,   # surface only (no tets): for surface models (paper 000)
 }
 
 #: names :func:`make_volume` knows (``block`` is served by :func:`surgsim_envs.geometry.make_volume`)

@@ -42,6 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-force", type=float, default=3.3, help="device force limit, N (default 3.3)")
     parser.add_argument("--max-force-rate", type=float, default=1000.0, help="force rate clamp, N/s (default 1000)")
     parser.add_argument("--spacing", type=float, default=None, help="tissue node spacing, m (default: the scene's)")
+    parser.add_argument("--model", default="mass_spring", help="tissue model (surgsim models), default mass_spring")
     parser.add_argument("--seed", type=int, default=0, help="seed of the scripted tremor/drift")
     parser.add_argument("--tremor", type=float, default=0.0, help="scripted tremor amplitude, m (8-12 Hz)")
     parser.add_argument("--fps", type=float, default=25.0, help="video/viewer frames per second")
@@ -127,7 +128,7 @@ def run(args) -> int:
         raise SurgSimError(f"teleop needs the MuJoCo scene (surgsim_envs.scene), which is unavailable: {exc}") from None
 
     print(f"building the {args.task} scene ...", flush=True)
-    physics = scene_adapter.make_haptic_simulation(args.task, spacing=args.spacing)
+    physics = scene_adapter.make_haptic_simulation(args.task, spacing=args.spacing, model=args.model)
     limits = DeviceLimits(max_force=args.max_force)
     device = make_device(kind, arg, args, physics, limits)
     duration = args.duration

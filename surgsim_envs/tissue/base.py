@@ -117,7 +117,8 @@ class TissueModel(abc.ABC):
         self.volume = volume
         self.material = get_material(material)
         self.region_materials = {int(k): get_material(v) for k, v in (region_materials or {}).items()}
-        unknown = set(self.region_materials) - set(np.unique(volume.labels).tolist())
+        labels = volume.node_labels if self.surface_only else volume.labels   # surface-only: per-node labels
+        unknown = set(self.region_materials) - set(np.unique(labels).tolist())
         if unknown:
             raise ConfigError(f"region_materials labels {sorted(unknown)} do not occur in volume '{volume.name}' "
                               f"(labels present: {sorted(np.unique(volume.labels).tolist())})")
@@ -142,8 +143,10 @@ class TissueModel(abc.ABC):
         self.fields = self._build_fields()
         self._fields0 = {k: v.copy() for k, v in self.fields.items()}
         self.masses = self._lumped_masses()
-        if np.any(self.masses <= 0):
-            bad = int(np.flatnonzero(self.masses <= 0)[0])
+        # surface-only models carry mass on surface nodes only (interior nodes of a tet volume stay still)
+        weighed = self.surface_nodes if self.surface_only else np.arange(n)
+        if np.any(self.masses[weighed] <= 0):
+            bad = int(weighed[np.flatnonzero(self.masses[weighed] <= 0)[0]])
             raise ConfigError(f"model '{self.name}': node {bad} has mass {self.masses[bad]:.3g} kg (isolated node?); "
                               "remove unused nodes from the volume")
         self.fixed = np.zeros(n, dtype=bool)
