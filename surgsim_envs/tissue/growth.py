@@ -290,15 +290,15 @@ class GrowthSolver:
         if not converged:
             tail = history[-6:]
             rate = (tail[-1] / tail[0]) ** (1.0 / max(len(tail) - 1, 1)) if tail[0] > 0 else float("nan")
-            if not rate < 1.0:
-                raise GrowthDivergedError(self.name, alpha, safe, len(history),
-                                          f"the growth per iteration grows by x{rate:.4f} per iteration")
-            if rate > 0.999:
+            if abs(rate - 1.0) < 1e-3:
                 raise GrowthNotConvergedError(
                     f"tissue growth stalled: after max_iter={max_iter} iterations (alpha={alpha:.4g} 1/Pa, k={k:g}) the "
                     f"growth per iteration stays at {history[-1] / history[0]:.3g} of the first (tol={tol:g}): part of the "
                     "growth load can be balanced by no displacement, so the tissue drifts by the same amount every "
                     "iteration. Use equilibrate=True (the default)")
+            if not rate < 1.0:
+                raise GrowthDivergedError(self.name, alpha, safe, len(history),
+                                          f"the growth per iteration grows by x{rate:.4f} per iteration")
             need = len(history) + math.log(tol * history[0] / history[-1]) / math.log(rate)
             raise GrowthNotConvergedError(
                 f"tissue growth did not converge in max_iter={max_iter} iterations (alpha={alpha:.4g} 1/Pa, k={k:g}): "
