@@ -19,6 +19,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fit": ("surgsim_envs.bench.fit", "fit model parameters to measured force data"),
     "teleop": ("surgsim_envs.haptics.teleop", "teleoperate a task with a (simulated) haptic device"),
     "run": ("surgsim_envs.scenarios.cli", "run a trainee scenario file and write a report"),
+    "grow": ("surgsim_envs.scenarios.growth_cmd", "tissue growth after a bone displacement (paper 004): basic vs growth"),
+    "validate": ("surgsim_envs.bench.validate_cmd", "signed surface distances of a prediction to a reference (paper 004)"),
 }
 BENCH: dict[str, tuple[str, str]] = {
     "speed": ("surgsim_envs.bench.speed", "tissue model step time per model, integrator, node count"),
@@ -27,6 +29,7 @@ BENCH: dict[str, tuple[str, str]] = {
     "haptics": ("surgsim_envs.bench.haptics_speed", "haptic servo loop period"),
     "accuracy": ("surgsim_envs.bench.accuracy", "speed against accuracy chart (Pareto front)"),
     "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
+    "growth": ("surgsim_envs.bench.growth_speed", "tissue growth iteration time (paper 004) on a ~10,000-node mesh"),
 }
 
 
