@@ -77,6 +77,8 @@ class SurfaceError:
 
 
 def surface_error(pred_vertices, pred_faces, ref_vertices, ref_faces) -> SurfaceError:
-    """:class:`SurfaceError` of a predicted surface (its vertices) against a reference surface."""
-    v, _ = _check_surface(pred_vertices, pred_faces, "predicted surface")
-    return SurfaceError(signed_surface_distance(v, ref_vertices, ref_faces))
+    """:class:`SurfaceError` of a predicted surface against a reference surface: one distance per
+    vertex used by ``pred_faces`` (in ascending vertex order), so a model's full node array can be
+    passed with its skin triangles."""
+    v, f = _check_surface(pred_vertices, pred_faces, "predicted surface")
+    return SurfaceError(signed_surface_distance(v[np.unique(f)], ref_vertices, ref_faces))

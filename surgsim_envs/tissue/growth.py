@@ -46,6 +46,7 @@ import scipy.sparse.linalg as spla
 
 from surgsim_envs.errors import ConfigError, GrowthDivergedError, GrowthNotConvergedError
 from surgsim_envs.geometry.volume import tet_signed_volumes
+from surgsim_envs.tissue.nested_dissection import dof_order, nested_dissection, node_adjacency
 from surgsim_envs.tissue.growth_ops import VOIGT_ENGINEERING, ElementOperators, frobenius, tensor_to_voigt, voigt_to_tensor
 
 #: default threshold: stop when the growth per iteration is below this fraction of the first iteration's
@@ -179,12 +180,15 @@ class GrowthSolver:
 
     # ------------------------------------------------------------------------------------------
     def _factor(self):
+        """Sparse LU of the free-DOF block of K (once), in a geometric nested-dissection order."""
         if self._lu is None:
             t0 = time.perf_counter()
-            kff = self.stiffness[self.free][:, self.free].tocsc()
+            order = nested_dissection(self.rest_positions, node_adjacency(self.ops.tets, self.ops.n_nodes), leaf=16)
+            perm = dof_order(order, self.free)
+            kff = self.stiffness[self.free][:, self.free]
+            kp = kff[perm][:, perm].tocsc()
             try:
-                lu = spla.splu(kff, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                               options=dict(SymmetricMode=True))
+                lu = spla.splu(kp, permc_spec="NATURAL", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True))
             except RuntimeError as exc:
                 raise ConfigError(f"growth: the stiffness K is singular ({exc}); the Dirichlet conditions do not hold "
                                   "the body (fix nodes so no rigid motion remains)") from None
@@ -193,13 +197,16 @@ class GrowthSolver:
                 raise ConfigError(f"growth: the stiffness K is singular (pivot ratio {piv.min() / piv.max():.2g}): "
                                   "the Dirichlet conditions leave a rigid-body motion free; fix at least three "
                                   "non-collinear nodes, or whole faces")
-            self._lu = lu
+            self._lu, self._perm = lu, perm
             self.factorizations += 1
             self.factor_seconds = time.perf_counter() - t0
         return self._lu
 
     def _solve_free(self, rhs_free: np.ndarray) -> np.ndarray:
-        return self._factor().solve(rhs_free)
+        lu = self._factor()
+        out = np.empty_like(rhs_free)
+        out[self._perm] = lu.solve(rhs_free[self._perm])
+        return out
 
     def basic(self) -> np.ndarray:
         """(3N,) displacement (m) of the basic model: ``K u = 0`` with the prescribed displacements."""

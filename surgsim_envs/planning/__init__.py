@@ -1,0 +1,7 @@
+"""Surgery planning (paper 004): soft-tissue prediction after a planned bone displacement.
+
+- :mod:`.maxillofacial`: a synthetic maxillofacial-like case (soft-tissue layer over bone, a
+  segment moved by distraction), basic vs growth model, skin surfaces for validation.
+- :mod:`.sweep`: the parameter sweep of the paper's Fig. 5 (error mu, sigma against nu and k).
+- :mod:`.grow_cmd`: the ``surgsim grow`` command.
+"""
