@@ -8,7 +8,11 @@ paper's patients: a unidirectional translation (``translation`` m along ``direct
 angular rotation (``rotation_deg`` about the axis ``rotation_axis`` through the segment's
 corner). The rest of the bone contact is fixed, and so are the layer's far borders (the paper:
 "the soft tissue above the eyes and behind the ears ... supposed to have a fixed position"):
-the faces y = +height/2 and x = +-width/2. The skin is the top face.
+the faces y = +height/2 and x = +-width/2. The skin is the top face. Between the moved segment
+and the fixed bone the bone displacement blends to zero over a band ``transition`` m wide
+(smoothstep; the stretched regenerate of distraction osteogenesis), so the prescribed field is
+resolved by every mesh finer than the band (a jump across one element would make the
+prediction depend on the element size).
 
 Units: m, Pa. E does not change the prediction (only alpha E matters, see growth.py).
 """
@@ -38,6 +42,7 @@ class DistractionCase:
     direction: tuple = (0.25, -1.0, 0.35)
     rotation_deg: float = 8.0
     rotation_axis: tuple = (0.0, 0.0, 1.0)
+    transition: float = 0.012
     young: float = 3000.0
     extra: dict = field(default_factory=dict)
 
@@ -88,12 +93,27 @@ class DistractionCase:
         p = np.asarray(points, float)
         return (p - corner) @ rot.T + corner + self.translation * d - p
 
+    def bone_weight(self, points: np.ndarray) -> np.ndarray:
+        """(P,) in [0, 1]: how much of the segment's motion a bone point follows (1 on the segment,
+        smoothstep to 0 over ``transition`` m outside it)."""
+        p = np.asarray(points, float)
+        tw = max(self.transition, 1e-12)
+
+        def smooth(t):
+            t = np.clip(t, 0.0, 1.0)
+            return t * t * (3.0 - 2.0 * t)
+
+        return smooth((p[:, 0] - self.segment_x) / tw + 1.0) * smooth((self.segment_y - p[:, 1]) / tw + 1.0)
+
     def dirichlet(self, vol: Volume):
-        """``(fixed (N,) bool, displacement (N,3) m)``: the bone contact and the borders; the segment moves."""
+        """``(fixed (N,) bool, displacement (N,3) m)``: the bone contact and the borders are fixed; the
+        bone moves with the segment weighted by :meth:`bone_weight`, the borders stay."""
         r = self.regions(vol)
         fixed = r["bone"] | r["border"]
         disp = np.zeros((vol.n_nodes, 3))
-        disp[r["segment"]] = self.bone_displacement(vol.nodes[r["segment"]])
+        moving = r["bone"] & ~r["border"]
+        w = self.bone_weight(vol.nodes[moving])
+        disp[moving] = w[:, None] * self.bone_displacement(vol.nodes[moving])
         return fixed, disp
 
     def skin_faces(self, vol: Volume) -> np.ndarray:
