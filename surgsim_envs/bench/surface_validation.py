@@ -33,7 +33,9 @@ def _plt():
 
 def draw_distance_map(ax, vertices, faces, distances, range_mm=DEFAULT_RANGE_MM, view=DEFAULT_VIEW, title=""):
     """Draw the surface (vertices m, faces) on a 3-D axis, faces coloured by the mean signed
-    distance (m) of their vertices on a +-``range_mm`` scale. Returns the colour mappable."""
+    distance (m) of their vertices on a +-``range_mm`` scale. ``distances``: one per vertex, or one
+    per vertex used by ``faces`` in ascending order (as :func:`surface_error` gives). Returns the
+    colour mappable."""
     import matplotlib.colors as mcolors
     from matplotlib import cm
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
@@ -42,7 +44,12 @@ def draw_distance_map(ax, vertices, faces, distances, range_mm=DEFAULT_RANGE_MM,
     f = np.asarray(faces)
     norm = mcolors.Normalize(-range_mm, range_mm)
     mappable = cm.ScalarMappable(norm=norm, cmap=CMAP)
-    colours = mappable.to_rgba(np.asarray(distances)[f].mean(axis=1) * 1e3)
+    d = np.asarray(distances, dtype=np.float64)
+    if len(d) != len(v):                     # one distance per vertex used by the faces (surface_error)
+        full = np.zeros(len(v))
+        full[np.unique(f)] = d
+        d = full
+    colours = mappable.to_rgba(d[f].mean(axis=1) * 1e3)
     ax.add_collection3d(Poly3DCollection(v[f], facecolors=colours, edgecolors=(0, 0, 0, 0.08), linewidths=0.2))
     lo, hi = v.min(axis=0), v.max(axis=0)
     ax.set_xlim(lo[0], hi[0])
@@ -105,13 +112,14 @@ def comparison_figure(path: str, entries, range_mm=DEFAULT_RANGE_MM, view=DEFAUL
     common scale plus one panel of overlaid histograms (the paper's Figs. 6 and 7)."""
     plt = _plt()
     n = len(entries)
-    fig = plt.figure(figsize=(4.2 * n + 4.6, 4.2))
+    fig = plt.figure(figsize=(4.4 * n + 6.0, 4.4))
+    grid = fig.add_gridspec(1, n + 1, width_ratios=[1.0] * n + [1.25], wspace=0.35)
     mappable = None
     for i, (label, v, f, err) in enumerate(entries):
-        ax = fig.add_subplot(1, n + 1, i + 1, projection="3d")
+        ax = fig.add_subplot(grid[0, i], projection="3d")
         mappable = draw_distance_map(ax, v, f, err.distances, range_mm, view, label)
     fig.colorbar(mappable, ax=fig.axes, shrink=0.6, location="left", label="signed distance (mm)")
-    ax = fig.add_subplot(1, n + 1, n + 1)
+    ax = fig.add_subplot(grid[0, n])
     draw_histogram(ax, [(e[0], e[3]) for e in entries], range_mm)
     if suptitle:
         fig.suptitle(suptitle, fontsize=10)
