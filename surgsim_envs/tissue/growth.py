@@ -227,6 +227,30 @@ class GrowthSolver:
         """``(alpha_auto, alpha_safe)`` (1/Pa) of this mesh's materials (see :func:`alpha_bounds`)."""
         return alpha_bounds(self.ops.young, self.ops.poisson)
 
+    def growth_operator(self, s: np.ndarray) -> np.ndarray:
+        """``M s``: the stress change per unit alpha when the tissue grows by ``eps_G = s`` (Voigt, tensor
+        shears) with homogeneous Dirichlet conditions; the iteration is ``s <- (I - alpha M) s``."""
+        eps = VOIGT_ENGINEERING * s
+        v = np.zeros(3 * self.ops.n_nodes)
+        v[self.free] = self._solve_free(self.ops.forces(self.ops.stress(eps))[self.free])
+        return self.ops.stress(eps - self.ops.strain(v))
+
+    def spectral_alpha_limit(self, iterations: int = 60, seed: int = 0) -> float:
+        """Divergence threshold ``2 / lambda_max(M)`` (1/Pa) of this mesh, lambda_max by power
+        iteration (Rayleigh quotient in the tensor inner product, a lower bound that converges from
+        below, so the returned limit converges from above). Costs one solve per iteration."""
+        s = self.growth_operator(np.random.default_rng(seed).normal(size=(self.ops.n_elements, 6)))
+        lam = 0.0
+        for _ in range(iterations):
+            w = self.growth_operator(s)
+            lam = self._dot(s, w) / self._dot(s, s)
+            s = w / math.sqrt(self._dot(w, w))
+        return 2.0 / lam
+
+    def _dot(self, a: np.ndarray, b: np.ndarray) -> float:
+        prod = np.sum(a[:, :3] * b[:, :3], axis=1) + 2.0 * np.sum(a[:, 3:] * b[:, 3:], axis=1)
+        return float(np.sum(self.ops.volume * prod))
+
     def rms(self, voigt_tensor: np.ndarray) -> float:
         """Volume-weighted RMS of the Frobenius norm of a Voigt tensor field (tensor shears)."""
         v = self.ops.volume
