@@ -324,9 +324,10 @@ class GrowthSolver:
             if abs(rate - 1.0) < 1e-3:
                 raise GrowthNotConvergedError(
                     f"tissue growth stalled: after max_iter={max_iter} iterations (alpha={alpha:.4g} 1/Pa, k={k:g}) the "
-                    f"growth per iteration stays at {history[-1] / history[0]:.3g} of the first (tol={tol:g}): part of the "
-                    "growth load can be balanced by no displacement, so the tissue drifts by the same amount every "
-                    "iteration. Use equilibrate=True (the default)")
+                    f"growth per iteration stays at {history[-1] / history[0]:.3g} of the first (tol={tol:g}). Either "
+                    f"alpha sits at the divergence threshold (about {safe:.4g} 1/Pa: use alpha='auto', {auto:.4g}) or "
+                    "part of the growth load can be balanced by no displacement, so the tissue drifts by the same "
+                    "amount every iteration (equilibrate=False: use equilibrate=True, the default)")
             if not rate < 1.0:
                 raise GrowthDivergedError(self.name, alpha, safe, len(history),
                                           f"the growth per iteration grows by x{rate:.4f} per iteration")
