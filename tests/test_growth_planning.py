@@ -74,3 +74,10 @@ def test_grow_cli(tmp_path, capsys):
                  "--out", str(tmp_path / "v")]) == 0
     assert main(["grow", "--out", str(out), "--alpha", "-1", "--no-reference", "--spacing", "0.008"]) == 2
     assert "alpha" in capsys.readouterr().err
+
+
+def test_bench_growth_runs(tmp_path, capsys):
+    assert main(["bench", "growth", "--nodes", "300", "--repeats", "1", "--out", str(tmp_path)]) == 0
+    data = json.loads((tmp_path / "growth_speed.json").read_text())
+    assert data["nodes"] >= 300 and data["iterations"] > 0 and "load" in data
+    assert main(["bench", "growth", "--nodes", "10", "--out", str(tmp_path)]) == 2
