@@ -73,7 +73,8 @@ def test_uniaxial_bar_matches_analytic_equilibrium_and_rate(k):
     np.testing.assert_allclose(res.stress[:, 0], -k * E * eps0, atol=1e-6 * E * eps0)
     np.testing.assert_allclose(res.growth_strain[:, 0], (1 + k) * eps0, rtol=1e-8)
     h = np.array(res.history)
-    np.testing.assert_allclose(h[1:] / h[:-1], 0.5, rtol=1e-6)
+    early = h[:-1] > 1e-6 * h[0]                 # ratios of round-off-sized steps are noise
+    np.testing.assert_allclose((h[1:] / h[:-1])[early], 0.5, rtol=1e-6)
     assert res.iterations == int(np.ceil(np.log(1e-10) / np.log(0.5))) + 1
 
 
@@ -182,3 +183,16 @@ def test_fem_grow_sets_positions_and_zero_load_is_rest():
     res0 = still.grow(20)
     assert res0.iterations == 0
     np.testing.assert_allclose(res0.positions, still.rest_positions)
+
+
+def test_growth_with_anp_formulation_reaches_equilibrium():
+    """The averaged-nodal-pressure stress operator (fem's default formulation) grows too."""
+    m = _stretched_cube(spacing=0.005, formulation="anp", poisson=0.45)
+    solver = GrowthSolver.from_model(m)
+    basic = mesh_volume(solver.rest_positions + solver.basic().reshape(-1, 3), m.tets)
+    res = solver.grow(10)
+    tight = solver.grow(10, tol=1e-8, max_iter=2000)
+    assert solver.rms(tight.stress + tight.growth_stress) < 1e-5 * solver.rms(tight.initial_stress)
+    scale = np.abs(tight.positions - tight.basic_positions).max()
+    assert np.abs(res.positions - tight.positions).max() < 1e-3 * scale
+    assert mesh_volume(res.positions, m.tets) > basic

@@ -71,6 +71,7 @@ class ElementOperators:
         self.young, self.poisson = np.array(young), np.array(poisson)
         self.mu, self.lam, self.kappa = asm.lame_parameters(young, poisson)
         self.formulation = formulation
+        self.compliance = np.ascontiguousarray(np.linalg.inv(asm.d_matrices(young, poisson)))   # Hooke D^-1
         if formulation == "anp":
             self.d = np.ascontiguousarray(asm.deviatoric_d_matrices(young, poisson))
             self.node_volume = asm.nodal_volumes(self.tets, self.volume, n)
@@ -109,6 +110,16 @@ class ElementOperators:
             theta = self._avg @ (eps[:, 0] + eps[:, 1] + eps[:, 2])
             sig[:, :3] += (self._pbar @ (self.kappa_node * theta))[:, None]
         return sig
+
+    def hooke_strain(self, sig: np.ndarray) -> np.ndarray:
+        """(T,6) Voigt strain (engineering shear) whose Hooke stress (paper eq. 2) is ``sig``."""
+        return np.einsum("tij,tj->ti", self.compliance, sig)
+
+    def in_stress_space(self, sig: np.ndarray) -> np.ndarray:
+        """``S(D^-1 sig)``: a Hooke stress field expressed in this formulation's stresses (identity for
+        "standard"; for "anp" the pressure becomes the averaged nodal pressure of the same strain),
+        so that it carries no part that the formulation cannot stress."""
+        return self.stress(self.hooke_strain(sig))
 
     def forces(self, sig: np.ndarray) -> np.ndarray:
         """(3N,) nodal forces (N) ``sum_e V_e B_e^T sigma_e`` of a Voigt stress field (Pa)."""
