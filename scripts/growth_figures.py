@@ -118,7 +118,7 @@ def fig4(out):
 
 
 def fig5_6(out, skip_sweep):
-    from surgsim_envs.bench.surface_validation import comparison_figure
+    from surgsim_envs.planning.validation_report import comparison_figure
     from surgsim_envs.geometry.surface_error import surface_error
     from surgsim_envs.planning.maxillofacial import DistractionCase
     from surgsim_envs.planning.sweep import TRUTH, grown_skin, plot_sweep, sweep

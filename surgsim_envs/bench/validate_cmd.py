@@ -29,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from surgsim_envs.bench.surface_validation import validation_report
+    from surgsim_envs.planning.validation_report import validation_report
     from surgsim_envs.errors import ConfigError
     from surgsim_envs.geometry.state_file import load_surface_any
 

@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
     from tqdm import tqdm
 
-    from surgsim_envs.bench.surface_validation import comparison_figure
+    from surgsim_envs.planning.validation_report import comparison_figure
     from surgsim_envs.errors import ConfigError
     from surgsim_envs.geometry.state_file import save_state
     from surgsim_envs.geometry.surface_error import surface_error

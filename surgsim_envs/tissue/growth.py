@@ -175,13 +175,14 @@ class GrowthSolver:
         """Solver on a :class:`~surgsim_envs.tissue.fem.TetFEMModel`: its rest mesh, materials,
         formulation and rest stiffness. Dirichlet conditions default to the model's fixed nodes
         and their targets (``set_fixed(nodes, targets)``: targets - rest = prescribed displacement).
-        Growth is linear (the paper's small-strain model): corotation is not used."""
+        Growth is linear (the paper's small-strain model): corotation is not used, and K is the rest
+        stiffness of the current material fields, assembled from the same element operators."""
         if fixed_dofs is None:
             fixed_dofs = model.fixed.copy()
             if displacement is None:
                 displacement = model.fixed_targets - model.rest_positions
-        return cls(ElementOperators.from_model(model), model.stiffness_matrix, fixed_dofs, displacement,
-                   name=model.name)
+        ops = ElementOperators.from_model(model)
+        return cls(ops, ops.stiffness(), fixed_dofs, displacement, name=model.name)
 
     # ------------------------------------------------------------------------------------------
     def _factor(self):

@@ -91,9 +91,9 @@ class ElementOperators:
 
     @classmethod
     def from_model(cls, model) -> "ElementOperators":
-        """Operators of a :class:`~surgsim_envs.tissue.fem.TetFEMModel` (its rest mesh, fields, formulation)."""
-        return cls(model.rest_positions, model.tets, model.fields["young"], model.fields["poisson"],
-                   model.formulation, getattr(model, "kappa_node", None))
+        """Operators of a :class:`~surgsim_envs.tissue.fem.TetFEMModel` (its rest mesh, current material
+        fields and formulation; nodal bulk moduli averaged from the fields as the model does)."""
+        return cls(model.rest_positions, model.tets, model.fields["young"], model.fields["poisson"], model.formulation)
 
     @property
     def n_elements(self) -> int:
