@@ -9,7 +9,8 @@ millisecond (wall time of one physics step, contact + tissue, times the steps pe
 model's stable dt). Outputs ``accuracy.json`` (the table :func:`surgsim_envs.bench.choose` reads)
 and ``accuracy.png`` (log-log, Pareto front marked). Shape error (``shape_rms`` etc., m; chart
 ``accuracy_shape.png``): signed distances of the deformed top surface at the deepest depth to the
-finest FEM surface under the same load (:mod:`surgsim_envs.bench.shape_error`, paper 004 sec. 2.2).
+most accurate model's finest surface under the same load (:mod:`surgsim_envs.bench.shape_error`,
+paper 004 sec. 2.2).
 
 Baselines, in the same process on the same scene (:func:`surgsim_envs.bench.mujoco_flex.flex_indent`):
 MuJoCo's own 3-D flex with built-in elasticity, ``mujoco_flex_full`` (three dofs per vertex, the
@@ -79,7 +80,7 @@ def sweep(models=None, spacings=SPACINGS, progress: bool = True, time_steps: int
                          "error": force_error(res.depth, res.force, ref, dv), "depth": res.depth.tolist(),
                          "force": res.force.tolist(), "_surface": res.top_surface})
     add_self_error(rows)
-    add_shape_error(rows)          # shape_mu/sigma/rms against the finest FEM surface (bench/shape_error.py)
+    add_shape_error(rows)          # shape_mu/sigma/rms vs the most accurate finest surface (bench/shape_error.py)
     return rows
 
 

@@ -2,9 +2,10 @@
 
 Next to the force error, every indentation row gets the signed distances (paper 004, section 2.2;
 :mod:`surgsim_envs.geometry.surface_error`) of its deformed top surface at the deepest depth to the
-top surface of the reference row under the same load: the finest ``fem`` row (the converged
-continuum solution), or each model's own finest row when no ``fem`` row exists. Columns (m):
-``shape_mu``, ``shape_sigma``, ``shape_rms`` and ``shape_max`` (largest |distance|).
+reference surface under the same load: the finest row of the model whose finest row has the
+smallest force error against the analytic reference (the converged continuum solution; in
+practice the finest FEM), chosen from the data, not by name. Columns (m): ``shape_mu``,
+``shape_sigma``, ``shape_rms`` and ``shape_max`` (largest |distance|), and ``shape_reference``.
 Rows carry their surface as ``"_surface"`` = (positions, triangles) until :func:`add_shape_error`
 removes it (it is not JSON).
 """
@@ -17,24 +18,30 @@ import numpy as np
 
 from surgsim_envs.geometry.surface_error import surface_error
 
-REFERENCE_MODEL = "fem"
+def reference_row(rows: list[dict]) -> dict | None:
+    """The reference: among the finest row of each model (rows with a surface), the one with the
+    smallest force ``error`` (rows without an ``error`` rank last)."""
+    finest = {}
+    for r in rows:
+        if r.get("_surface") is not None and (r["model"] not in finest or r["spacing"] < finest[r["model"]]["spacing"]):
+            finest[r["model"]] = r
+    if not finest:
+        return None
+    return min(finest.values(), key=lambda r: (r.get("error", math.inf), r["spacing"]))
 
 
 def add_shape_error(rows: list[dict]) -> None:
     """Fill the shape columns of ``rows`` in place and drop their ``_surface`` entries."""
-    with_surface = [r for r in rows if r.get("_surface") is not None]
-    fem = [r for r in with_surface if r["model"] == REFERENCE_MODEL]
+    ref_row = reference_row(rows)
     for r in rows:
-        ref_row = min(fem or [q for q in with_surface if q["model"] == r["model"]] or [None],
-                      key=lambda q: q["spacing"] if q else 0)
         surf = r.get("_surface")
         if surf is None or ref_row is None:
             r.update(shape_mu=math.nan, shape_sigma=math.nan, shape_rms=math.nan, shape_max=math.nan)
             continue
         err = surface_error(surf[0], surf[1], ref_row["_surface"][0], ref_row["_surface"][1])
         r.update(shape_mu=err.mean, shape_sigma=err.std, shape_rms=err.rms,
-                 shape_max=float(np.max(np.abs(err.distances))), shape_reference=f"{ref_row['model']} "
-                 f"h={ref_row['spacing'] * 1e3:g} mm")
+                 shape_max=float(np.max(np.abs(err.distances))),
+                 shape_reference=f"{ref_row['model']} h={ref_row['spacing'] * 1e3:g} mm")
     for r in rows:
         r.pop("_surface", None)
 
