@@ -197,3 +197,30 @@ def test_growth_with_anp_formulation_reaches_equilibrium():
     scale = np.abs(tight.positions - tight.basic_positions).max()
     assert np.abs(res.positions - tight.positions).max() < 1e-3 * scale
     assert mesh_volume(res.positions, m.tets) > basic
+
+
+def test_heterogeneous_materials_use_the_extreme_moduli():
+    """Two materials (the right half 5x stiffer, nu 0.25 / 0.4): 'auto' and the bound use the extremes
+    of 2 mu and 3 kappa over the elements; the iteration converges below the bound and diverges above
+    the mesh's spectral limit."""
+    from surgsim_envs.geometry import Volume
+
+    box = box_volume((0.02, 0.02, 0.02), spacing=0.005)
+    right = box.nodes[box.tets].mean(axis=1)[:, 0] > 0
+    vol = Volume(box.nodes, box.tets, labels=right.astype(np.int32))
+    m = tissue.make("fem", vol, _material(E, 0.25), region_materials={1: _material(5 * E, 0.4)},
+                    formulation="standard", corotational=False)
+    x = vol.nodes
+    left_face, right_face = np.isclose(x[:, 0], x[:, 0].min()), np.isclose(x[:, 0], x[:, 0].max())
+    m.set_fixed(left_face, x[left_face] - [0.001, 0, 0])
+    m.set_fixed(right_face, x[right_face] + [0.001, 0, 0])
+    solver = GrowthSolver.from_model(m)
+    auto, safe = solver.alpha_bounds()
+    assert safe == pytest.approx(2 / (5 * E / (1 - 2 * 0.4)))          # 3 kappa of the stiff material
+    assert auto == pytest.approx(2 / (E / 1.25 + 5 * E / 0.2))           # 2 mu of the soft one + 3 kappa of the stiff
+    res = solver.grow(10, tol=1e-8, max_iter=3000)
+    assert solver.rms(res.stress + res.growth_stress) < 1e-6 * solver.rms(res.initial_stress)
+    limit = solver.spectral_alpha_limit(60)
+    assert safe <= limit * (1 + 1e-9)
+    with pytest.raises(GrowthDivergedError):
+        solver.grow(10, 1.3 * limit)
