@@ -19,6 +19,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fit": ("surgsim_envs.bench.fit", "fit model parameters to measured force data"),
     "teleop": ("surgsim_envs.haptics.teleop", "teleoperate a task with a (simulated) haptic device"),
     "run": ("surgsim_envs.scenarios.cli", "run a trainee scenario file and write a report"),
+    "grow": ("surgsim_envs.planning.grow_cmd", "tissue growth after a bone displacement (paper 004): basic vs growth"),
+    "validate": ("surgsim_envs.bench.validate_cmd", "signed surface distances of a prediction to a reference (paper 004)"),
 }
 BENCH: dict[str, tuple[str, str]] = {
     "speed": ("surgsim_envs.bench.speed", "tissue model step time per model, integrator, node count"),
@@ -30,6 +32,7 @@ BENCH: dict[str, tuple[str, str]] = {
     "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
     "soak": ("surgsim_envs.bench.soak", "long random-action runs: NaN, exceptions, force bounds, memory growth"),
     "diffusion": ("surgsim_envs.bench.diffusion_bench", "diffusion model (paper 000) update time vs the paper's Table 9.1"),
+    "growth": ("surgsim_envs.bench.growth_speed", "tissue growth iteration time (paper 004) on a ~10,000-node mesh"),
 }
 
 

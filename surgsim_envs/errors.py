@@ -41,3 +41,32 @@ class TissueUnstableError(SurgSimError, RuntimeError):
 
 class RenderingUnavailableError(SurgSimError, RuntimeError):
     """No OpenGL context could be created for offscreen rendering."""
+
+
+class GrowthDivergedError(TissueUnstableError):
+    """The tissue-growth iteration (paper 004, section 2.3) diverged: the growth per iteration grew.
+
+    Attributes: ``model``, ``alpha`` (the stability factor, 1/Pa), ``alpha_limit`` (1/Pa, the
+    largest alpha guaranteed to converge), ``iteration``, ``reason``.
+    """
+
+    def __init__(self, model: str, alpha: float, alpha_limit: float, iteration: int, reason: str):
+        self.model = model
+        self.alpha = float(alpha)
+        self.alpha_limit = float(alpha_limit)
+        self.iteration = int(iteration)
+        self.reason = reason
+        self.dt = float("nan")
+        self.critical_dt = float("nan")
+        RuntimeError.__init__(
+            self,
+            f"tissue growth of model '{model}' diverged at iteration {iteration} with alpha={alpha:.4g} 1/Pa: "
+            f"{reason}. Use a smaller stability factor: alpha < {alpha_limit:.4g} 1/Pa always converges "
+            "(alpha='auto' picks the fastest safe value).")
+
+    def __reduce__(self):
+        return (type(self), (self.model, self.alpha, self.alpha_limit, self.iteration, self.reason))
+
+
+class GrowthNotConvergedError(SurgSimError, RuntimeError):
+    """The tissue-growth iteration did not reach its threshold within ``max_iter`` iterations."""

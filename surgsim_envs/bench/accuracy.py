@@ -11,7 +11,10 @@ reference's validity depth (1.5 mm here); ``self_error`` is the same against the
 finest resolution (its converged solution). Cost: microseconds of compute per simulated
 millisecond (wall time of one physics step, contact + tissue, times the steps per ms at the
 model's stable dt). Outputs ``accuracy.json`` (the table :func:`surgsim_envs.bench.choose` reads)
-and ``accuracy.png`` (log-log, Pareto front marked).
+and ``accuracy.png`` (log-log, Pareto front marked). Shape error (``shape_rms`` etc., m; chart
+``accuracy_shape.png``): signed distances of the deformed top surface at the deepest depth to the
+most accurate model's finest surface under the same load (:mod:`surgsim_envs.bench.shape_error`,
+paper 004 sec. 2.2).
 
 Baselines, in the same process on the same scene (:func:`surgsim_envs.bench.mujoco_flex.flex_indent`):
 MuJoCo's own 3-D flex with built-in elasticity, ``mujoco_flex_full`` (three dofs per vertex, the
@@ -34,6 +37,7 @@ import sys
 import numpy as np
 
 from surgsim_envs.bench.references import dimitriadis_force, dimitriadis_valid_depth
+from surgsim_envs.bench.shape_error import add_shape_error, plot_shape_axis
 from surgsim_envs.tissue.capabilities import CapabilityError
 
 #: the capability the indentation needs (nodal forces in, positions out); asked of every registered model
@@ -93,8 +97,10 @@ def sweep(models=None, spacings=SPACINGS, progress: bool = True, time_steps: int
             rows.append({"scene": "indent", "model": cls.name, "integrator": integ, "spacing": s,
                          "nodes": res.nodes, "dt": res.dt, "us_per_step": res.us_per_step, "us_per_ms": res.us_per_ms,
                          "error": force_error(res.depth, res.force, ref, dv), "depth": res.depth.tolist(),
-                         "force": res.force.tolist(), **({"calibration": calibrated} if calibrated else {})})
+                         "force": res.force.tolist(), "_surface": res.top_surface,
+                         **({"calibration": calibrated} if calibrated else {})})
     add_self_error(rows)
+    add_shape_error(rows)          # shape_mu/sigma/rms vs the most accurate finest surface (bench/shape_error.py)
     return rows
 
 
@@ -208,15 +214,17 @@ def run(args: argparse.Namespace) -> int:
         json.dump(table, fh, indent=1)
     if rows:
         plot(rows, os.path.join(args.out, "accuracy.png"))
+        plot_shape_axis(rows, os.path.join(args.out, "accuracy_shape.png"))
     front = {id(r) for r in pareto(rows)}
     print(f"{'model':<22} {'integrator':<11} {'res':>5} {'nodes':>6} {'us/ms':>10} {'error':>7} {'self':>7} "
-          f"{'pen mm':>6}")
+          f"{'pen mm':>6} {'shape mm':>8}")
     for r in rows:
         mark = " *" if id(r) in front else ""
         pen = f"{max(r['penetration']) * 1e3:6.3f}" if "penetration" in r else " " * 6
         res = r.get("label", f"{r['spacing'] * 1e3:g}")
         print(f"{r['model']:<22} {r['integrator']:<11} {res:>5} "
-              f"{r['nodes']:>6} {r['us_per_ms']:>10.4g} {r['error']:>7.3f} {r['self_error']:>7.3f} {pen}{mark}")
+              f"{r['nodes']:>6} {r['us_per_ms']:>10.4g} {r['error']:>7.3f} {r['self_error']:>7.3f} {pen} "
+              f"{r.get('shape_rms', math.nan) * 1e3:>8.4f}{mark}")
     print("(res: mm spacing under the sphere, cN: trilinear cells per axis; pen: MuJoCo contact penetration at "
           f"the deepest point; * = Pareto front) wrote {args.out}/accuracy.json and accuracy.png")
     return 0

@@ -138,6 +138,8 @@ class IndentResult:
     integrator: str = ""
     spacing: float = 0.0
     info: dict = field(default_factory=dict)
+    #: (positions (N,3) m, top-surface triangles) at the deepest depth, for shape errors (not serialised)
+    top_surface: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
     def us_per_ms(self) -> float:
@@ -146,6 +148,7 @@ class IndentResult:
 
     def as_dict(self) -> dict:
         out = asdict(self)
+        out.pop("top_surface", None)
         out["depth"] = [float(v) for v in self.depth]
         out["force"] = [float(v) for v in self.force]
         out["us_per_ms"] = self.us_per_ms
@@ -251,6 +254,9 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
         p = _solve_lcp(comp, gap0 - d)                  # gap g = -d + gap0 (u_z <= g)
         forces[k] = p.sum() * (4.0 if quarter else 1.0)
 
+    u = np.zeros(3 * n)
+    u[free] = -(sol @ p)                               # deformed state at the deepest depth
+    top = vol.surface[np.all(np.isclose(X[vol.surface, 2], 0.0), axis=1)]
     us, dt_used = math.nan, math.nan
     if time_steps:
         load = np.zeros((n, 3))
@@ -262,7 +268,8 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
     return IndentResult(depths, forces, n, us, dt_used, cls.name, tissue.integrator, float(spacing),
                         {"bonded": bool(bonded), "quarter": bool(quarter), "thickness": float(thickness),
                          "width": float(width), "radius": R, "young": mat.young, "poisson": mat.poisson,
-                         "contact_nodes": int(np.count_nonzero(p)), "candidate_nodes": int(len(cand))})
+                         "contact_nodes": int(np.count_nonzero(p)), "candidate_nodes": int(len(cand))},
+                        top_surface=(X + u.reshape(-1, 3), top))
 
 
 def _time_steps(tissue, load: np.ndarray, radius: float, depth: float, dt: float | None, steps: int):

@@ -675,3 +675,13 @@ class TetFEMModel(TissueModel):
                    stiffness_damping=self.stiffness_damping, threads=self.threads,
                    preconditioner=self.preconditioner)
         return out
+
+    # ------------------------------------------------------------------------------------------
+    # Growth (paper 004, section 2.3): surgsim_envs.tissue.growth
+    def grow(self, k: float = 20.0, alpha="auto", **kwargs):
+        """Stress-induced tissue growth from the current Dirichlet nodes/targets (bone displacement);
+        sets ``positions`` to the grown equilibrium, returns a ``GrowthResult``. See
+        :func:`surgsim_envs.tissue.growth.grow` and docs/models/growth.md."""
+        from surgsim_envs.tissue.growth import grow
+
+        return grow(self, k, alpha, **kwargs)
