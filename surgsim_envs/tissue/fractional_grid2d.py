@@ -14,7 +14,7 @@ Space: the (N_x+1) x (N_y+1) grid of step h with the finite differences of eq. 2
 interior points are the states, the boundary points carry prescribed displacements (Dirichlet).
 *Choice:* eq. 21 as printed puts gamma on u_y,yy and alpha on u_y,xx in the z_y row, which
 contradicts eqs. 13, 14 and 19 (alpha u_y,yy + gamma u_y,xx) and breaks the x <-> y symmetry; we
-follow eq. 19 (a test checks the 90-degree rotation symmetry).
+follow eq. 19 (a test checks the mirror symmetry about the diagonal).
 
 Time: step dt, explicit (symplectic) in u and g; ``D^p z_n = w_n`` by Grunwald-Letnikov,
 ``z_n = dt^p w_n - sum_{k=1}^{min(n,L)} c_k z_{n-k}`` (c_k the GL weights of order p, L the short

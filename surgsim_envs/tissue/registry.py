@@ -20,6 +20,7 @@ ENTRY_POINT_GROUP = "surgsim_envs.tissue_models"
 BUILTIN_MODELS: dict[str, str] = {
     "mass_spring": "surgsim_envs.tissue.mass_spring:MassSpringModel",
     "fem": "surgsim_envs.tissue.fem:TetFEMModel",
+    "fractional": "surgsim_envs.tissue.fractional:FractionalTetModel",
 }
 
 _registry: dict[str, Any] = {}
