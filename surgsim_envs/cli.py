@@ -27,6 +27,7 @@ BENCH: dict[str, tuple[str, str]] = {
     "haptics": ("surgsim_envs.bench.haptics_speed", "haptic servo loop period"),
     "accuracy": ("surgsim_envs.bench.accuracy", "speed against accuracy chart (Pareto front)"),
     "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
+    "memory": ("surgsim_envs.bench.fractional_memory", "fractional model: error and step cost against short memory L"),
 }
 
 
