@@ -300,7 +300,8 @@ def run_cli(args) -> int:
     print(f"{'residual':>15} = {frac.residual:.4g} Pa RMS ({100 * frac.relative_residual:.2f} % of data RMS); "
           f"cost {frac.cost:.4g} Pa^2 s")
     p = sls.params()
-    print(f"SLS: E0 = {p['young']:.6g} Pa, relax_fraction = {p['relax_fraction']:.4f}, tau = {p['relax_time']:.4g} s; "
+    tau = f"{p['relax_time']:.4g} s" if p["relax_fraction"] > 1e-6 else "not identifiable (no relaxing part)"
+    print(f"SLS: E0 = {p['young']:.6g} Pa, relax_fraction = {p['relax_fraction']:.4f}, tau = {tau}; "
           f"residual {sls.residual:.4g} Pa RMS ({100 * sls.relative_residual:.2f} %)")
     if args.plot:
         print(f"plot: {args.plot}")
