@@ -25,8 +25,10 @@ BENCH: dict[str, tuple[str, str]] = {
     "loop": ("surgsim_envs.bench.loop", "full physics step (MuJoCo + contact + tissue) vs MuJoCo flex"),
     "envs": ("surgsim_envs.bench.envs_speed", "Gymnasium env steps per second"),
     "haptics": ("surgsim_envs.bench.haptics_speed", "haptic servo loop period"),
+    "haptics-flood": ("surgsim_envs.bench.haptics_flood", "haptic servo period while its UDP port is flooded"),
     "accuracy": ("surgsim_envs.bench.accuracy", "speed against accuracy chart (Pareto front)"),
     "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
+    "soak": ("surgsim_envs.bench.soak", "long random-action runs: NaN, exceptions, force bounds, memory growth"),
     "memory": ("surgsim_envs.bench.fractional_memory", "fractional model: error and step cost against short memory L"),
 }
 

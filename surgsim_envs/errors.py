@@ -11,6 +11,11 @@ class ConfigError(SurgSimError, ValueError):
     """Bad user input: the message names the value and how to fix it."""
 
 
+class NonFiniteInputError(ConfigError):
+    """An input array (external forces, stiffness, an action) holds NaN or inf; the message names
+    the array, where and the value. Raised before the input can reach the simulation state."""
+
+
 class TissueUnstableError(SurgSimError, RuntimeError):
     """A tissue simulation diverged (NaN/inf, energy blow-up, inverted elements).
 

@@ -85,12 +85,12 @@ def test_scene_renders_the_smooth_embedded_surface():
     assert np.all(np.abs(verts.min(axis=0) - nodes.min(axis=0)) < 0.01)
     assert np.all(np.abs(verts.max(axis=0) - nodes.max(axis=0)) < 0.01)
     sim.sync_visual()
-    flex = sim.data.flexvert_xpos[binding.vertadr:binding.vertadr + binding.n_vertices]
+    flex = sim.render_data.flexvert_xpos[binding.vertadr:binding.vertadr + binding.n_vertices]
     np.testing.assert_allclose(flex, verts, atol=1e-12)
     tissue = sim.tissue()
     tissue.positions[:] = tissue.rest_positions + [0.0, 0.0, 0.003]
     sim.sync_visual()
-    flex = sim.data.flexvert_xpos[binding.vertadr:binding.vertadr + binding.n_vertices]
+    flex = sim.render_data.flexvert_xpos[binding.vertadr:binding.vertadr + binding.n_vertices]
     np.testing.assert_allclose(flex, verts + [0.0, 0.0, 0.003], atol=1e-12)
     tissue.positions[:] = tissue.rest_positions
     lattice = TissueBinding("x", tissue, visual="lattice")

@@ -238,13 +238,13 @@ def test_inverted_elements_are_counted():
 
 def test_explicit_beyond_critical_dt_raises_and_below_is_stable():
     stable = small_free_block(True, damping=0.0)
-    crit = stable.critical_dt()
+    crit = stable.critical_dt()            # raw estimate (contract v2: no safety factor inside)
     for _ in range(3000):
-        stable.step(crit)
+        stable.step(stable.stable_dt())
     unstable = small_free_block(True, damping=0.0)
     with pytest.raises(TissueUnstableError, match="critical dt"):
         for _ in range(3000):
-            unstable.step(1.6 * crit)
+            unstable.step(1.45 * crit)
     geo = stable.critical_dt("geometric")
     assert 0.25 * crit < geo < 4 * crit
 

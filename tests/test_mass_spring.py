@@ -284,7 +284,7 @@ def test_auto_integrator_is_the_default_and_switches_with_dt():
     m.step(0.5 * crit)
     assert m.active_integrator == "symplectic"
     # the boundary is the documented rule, and the choice is a function of the state only
-    from surgsim_envs.tissue.base import AUTO_SAFETY
+    from surgsim_envs.tissue.base import DT_SAFETY as AUTO_SAFETY
     assert m.choose_integrator(0.999 * AUTO_SAFETY * m.critical_dt()) == "symplectic"
     assert m.choose_integrator(1.001 * AUTO_SAFETY * m.critical_dt()) == "implicit"
 

@@ -63,7 +63,7 @@ def test_simulation_rejects_bad_dt_override_and_unreachable_targets():
     sim = Simulation(scene)
     with pytest.raises(ConfigError, match="outside tool 'probe'"):
         sim.set_tool_target("probe", [5.0, 0.0, 0.03])
-    with pytest.raises(ConfigError, match="not a grasper"):
+    with pytest.raises(ConfigError, match="is a probe; it has no command .set_jaw_opening"):
         sim.set_jaw_opening("probe", 0.01)
 
 
@@ -140,7 +140,7 @@ def test_grasper_pull_leads_to_gross_slip_at_low_friction_only():
     def pulled(mu):
         cfg = grasp_config()
         cfg.tissues[0].spacing = 0.009
-        cfg.graspers[0].friction = mu
+        cfg.tool("grasper").friction = mu
         sim = Simulation(grasp_scene(cfg))
         tool = sim.tool("grasper")
         sim.set_jaw_opening("grasper", 0.012, speed=0.05)

@@ -67,4 +67,6 @@ def test_soft_block_limit_is_the_explicit_limit():
     row = stable_limit(t, steps=200, rel_tol=0.1)
     assert not row["capped"]
     assert 0.5 < row["dt_limit"] / row["critical_dt"] < 2.0
-    assert "invert" not in row["error"].lower()
+    # the load does not crush the block: at the measured limit nothing inverts (beyond it the
+    # explicit instability may show first as inverted elements)
+    assert guard_verdict(t, row["dt_limit"], steps=200) is None and t.inverted_elements() == 0

@@ -2,7 +2,8 @@
 
 Single process, default task settings (control rate, physics dt and substeps are reported),
 random actions (Palpation's "report" component held at -1 so episodes run to the time limit),
-episode resets included. Then ``gym.make_vec(..., vectorization_mode="async")`` with
+episode resets included. ``overhead_ratio``: wall time of one physics substep inside the env over
+the tissue model's own ``step`` time for the same tissue and forces, same process. Then ``gym.make_vec(..., vectorization_mode="async")`` with
 ``--workers`` processes (default 2) for the scaling figure. Every figure is the median over
 ``--repeats`` timed runs of ``--steps`` env steps each (after a warm-up that compiles numba).
 """
@@ -58,15 +59,52 @@ def single_rate(env_id: str, steps: int, repeats: int) -> dict:
             if term or trunc:
                 env.reset()
         rates.append(steps / (time.perf_counter() - t0))
+    substep_us, tissue_us = overhead(env, steps, repeats, rng, pal)
     t0 = time.perf_counter()
     for r in range(5):
         env.reset(seed=r)
     reset_ms = (time.perf_counter() - t0) / 5 * 1e3
     out = {"task": env_id, "steps_per_s": statistics.median(rates), "control_hz": u.config.control_hz,
            "physics_dt_s": u.sim.dt, "substeps": u.substeps, "tissue_nodes": int(u.sim.tissue().n_nodes),
-           "reset_ms": reset_ms, "physics_steps_per_s": statistics.median(rates) * u.substeps}
+           "reset_ms": reset_ms, "physics_steps_per_s": statistics.median(rates) * u.substeps,
+           "substep_us": substep_us, "tissue_step_us": tissue_us, "overhead_ratio": substep_us / tissue_us}
     env.close()
     return out
+
+
+def overhead(env, steps: int, repeats: int, rng, palpation: bool) -> tuple[float, float]:
+    """``(substep_us, tissue_step_us)``: median wall time of one physics substep inside the env (an
+    env step divided by its substeps, so every cost of the env is in it) and of the tissue model's
+    own ``step`` on a copy of the same tissue under the same contact forces and stiffness, timed
+    alternately in this process (same load). Their ratio is ``overhead_ratio``."""
+    import copy
+
+    u = env.unwrapped
+    sub, own = [], []
+    n = max(1, steps // 4)
+    for _ in range(repeats):
+        env.reset(seed=int(rng.integers(2**31)))
+        acts = _actions(env.action_space, n, rng, palpation)
+        taken = 0
+        t0 = time.perf_counter()
+        for a in acts:
+            _, _, term, trunc, _ = env.step(a)
+            taken += 1
+            if term or trunc:
+                break
+        sub.append((time.perf_counter() - t0) / (taken * u.substeps) * 1e6)
+        sim = u.sim
+        name = next(iter(sim.contacts))
+        tissue = copy.deepcopy(sim.tissues[name])
+        res = sim.contacts[name].result
+        forces = np.array(res.forces)
+        stiffness = None if res.stiffness is None else np.array(res.stiffness)
+        k = taken * u.substeps
+        t0 = time.perf_counter()
+        for _ in range(k):
+            tissue.step(sim.dt, forces, stiffness)
+        own.append((time.perf_counter() - t0) / k * 1e6)
+    return statistics.median(sub), statistics.median(own)
 
 
 def async_rate(env_id: str, workers: int, steps: int, repeats: int) -> float:
@@ -120,11 +158,12 @@ def run(args) -> int:
         print(json.dumps({"envs": rows}, indent=2))
         return 0
     print(f"{'task':24s} {'steps/s':>8s} {'ctrl Hz':>8s} {'dt ms':>6s} {'sub':>4s} {'nodes':>6s} {'reset ms':>9s}"
-          f" {'async/s':>8s} {'speedup':>8s}")
+          f" {'async/s':>8s} {'speedup':>8s} {'overhead':>8s}")
     for r in rows:
         print(f"{r['task']:24s} {r['steps_per_s']:8.0f} {r['control_hz']:8.0f} {r['physics_dt_s'] * 1e3:6.2f} "
               f"{r['substeps']:4d} {r['tissue_nodes']:6d} {r['reset_ms']:9.1f} "
-              f"{r.get('async_steps_per_s', float('nan')):8.0f} {r.get('async_speedup', float('nan')):8.2f}")
+              f"{r.get('async_steps_per_s', float('nan')):8.0f} {r.get('async_speedup', float('nan')):8.2f} "
+              f"{r['overhead_ratio']:8.2f}")
     return 0
 
 

@@ -126,7 +126,7 @@ _OK, _BAD_KIND, _BAD_TOOL, _BAD_SIZE = 0, 1, 2, 3
 @njit(cache=True, nogil=True)
 def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel, tool_com,
                     mu, k_n, c_n, k_t, anchor_local, anchor_on,
-                    forces, stiffness, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv,
+                    forces, stiffness, node_tool_k, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv,
                     tool_fn, tool_ft, tool_ftv, contacts, slipping, penetration, last_contact, last_slip,
                     err):
     """Contact points p < C are the candidate nodes ``cand[p]``; points p >= C are the surface
@@ -183,6 +183,8 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
         forces[i, 1] = 0.0
         forces[i, 2] = 0.0
         stiffness[i] = 0.0
+        for t in range(T):
+            node_tool_k[i, t] = 0.0
     nl = np.empty(3)
     cl = np.empty(3)
     nrm = np.empty(3)
@@ -264,10 +266,14 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
             fx += gx
             fy += gy
             fz += gz
-            if slip:
-                kk += k_n
+            kg = k_n if (slip or k_n > k_t) else k_t
+            kk += kg
+            if c < C:
+                node_tool_k[i, t] += kg
             else:
-                kk += k_n if k_n > k_t else k_t
+                node_tool_k[a, t] += wa * kg
+                node_tool_k[b, t] += wb * kg
+                node_tool_k[e, t] += we * kg
             # reactions on the tool (applied at the contact point)
             tool_force[t, 0] -= gx
             tool_force[t, 1] -= gy
@@ -320,6 +326,40 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
     for t in range(T):
         tool_ft[t] = math.sqrt(tool_ftv[t, 0] ** 2 + tool_ftv[t, 1] ** 2 + tool_ftv[t, 2] ** 2)
     err[0] = 0
+
+
+@njit(cache=True, nogil=True)
+def _attribute_increment(touched, integrated, forces, stiffness, node_tool_k, positions, tool_com,
+                         tool_force, tool_torque):
+    """Give each tool the reaction of its share (node_tool_k / stiffness) of the increment
+    ``integrated - forces`` the tissue added to the contact force of every touched node."""
+    T = tool_force.shape[0]
+    for j in range(touched.shape[0]):
+        i = touched[j]
+        k = stiffness[i]
+        if k <= 0.0:
+            continue
+        dx = integrated[i, 0] - forces[i, 0]
+        dy = integrated[i, 1] - forces[i, 1]
+        dz = integrated[i, 2] - forces[i, 2]
+        if dx == 0.0 and dy == 0.0 and dz == 0.0:
+            continue
+        for t in range(T):
+            w = node_tool_k[i, t] / k
+            if w == 0.0:
+                continue
+            gx = w * dx
+            gy = w * dy
+            gz = w * dz
+            tool_force[t, 0] -= gx
+            tool_force[t, 1] -= gy
+            tool_force[t, 2] -= gz
+            rx = positions[i, 0] - tool_com[t, 0]
+            ry = positions[i, 1] - tool_com[t, 1]
+            rz = positions[i, 2] - tool_com[t, 2]
+            tool_torque[t, 0] -= ry * gz - rz * gy
+            tool_torque[t, 1] -= rz * gx - rx * gz
+            tool_torque[t, 2] -= rx * gy - ry * gx
 
 
 def _array(value, shape, dtype, name, unit):
@@ -393,6 +433,10 @@ class ContactModel:
         self.result = ContactResult(np.zeros((self.n_nodes, 3)), np.zeros(self.n_nodes), np.zeros((T, 3)),
                                     np.zeros((T, 3)), self.report)
         self._tool_ftv = np.zeros((T, 3))
+        #: (N, T) N/m, each tool's part of every node's contact stiffness at the last compute()
+        self.node_tool_stiffness = np.zeros((self.n_nodes, T))
+        self._com = np.zeros((T, 3))
+        self._pos = np.zeros((self.n_nodes, 3))
         self._last = np.zeros((2, T), dtype=np.int64)
         self._err = np.zeros(2, dtype=np.int64)
         self._n_geoms = -1
@@ -465,6 +509,7 @@ class ContactModel:
         """Forget all stick anchors (every contact starts fresh) and zero the outputs."""
         self._anchor_on[:] = 0
         self._anchor_local[:] = 0.0
+        self.node_tool_stiffness[:] = 0.0
         r = self.result
         for arr in (r.forces, r.stiffness, r.tool_force, r.tool_torque, r.geom_normal_force,
                     r.geom_tangential_force, self.report.normal_force, self.report.tangential_force,
@@ -515,7 +560,8 @@ class ContactModel:
         _contact_kernel(pos, vel, self.candidate_nodes, self.sample_nodes, self.sample_weights, self._touched,
                         kind, tool, size, gpos, gmat, gvel, com,
                         self.tool_friction, k_n * scale, float(self.params.damping) * scale, float(k_t) * scale,
-                        self._anchor_local, self._anchor_on, r.forces, r.stiffness, r.tool_force,
+                        self._anchor_local, self._anchor_on, r.forces, r.stiffness, self.node_tool_stiffness,
+                        r.tool_force,
                         r.tool_torque, r.geom_normal_force, r.geom_tangential_force, self._geom_ftv,
                         rep.normal_force, rep.tangential_force, self._tool_ftv, rep.contacts, rep.slipping,
                         rep.penetration, self._last[0], self._last[1], err)
@@ -528,4 +574,18 @@ class ContactModel:
                 raise ConfigError(f"shape_tool[{g}] = {tool[g]} is not a tool index in [0, {T})")
             raise ConfigError(f"shape_size[{g}] = {size[g].tolist()} m is invalid for shape kind {kind[g]}; "
                               "sizes must be positive (MuJoCo geom_size convention)")
+        self._com[:] = com
+        self._pos[:] = pos
         return r
+
+    def attribute_increment(self, integrated_forces) -> None:
+        """After the tissue step: add to ``result.tool_force`` / ``tool_torque`` the reaction of
+        the increment ``integrated_forces - result.forces`` (N,3) N that an implicit integrator
+        added to the contact force (the tissue's ``integrated_external_forces``), split among the
+        tools by their part of each node's contact stiffness. Then tools receive the reaction of
+        exactly the force the tissue integrated, and total momentum is conserved for every
+        integrator (torques taken at the node positions of the last :meth:`compute`)."""
+        f = _array(integrated_forces, (self.n_nodes, 3), np.float64, "integrated_forces", "N")
+        r = self.result
+        _attribute_increment(self._touched, f, r.forces, r.stiffness, self.node_tool_stiffness, self._pos,
+                             self._com, r.tool_force, r.tool_torque)

@@ -17,16 +17,27 @@ TASKS = {
     "SurgSim/Slippage-v0": "surgsim_envs.envs.slippage:SlippageEnv",
 }
 
+#: task id -> control steps per episode of the default config (episode_seconds x control_hz); a
+#: test keeps these equal to the configs. A changed config needs gym.make(..., max_episode_steps=N).
+MAX_EPISODE_STEPS = {"SurgSim/Palpation-v0": 600, "SurgSim/Grasp-v0": 150, "SurgSim/Slippage-v0": 150}
+
 
 def register_envs() -> None:
-    """Register the SurgSim tasks with Gymnasium (idempotent). Time limits are applied by the
-    envs themselves (``config.episode_seconds``), so no TimeLimit wrapper is added."""
+    """Register the SurgSim tasks with Gymnasium (idempotent), each with its
+    ``max_episode_steps`` (:data:`MAX_EPISODE_STEPS`; Gymnasium adds its TimeLimit wrapper, and
+    the env truncates at the same step itself, paying its end-of-episode terms).
+
+    Gymnasium's passive env checker is off: after a first ``reset`` that raises (e.g. a bad
+    option) it keeps no reset data and every later ``step`` failed with a TypeError. The envs
+    check their own actions, options and outputs; ``gymnasium.utils.env_checker.check_env``
+    passes on every task (tests/test_envs.py)."""
     import gymnasium as gym
 
     for env_id, entry in TASKS.items():
         if env_id in gym.registry:
             continue
-        gym.register(id=env_id, entry_point=entry, disable_env_checker=False)
+        gym.register(id=env_id, entry_point=entry, disable_env_checker=True,
+                     max_episode_steps=MAX_EPISODE_STEPS[env_id])
 
 
-__all__ = ["TASKS", "register_envs"]
+__all__ = ["TASKS", "MAX_EPISODE_STEPS", "register_envs"]

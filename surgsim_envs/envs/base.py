@@ -21,12 +21,37 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError, TissueUnstableError
+
+
+@dataclass(frozen=True)
+class ObsTerm:
+    """One named observation term: ``size`` entries in ``unit``, physical bounds [low, high]
+    (+-inf where none exists, e.g. a contact force)."""
+
+    name: str
+    unit: str
+    size: int = 1
+    low: float = -math.inf
+    high: float = math.inf
+
+
+def observation_space_of(terms) -> tuple[gym.spaces.Box, list[str]]:
+    """``(Box, names)`` of a list of :class:`ObsTerm`: float32 bounds per entry and one
+    "name [unit]" string per index (``name[i] [unit]`` for multi-entry terms)."""
+    lows, highs, names = [], [], []
+    for t in terms:
+        lows += [t.low] * t.size
+        highs += [t.high] * t.size
+        names += [f"{t.name} [{t.unit}]"] if t.size == 1 else [f"{t.name}[{i}] [{t.unit}]" for i in range(t.size)]
+    box = gym.spaces.Box(np.array(lows, dtype=np.float32), np.array(highs, dtype=np.float32), dtype=np.float32)
+    return box, names
 
 
 def apply_overrides(config, overrides: dict[str, Any]):
@@ -68,6 +93,68 @@ def check_task_resolution(config, what: str) -> None:
         check_positive(config.step_budget_us, f"{what}.step_budget_us", "us of compute per simulated ms, e.g. 1000")
 
 
+def check_control_rate(config, what: str) -> None:
+    """``control_hz`` must give a control period between one physics step ``dt`` and 1000 physics
+    steps (the scene's substep limit), and no longer than the episode: the physical range is
+    ``[max(1 / episode_seconds, 1 / (1000 dt)), 1 / dt]`` Hz. ``dt`` and ``episode_seconds`` must be
+    valid positive numbers first."""
+    from surgsim_envs.scene.config import DT_RANGE, SUBSTEPS_RANGE
+
+    dt = check_positive(config.dt, f"{what}.dt", "the physics step in s, e.g. 4e-4")
+    if not DT_RANGE[0] <= dt <= DT_RANGE[1]:
+        raise ConfigError(f"{what}.dt={dt!r} s is outside the physics step range [{DT_RANGE[0]:g}, {DT_RANGE[1]:g}] s")
+    episode = check_positive(config.episode_seconds, f"{what}.episode_seconds", "e.g. 3.0")
+    hz = check_positive(config.control_hz, f"{what}.control_hz", "the control rate in Hz, e.g. 50")
+    lo, hi = max(1.0 / episode, 1.0 / (SUBSTEPS_RANGE[1] * dt)), 1.0 / dt
+    if not lo * (1 - 1e-9) <= hz <= hi * (1 + 1e-9):
+        raise ConfigError(f"{what}.control_hz={hz!r} Hz is outside its physical range [{lo:.4g}, {hi:.4g}] Hz: the "
+                          f"control period must be at least one physics step (dt={dt:g} s), at most "
+                          f"{SUBSTEPS_RANGE[1]} steps and at most the episode ({episode:g} s); e.g. 50 Hz")
+
+
+def sphere_mask(centroids: np.ndarray, centre, radius: float) -> np.ndarray:
+    """(T,) bool: elements whose rest centroid (``model.element_centroids()``, (T,3) m) lies within
+    ``radius`` m of ``centre`` (3,) m; at least the nearest one."""
+    d = np.linalg.norm(np.asarray(centroids) - np.asarray(centre, dtype=float)[None], axis=1)
+    mask = d < radius
+    if not mask.any():
+        mask[np.argmin(d)] = True
+    return mask
+
+
+def tissue_options(model: str, integrator: str) -> dict[str, Any]:
+    """Constructor options of a task's tissue: ``integrator`` if model ``model`` has it, else its
+    "auto" choice (explicit when stable, implicit otherwise), else the model's default."""
+    from surgsim_envs.tissue.registry import get as model_class
+
+    cls = model_class(model)
+    names = cls.integrator_names() if hasattr(cls, "integrator_names") else list(getattr(cls, "integrators", ()))
+    if integrator in names:
+        return {"integrator": integrator}
+    return {"integrator": "auto"} if "auto" in names else {}
+
+
+def require_capabilities(model: str, capabilities, task: str) -> None:
+    """Before building: CapabilityError (a ConfigError naming model, capability and task) unless
+    tissue model ``model`` declares every one of ``capabilities`` (tissue contract v2)."""
+    from surgsim_envs.tissue.registry import get as model_class
+
+    cls = model_class(model)
+    for cap in capabilities:
+        cls.require(cap, task=task)
+
+
+def check_explicit_step(tissue, dt: float, what: str) -> None:
+    """After a re-randomised material: ConfigError if the tissue steps explicitly (integrator
+    "symplectic") and ``dt`` exceeds its critical step (an implicit or "auto" model is safe)."""
+    if getattr(tissue, "integrator", None) != "symplectic":
+        return
+    crit = tissue.critical_dt()
+    if crit < dt:
+        raise ConfigError(f"{what} makes the explicit tissue step unstable (critical dt {crit:.2e} s < dt {dt:g} s); "
+                          "lower the stiffness ranges or dt, or use integrator 'auto'")
+
+
 def check_on_unstable(value, what: str) -> None:
     """``on_unstable`` must be "raise" (default) or "terminate" (see the module docstring)."""
     if value not in ("raise", "terminate"):
@@ -84,6 +171,12 @@ def sample(rng: np.random.Generator, value, what: str, lo: float = -math.inf, hi
         return v
     a, b = check_range(value, what, lo, hi)
     return float(rng.uniform(a, b)) if b > a else a
+
+
+def reward_from_terms(terms: dict[str, float]) -> tuple[float, dict[str, float]]:
+    """``(sum, terms as floats)`` of weighted reward terms: the reward and ``info["reward_terms"]``."""
+    clean = {k: float(v) for k, v in terms.items()}
+    return float(sum(clean.values())), clean
 
 
 class SurgSimEnv(gym.Env):
@@ -109,6 +202,10 @@ class SurgSimEnv(gym.Env):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(f"render_mode={render_mode!r} is not supported; use one of "
                               f"{self.metadata['render_modes']} or None")
+        if render_mode == "human":
+            from surgsim_envs.scene.display import require_display
+
+            require_display("render_mode='human'")   # raises here; MuJoCo would exit the process later
         self.render_mode = render_mode
         self.metadata = dict(self.metadata, render_fps=int(round(self.config.control_hz)))
         self._renderer = None
@@ -134,7 +231,8 @@ class SurgSimEnv(gym.Env):
         raise NotImplementedError
 
     def _evaluate(self, action: np.ndarray) -> tuple[float, bool, dict[str, Any]]:
-        """(reward, terminated, info terms) after a control step."""
+        """(reward, terminated, info terms) after a control step; ``info terms["reward_terms"]`` is
+        {term name: weighted value} summing to the reward (:func:`reward_from_terms`)."""
         raise NotImplementedError
 
     def _metrics(self) -> dict[str, Any]:
@@ -152,6 +250,16 @@ class SurgSimEnv(gym.Env):
         return max(1, int(round(self.control_dt / self.config.dt)))
 
     @property
+    def observation_names(self) -> list[str]:
+        """Index -> "name [unit]" of every observation entry (from the task's observation terms)."""
+        return list(self._obs_names)
+
+    def _set_observation_terms(self, terms) -> None:
+        """Build ``observation_space`` (physical bounds) and ``observation_names`` from ObsTerms."""
+        self.observation_terms = list(terms)
+        self.observation_space, self._obs_names = observation_space_of(self.observation_terms)
+
+    @property
     def max_episode_steps(self) -> int:
         return max(1, int(round(self.config.episode_seconds * self.config.control_hz)))
 
@@ -160,10 +268,12 @@ class SurgSimEnv(gym.Env):
 
         Raises ConfigError (a ValueError) on a wrong shape or non-finite entries.
         """
-        try:
-            a = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ConfigError(f"action must be numeric with shape {self.action_space.shape}, got {action!r}") from None
+        raw = np.asarray(action)
+        if raw.dtype.kind not in "iuf":
+            raise ConfigError(f"action must be real numbers (float or int) with shape {self.action_space.shape} in "
+                              f"[-1, 1], got {action!r} of dtype {raw.dtype} (bool, complex, string and object "
+                              "actions are rejected)")
+        a = raw.astype(np.float64)
         if a.shape != self.action_space.shape:
             if a.size == int(np.prod(self.action_space.shape)) and a.ndim <= 1:
                 a = a.reshape(self.action_space.shape)
@@ -209,6 +319,8 @@ class SurgSimEnv(gym.Env):
             extra_r, extra = self._on_truncate()
             reward += extra_r
             terms.update(extra)
+            if "reward_terms" in terms:
+                terms["reward_terms"]["final"] = terms["reward_terms"].get("final", 0.0) + float(extra_r)
         self.episode_return += reward
         obs = self._observe()
         info = self._info(terms)
@@ -258,10 +370,13 @@ class SurgSimEnv(gym.Env):
 
     def _render_human(self) -> None:
         if self._viewer is None:
+            from surgsim_envs.scene.display import require_display
+
+            require_display("render_mode='human'")
             try:
                 import mujoco.viewer
 
-                self._viewer = mujoco.viewer.launch_passive(self.sim.model, self.sim.data)
+                self._viewer = mujoco.viewer.launch_passive(self.sim.render_model, self.sim.sync_visual())
             except Exception as exc:  # no display, or not the main thread on macOS
                 raise RenderingUnavailableError(
                     f"render_mode='human' needs a display for mujoco.viewer ({exc}); use render_mode='rgb_array' "

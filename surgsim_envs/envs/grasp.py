@@ -37,12 +37,12 @@ from typing import Any, Sequence
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import (SurgSimEnv, check_on_unstable, check_positive, check_range,
-                                   check_task_resolution, sample)
+from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_on_unstable,
+                                   check_positive, check_range, check_task_resolution, ObsTerm, require_capabilities,
+                                   reward_from_terms, sample)
 from surgsim_envs.envs.grasp_common import (ORGAN_SPACING, SlipTracker, build_grasp_simulation, contact_nodes,
                                             contact_reward, excess_force_penalty, is_grasped, record_progress,
                                             slip_fraction)
-from surgsim_envs.envs.stiffness_field import StiffnessField
 from surgsim_envs.errors import ConfigError
 
 
@@ -54,6 +54,8 @@ class GraspConfig:
     dt: float = 4e-4                   # s; squeezed, strain-stiffened tissue needs < 0.5 ms
     episode_seconds: float = 3.0
     organ: str = "spleen"
+    model: str = "mass_spring"         # any registered tissue model with the "forces" capability
+    integrator: str = "symplectic"     # used if the model has it, else the model's "auto"
     resolution: float | str | None = None   # None: the organ's task lattice; a spacing in m; "auto"
     error_tolerance: float = 0.1       # resolution="auto": force error limit (fraction)
     step_budget_us: float = 5_000.0    # resolution="auto": compute limit, us per simulated ms
@@ -84,6 +86,7 @@ class GraspConfig:
         for key in ("control_hz", "dt", "episode_seconds", "closing_speed", "max_step", "workspace", "hold_force",
                     "damage_force", "tolerance"):
             check_positive(getattr(self, key), f"GraspConfig.{key}")
+        check_control_rate(self, type(self).__name__)
         check_task_resolution(self, type(self).__name__)
         check_on_unstable(self.on_unstable, type(self).__name__)
         if self.organ not in ORGAN_SPACING:
@@ -98,26 +101,39 @@ class GraspEnv(SurgSimEnv):
     """Grasp-v0 (see module docstring)."""
 
     config_cls = GraspConfig
+    TASK_ID = "SurgSim/Grasp-v0"
+    REQUIRES = ("forces",)      # tissue capabilities the task needs (contract v2)
     OPTIONS = ("organ", "mu", "young_scale", "target_offset_x", "target_offset_z")
     tool_name = "grasper"
 
     def _build(self) -> None:
         self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
-        self.observation_space = spaces.Box(-1e6, 1e6, shape=(15,), dtype=np.float32)
-        self._fields: dict[str, StiffnessField] = {}
         self._select(self.config.organ)
         self.slip = SlipTracker()
+        self._set_observation_terms(self._observation_terms())
+
+    def _reach(self) -> tuple[float, float, float]:
+        """(low, high, span) m of the wrist's reachable world coordinates: home +- travel."""
+        t = float(self.gcfg.travel) * np.sqrt(3.0)      # slides along the (rotated) wrist axes
+        return float(self.home.min()) - t, float(self.home.max()) + t, 2.0 * t
+
+    def _observation_terms(self) -> list:
+        lo, hi, span = self._reach()
+        return [ObsTerm("wrist_position", "m", 3, lo, hi), ObsTerm("target_minus_wrist", "m", 3, -span, span),
+                ObsTerm("jaw_opening", "m", 1, 0.0, 2.0 * float(self.gcfg.open_radius)),
+                ObsTerm("jaw_normal_force", "N", 3, 0.0), ObsTerm("jaw_tangential_force", "N", 3, 0.0),
+                ObsTerm("slipping_contacts", "1", 1, 0.0), ObsTerm("contacts", "1", 1, 0.0)]
 
     def _select(self, organ: str) -> None:
         if organ not in ORGAN_SPACING:
             raise ConfigError(f"unknown organ {organ!r}; choose one of {sorted(ORGAN_SPACING)}")
         if organ not in self._sims:
             c = self.config
+            require_capabilities(c.model, self.REQUIRES, self.TASK_ID)
             self._sims[organ] = build_grasp_simulation(organ, c.dt, self.substeps, c.closing_speed, c.resolution,
-                                                       c.error_tolerance, c.step_budget_us)
-            self._fields[organ] = StiffnessField(self._sims[organ].tissue())
+                                                       c.error_tolerance, c.step_budget_us, model=c.model,
+                                                       integrator=c.integrator)
         self.sim = self._sims[organ]
-        self.field = self._fields[organ]
         self.organ = organ
         tool = self.sim.tool(self.tool_name)
         self.home = tool.home.copy()
@@ -130,14 +146,11 @@ class GraspEnv(SurgSimEnv):
         self._select(options.get("organ", self.config.organ))
         mu = sample(rng, options.get("mu", c.mu), "mu", 0.0, 2.0)
         scale = sample(rng, options.get("young_scale", c.young_scale), "young_scale", 0.5, 1.25)
-        self.field.apply(np.full(len(self.field.tet_scale), scale))
+        self.sim.tissue().scale_material("young", scale)   # the contract's only way to change stiffness
         for contact in self.sim.contacts.values():
             contact.tool_friction[:] = mu
         self.sim.reset(seed=int(rng.integers(2**31)))
-        crit = self.sim.tissue().critical_dt()
-        if crit < self.sim.dt:
-            raise ConfigError(f"young_scale {scale:.2f} makes the explicit tissue step unstable (critical dt "
-                              f"{crit:.2e} s < dt {self.sim.dt:g} s); lower young_scale or dt")
+        check_explicit_step(self.sim.tissue(), self.sim.dt, f"young_scale {scale:.2f}")
         self.mu, self.young_scale = mu, scale
         self.slip.reset()
         self.slip_distance = 0.0
@@ -193,24 +206,26 @@ class GraspEnv(SurgSimEnv):
         pos, fn, ft, rep = self._readings()
         grasped = self._update_grasp(pos, fn)
         dist = float(np.linalg.norm(self.goal - pos))
-        reward = excess_force_penalty(fn, c.damage_force, c.force_weight)
-        reward += contact_reward(fn, c.hold_force, c.contact_weight)
+        rt = {"excess_force": excess_force_penalty(fn, c.damage_force, c.force_weight),
+              "contact": contact_reward(fn, c.hold_force, c.contact_weight), "progress": 0.0, "slip": 0.0,
+              "drop": 0.0, "success": 0.0}
         terms: dict[str, Any] = {"grasped": grasped, "distance_to_target_m": dist}
         terminated = False
         if grasped:
             gain, self.best_dist = record_progress(self.best_dist, dist)
-            reward += c.progress_weight * gain / self.goal_dist0
-            reward -= c.slip_weight * slip_fraction(rep["slipping"], rep["contacts"])
+            rt["progress"] = c.progress_weight * gain / self.goal_dist0
+            rt["slip"] = -c.slip_weight * slip_fraction(rep["slipping"], rep["contacts"])
             self.was_grasped = True
             if dist <= c.tolerance:
-                reward += c.success_bonus
+                rt["success"] = c.success_bonus
                 terminated = True
                 terms["success"] = terms["is_success"] = True
         elif self.was_grasped and rep["contacts"] == 0:
-            reward -= c.drop_penalty
+            rt["drop"] = -c.drop_penalty
             terminated = True
             terms["dropped"] = True
         self.prev_dist = dist
+        reward, terms["reward_terms"] = reward_from_terms(rt)
         return reward, terminated, terms
 
     def _metrics(self) -> dict[str, Any]:

@@ -16,23 +16,25 @@ ORGAN_SPACING = {"spleen": 0.011, "liver_lobe": 0.015}
 
 
 def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: float, resolution=None,
-                           error_tolerance: float = 0.1, step_budget_us: float = 5_000.0):
+                           error_tolerance: float = 0.1, step_budget_us: float = 5_000.0, model: str = "mass_spring",
+                           integrator: str = "symplectic"):
     """A Simulation of the grasp scene for ``organ`` ("spleen" or "liver_lobe").
 
     resolution: None (the organ's :data:`ORGAN_SPACING`), a spacing in m, or "auto" (the cheapest
     measured mass-spring/symplectic spacing meeting ``error_tolerance`` (fraction) and
     ``step_budget_us`` (us per simulated ms); see :class:`surgsim_envs.scene.TissueConfig`).
     """
+    from surgsim_envs.envs.base import tissue_options
     from surgsim_envs.scene import Simulation, grasp_config, grasp_scene
 
     if organ not in ORGAN_SPACING:
         raise ConfigError(f"unknown organ {organ!r} for the grasp tasks; choose one of {sorted(ORGAN_SPACING)}")
-    cfg = grasp_config(organ=organ)
+    cfg = grasp_config(organ=organ, model=model)
     t = cfg.tissues[0]
     t.spacing = ORGAN_SPACING[organ]
     t.resolution, t.error_tolerance, t.step_budget_us = resolution, error_tolerance, step_budget_us
-    t.options = {"integrator": "symplectic"}
-    cfg.graspers[0].closing_speed = float(closing_speed)
+    t.options = tissue_options(model, integrator)
+    cfg.tool("grasper").closing_speed = float(closing_speed)
     cfg.dt = float(dt)
     return Simulation(grasp_scene(cfg), dt=dt, substeps=substeps)
 

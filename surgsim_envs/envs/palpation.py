@@ -46,9 +46,9 @@ from typing import Any, Sequence
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import (SurgSimEnv, check_on_unstable, check_positive, check_range,
-                                   check_task_resolution, sample)
-from surgsim_envs.envs.stiffness_field import StiffnessField
+from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_on_unstable,
+                                   check_positive, check_range, check_task_resolution, ObsTerm, require_capabilities,
+                                   reward_from_terms, sample, sphere_mask, tissue_options)
 from surgsim_envs.errors import ConfigError
 
 
@@ -67,6 +67,8 @@ class PalpationConfig:
     on_unstable: str = "raise"         # "terminate": a tissue divergence ends the episode (info["unstable"])
     slab_size: Sequence[float] = (0.1, 0.1, 0.02)   # m
     material: str = "liver"
+    model: str = "mass_spring"         # any registered tissue model with the "forces" capability
+    integrator: str = "symplectic"     # used if the model has it, else the model's "auto"
     tip_radius: float = 0.01           # m, probe tip
     probe_speed: float = 0.2           # m/s, rate limit of the probe target
     # action scaling
@@ -110,6 +112,7 @@ class PalpationConfig:
                     "hover", "max_depth", "xy_limit", "press_min_depth", "sample_max_speed", "site_spacing", "damage_force",
                     "localisation_scale", "tolerance_mm", "map_half_width"):
             check_positive(getattr(self, key), f"PalpationConfig.{key}")
+        check_control_rate(self, "PalpationConfig")
         for key in ("shaping_weight", "time_cost", "press_reward", "cell_reward"):
             v = getattr(self, key)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
@@ -211,6 +214,8 @@ class PalpationEnv(SurgSimEnv):
     """Palpation-v0 (see module docstring)."""
 
     config_cls = PalpationConfig
+    TASK_ID = "SurgSim/Palpation-v0"
+    REQUIRES = ("forces",)      # tissue capabilities the task needs (contract v2)
     OPTIONS = ("inclusion_position", "inclusion_xy", "inclusion_depth", "inclusion_radius", "stiffness_contrast", "young_scale")
 
     def _build(self) -> None:
@@ -222,21 +227,34 @@ class PalpationEnv(SurgSimEnv):
         t.spacing = c.spacing
         t.resolution, t.error_tolerance, t.step_budget_us = c.resolution, c.error_tolerance, c.step_budget_us
         t.material = c.material
+        t.model = c.model
+        t.options = tissue_options(c.model, c.integrator)
         t.region_materials = None
         t.volume_options = {"size": tuple(float(s) for s in c.slab_size)}
         t.position = (0.0, 0.0, float(c.slab_size[2]) / 2.0)
         self.surface_z = float(c.slab_size[2])
-        p = cfg.probes[0]
+        p = cfg.tool("probe")
         p.tip_radius = c.tip_radius
         p.position = (0.0, 0.0, self.surface_z + c.tip_radius + c.hover)
         cfg.dt = c.dt
+        require_capabilities(c.model, self.REQUIRES, self.TASK_ID)
         self.sim = Simulation(palpation_scene(cfg), dt=c.dt, substeps=self.substeps)
-        self.field = StiffnessField(self.sim.tissue())
+        self.centroids = self.sim.tissue().element_centroids()     # (T,3) m, rest frame: inclusion masks
         self.home = np.asarray(p.position, dtype=float)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
-        big = np.float32(1e6)
         self.n_cells = int(c.map_cells) ** 2
-        self.observation_space = spaces.Box(-big, big, shape=(14 + self.n_cells,), dtype=np.float32)
+        reach = float(p.travel)                          # the probe's slides: home +- travel per axis
+        lo, hi = float(self.home[:2].min()) - reach, float(self.home[:2].max()) + reach
+        self._set_observation_terms([
+            ObsTerm("probe_tip_position", "m", 3, float(self.home.min()) - reach, float(self.home.max()) + reach),
+            ObsTerm("contact_force", "N", 3),
+            ObsTerm("indentation_depth", "m", 1, 0.0),
+            ObsTerm("best_site_xy", "m", 2, lo, hi),
+            ObsTerm("best_stiffness", "N/m", 1, 0.0),
+            ObsTerm("episode_fraction", "1", 1, 0.0, 1.0),
+            ObsTerm("estimate_xy", "m", 2, lo, hi),
+            ObsTerm("stiffness_contrast_seen", "1", 1, 1.0),
+            ObsTerm("stiffness_map", "1", self.n_cells, 0.0, 1.0)])
         self.inclusion = {}
 
     # -- episode ----------------------------------------------------------------------------
@@ -258,15 +276,12 @@ class PalpationEnv(SurgSimEnv):
         contrast = sample(rng, get("stiffness_contrast"), "stiffness_contrast", 1.0, 20.0)
         scale = sample(rng, get("young_scale"), "young_scale", 0.1, 10.0)
         centre = np.array([x, y, self.surface_z - depth])
-        s = np.full(len(self.field.tet_scale), scale)
-        s[self.field.sphere_mask(centre, radius)] *= contrast
-        self.field.apply(s)
+        tissue = self.sim.tissue()
+        tissue.scale_material("young", scale)             # the contract's only way to change stiffness
+        tissue.scale_material("young", scale * contrast, mask=sphere_mask(self.centroids, centre, radius))
         self.sim.reset(seed=int(rng.integers(2**31)))
-        crit = self.sim.tissue().critical_dt()
-        if crit < self.sim.dt:
-            raise ConfigError(f"Palpation: stiffness contrast {contrast:.2f} x young_scale {scale:.2f} makes the "
-                              f"explicit tissue step unstable (critical dt {crit:.2e} s < dt {self.sim.dt:g} s); "
-                              "lower stiffness_contrast / young_scale, or dt")
+        check_explicit_step(tissue, self.sim.dt, f"Palpation: stiffness contrast {contrast:.2f} x young_scale "
+                                                 f"{scale:.2f}")
         self.inclusion = {"centre": centre, "radius": radius, "contrast": contrast, "young_scale": scale}
         self.target = self.home.copy()
         self.sim.set_tool_target("probe", self.target, speed=c.probe_speed)
@@ -310,7 +325,8 @@ class PalpationEnv(SurgSimEnv):
         pos, force, depth = self._readings()
         fmag = float(np.linalg.norm(force))
         self.peak_force = max(self.peak_force, fmag)
-        reward = damage_penalty(force, c.damage_force, c.damage_weight)
+        rt = {"damage": damage_penalty(force, c.damage_force, c.damage_weight), "coverage": 0.0, "shaping": 0.0,
+              "time": -c.time_cost, "press_site": 0.0, "localisation": 0.0}
         k = stiffness_estimate(force[2], depth, c.press_min_depth)
         if k > self.best[2]:
             self.best = (float(pos[0]), float(pos[1]), k)
@@ -321,23 +337,22 @@ class PalpationEnv(SurgSimEnv):
             self.samples_k.append(k)
             cell = map_cell(pos[:2], int(c.map_cells), c.map_half_width)
             if self.cell_k[cell] == 0.0:
-                reward += c.cell_reward
+                rt["coverage"] += c.cell_reward
             self.cell_k[cell] = max(self.cell_k[cell], k)
             self.estimate = stiffness_weighted_estimate(np.array(self.samples_xy), np.array(self.samples_k))
             med = float(np.median(self.samples_k))
             self.contrast_seen = float(max(self.samples_k)) / med if med > 0 else 1.0
             err = localisation_error(self.estimate, self.inclusion["centre"][:2])
             phi = 1.0 - min(err / c.localisation_scale, 1.0)
-            reward += c.shaping_weight * (phi - self.phi)
+            rt["shaping"] += c.shaping_weight * (phi - self.phi)
             self.phi = phi
-        reward -= c.time_cost
         # a press site counts only when it gives a quasi-static stiffness sample (dragging a pressed tip
         # across the slab measures drag, not stiffness, and must not pay)
         if (depth >= c.press_min_depth and speed <= c.sample_max_speed
                 and is_new_site(pos[:2], self.sites, c.site_spacing)):
             self.sites.append(pos[:2].copy())
             if len(self.sites) <= c.max_rewarded_sites:
-                reward += c.press_reward
+                rt["press_site"] += c.press_reward
         terms: dict[str, Any] = {"stiffness_estimate_N_per_m": k, "force_N": fmag,
                                  "estimate_xy_m": None if self.estimate is None else self.estimate.tolist()}
         self.report_held = self.report_held + 1 if a[3] > 0.0 else 0
@@ -345,8 +360,9 @@ class PalpationEnv(SurgSimEnv):
                       and self.steps * self.control_dt >= c.min_report_seconds)
         if terminated:
             r, t = self._finish(pos)
-            reward += r
+            rt["localisation"] += r
             terms.update(t)
+        reward, terms["reward_terms"] = reward_from_terms(rt)
         return reward, terminated, terms
 
     def _finish(self, pos) -> tuple[float, dict[str, Any]]:

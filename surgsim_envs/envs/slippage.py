@@ -32,7 +32,7 @@ from typing import Any, Sequence
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import check_positive, check_range, sample
+from surgsim_envs.envs.base import ObsTerm, check_positive, check_range, reward_from_terms, sample
 from surgsim_envs.envs.grasp import GraspConfig, GraspEnv
 from surgsim_envs.envs.grasp_common import contact_nodes
 from surgsim_envs.errors import ConfigError
@@ -98,12 +98,21 @@ class SlippageEnv(GraspEnv):
     """Slippage-v0 (see module docstring)."""
 
     config_cls = SlippageConfig
+    TASK_ID = "SurgSim/Slippage-v0"
     OPTIONS = ("organ", "mu", "young_scale", "pull_rate", "pull_amplitude", "pull_frequency")
 
     def _build(self) -> None:
         super()._build()
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-        self.observation_space = spaces.Box(-1e6, 1e6, shape=(12,), dtype=np.float32)
+
+    def _observation_terms(self) -> list:
+        _, _, span = self._reach()
+        return [ObsTerm("jaw_opening", "m", 1, 0.0, 2.0 * float(self.gcfg.open_radius)),
+                ObsTerm("jaw_normal_force", "N", 3, 0.0), ObsTerm("jaw_tangential_force", "N", 3, 0.0),
+                ObsTerm("slipping_contacts", "1", 1, 0.0), ObsTerm("contacts", "1", 1, 0.0),
+                ObsTerm("pull_force", "N", 1, 0.0, float(self.config.max_pull)),
+                ObsTerm("wrist_displacement_along_pull", "m", 1, -span, span),
+                ObsTerm("slip_distance", "m", 1, 0.0)]
 
     def _select(self, organ: str) -> None:
         new = organ not in self._sims
@@ -173,16 +182,18 @@ class SlippageEnv(GraspEnv):
         self.slip_distance = self.slip.distance(pos, self.sim.tissue().positions)
         total = float(np.sum(fn))
         self.peak_force = max(self.peak_force, total)
-        reward = slip_penalty(self.slip_distance, before, c.slip_weight)
-        reward += excess_squeeze_penalty(total, self.pull, self.mu, c.squeeze_weight)
+        rt = {"slip": slip_penalty(self.slip_distance, before, c.slip_weight),
+              "excess_squeeze": excess_squeeze_penalty(total, self.pull, self.mu, c.squeeze_weight),
+              "hold": 0.0, "drop": 0.0}
         lost = rep["contacts"] == 0 or self.slip_distance > c.max_slip
         terms: dict[str, Any] = {"pull_force_N": self.pull, "normal_force_N": total,
                                  "least_squeeze_N": least_squeeze(self.pull, self.mu)}
         if lost:
-            reward -= c.drop_penalty
+            rt["drop"] = -c.drop_penalty
             terms["dropped"] = True
         else:
-            reward += c.hold_reward
+            rt["hold"] = c.hold_reward
+        reward, terms["reward_terms"] = reward_from_terms(rt)
         return reward, bool(lost), terms
 
     def _on_truncate(self):

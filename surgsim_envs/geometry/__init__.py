@@ -2,6 +2,7 @@
 
 - :class:`Volume`: tet mesh (m) + outward boundary + per-tet region labels.
 - :func:`make_volume`: named volumes ("block", "slab", "slab_inclusion", "spleen", "liver_lobe").
+- :func:`organ_volume`: a registered name, a mesh file (STL/OBJ/PLY/VTK) or a Volume -> checked Volume.
 - :func:`spleen_surface`, :func:`liver_lobe_surface`: procedural closed organ surfaces (trimesh).
 - :func:`load_surface` (STL/OBJ/PLY), :func:`load_tet_mesh` (legacy VTK): meshes from files.
 - :func:`lattice_volume`: fill any closed surface with lattice tets, boundary snapped by tri-ray
@@ -15,6 +16,7 @@ from surgsim_envs.geometry.embedding import Embedding, embed_points, embed_surfa
 from surgsim_envs.geometry.inclusion import add_spherical_inclusion
 from surgsim_envs.geometry.lattice import lattice_volume, surface_distance
 from surgsim_envs.geometry.loaders import load_surface, load_tet_mesh
+from surgsim_envs.geometry.organ_source import check_surface_mesh, organ_volume
 from surgsim_envs.geometry.organs import ORGANS, liver_lobe_surface, spleen_surface
 from surgsim_envs.geometry.snapping import tet_quality
 from surgsim_envs.geometry.volume import Volume, boundary_triangles, tet_signed_volumes
@@ -22,7 +24,7 @@ from surgsim_envs.geometry.volume import Volume, boundary_triangles, tet_signed_
 __all__ = ["Volume", "box_volume", "lattice_tets", "boundary_triangles", "tet_signed_volumes", "make_volume",
            "lattice_volume", "surface_distance", "load_surface", "load_tet_mesh", "add_spherical_inclusion",
            "spleen_surface", "liver_lobe_surface", "tet_quality", "ORGANS",
-           "Embedding", "embed_points", "embed_surface", "interpolate"]
+           "Embedding", "embed_points", "embed_surface", "interpolate", "organ_volume", "check_surface_mesh"]
 
 
 def make_volume(name: str, spacing: float | None = None, **kwargs) -> Volume:

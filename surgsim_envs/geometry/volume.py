@@ -80,6 +80,11 @@ class Volume:
                 np.maximum.at(nl, self.tets.reshape(-1), np.repeat(self.labels, 4))
             self.node_labels = nl
 
+    def __repr__(self) -> str:   # short: a Volume in an error message must not print its arrays
+        lo, hi = self.bounds()
+        return (f"<Volume '{self.name}' {len(self.nodes)} nodes, {len(self.tets)} tets, {len(self.surface)} surface "
+                f"triangles, extent {np.round(hi - lo, 4).tolist()} m>")
+
     # Derived quantities -----------------------------------------------------------------------
     @property
     def n_nodes(self) -> int:

@@ -1,15 +1,25 @@
-"""Recording of the forces a (simulated) device was sent: what the hand felt.
+"""Recording of what a teleoperation session produced: the forces the hand felt, and video.
 
 Every :class:`~surgsim_envs.haptics.device.HapticDevice` owns a :class:`ForceLog`; the servo
 writes one row per servo tick. Tests and reports read it back as arrays or a CSV file with the
 header ``t,fx,fy,fz,saturated`` (s, N, N, N, 0/1).
+
+:class:`PacedVideoWriter` keeps a real-time video at its nominal frame rate: rendering competes
+with the servo and physics threads and may deliver far fewer frames than ``fps`` asks (8-9
+frames for a 3 s run at 25 frames/s were measured), so each rendered image is written as many
+times as video frames fell due since the last one, and :meth:`PacedVideoWriter.close` pads the
+video to ``duration * fps`` frames. The video then plays in real time (choppy when rendering is
+slow, never fast-forwarded).
 """
 
 from __future__ import annotations
 
 import csv
+import math
 import threading
+import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -110,3 +120,57 @@ class ForceLog:
             for row in reader:
                 log.append(float(row["t"]), (float(row["fx"]), float(row["fy"]), float(row["fz"])), row["saturated"] == "1")
         return log
+
+
+class PacedVideoWriter:
+    """Wraps a frame sink (``write(image)``, ``release()``; e.g. ``cv2.VideoWriter``) so frame
+    ``k`` of the video shows the newest image rendered at or before wall time ``k / fps`` after
+    the first write (see module docstring). ``clock`` returns seconds (default
+    ``time.perf_counter``). Frame ``k`` is written once the next image (or :meth:`close`)
+    shows which image was the newest at its time, so the video lags the renders by one image."""
+
+    def __init__(self, sink, fps: float, clock: Callable[[], float] = time.perf_counter):
+        if not (isinstance(fps, (int, float)) and math.isfinite(fps) and 0 < fps <= 1000):
+            raise ConfigError(f"video fps must be in (0, 1000] frames/s, got {fps!r}")
+        self.sink, self.fps, self.clock = sink, float(fps), clock
+        self.frames_written = 0
+        self.images_rendered = 0
+        self._t0: float | None = None
+        self._last = None
+
+    def _frames_before(self, now: float) -> int:
+        """Number of video frames whose time ``k / fps`` lies strictly before ``now``."""
+        return max(int(math.ceil((now - self._t0) * self.fps - 1e-9)), 0)
+
+    def write(self, image) -> int:
+        """Hand over the image rendered now. Frames that fell due since the previous image show
+        the previous image (it was the newest then); this one shows from the next frame on.
+        Returns the number of frames written by this call."""
+        now = self.clock()
+        n = 0
+        if self._t0 is None:
+            self._t0 = now
+        else:
+            target = self._frames_before(now)
+            while self.frames_written < target:
+                self.sink.write(self._last)
+                self.frames_written += 1
+                n += 1
+        self._last = image
+        self.images_rendered += 1
+        return n
+
+    def close(self, duration: float | None = None) -> None:
+        """Write the frames still due with the last image, up to ``round(duration * fps)`` frames
+        (if given; else up to now), then release the sink."""
+        try:
+            if self._last is not None:
+                if duration is not None and math.isfinite(duration):
+                    target = int(round(duration * self.fps))
+                else:
+                    target = self._frames_before(self.clock()) + 1
+                while self.frames_written < target:
+                    self.sink.write(self._last)
+                    self.frames_written += 1
+        finally:
+            self.sink.release()

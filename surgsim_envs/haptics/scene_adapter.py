@@ -22,7 +22,7 @@ import numpy as np
 from surgsim_envs.errors import ConfigError
 
 try:  # the scene is optional at haptics import time; this module needs it
-    from surgsim_envs.scene import HapticProxyConfig, Simulation, build_scene, grasp_config, grasp_scene, palpation_config
+    from surgsim_envs.scene import HapticProxyConfig, Simulation, make_scene, scene_config
 except ImportError as exc:  # pragma: no cover - only without the scene package
     raise ImportError(f"surgsim_envs.haptics.scene_adapter needs surgsim_envs.scene ({exc})", name=exc.name) from exc
 
@@ -70,15 +70,13 @@ class SceneHapticPhysics:
 
     def set_grip(self, value: float) -> None:
         """Jaw command in [0, 1] (graspers only; ignored for probes)."""
-        if self.tool.kind != "grasper" or not math.isfinite(value):
+        if not self.tool.has_grip or not math.isfinite(value):
             return
         g = round(float(np.clip(value, 0.0, 1.0)), 3)
         if g == self._grip:
             return
         self._grip = g
-        cfg = self.tool.config
-        radius = cfg.open_radius - g * (cfg.open_radius - cfg.min_radius)
-        self.sim.set_jaw_opening(self.tool.name, radius, speed=self.grip_speed)
+        self.tool.set_grip(self.sim, g, speed=self.grip_speed)
 
     def step(self) -> None:
         """One physics step."""
@@ -100,10 +98,9 @@ def haptic_scene_config(task: str, spacing: float | None = None, model: str = "m
         raise ConfigError(f"unknown teleop task {task!r}; choose one of {sorted(TASKS)}")
     kind, tool = TASKS[task]
     kw = {"model": model} if organ is None else {"model": model, "organ": organ}
-    cfg = palpation_config(**kw) if kind == "palpation" else grasp_config(**kw)
-    tools = cfg.probes if kind == "palpation" else cfg.graspers
-    tools[0].drive = "proxy"
-    cfg.proxies = [HapticProxyConfig(name="proxy", tool=tools[0].name)]
+    cfg = scene_config(kind, **kw)
+    cfg.tool(tool).drive = "proxy"
+    cfg.proxies = [HapticProxyConfig(name="proxy", tool=tool)]
     if spacing is not None:
         cfg.tissues[0].spacing = float(spacing)
     return cfg
@@ -113,8 +110,7 @@ def make_haptic_simulation(task: str, spacing: float | None = None, model: str =
                            organ: str | None = None) -> SceneHapticPhysics:
     """Build the task's scene with a proxy-driven tool and wrap it for the servo."""
     cfg = haptic_scene_config(task, spacing=spacing, model=model, organ=organ)
-    scene = build_scene(cfg) if TASKS[task][0] == "palpation" else grasp_scene(cfg)
-    return SceneHapticPhysics(Simulation(scene))
+    return SceneHapticPhysics(Simulation(make_scene(TASKS[task][0], cfg)))
 
 
 def tissue_top(physics: SceneHapticPhysics) -> float:

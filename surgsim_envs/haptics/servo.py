@@ -3,7 +3,9 @@
 One servo tick (:meth:`ServoLoop.tick`)::
 
     state = device.read(t)                       # pose, buttons, grip
-    reject a non-finite pose (keep the last good one; count it)
+    no target (zero force) while a live device has no pose yet (``device.has_pose`` False)
+    reject a non-finite pose (keep the last good one; count it); normalise the quaternion
+    without overflow (components up to 1e308)
     clamp the position to the device workspace;  map it into the scene (scale + origin)
     publish the proxy target for the physics
     F = extrapolator.force(t, proxy target)      # physics runs at its own, slower rate
@@ -39,6 +41,7 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.haptics.device import DeviceState, HapticDevice
 from surgsim_envs.haptics.extrapolation import ForceExtrapolator, make_extrapolator
 from surgsim_envs.haptics.protocol import check_physics
+from surgsim_envs.haptics.quaternion import unit_quaternion
 
 
 @dataclass
@@ -179,17 +182,20 @@ class ServoLoop:
         st.ticks += 1
         state = self.device.read(t)
         self.last_state = state
-        if state.is_finite():
+        with np.errstate(over="ignore"):  # |q|^2 of a 1e300 quaternion overflows; unit_quaternion copes
+            unit_q = unit_quaternion(state.quaternion) if state.is_finite() else None
+        if not getattr(self.device, "has_pose", True):
+            pass  # a live device before its first pose: no target, zero force
+        elif unit_q is not None:
             self._last_good = state
             pos = state.position
             clamped = self.device.limits.clamp_position(pos)
             if not np.array_equal(clamped, np.asarray(pos, dtype=float)):
                 st.workspace_clamped += 1
-            q = np.asarray(state.quaternion, dtype=float)
             target = self.config.mapping.to_scene(clamped)
             with self._target_lock:
                 self._target_pos = target
-                self._target_quat = q / np.linalg.norm(q)
+                self._target_quat = np.array(unit_q)
                 self._target_grip = float(np.clip(state.grip, 0.0, 1.0))
         else:
             st.rejected_poses += 1
@@ -360,18 +366,25 @@ class ServoLoop:
 
     def run_realtime(self, duration: float, on_frame=None, frame_period: float = 1 / 30) -> ServoStats:
         """Run the threads for ``duration`` s of wall clock; call ``on_frame(loop)`` every
-        ``frame_period`` s from this thread (viewer sync, video frames). ``on_frame`` must hold
+        ``frame_period`` s (absolute deadlines; late calls are not made up) from this thread
+        (viewer sync, video frames; see recording.PacedVideoWriter for a video at its rate). ``on_frame`` must hold
         ``loop.physics_lock`` while it touches the physics (briefly: copy, then render outside);
         returning False stops early."""
         if not (math.isfinite(duration) and duration > 0):
             raise ConfigError(f"duration must be > 0 s, got {duration!r}")
+        if not (math.isfinite(frame_period) and frame_period > 0):
+            raise ConfigError(f"frame_period must be > 0 s, got {frame_period!r}")
         self.start()
         try:
-            end = time.perf_counter() + duration
+            start = time.perf_counter()
+            end = start + duration
+            k = 0
             while time.perf_counter() < end and not self._stop.is_set():
                 if on_frame is not None and on_frame(self) is False:
                     break
-                time.sleep(frame_period)
+                # absolute deadlines: a slow on_frame (rendering) does not stretch the frame period
+                k = max(k + 1, int((time.perf_counter() - start) / frame_period) + 1)
+                time.sleep(max(0.0, min(start + k * frame_period, end) - time.perf_counter()))
         finally:
             stats = self.stop()
         return stats

@@ -179,27 +179,29 @@ def _run_headless(loop, physics, args, duration: float):
     sim = physics.sim
     width, height = int(args.size[0]), int(args.size[1])
     try:
-        renderer = mujoco.Renderer(sim.model, height=height, width=width)
+        renderer = mujoco.Renderer(sim.render_model, height=height, width=width)
     except Exception as exc:
         raise RenderingUnavailableError(
             f"offscreen rendering failed ({exc}); set MUJOCO_GL=egl or MUJOCO_GL=osmesa (apt-get install libosmesa6)"
         ) from None
     cam = args.camera if mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_CAMERA, args.camera) >= 0 else -1
-    scratch = mujoco.MjData(sim.model)
+    scratch = mujoco.MjData(sim.render_model)
     path = out / f"teleop_{args.task}.mp4"
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(args.fps), (width, height))
+    from surgsim_envs.haptics.recording import PacedVideoWriter
+
+    writer = PacedVideoWriter(cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(args.fps),
+                                              (width, height)), float(args.fps))  # frames at the video's rate
 
     def frame(_loop) -> None:
         with _loop.physics_lock:  # copy the state briefly; render outside the lock
-            sim.sync_visual()
-            mujoco.mj_copyData(scratch, sim.model, sim.data)
+            mujoco.mj_copyData(scratch, sim.render_model, sim.sync_visual())
         renderer.update_scene(scratch, camera=cam)
         writer.write(cv2.cvtColor(renderer.render(), cv2.COLOR_RGB2BGR))
 
     try:
         stats = loop.run_realtime(duration, on_frame=frame, frame_period=1.0 / args.fps)
     finally:
-        writer.release()
+        writer.close(loop.stats.duration_s or None)  # pad to the run's wall-clock length
         renderer.close()
     return stats
 
@@ -207,9 +209,12 @@ def _run_headless(loop, physics, args, duration: float):
 def _run_viewer(loop, physics, device, kind: str, duration: float):  # pragma: no cover - needs a display
     import mujoco.viewer
 
+    from surgsim_envs.scene.display import require_display
+
+    require_display("surgsim teleop (viewer)")   # raises; MuJoCo would exit the process
     sim = physics.sim
     callback = device.key_callback if kind == "keyboard" else None
-    with mujoco.viewer.launch_passive(sim.model, sim.data, key_callback=callback) as viewer:
+    with mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual(), key_callback=callback) as viewer:
         def frame(_loop):
             if not viewer.is_running():
                 return False

@@ -25,8 +25,39 @@ sequence, timestamp (s, servo clock), force x, y, z (N, on the hand, already lim
 
 A datagram is *malformed* (counted in ``stats.malformed`` and dropped; the bridge never raises
 for it) when its length, magic, version or type is wrong, a number is non-finite, the quaternion
-has zero length or grip is outside [0, 1]. Out-of-order pose packets (older sequence) are counted
-in ``stats.stale`` and dropped. Forces go back to the address of the last valid pose packet.
+has zero length (after scaling by its largest component, so ``1e300`` components that overflow
+when squared are still normalised correctly) or grip is outside [0, 1]. A decoded quaternion is
+always unit length. Forces go back to the address of the last valid pose packet.
+
+Sequence window and session restart
+-----------------------------------
+A pose is *in window* when its sequence number is ahead of the last accepted one by 1 to
+:data:`SEQ_WINDOW` (65,536, about 65 s of packets at 1 kHz) modulo 2^32; only in-window poses are
+applied. Every other valid pose (older, repeated, or far ahead) is counted in ``stats.stale`` and
+dropped, so one stray packet with a far-ahead number cannot lock genuine packets out.
+A *session restart* (a device client that restarts at sequence 0, or jumps) is adopted when
+either
+
+* :data:`RESYNC_PACKETS` (3) consecutive out-of-window poses arrive from one address, each in
+  window of the one before (a live, counting stream), with no in-window pose between them; or
+* no pose was accepted for :data:`SESSION_TIMEOUT_S` (0.5 s): the next valid pose starts a new
+  session whatever its number.
+
+Restarts are counted in ``stats.resyncs``.
+
+Flooding
+--------
+One :meth:`UdpDevice.poll` (once per servo tick) reads at most ``max_drain`` datagrams
+(default 32) and stops after ``max_poll_s`` (default 0.2 ms) of wall clock, so a flood of
+garbage cannot starve the 1 kHz servo; the rest stays queued in the kernel (which drops what
+overflows its buffer). Datagrams of the wrong length are rejected before any decoding.
+
+Trust model
+-----------
+The bridge has no authentication and no encryption: any process that can reach the port can
+move the proxy. It binds loopback (``127.0.0.1``) by default; bind another interface only on a
+network you trust. Until the first valid pose arrives the device reports *no pose*
+(:attr:`UdpDevice.has_pose` is False) and the servo renders zero force.
 """
 
 from __future__ import annotations
@@ -34,12 +65,14 @@ from __future__ import annotations
 import math
 import socket
 import struct
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.haptics.device import DeviceLimits, DeviceState, HapticDevice
+from surgsim_envs.haptics.quaternion import unit_quaternion
 
 MAGIC = b"SSHP"
 PROTOCOL_VERSION = 1
@@ -48,6 +81,12 @@ POSE_STRUCT = struct.Struct("<4sBBI8dIf")
 FORCE_STRUCT = struct.Struct("<4sBBIddddB")
 POSE_SIZE, FORCE_SIZE = POSE_STRUCT.size, FORCE_STRUCT.size  # 82, 43
 DEFAULT_HOST = "127.0.0.1"
+#: poses ahead of the last accepted one by 1..SEQ_WINDOW (mod 2^32) are applied
+SEQ_WINDOW = 1 << 16
+#: consecutive counting out-of-window poses from one address that restart the session
+RESYNC_PACKETS = 3
+#: a pose arriving after this long without an accepted pose starts a new session (s)
+SESSION_TIMEOUT_S = 0.5
 
 
 class MalformedPacketError(ConfigError):
@@ -105,12 +144,13 @@ def decode_pose(data: bytes) -> PosePacket:
     seq, ts, pos, quat, buttons, grip = f[3], f[4], f[5:8], f[8:12], f[12], f[13]
     nums = (ts, *pos, *quat, grip)
     if not all(math.isfinite(v) for v in nums):
-        raise MalformedPacketError("pose packet holds a non-finite number")
-    if sum(v * v for v in quat) < 1e-12:
-        raise MalformedPacketError("pose quaternion has zero length")
+        raise MalformedPacketError(f"pose packet holds a non-finite number: {nums}")
+    unit = unit_quaternion(quat)
+    if unit is None:
+        raise MalformedPacketError(f"pose quaternion {tuple(quat)} has zero length")
     if not (0.0 <= grip <= 1.0):
         raise MalformedPacketError(f"grip {grip} outside [0, 1]")
-    return PosePacket(seq, ts, tuple(pos), tuple(quat), buttons, grip)
+    return PosePacket(seq, ts, tuple(pos), unit, buttons, grip)
 
 
 def encode_force(seq: int, timestamp: float, force, saturated: bool = False) -> bytes:
@@ -130,8 +170,42 @@ def decode_force(data: bytes) -> ForcePacket:
     return ForcePacket(f[3], f[4], tuple(f[5:8]), bool(f[8] & 1))
 
 
-def _newer(seq: int, last: int | None) -> bool:
-    return last is None or 0 < ((seq - last) & 0xFFFFFFFF) < 0x80000000
+class SequenceGate:
+    """The sequence window and session-restart rule of the module docstring (no I/O, testable).
+
+    ``admit(seq, addr, now)`` returns True when the pose must be applied (and records it)."""
+
+    def __init__(self, window: int = SEQ_WINDOW, resync_packets: int = RESYNC_PACKETS,
+                 session_timeout: float = SESSION_TIMEOUT_S):
+        self.window, self.resync_packets, self.session_timeout = int(window), int(resync_packets), float(session_timeout)
+        self.last_seq: int | None = None
+        self.last_time = -math.inf
+        self.resyncs = 0
+        self._run_addr = None
+        self._run_seq: int | None = None
+        self._run_len = 0
+
+    def _in_window(self, seq: int, ref: int | None) -> bool:
+        return ref is None or 0 < ((seq - ref) & 0xFFFFFFFF) <= self.window
+
+    def admit(self, seq: int, addr, now: float) -> bool:
+        restart = False
+        if self.last_seq is not None and now - self.last_time > self.session_timeout:
+            restart = True
+        elif not self._in_window(seq, self.last_seq):
+            if self._run_len and addr == self._run_addr and self._in_window(seq, self._run_seq):
+                self._run_len += 1
+            else:
+                self._run_len = 1
+            self._run_addr, self._run_seq = addr, seq
+            if self._run_len < self.resync_packets:
+                return False
+            restart = True
+        if restart:
+            self.resyncs += 1
+        self.last_seq, self.last_time = seq, now
+        self._run_len, self._run_seq, self._run_addr = 0, None, None
+        return True
 
 
 @dataclass
@@ -140,6 +214,8 @@ class BridgeStats:
     accepted: int = 0
     malformed: int = 0
     stale: int = 0
+    resyncs: int = 0
+    polls_truncated: int = 0
     forces_sent: int = 0
     send_errors: int = 0
 
@@ -154,23 +230,30 @@ def _check_endpoint(host: str, port: int) -> None:
 class UdpDevice(HapticDevice):
     """Simulator side: receives pose packets on ``host:port``, sends force packets back.
 
-    ``read`` drains every queued datagram without blocking and returns the newest valid pose
-    (the handle stays where it was if nothing new arrived; before the first pose it reports the
-    workspace centre). ``port=0`` binds a free port: see :attr:`address` after ``connect()``.
+    ``read`` drains queued datagrams without blocking (at most ``max_drain`` datagrams and
+    ``max_poll_s`` s per call) and returns the newest valid pose (the handle stays where it was
+    if nothing new arrived). Before the first pose it reports the workspace centre with
+    :attr:`has_pose` False; the servo renders zero force until a pose arrives. ``port=0`` binds
+    a free port: see :attr:`address` after ``connect()``.
     """
 
     name = "udp"
 
     def __init__(self, port: int = 0, host: str = DEFAULT_HOST, limits: DeviceLimits | None = None,
-                 max_drain: int = 256):
+                 max_drain: int = 32, max_poll_s: float = 2e-4):
         super().__init__(limits)
         _check_endpoint(host, port)
+        if not (isinstance(max_drain, int) and max_drain >= 1):
+            raise ConfigError(f"max_drain must be an integer >= 1 datagram per poll, got {max_drain!r}")
+        if not (isinstance(max_poll_s, (int, float)) and math.isfinite(max_poll_s) and max_poll_s > 0):
+            raise ConfigError(f"max_poll_s must be a positive time budget in s (e.g. 2e-4), got {max_poll_s!r}")
         self.host, self.port = host, port
         self.max_drain = int(max_drain)
+        self.max_poll_s = float(max_poll_s)
         self.stats = BridgeStats()
         self._sock: socket.socket | None = None
         self._peer = None
-        self._last_seq: int | None = None
+        self._gate = SequenceGate()
         self._seq_out = 0
         centre = 0.5 * (np.asarray(self.limits.workspace_min) + np.asarray(self.limits.workspace_max))
         self._state = DeviceState(time=0.0, position=centre, quaternion=np.array([1.0, 0.0, 0.0, 0.0]))
@@ -198,10 +281,22 @@ class UdpDevice(HapticDevice):
             self._sock.close()
             self._sock = None
 
+    @property
+    def has_pose(self) -> bool:
+        """True once a valid pose has been accepted."""
+        return self.last_packet is not None
+
     def poll(self) -> int:
-        """Drain queued datagrams; returns how many valid poses were accepted."""
+        """Read queued datagrams (bounded: ``max_drain`` datagrams, ``max_poll_s`` s); returns
+        how many valid poses were accepted."""
+        if self._sock is None:
+            return 0
         accepted = 0
-        for _ in range(self.max_drain):
+        deadline = time.perf_counter() + self.max_poll_s
+        for i in range(self.max_drain):
+            if i and time.perf_counter() > deadline:
+                self.stats.polls_truncated += 1
+                break
             try:
                 data, addr = self._sock.recvfrom(2048)
             except (BlockingIOError, InterruptedError):
@@ -209,15 +304,19 @@ class UdpDevice(HapticDevice):
             except OSError:  # e.g. ICMP port unreachable reported on a later recv
                 continue
             self.stats.received += 1
+            if len(data) != POSE_SIZE:
+                self.stats.malformed += 1
+                continue
             try:
                 pkt = decode_pose(data)
             except MalformedPacketError:
                 self.stats.malformed += 1
                 continue
-            if not _newer(pkt.seq, self._last_seq):
+            resyncs = self._gate.resyncs
+            if not self._gate.admit(pkt.seq, addr, time.monotonic()):
                 self.stats.stale += 1
                 continue
-            self._last_seq = pkt.seq
+            self.stats.resyncs += self._gate.resyncs - resyncs
             self._peer = addr
             self.last_packet = pkt
             self._state = DeviceState(time=pkt.timestamp, position=np.array(pkt.position),

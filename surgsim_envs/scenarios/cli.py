@@ -3,13 +3,20 @@
     surgsim run tasks/grasp_slippage_mu_sweep.toml --out out/mu --no-video
     surgsim run tasks/spleen_grasp_and_retract.toml --device scripted      # a simulated hand drives
     surgsim run tasks/palpation_find_inclusion.toml --device replay:hand.csv
-    surgsim run tasks/palpation_policy.toml --policy my_pkg.policies:scan
+    surgsim run tasks/palpation_policy.toml --policy scan.npz                 # a data policy
+    surgsim run tasks/palpation_policy.toml --policy my_pkg.policies:scan --allow-code
     surgsim run tasks/palpation_find_inclusion.toml --duration-scale 0.25 --viewer
 
 The file is validated before anything is simulated (errors name the key, its value and the
 line). Writes ``report.json``, ``forces.png``, ``report.md``, ``timeseries.npz`` and (unless
 ``--no-video`` or without OpenGL) ``video.mp4`` into ``--out`` (default
 ``surgsim-out/<scenario name>``) and prints the score.
+
+Trust model: a scenario file is data. Policies that load code (``file.py:function``,
+``module:function``, pickled stable-baselines3 ``.zip``) are refused unless ``--allow-code`` is
+given; even then a scenario file may only load ``.py``/``.zip`` files from its own folder (a
+``--policy`` typed on the command line may name any module or file). ``.npz`` data policies and
+``builtin:NAME`` policies need no flag.
 """
 
 from __future__ import annotations
@@ -28,7 +35,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None, help="output directory (default surgsim-out/<scenario name>)")
     parser.add_argument("--device", default=None,
                         help="drive every phase with a device: scripted | replay:FILE | keyboard | udp:PORT")
-    parser.add_argument("--policy", default=None, help="drive with a policy: 'module:function' or an SB3 .zip")
+    parser.add_argument("--policy", default=None,
+                        help="drive with a policy: a .npz data policy, builtin:NAME, or (with --allow-code) "
+                             "'module:function', 'file.py:function' or an SB3 .zip")
+    parser.add_argument("--allow-code", action="store_true",
+                        help="allow policies that load and run Python code (from the scenario's folder, or named "
+                             "by --policy); off by default: sharing a scenario must not share a program")
     parser.add_argument("--duration-scale", type=float, default=1.0,
                         help="multiply every phase duration (e.g. 0.25 for a quick run; default 1)")
     parser.add_argument("--tremor", type=float, default=0.0,
@@ -42,12 +54,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     from surgsim_envs.scenarios.schema import load_scenario
 
-    sc = load_scenario(args.scenario)
+    from surgsim_envs.scenarios.policies import check_policy_reference
+    from surgsim_envs.scenarios.schema import LIMITS, NAME_PATTERN
+
+    allow_code = bool(getattr(args, "allow_code", False))
+    sc = load_scenario(args.scenario, allow_code=allow_code)
     scale = args.duration_scale
     if not (isinstance(scale, float) and math.isfinite(scale) and 0 < scale <= 100):
         raise ConfigError(f"--duration-scale {scale!r} must be in (0, 100]")
-    if not (math.isfinite(args.tremor) and args.tremor >= 0):
-        raise ConfigError(f"--tremor {args.tremor!r} must be >= 0 m")
+    sc.scaled(scale)  # raises when the scaled run exceeds the simulated-time limit
+    tremor_max = LIMITS["trainee.tremor"][1]
+    if not (math.isfinite(args.tremor) and 0 <= args.tremor <= tremor_max):
+        raise ConfigError(f"--tremor {args.tremor!r} must be in [0, {tremor_max}] m")
+    if args.policy is not None:
+        check_policy_reference(args.policy, None, allow_code=allow_code, trusted=True)
+    if args.device is not None:
+        from surgsim_envs.scenarios.schema import KeyLocator, _Ctx, validate_driver
+
+        validate_driver(_Ctx("command line", KeyLocator(None)), ("--device",), "device", args.device, "",
+                        folder=sc.folder, check_files=True)
     if args.check:
         runs = len(sc.runs())
         print(f"{args.scenario}: valid scenario '{sc.name}' ({len(sc.phases)} phases, {runs} run{'s' * (runs != 1)})")
@@ -60,7 +85,14 @@ def run(args) -> int:
     from surgsim_envs.scenarios.report import write_report
     from surgsim_envs.scenarios.runner import run_scenario
 
-    out = Path(args.out) if args.out else Path("surgsim-out") / sc.name
+    import re
+
+    if args.out:
+        out = Path(args.out)
+    else:
+        if not re.fullmatch(NAME_PATTERN, sc.name):  # also checked by the schema: never leave surgsim-out/
+            raise ConfigError(f"scenario name {sc.name!r} cannot name an output folder; pass --out DIR")
+        out = Path("surgsim-out") / sc.name
     out.mkdir(parents=True, exist_ok=True)
     results = run_scenario(sc, duration_scale=scale, device=args.device, policy=args.policy, out_dir=out,
                            video=not args.no_video, viewer=args.viewer, progress=not args.quiet, tremor=args.tremor)

@@ -221,7 +221,7 @@ class Release(Phase):
         super().begin(ctx)
 
     def command(self, ctx, s):
-        if ctx.kind == "grasper":
+        if ctx.has_jaws:
             return self._start, _lerp(self._start_radius, ctx.tool.config.open_radius, s)
         return _lerp(self._start, np.zeros(3), s), None
 
@@ -241,13 +241,14 @@ class PhaseContext:
         self.sim = sim
         self.tool = sim.tool(tool_name)
         self.kind = self.tool.kind
+        self.has_jaws = self.tool.has_grip      # a tool with jaws (a grip command); never a kind-name branch
         self.home = np.asarray(self.tool.home, dtype=float)
         self.scale = float(scale)
         self.offset = np.zeros(3)
-        self.radius = float(self.tool.config.open_radius) if self.kind == "grasper" else None
+        self.radius = float(self.tool.config.open_radius) if self.has_jaws else None
         tissue = sim.tissue()
         self.surface_z = float(tissue.positions[:, 2].max())
-        if self.kind == "grasper":
+        if self.has_jaws:
             axis = np.asarray(self.tool.config.axis, dtype=float)
             self.pull_direction = -axis / np.linalg.norm(axis)
         else:
@@ -269,7 +270,7 @@ class PhaseContext:
         if not np.array_equal(offset, self.offset):
             self.sim.set_tool_target(self.tool.name, self.home + offset, speed=math.inf)
             self.offset = offset.copy()
-        if radius is not None and self.kind == "grasper":
+        if radius is not None and self.has_jaws:
             cfg = self.tool.config
             radius = float(min(max(radius, cfg.min_radius), cfg.open_radius))
             if radius != self.radius:

@@ -1,6 +1,7 @@
 """Scenario runs that drive a registered Gymnasium task with a saved policy (``scenario.task``).
 
-The policy reference (``[policy] file``) is loaded by :func:`~surgsim_envs.scenarios.runner.load_policy`.
+The policy reference (``[policy] file``) is loaded by :func:`~surgsim_envs.scenarios.policies.load_policy`
+(trust model: data and built-in policies always, code only with ``--allow-code``).
 A callable whose first parameter is named ``env`` is a *factory*: it is called with the
 environment at the start of each episode and must return ``policy(obs) -> action``. Otherwise the
 callable is the policy itself. Each control step records the tool's contact forces (N) and
@@ -34,7 +35,8 @@ def run_rollout(sc, progress: bool = False):
     import gymnasium as gym
 
     import surgsim_envs  # noqa: F401  (registers the SurgSim tasks)
-    from surgsim_envs.scenarios.runner import Recording, _evaluate_rollout, load_policy
+    from surgsim_envs.scenarios.policies import policy_for
+    from surgsim_envs.scenarios.runner import Recording, _evaluate_rollout
 
     spec = sc.policy
     wall0 = time.perf_counter()
@@ -42,8 +44,7 @@ def run_rollout(sc, progress: bool = False):
         env = gym.make(sc.meta.task, **dict(spec.env_kwargs))
     except gym.error.Error as exc:
         raise ConfigError(f"{sc.source or sc.name}: scenario.task {sc.meta.task!r} cannot be made: {exc}") from None
-    base = sc.source.parent if sc.source else None
-    ref = load_policy(spec.file, base)
+    ref = policy_for(sc, spec.file)
     rec = Recording()
     completed, error, infos = True, None, []
     t_offset = 0.0

@@ -18,8 +18,6 @@ is imported only when a scenario runs. Units: m, s, N.
 from __future__ import annotations
 
 import copy
-import importlib
-import importlib.util
 import math
 import time
 from dataclasses import dataclass, field
@@ -31,6 +29,7 @@ import numpy as np
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError, TissueUnstableError
 from surgsim_envs.scenarios.phases import SCENE_TOOL, PhaseContext
 from surgsim_envs.scenarios.schema import Scenario
+from surgsim_envs.scenarios.policies import load_policy, policy_for  # noqa: F401 (load_policy re-exported)
 
 CONTROL_PERIOD = 0.01  # s between policy evaluations in phase scenarios
 FPS = 25
@@ -101,11 +100,11 @@ class RunResult:
 # Scene
 def scene_config(sc: Scenario):
     """The :class:`~surgsim_envs.scene.SceneConfig` of a scenario (ready-made scene + overrides)."""
-    from surgsim_envs.scene import grasp_config, palpation_config
+    from surgsim_envs.scene import scene_config as ready_made
 
     o = sc.scene
     kw = {k: v for k, v in (("organ", o.organ), ("model", o.model)) if v is not None}
-    cfg = palpation_config(**kw) if sc.meta.scene == "palpation" else grasp_config(**kw)
+    cfg = ready_made(sc.meta.scene, **kw)
     tissue = cfg.tissues[0]
     if o.material is not None:
         tissue.material = o.material
@@ -118,7 +117,7 @@ def scene_config(sc: Scenario):
             raise ConfigError(f"scene.inclusion_xy needs organ 'slab_inclusion', got {tissue.organ!r}")
         tissue.volume_options = {**dict(tissue.volume_options),
                                  "inclusion_centre": (float(o.inclusion_xy[0]), float(o.inclusion_xy[1]), -0.002)}
-    for tool in [*cfg.probes, *cfg.graspers]:
+    for tool in cfg.tool_configs():
         if o.mu is not None:
             tool.friction = float(o.mu)
     cfg.seed = int(sc.meta.seed)
@@ -127,11 +126,10 @@ def scene_config(sc: Scenario):
 
 def build_simulation(sc: Scenario):
     """Build the scenario's :class:`~surgsim_envs.scene.Simulation`."""
-    from surgsim_envs.scene import Simulation, build_scene, grasp_scene
+    from surgsim_envs.scene import Simulation, make_scene
 
     cfg = scene_config(sc)
-    scene = build_scene(cfg) if sc.meta.scene == "palpation" else grasp_scene(cfg)
-    return Simulation(scene)
+    return Simulation(make_scene(sc.meta.scene, cfg))
 
 
 def inclusion_centre(sim) -> np.ndarray | None:
@@ -172,89 +170,30 @@ class PlanDevice:
 
 
 def make_device(spec: str, script: str, runner: "_Runner", tremor: float, seed: int):
-    """A connected-to-be HapticDevice from a spec: scripted | replay:FILE | keyboard | udp:PORT."""
-    from surgsim_envs.haptics.device import DeviceLimits
-    from surgsim_envs.haptics.keyboard import KeyboardDevice
-    from surgsim_envs.haptics.replay import ReplayDevice
-    from surgsim_envs.haptics.scripted import ScriptedDevice, TrajectorySpec
-    from surgsim_envs.haptics.udp_bridge import UdpDevice
+    """A connected-to-be HapticDevice from a spec: scripted | replay:FILE | keyboard | udp:PORT
+    (:func:`surgsim_envs.haptics.device.make_device`; "scripted" is the scenario's phase plan, or
+    ``script``; a replay FILE is resolved in the scenario's folder)."""
+    from surgsim_envs.haptics.device import DeviceLimits, parse_device_spec
+    from surgsim_envs.haptics.device import make_device as make
+    from surgsim_envs.scenarios.schema import resolve_data_file
 
     limits = DeviceLimits(max_force=1e6)  # the scenario scores forces; the device only records them
-    kind, _, arg = spec.partition(":")
-    if kind == "scripted":
+    kind, arg = parse_device_spec(spec)
+
+    def scripted():
         if script:
+            from surgsim_envs.haptics.scripted import ScriptedDevice, TrajectorySpec
             from surgsim_envs.haptics.teleop import _load_script
 
-            return ScriptedDevice(TrajectorySpec.from_dict(_load_script(script)), limits=limits)
+            path = str(resolve_data_file(script, runner.sc.folder))
+            return ScriptedDevice(TrajectorySpec.from_dict(_load_script(path)), limits=limits)
         dev = PlanDevice.make(runner, tremor, seed)
         dev.limits = limits
         return dev
+
     if kind == "replay":
-        if not Path(arg).is_file():
-            raise ConfigError(f"device replay:{arg}: file not found; give a .csv or .json pose recording")
-        return ReplayDevice(arg, limits=limits)
-    if kind == "keyboard":
-        return KeyboardDevice(limits=limits)
-    if kind == "udp":
-        try:
-            port = int(arg)
-        except ValueError:
-            raise ConfigError(f"device udp:{arg}: PORT must be an integer, e.g. udp:9870") from None
-        return UdpDevice(port=port, limits=limits)
-    raise ConfigError(f"device {spec!r} not understood; use scripted, replay:FILE, keyboard or udp:PORT")
-
-
-def load_policy(ref: str, base: Path | None = None) -> Callable:
-    """A policy callable from ``"module:function"``, ``"path/file.py:function"`` or an SB3 ``.zip``.
-
-    A class is instantiated (no arguments) and its instance called. An SB3 model becomes
-    ``lambda obs: model.predict(obs, deterministic=True)[0]``.
-    """
-    if not isinstance(ref, str) or not ref:
-        raise ConfigError(f"policy must be 'module:function' or a .zip file, got {ref!r}")
-    if ref.endswith(".zip"):
-        path = Path(ref)
-        if not path.is_file() and base is not None and (base / ref).is_file():
-            path = base / ref
-        if not path.is_file():
-            raise ConfigError(f"policy file {ref!r} not found")
-        try:
-            import stable_baselines3 as sb3
-        except ImportError:
-            raise ConfigError(f"policy {ref!r} is a stable-baselines3 model, but stable-baselines3 is not installed; "
-                              "pip install 'surgsim_envs[train]' or use a 'module:function' policy") from None
-        for algo in ("PPO", "SAC", "TD3", "A2C", "DDPG"):
-            try:
-                model = getattr(sb3, algo).load(str(path))
-                return lambda obs: model.predict(obs, deterministic=True)[0]
-            except Exception:  # noqa: BLE001 - wrong algorithm class: try the next
-                continue
-        raise ConfigError(f"could not load {ref!r} with any stable-baselines3 algorithm")
-    mod_name, sep, attr = ref.rpartition(":")
-    if not sep or not mod_name or not attr:
-        raise ConfigError(f"policy {ref!r} must look like 'package.module:function' or 'file.py:function'")
-    try:
-        if mod_name.endswith(".py"):
-            path = Path(mod_name)
-            if not path.is_file() and base is not None:
-                path = base / mod_name
-            spec = importlib.util.spec_from_file_location(path.stem, path)
-            if spec is None or not path.is_file():
-                raise ConfigError(f"policy file {mod_name!r} not found")
-            module = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(module)
-        else:
-            module = importlib.import_module(mod_name)
-    except ImportError as exc:
-        raise ConfigError(f"policy {ref!r}: cannot import {mod_name!r} ({exc})") from None
-    obj = getattr(module, attr, None)
-    if obj is None:
-        raise ConfigError(f"policy {ref!r}: module {mod_name!r} has no {attr!r}")
-    if isinstance(obj, type):
-        obj = obj()
-    if not callable(obj):
-        raise ConfigError(f"policy {ref!r} is not callable")
-    return obj
+        spec = f"replay:{resolve_data_file(arg, runner.sc.folder)}"
+    return make(spec, limits=limits, scripted=scripted)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -278,14 +217,14 @@ class _Runner:
         return self._phase.command(self.ctx, self._s)
 
     def grip_of(self, radius) -> float:
-        if self.ctx.kind != "grasper":
+        if not self.ctx.has_jaws:
             return 0.0
         cfg = self.ctx.tool.config
         r = self.ctx.radius if radius is None else radius
         return float((cfg.open_radius - r) / (cfg.open_radius - cfg.min_radius))
 
     def _radius_of(self, grip: float):
-        if self.ctx.kind != "grasper" or not math.isfinite(grip):
+        if not self.ctx.has_jaws or not math.isfinite(grip):
             return None
         cfg = self.ctx.tool.config
         return cfg.open_radius - float(np.clip(grip, 0.0, 1.0)) * (cfg.open_radius - cfg.min_radius)
@@ -300,8 +239,7 @@ class _Runner:
 
     def _policy(self, phase):
         if phase.policy not in self._policies:
-            base = self.sc.source.parent if self.sc.source else None
-            self._policies[phase.policy] = load_policy(phase.policy, base)
+            self._policies[phase.policy] = policy_for(self.sc, phase.policy)
         return self._policies[phase.policy]
 
     def _observation(self, i, t_phase) -> dict:
@@ -317,7 +255,7 @@ class _Runner:
     def _sample(self, i) -> None:
         sim, ctx = self.sim, self.ctx
         rep = sim.contact_report()[ctx.tool.name]
-        opening = sim.jaw_opening(ctx.tool.name) if ctx.kind == "grasper" else math.nan
+        opening = sim.jaw_opening(ctx.tool.name) if ctx.has_jaws else math.nan
         self.rec.add(sim.time, i, rep["normal_force"], rep["tangential_force"], ctx.pull_force(), rep["slipping"],
                      rep["contacts"], rep["penetration"], sim.tool_position(ctx.tool.name), opening)
 
@@ -443,7 +381,10 @@ def run_one(sc: Scenario, values: dict | None = None, *, video_path=None, viewer
     if viewer:  # pragma: no cover - needs a display
         import mujoco.viewer
 
-        view = mujoco.viewer.launch_passive(sim.model, sim.data)
+        from surgsim_envs.scene.display import require_display
+
+        require_display("surgsim run --viewer")   # raises; MuJoCo would exit the process
+        view = mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual())
     try:
         runner = _Runner(sc, sim, sc.meta.duration_scale, bar, renderer, writer, view, camera, tremor)
         completed, error = runner.run()
@@ -474,6 +415,7 @@ def apply_overrides(sc: Scenario, duration_scale: float = 1.0, device: str | Non
             ph.driver, ph.device = "device", device
         out.trainee.driver, out.trainee.device = "device", device
     if policy is not None:
+        out.trusted_policy = policy  # typed by the user, not read from the shared file
         if out.policy is not None:
             out.policy.file = policy
         else:

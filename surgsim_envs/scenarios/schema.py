@@ -52,7 +52,16 @@ A scenario file has these tables (every key is optional unless marked *required*
 
 Unknown keys, wrong types, bad values and impossible phase orders raise
 :class:`~surgsim_envs.errors.ConfigError` naming the key, its value and (for files) the line,
-before any simulation is built.
+before any simulation is built (so ``surgsim run --check`` catches them). Beyond types, values are
+checked against :data:`LIMITS` (e.g. ``scene.dt`` in (0, 5 ms], ``scene.spacing`` >= 2 mm, phase
+durations <= 600 s, a whole run <= 3,600 s of simulated time); names against their registries
+(organ, tissue model, material preset, Gymnasium task id, built-in policy); files named by
+``replay:FILE``, ``trainee.script`` and policies must exist (relative paths are taken relative to
+the scenario's folder, then the working directory). Policies follow the trust model of
+:mod:`surgsim_envs.scenarios.policies`: code-loading ones need ``allow_code`` (``--allow-code``).
+The scenario ``name`` becomes a folder name: letters, digits, ``_``, ``-``, ``.``, not starting
+with ``.`` (so ``".."`` cannot escape the output folder), at most 100 characters. Files larger than
+1 MB and nesting deeper than the TOML parser can follow are refused with a ConfigError.
 """
 
 from __future__ import annotations
@@ -75,6 +84,38 @@ except ModuleNotFoundError:  # pragma: no cover - python < 3.11
 
 SCENES = ("palpation", "grasp")
 DRIVERS = ("script", "device", "policy")
+MAX_FILE_BYTES = 1_000_000
+NAME_PATTERN = r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,99}"
+#: (key, low, high, low inclusive, unit): physical limits of numeric values, checked at load time
+LIMITS: dict[str, tuple[float, float, bool, str]] = {
+    "scenario.sample_period": (1e-4, 10.0, True, "s"),
+    "scenario.duration_scale": (0.0, 100.0, False, ""),
+    "scenario.seed": (0, 2**32 - 1, True, ""),
+    "scene.spacing": (2e-3, 0.05, True, "m"),
+    "scene.dt": (0.0, 5e-3, False, "s"),
+    "scene.mu": (0.0, 10.0, True, ""),
+    "scene.inclusion_xy": (-0.1, 0.1, True, "m"),
+    "trainee.tremor": (0.0, 0.01, True, "m"),
+    "phase.duration": (0.0, 600.0, False, "s"),
+    "phase.depth": (0.0, 0.05, False, "m"),
+    "phase.clearance": (0.0, 0.1, True, "m"),
+    "phase.distance": (0.0, 0.2, False, "m"),
+    "phase.force": (0.0, 100.0, False, "N"),
+    "phase.gain": (0.0, 100.0, False, ""),
+    "phase.max_speed": (0.0, 1.0, False, "m/s"),
+    "phase.opening": (0.0, 0.1, False, "m"),
+    "phase.at": (-0.2, 0.2, True, "m"),
+    "phase.region": (-0.2, 0.2, True, "m"),
+    "phase.offset": (-0.2, 0.2, True, "m"),
+    "phase.above": (-0.2, 0.2, True, "m"),
+    "phase.direction": (-1e3, 1e3, True, ""),
+    "phase.grid": (1, 400, True, "presses per axis"),
+    "policy.episodes": (1, 1000, True, ""),
+    "policy.max_steps": (1, 1_000_000, True, "steps"),
+    "scoring.safety_limit": (0.0, 1e3, False, "N"),
+}
+MAX_RUN_DURATION = 3600.0  # s of simulated time per run (phases x duration scale)
+MAX_GRID_PRESSES = 400
 
 
 @dataclass
@@ -161,6 +202,12 @@ class Scenario:
     sweep: dict[str, list] = field(default_factory=dict)
     policy: PolicySpec | None = None
     source: Path | None = None
+    #: folder that relative file names are resolved against (the scenario file's folder)
+    folder: Path | None = None
+    #: code-loading policies allowed (``--allow-code``); see scenarios.policies
+    allow_code: bool = False
+    #: a policy reference given on the command line (trusted: may name any module or file)
+    trusted_policy: str = ""
 
     @property
     def name(self) -> str:
@@ -188,7 +235,15 @@ class Scenario:
             raise ConfigError(f"duration scale must be a number in (0, 100], got {factor!r}")
         sc = copy.deepcopy(self)
         sc.meta.duration_scale = self.meta.duration_scale * float(factor)
+        total = sc.run_duration()
+        if total > MAX_RUN_DURATION:
+            raise ConfigError(f"with duration scale {factor!r} one run lasts {total:g} s of simulated time, more than "
+                              f"the {MAX_RUN_DURATION:g} s limit; use a smaller scale")
         return sc
+
+    def run_duration(self) -> float:
+        """Simulated seconds of one run (phase durations times the duration scale)."""
+        return sum(p.duration for p in self.phases) * self.meta.duration_scale
 
 
 # ----------------------------------------------------------------------------------------------
@@ -333,16 +388,41 @@ def build_dataclass(cls, table: Any, path: tuple, ctx: _Ctx, skip: tuple = ()):
 _TOP = ("scenario", "scene", "trainee", "phases", "scoring", "sweep", "policy")
 
 
-def _positive(ctx: _Ctx, path: tuple, value, allow_zero: bool = False, unit: str = "") -> None:
+def _limit(ctx: _Ctx, path: tuple, rule: str, value) -> None:
+    """Check ``value`` (a number or nested arrays of numbers) against ``LIMITS[rule]``."""
     if value is None:
         return
-    ok = value >= 0 if allow_zero else value > 0
+    if isinstance(value, (list, tuple)):
+        for i, v in enumerate(value):
+            _limit(ctx, path + (i,), rule, v)
+        return
+    lo, hi, lo_inclusive, unit = LIMITS[rule]
+    ok = (value >= lo if lo_inclusive else value > lo) and value <= hi
     if not ok:
-        raise ctx.error(path, f"must be {'>= 0' if allow_zero else '> 0'}{' ' + unit if unit else ''}, got {value!r}")
+        u = f" {unit}" if unit else ""
+        raise ctx.error(path, f"{value!r} is out of range: must be {'>=' if lo_inclusive else '>'} {lo:g}{u} and "
+                              f"<= {hi:g}{u}")
 
 
-def validate_driver(ctx: _Ctx, path: tuple, driver: str, device: str, policy: str) -> None:
-    """Check a driver name and, for devices, the device spec's form (files are checked when run)."""
+def resolve_data_file(name: str, folder: Path | None) -> Path:
+    """A file named in a scenario: absolute as given; relative to the scenario's ``folder`` when
+    it exists there, else relative to the working directory."""
+    p = Path(name)
+    if not p.is_absolute() and folder is not None and (folder / p).is_file():
+        return folder / p
+    return p
+
+
+def _check_file(ctx: _Ctx, path: tuple, name: str, folder: Path | None, what: str) -> None:
+    if not resolve_data_file(name, folder).is_file():
+        where = f"{folder} or the working directory" if folder is not None else "the working directory"
+        raise ctx.error(path, f"{what} file {name!r} not found (looked in {where})")
+
+
+def validate_driver(ctx: _Ctx, path: tuple, driver: str, device: str, policy: str, folder: Path | None = None,
+                    allow_code: bool = True, trusted: bool = True, check_files: bool = False) -> None:
+    """Check a driver name, the device spec (files exist when ``check_files``) and the policy
+    reference under the trust model (see :func:`surgsim_envs.scenarios.policies.check_policy_reference`)."""
     if driver not in DRIVERS:
         raise ctx.error(path + ("driver",), f"unknown driver {driver!r}; choose one of {', '.join(DRIVERS)}")
     if driver == "device":
@@ -350,12 +430,81 @@ def validate_driver(ctx: _Ctx, path: tuple, driver: str, device: str, policy: st
         if device not in ("scripted", "keyboard") and not (kind in ("replay", "udp") and arg):
             raise ctx.error(path + ("device",), f"device {device!r} not understood; use scripted, replay:FILE, "
                                                 "keyboard or udp:PORT")
-    if driver == "policy" and not policy:
-        raise ctx.error(path + ("policy",), "driver 'policy' needs a policy: 'module:function' or a .zip file")
+        if kind == "udp" and not (arg.isdigit() and 0 <= int(arg) <= 65535):
+            raise ctx.error(path + ("device",), f"device {device!r}: PORT must be an integer in [0, 65535], "
+                                                "e.g. udp:9870")
+        if kind == "replay" and check_files:
+            _check_file(ctx, path + ("device",), arg, folder, "replay")
+    if driver == "policy":
+        if not policy:
+            raise ctx.error(path + ("policy",), "driver 'policy' needs a policy: a .npz data policy, 'builtin:NAME' "
+                                                "or (with --allow-code) 'file.py:function'")
+        check_policy(ctx, path + ("policy",), policy, folder, allow_code, trusted)
 
 
-def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = None) -> Scenario:
-    """Validate a parsed TOML document and build a :class:`Scenario` (ConfigError on any problem)."""
+def check_policy(ctx: _Ctx, path: tuple, ref: str, folder: Path | None, allow_code: bool, trusted: bool) -> None:
+    """:func:`~surgsim_envs.scenarios.policies.check_policy_reference` with the key's line."""
+    from surgsim_envs.scenarios.policies import check_policy_reference
+
+    try:
+        check_policy_reference(ref, folder, allow_code=allow_code, trusted=trusted)
+    except ConfigError as exc:
+        raise ctx.error(path, str(exc)) from None
+
+
+def _check_registered(ctx: _Ctx, path: tuple, value: str | None, known: list, what: str) -> None:
+    if value is not None and value not in known:
+        raise ctx.error(path, f"unknown {what} {value!r}; choose one of {', '.join(map(str, known))}")
+
+
+def _check_scene_value(ctx: _Ctx, path: tuple, key: str, value) -> None:
+    """Range and registry checks of one [scene] value (also used for every swept value)."""
+    if key in ("spacing", "dt", "mu", "inclusion_xy"):
+        _limit(ctx, path, f"scene.{key}", value)
+    elif key == "organ":
+        from surgsim_envs.geometry.organs import ORGANS
+
+        _check_registered(ctx, path, value, ["block", *ORGANS], "organ")
+    elif key == "model":
+        from surgsim_envs.tissue import registry
+
+        _check_registered(ctx, path, value, registry.names(), "tissue model")
+    elif key == "material":
+        from surgsim_envs.tissue.materials import PRESETS
+
+        _check_registered(ctx, path, value, sorted(PRESETS), "material preset")
+
+
+def _check_task_id(ctx: _Ctx, path: tuple, task: str) -> None:
+    try:
+        import gymnasium as gym
+
+        import surgsim_envs.envs  # noqa: F401  (registers the SurgSim tasks)
+    except ImportError as exc:
+        raise ctx.error(path, f"task {task!r} needs gymnasium ({exc}); pip install gymnasium") from None
+    if task not in gym.registry:
+        ours = sorted(k for k in gym.registry if k.startswith("SurgSim/"))
+        raise ctx.error(path, f"unknown task id {task!r}; registered SurgSim tasks: {', '.join(ours)}")
+
+
+def _check_phase_values(ctx: _Ctx, path: tuple, phase) -> None:
+    """Range checks of a phase's physical values (by field name, see LIMITS)."""
+    for f in dataclasses.fields(phase):
+        rule = f"phase.{f.name}"
+        if rule in LIMITS:
+            _limit(ctx, path + (f.name,), rule, getattr(phase, f.name))
+    grid = getattr(phase, "grid", None)
+    if grid is not None and grid[0] * grid[1] > MAX_GRID_PRESSES:
+        raise ctx.error(path + ("grid",), f"{list(grid)} asks for {grid[0] * grid[1]} presses; at most "
+                                          f"{MAX_GRID_PRESSES}")
+
+
+def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = None, folder: Path | None = None,
+                   allow_code: bool = False) -> Scenario:
+    """Validate a parsed TOML document and build a :class:`Scenario` (ConfigError on any problem).
+
+    ``folder``: where relative file names point (the scenario file's folder); ``allow_code``:
+    accept code-loading policies (see :mod:`surgsim_envs.scenarios.policies`)."""
     from surgsim_envs.scenarios.phases import build_phase, check_phase_order
     from surgsim_envs.scenarios.scoring import CRITERIA
 
@@ -368,27 +517,33 @@ def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = No
     if "scenario" not in data:
         raise ctx.error(("scenario",), "missing the [scenario] table (it needs at least name = \"...\")")
     meta = build_dataclass(ScenarioMeta, data["scenario"], ("scenario",), ctx)
-    if not meta.name or not re.fullmatch(r"[A-Za-z0-9_.\-]+", meta.name):
-        raise ctx.error(("scenario", "name"), f"give a name of letters, digits, '_', '-' or '.', got {meta.name!r}")
+    if not re.fullmatch(NAME_PATTERN, meta.name):
+        raise ctx.error(("scenario", "name"), f"give a name of letters, digits, '_', '-' or '.' (not starting with "
+                                              f"'.', at most 100 characters; it names the output folder), got "
+                                              f"{meta.name!r}")
     if meta.task and meta.scene:
         raise ctx.error(("scenario", "task"), f"give either scene = ... (scripted phases) or task = ... (a Gymnasium "
                                               f"policy rollout), not both (scene={meta.scene!r}, task={meta.task!r})")
     if not meta.task and meta.scene not in SCENES:
         raise ctx.error(("scenario", "scene"), f"unknown scene {meta.scene!r}; choose one of {', '.join(SCENES)} "
                                                "(or set task = \"SurgSim/...-v0\" for a policy rollout)")
-    _positive(ctx, ("scenario", "sample_period"), meta.sample_period, unit="s")
-    _positive(ctx, ("scenario", "duration_scale"), meta.duration_scale)
+    for key in ("sample_period", "duration_scale", "seed"):
+        _limit(ctx, ("scenario", key), f"scenario.{key}", getattr(meta, key))
+    if meta.task:
+        _check_task_id(ctx, ("scenario", "task"), meta.task)
     scene = build_dataclass(SceneOverrides, data.get("scene", {}), ("scene",), ctx)
-    for key, unit in (("spacing", "m"), ("dt", "s")):
-        _positive(ctx, ("scene", key), getattr(scene, key), unit=unit)
-    _positive(ctx, ("scene", "mu"), scene.mu, allow_zero=True)
+    for f in dataclasses.fields(SceneOverrides):
+        _check_scene_value(ctx, ("scene", f.name), f.name, getattr(scene, f.name))
     trainee = build_dataclass(TraineeSpec, data.get("trainee", {}), ("trainee",), ctx)
-    validate_driver(ctx, ("trainee",), trainee.driver, trainee.device, trainee.policy)
-    _positive(ctx, ("trainee", "tremor"), trainee.tremor, allow_zero=True, unit="m")
+    drivers = dict(folder=folder, allow_code=allow_code, trusted=False, check_files=True)
+    validate_driver(ctx, ("trainee",), trainee.driver, trainee.device, trainee.policy, **drivers)
+    _limit(ctx, ("trainee", "tremor"), "trainee.tremor", trainee.tremor)
+    if trainee.script:
+        _check_file(ctx, ("trainee", "script"), trainee.script, folder, "trajectory script")
 
     scoring_tab = data.get("scoring", {})
     scoring = build_dataclass(ScoringSpec, scoring_tab, ("scoring",), ctx, skip=("criteria",))
-    _positive(ctx, ("scoring", "safety_limit"), scoring.safety_limit, unit="N")
+    _limit(ctx, ("scoring", "safety_limit"), "scoring.safety_limit", scoring.safety_limit)
     crit_tab = scoring_tab.get("criteria", {}) if isinstance(scoring_tab, dict) else {}
     if not isinstance(crit_tab, dict):
         raise ctx.error(("scoring", "criteria"), f"expected a table of criteria, got {crit_tab!r}")
@@ -415,8 +570,10 @@ def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = No
         if not isinstance(values, list) or not values:
             raise ctx.error(("sweep", key), f"expected a non-empty array of values, got {values!r}")
         hint = typing.get_type_hints(SceneOverrides)[key]
+        if len(values) > 100:
+            raise ctx.error(("sweep", key), f"{len(values)} values: at most 100 runs per sweep")
         for i, v in enumerate(values):
-            _check_type(v, hint, ("sweep", key, i), ctx)
+            _check_scene_value(ctx, ("sweep", key, i), key, _check_type(v, hint, ("sweep", key, i), ctx))
         lengths.add(len(values))
     if len(lengths) > 1:
         raise ctx.error(("sweep",), f"all swept arrays must have the same length, got lengths {sorted(lengths)}")
@@ -427,9 +584,11 @@ def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = No
             raise ctx.error(("policy",), "a [policy] table needs scenario.task (a Gymnasium task id)")
         policy = build_dataclass(PolicySpec, data["policy"], ("policy",), ctx)
         if not policy.file:
-            raise ctx.error(("policy", "file"), "give the policy: 'module:function' or a stable-baselines3 .zip file")
-        _positive(ctx, ("policy", "episodes"), policy.episodes)
-        _positive(ctx, ("policy", "max_steps"), policy.max_steps)
+            raise ctx.error(("policy", "file"), "give the policy: a .npz data policy, 'builtin:NAME' or (with "
+                                                "--allow-code) 'file.py:function'")
+        check_policy(ctx, ("policy", "file"), policy.file, folder, allow_code, trusted=False)
+        _limit(ctx, ("policy", "episodes"), "policy.episodes", policy.episodes)
+        _limit(ctx, ("policy", "max_steps"), "policy.max_steps", policy.max_steps)
     elif meta.task:
         raise ctx.error(("scenario", "task"), "a task rollout needs a [policy] table with file = '...'")
 
@@ -440,27 +599,59 @@ def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = No
     else:
         if not isinstance(phases_tab, list) or not phases_tab:
             raise ctx.error(("phases",), "a scenario needs at least one [[phases]] table (e.g. type = \"hold\")")
-    phases = [build_phase(tab, ("phases", i), ctx, trainee) for i, tab in enumerate(phases_tab)]
+    if len(phases_tab) > 1000:
+        raise ctx.error(("phases",), f"{len(phases_tab)} phases: at most 1000")
+    phases = []
+    for i, tab in enumerate(phases_tab):
+        if isinstance(tab, dict) and not isinstance(tab.get("type"), str):
+            raise ctx.error(("phases", i, "type"), f"give the phase type as a string, got {tab.get('type')!r}")
+        phase = build_phase(tab, ("phases", i), ctx, trainee)
+        _check_phase_values(ctx, ("phases", i), phase)
+        validate_driver(ctx, ("phases", i), phase.driver, phase.device, phase.policy, **drivers)
+        phases.append(phase)
     if phases:
         check_phase_order(phases, meta.scene, ctx)
-    return Scenario(meta=meta, scene=scene, trainee=trainee, phases=phases, scoring=scoring, sweep=dict(sweep),
-                    policy=policy, source=None)
+    sc = Scenario(meta=meta, scene=scene, trainee=trainee, phases=phases, scoring=scoring, sweep=dict(sweep),
+                  policy=policy, source=None, folder=folder, allow_code=allow_code)
+    if sc.run_duration() > MAX_RUN_DURATION:
+        raise ctx.error(("phases",), f"one run lasts {sc.run_duration():g} s of simulated time (phase durations x "
+                                     f"duration_scale), more than the {MAX_RUN_DURATION:g} s limit")
+    return sc
 
 
-def loads_scenario(text: str, source: str = "<string>") -> Scenario:
-    """Parse and validate scenario TOML ``text``."""
+def loads_scenario(text: str, source: str = "<string>", folder: Path | None = None,
+                   allow_code: bool = False) -> Scenario:
+    """Parse and validate scenario TOML ``text`` (relative file names resolve against ``folder``)."""
+    if not isinstance(text, str):
+        raise ConfigError(f"{source}: scenario text must be a string, got {type(text).__name__}")
+    if len(text) > MAX_FILE_BYTES:
+        raise ConfigError(f"{source}: {len(text)} characters; a scenario file is at most {MAX_FILE_BYTES} "
+                          "(move data into separate files)")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: not valid TOML: {exc}") from None
-    return parse_scenario(data, source, text)
+    except RecursionError:
+        raise ConfigError(f"{source}: arrays or tables nested too deeply to parse; a scenario needs at most a few "
+                          "levels of nesting") from None
+    try:
+        return parse_scenario(data, source, text, folder=folder, allow_code=allow_code)
+    except RecursionError:
+        raise ConfigError(f"{source}: values nested too deeply; a scenario needs at most a few levels") from None
 
 
-def load_scenario(path) -> Scenario:
-    """Load and validate the scenario file ``path`` (.toml)."""
+def load_scenario(path, allow_code: bool = False) -> Scenario:
+    """Load and validate the scenario file ``path`` (.toml); ``allow_code`` accepts code-loading
+    policies (``--allow-code``)."""
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"scenario file {str(path)!r} not found; give a path such as tasks/spleen_grasp_and_retract.toml")
-    sc = loads_scenario(p.read_text(), str(p))
+    if p.stat().st_size > MAX_FILE_BYTES:
+        raise ConfigError(f"scenario file {str(p)!r} is {p.stat().st_size} bytes; at most {MAX_FILE_BYTES}")
+    try:
+        text = p.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"scenario file {str(p)!r} cannot be read as UTF-8 text ({exc})") from None
+    sc = loads_scenario(text, str(p), folder=p.parent, allow_code=allow_code)
     sc.source = p
     return sc

@@ -16,12 +16,12 @@ if "MUJOCO_GL" not in os.environ and sys.platform.startswith("linux") and not os
         and "mujoco" not in sys.modules:
     os.environ["MUJOCO_GL"] = "egl"
 
-from surgsim_envs.scene.builder import (Scene, build_scene, grasp_config, grasp_scene, make_scene,  # noqa: E402
-                                        palpation_config, palpation_scene)
+from surgsim_envs.scene.builder import (SCENES, Scene, build_scene, grasp_config, grasp_scene,  # noqa: E402
+                                        make_scene, palpation_config, palpation_scene, register_scene, scene_config)
 from surgsim_envs.scene.config import (CameraConfig, ContactConfig, GrasperConfig, HapticProxyConfig,  # noqa: E402
                                        ProbeConfig, SceneConfig, TissueConfig)
 from surgsim_envs.scene.simulation import Simulation  # noqa: E402
 
-__all__ = ["Scene", "Simulation", "build_scene", "make_scene", "palpation_scene", "palpation_config", "grasp_scene",
+__all__ = ["SCENES", "Scene", "Simulation", "build_scene", "make_scene", "scene_config", "register_scene", "palpation_scene", "palpation_config", "grasp_scene",
            "grasp_config", "SceneConfig", "TissueConfig", "ProbeConfig", "GrasperConfig", "HapticProxyConfig",
            "CameraConfig", "ContactConfig"]

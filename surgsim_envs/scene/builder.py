@@ -24,7 +24,8 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.config import (CameraConfig, GrasperConfig, ProbeConfig, SceneConfig, TissueConfig,
                                        validate_scene_config)
 from surgsim_envs.scene.tissue_binding import TissueBinding
-from surgsim_envs.scene.tools import ToolSpec, add_grasper, add_haptic_proxy, add_probe
+from surgsim_envs.scene.visual import VisualTwin
+from surgsim_envs.scene.tools import ToolSpec, add_haptic_proxy, build_tool
 
 ANCHOR_FACES = {"bottom": (2, 0), "top": (2, 1), "x_min": (0, 0), "x_max": (0, 1), "y_min": (1, 0), "y_max": (1, 1)}
 
@@ -42,6 +43,7 @@ class Scene:
     tools: dict = field(default_factory=dict)           # name -> ToolSpec
     proxies: dict = field(default_factory=dict)         # proxy name -> ToolSpec it drives
     resolutions: dict = field(default_factory=dict)     # tissue name -> tissue.resolution.Choice ("auto" only)
+    visual: VisualTwin | None = None                    # render-only twin with the tissue flexes
 
 
 # ----------------------------------------------------------------------------------------------
@@ -101,10 +103,11 @@ def resolve_scene_config(cfg: SceneConfig):
 
 def placed_volume(cfg: TissueConfig):
     """The tissue's volume, rotated by ``cfg.euler`` and with its bounding-box centre at ``cfg.position``."""
-    from surgsim_envs.geometry import Volume, make_volume
+    from surgsim_envs.geometry import Volume, organ_volume
 
     cfg, _ = resolve_tissue(cfg)
-    vol = make_volume(cfg.organ, spacing=cfg.spacing, **dict(cfg.volume_options))
+    # a registered name, a mesh file (STL/OBJ/PLY/VTK, set on its bed) or a Volume (contract v2)
+    vol = organ_volume(cfg.organ, spacing=cfg.spacing, **dict(cfg.volume_options))
     lo, hi = vol.bounds()
     centre = (lo + hi) / 2.0
     nodes = vol.nodes - centre
@@ -229,13 +232,11 @@ def build_scene(cfg: SceneConfig) -> Scene:
         model = build_tissue(tcfg)
         scene.tissues[tcfg.name] = model
         scene.tissue_configs[tcfg.name] = tcfg
-        binding = TissueBinding(tcfg.name, model, rgba=tcfg.rgba)
-        binding.add_to(spec)
-        scene.bindings[tcfg.name] = binding
-    for pcfg in cfg.probes:
-        scene.tools[pcfg.name] = add_probe(spec, pcfg)
-    for gcfg in cfg.graspers:
-        scene.tools[gcfg.name] = add_grasper(spec, gcfg)
+        # the surface flex goes only into the render twin (scene/visual.py): never into the physics model
+        scene.bindings[tcfg.name] = TissueBinding(tcfg.name, model, rgba=tcfg.rgba, render_field=tcfg.render_field,
+                                                  render_range=tcfg.render_range)
+    for tcfg in cfg.tool_configs():
+        scene.tools[tcfg.name] = build_tool(spec, tcfg)
     for hcfg in cfg.proxies:
         tool = scene.tools[hcfg.tool]
         add_haptic_proxy(spec, hcfg, tool)
@@ -246,9 +247,34 @@ def build_scene(cfg: SceneConfig) -> Scene:
         raise ConfigError(f"scene '{cfg.name}' does not compile in MuJoCo: {exc}") from exc
     for tool in scene.tools.values():
         tool.bind(scene.model)
-    for binding in scene.bindings.values():
-        binding.bind(scene.model)
+    check_tools_clear(scene)
+    scene.visual = VisualTwin(spec, scene.bindings)
     return scene
+
+
+def check_tools_clear(scene: Scene) -> None:
+    """Raise ConfigError if a tool starts touching rigid geometry (floor) at its home pose: a tool
+    pressed into the floor at rest pushes back on its drive (and on a haptic user's hand)."""
+    m = scene.model
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    tool_bodies = {}
+    for tool in scene.tools.values():
+        for b in range(m.nbody):
+            root = b
+            while root and m.body_parentid[root] != 0:
+                root = m.body_parentid[root]
+            if root == tool.body_id:
+                tool_bodies[b] = tool.name
+    for c in d.contact[:d.ncon]:
+        for g, other in ((c.geom1, c.geom2), (c.geom2, c.geom1)):
+            name = tool_bodies.get(int(m.geom_bodyid[g]))
+            if name is not None and c.dist < 0:
+                gname = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, int(g))
+                oname = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, int(other))
+                raise ConfigError(f"tool '{name}' starts inside {oname!r}: geom {gname!r} penetrates it by "
+                                  f"{-c.dist * 1e3:.2f} mm at the home pose; move the tool (or the tissue it is "
+                                  "placed around) up, or make its jaws/tip smaller")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -264,7 +290,7 @@ def palpation_config(organ: str = "slab_inclusion", model: str = "mass_spring") 
             CameraConfig("top", (0.0, -0.001, 0.25), (0.0, 0.0, 0.0)),
             CameraConfig("side", (0.0, -0.16, 0.03), (0.0, 0.0, 0.015))]
     # explicit tissue + explicit penalty contact: 0.5 ms keeps k_n dt^2 / m well below the limit
-    return SceneConfig(name="palpation", tissues=[tissue], probes=[probe], cameras=cams, dt=5e-4)
+    return SceneConfig(name="palpation", tissues=[tissue], tools=[probe], cameras=cams, dt=5e-4)
 
 
 def palpation_scene(cfg: SceneConfig | None = None) -> Scene:
@@ -294,13 +320,14 @@ def place_grasper_around_tip(tissue_nodes: np.ndarray, grasper: GrasperConfig, m
 
 def grasp_config(organ: str = "spleen", model: str = "mass_spring") -> SceneConfig:
     """Three-jaw grasper (paper 002) around the tip of a spleen held at its other end (ligaments)."""
+    # grasp_scene lifts organ and grasper together if the open jaws would reach into the floor
     tissue = TissueConfig(name="spleen", organ=organ, model=model, material="spleen", spacing=None,
                           anchors=("x_min:0.03",), position=(0.0, 0.0, 0.025),
                           options={"integrator": "implicit"}, rgba=(0.55, 0.18, 0.25, 1.0))
     cams = [CameraConfig("overview", (0.05, -0.22, 0.16), (0.03, 0.0, 0.02)),
             CameraConfig("top", (0.03, -0.001, 0.30), (0.03, 0.0, 0.0)),
             CameraConfig("side", (0.03, -0.25, 0.03), (0.03, 0.0, 0.025))]
-    return SceneConfig(name="grasp", tissues=[tissue], graspers=[GrasperConfig(name="grasper")], cameras=cams)
+    return SceneConfig(name="grasp", tissues=[tissue], tools=[GrasperConfig(name="grasper")], cameras=cams)
 
 
 def grasp_scene(cfg: SceneConfig | None = None, auto_place: bool = True) -> Scene:
@@ -310,20 +337,72 @@ def grasp_scene(cfg: SceneConfig | None = None, auto_place: bool = True) -> Scen
     (:func:`place_grasper_around_tip`), so any organ can be grasped.
     """
     cfg = copy.deepcopy(cfg if cfg is not None else grasp_config())
-    if auto_place and cfg.graspers and cfg.tissues:
+    grasper = next((t for t in cfg.tool_configs() if isinstance(t, GrasperConfig)), None)
+    if auto_place and grasper is not None and cfg.tissues:
         validate_scene_config(cfg)
         nodes = placed_volume(cfg.tissues[0]).nodes
-        cfg.graspers[0] = place_grasper_around_tip(nodes, cfg.graspers[0])
+        g = place_grasper_around_tip(nodes, grasper)
+        cfg.replace_tool(grasper.name, g)
+        lift = FLOOR_CLEARANCE - lowest_jaw_point(g) if cfg.floor else 0.0
+        if lift > 0:  # an organ whose tip sits low: raise organ and grasper together, clear of the floor
+            t = cfg.tissues[0]
+            t.position = (t.position[0], t.position[1], float(t.position[2]) + lift)
+            g.position = (g.position[0], g.position[1], float(g.position[2]) + lift)
     return build_scene(cfg)
 
 
-SCENES: dict[str, Callable[..., Scene]] = {"palpation": palpation_scene, "grasp": grasp_scene}
+#: m, the least gap between an auto-placed grasper's open jaws and the floor
+FLOOR_CLEARANCE = 0.001
+
+
+def lowest_jaw_point(g: GrasperConfig) -> float:
+    """World z (m) of the lowest corner of the open jaws of grasper ``g`` at its home pose."""
+    from surgsim_envs.scene.tools.base import _rotation_to
+
+    rot = _rotation_to(-np.asarray(g.axis, dtype=float))
+    t, half = g.jaw_thickness, np.array([g.jaw_thickness, g.jaw_width, g.jaw_length]) / 2.0
+    signs = np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)], dtype=float)
+    low = math.inf
+    for i in range(3):
+        theta = float(g.roll) + 2.0 * math.pi * i / 3.0
+        c, s = math.cos(theta), math.sin(theta)
+        rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        centre = np.array([c, s, 0.0]) * (g.open_radius + t / 2.0) + [0.0, 0.0, -g.jaw_length / 2.0]
+        corners = centre + (signs * half) @ rz.T
+        low = min(low, float((np.asarray(g.position, dtype=float) + corners @ rot.T)[:, 2].min()))
+    return low
+
+
+@dataclass(frozen=True)
+class SceneEntry:
+    """A ready-made scene: ``config(**kw) -> SceneConfig`` (organ=, model=) and ``build(cfg) -> Scene``."""
+
+    config: Callable[..., SceneConfig]
+    build: Callable[..., Scene]
+
+
+#: THE registry of ready-made scenes, used by envs, scenarios, haptics and the CLI
+SCENES: dict[str, SceneEntry] = {"palpation": SceneEntry(palpation_config, palpation_scene),
+                                 "grasp": SceneEntry(grasp_config, grasp_scene)}
+
+
+def register_scene(name: str, config: Callable[..., SceneConfig], build: Callable[..., Scene] = build_scene) -> None:
+    """Add a ready-made scene ``name`` (a config factory and a builder) to :data:`SCENES`."""
+    SCENES[name] = SceneEntry(config, build)
+
+
+def _entry(name: str) -> SceneEntry:
+    try:
+        return SCENES[name]
+    except (KeyError, TypeError):
+        raise ConfigError(f"unknown scene {name!r}; available scenes: {sorted(SCENES)}") from None
+
+
+def scene_config(name: str, **kw) -> SceneConfig:
+    """The default SceneConfig of ready-made scene ``name`` (keywords: organ=, model=)."""
+    return _entry(name).config(**kw)
 
 
 def make_scene(name: str, cfg: SceneConfig | None = None) -> Scene:
-    """Build the ready-made scene ``name`` ("palpation", "grasp")."""
-    try:
-        fn = SCENES[name]
-    except KeyError:
-        raise ConfigError(f"unknown scene {name!r}; available scenes: {sorted(SCENES)}") from None
-    return fn(cfg)
+    """Build the ready-made scene ``name`` ("palpation", "grasp"), from ``cfg`` if given."""
+    return _entry(name).build(cfg)

@@ -23,8 +23,11 @@ SUBSTEPS_RANGE = (1, 1000)
 class TissueConfig:
     """One deformable organ.
 
-    organ: volume name for :func:`surgsim_envs.geometry.make_volume` ("slab", "block",
-        "slab_inclusion", "spleen", "liver_lobe", ...).
+    organ: a registered volume name ("slab", "block", "slab_inclusion", "spleen", "liver_lobe"),
+        a mesh file path (closed surface STL/OBJ/PLY/OFF, filled with lattice tets; or a legacy
+        VTK tet mesh; ``volume_options={"units": "mm"}`` if not in metres) or a
+        :class:`~surgsim_envs.geometry.Volume` (:func:`surgsim_envs.geometry.organ_volume`).
+        Meshes are set on their bed and rendered with their smooth surface.
     model: tissue model registry name ("mass_spring", "fem", or a plugin); "auto" lets
         ``resolution="auto"`` choose the model too.
     material: preset name, dict of :class:`~surgsim_envs.tissue.Material` fields, or a Material.
@@ -49,10 +52,13 @@ class TissueConfig:
     options: extra keyword options for the model constructor (integrator, ...).
     volume_options: extra keyword options for make_volume (size, ...).
     rgba: colour of the rendered surface.
+    render_field: None (plain ``rgba``) or a per-node field of the model to colour the surface by
+        (``model.field_names()``: "displacement" m, "stress" Pa, ...), viridis from low to high.
+    render_range: (lo, hi) of that colour scale in the field's unit; None: 0 .. largest value seen.
     """
 
     name: str = "tissue"
-    organ: str = "slab"
+    organ: Any = "slab"
     model: str = "mass_spring"
     material: Any = "liver"
     spacing: float | None = 0.005
@@ -70,6 +76,8 @@ class TissueConfig:
     options: Mapping[str, Any] = field(default_factory=dict)
     volume_options: Mapping[str, Any] = field(default_factory=dict)
     rgba: Sequence[float] = (0.78, 0.33, 0.30, 1.0)
+    render_field: str | None = None
+    render_range: Sequence[float] | None = None
 
 
 @dataclass
@@ -204,6 +212,10 @@ def _default_cameras() -> list[CameraConfig]:
 class SceneConfig:
     """A whole scene: tissues, tools, haptic proxies, cameras and the step loop.
 
+    tools: a list of tool configs of any registered kind (:class:`ProbeConfig`,
+    :class:`GrasperConfig`, or a plugin's; :mod:`surgsim_envs.scene.tools`), built in order.
+    ``probes`` and ``graspers`` are the older per-kind lists, still accepted and appended after
+    ``tools`` (:meth:`tool_configs`).
     dt: s, physics step (validated against :data:`DT_RANGE`); substeps: physics steps per
     control step (:meth:`Simulation.step`). gravity: m/s^2 for the MuJoCo (tool) world; tools are
     gravity-compensated. seed: seeds ``Simulation.rng``.
@@ -211,6 +223,7 @@ class SceneConfig:
 
     name: str = "scene"
     tissues: list[TissueConfig] = field(default_factory=list)
+    tools: list[Any] = field(default_factory=list)
     probes: list[ProbeConfig] = field(default_factory=list)
     graspers: list[GrasperConfig] = field(default_factory=list)
     proxies: list[HapticProxyConfig] = field(default_factory=list)
@@ -224,9 +237,29 @@ class SceneConfig:
     render_width: int = 640
     render_height: int = 480
 
+    def tool_configs(self) -> list:
+        """Every tool config: ``tools``, then the older ``probes`` and ``graspers`` lists."""
+        return [*self.tools, *self.probes, *self.graspers]
+
+    def tool(self, name: str):
+        """The tool config called ``name`` (ConfigError listing the tools if there is none)."""
+        for t in self.tool_configs():
+            if t.name == name:
+                return t
+        raise ConfigError(f"scene '{self.name}' has no tool {name!r}; tools: {[t.name for t in self.tool_configs()]}")
+
+    def replace_tool(self, name: str, new) -> None:
+        """Put tool config ``new`` in the place of the tool called ``name``."""
+        for group in (self.tools, self.probes, self.graspers):
+            for i, t in enumerate(group):
+                if t.name == name:
+                    group[i] = new
+                    return
+        raise ConfigError(f"scene '{self.name}' has no tool {name!r}")
+
 
 # ----------------------------------------------------------------------------------------------
-def _vec(value, n: int, what: str) -> tuple[float, ...]:
+def vec(value, n: int, what: str) -> tuple[float, ...]:
     try:
         out = tuple(float(v) for v in value)
     except TypeError:
@@ -236,10 +269,13 @@ def _vec(value, n: int, what: str) -> tuple[float, ...]:
     return out
 
 
-def _positive(value, what: str, hint: str, allow_inf: bool = False) -> None:
+def positive(value, what: str, hint: str, allow_inf: bool = False) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value) or value <= 0 \
             or (math.isinf(value) and not allow_inf):
         raise ConfigError(f"{what} must be a positive finite number, got {value!r}; {hint}")
+
+
+_vec, _positive = vec, positive
 
 
 def validate_step(dt: float, substeps: int) -> None:
@@ -277,7 +313,7 @@ def validate_scene_config(cfg: SceneConfig) -> None:
     validate_step(cfg.dt, cfg.substeps)
     _vec(cfg.gravity, 3, "gravity")
     names: set[str] = set()
-    for group in (cfg.tissues, cfg.probes, cfg.graspers, cfg.proxies, cfg.cameras):
+    for group in (cfg.tissues, cfg.tool_configs(), cfg.proxies, cfg.cameras):
         for item in group:
             if not isinstance(item.name, str) or not item.name:
                 raise ConfigError(f"every scene object needs a non-empty name, got {item.name!r}")
@@ -293,31 +329,11 @@ def validate_scene_config(cfg: SceneConfig) -> None:
         _vec(t.euler, 3, f"tissue '{t.name}' euler")
         _vec(t.gravity, 3, f"tissue '{t.name}' gravity")
         _vec(t.rgba, 4, f"tissue '{t.name}' rgba")
-    for p in cfg.probes:
-        for key, hint in (("tip_radius", "e.g. 0.005 (5 mm)"), ("rod_radius", "e.g. 0.003"), ("rod_length", "e.g. 0.1"),
-                          ("kp", "e.g. 2e4 N/m"), ("mass", "e.g. 0.05 kg"), ("travel", "e.g. 0.2 m"),
-                          ("speed", "m/s, inf for no limit")):
-            _positive(getattr(p, key), f"probe '{p.name}' {key}", hint, allow_inf=key == "speed")
-        _vec(p.position, 3, f"probe '{p.name}' position")
-        if p.drive not in ("position", "proxy", "free"):
-            raise ConfigError(f"probe '{p.name}' drive={p.drive!r}; choose 'position', 'proxy' or 'free'")
-    for g in cfg.graspers:
-        for key in ("open_radius", "min_radius", "jaw_length", "jaw_width", "jaw_thickness", "shaft_radius",
-                    "shaft_length", "closing_speed", "kp", "jaw_kp", "mass", "jaw_mass", "travel", "speed"):
-            _positive(getattr(g, key), f"grasper '{g.name}' {key}", "give a positive number in SI units",
-                      allow_inf=key == "speed")
-        if g.min_radius >= g.open_radius:
-            raise ConfigError(f"grasper '{g.name}': min_radius={g.min_radius} m must be < open_radius={g.open_radius} m")
-        if g.jaw_width / 2 >= g.min_radius * math.sqrt(3):
-            raise ConfigError(f"grasper '{g.name}': jaws of width {g.jaw_width} m would collide at min_radius "
-                              f"{g.min_radius} m; use min_radius > {g.jaw_width / (2 * math.sqrt(3)):.4f} m")
-        ax = _vec(g.axis, 3, f"grasper '{g.name}' axis")
-        if math.sqrt(sum(a * a for a in ax)) < 1e-9:
-            raise ConfigError(f"grasper '{g.name}' axis must be a non-zero direction, got {g.axis!r}")
-        _vec(g.position, 3, f"grasper '{g.name}' position")
-        if g.drive not in ("position", "proxy", "free"):
-            raise ConfigError(f"grasper '{g.name}' drive={g.drive!r}; choose 'position', 'proxy' or 'free'")
-    tools = {p.name: p for p in [*cfg.probes, *cfg.graspers]}
+    from surgsim_envs.scene.tools import tool_kind
+
+    for t in cfg.tool_configs():
+        tool_kind(t).validate(t)
+    tools = {p.name: p for p in cfg.tool_configs()}
     driven = set()
     for h in cfg.proxies:
         if h.tool not in tools:

@@ -33,7 +33,7 @@ class SceneRenderer:
     def __init__(self, sim, width: int = 640, height: int = 480):
         import mujoco
 
-        m = sim.model
+        m = sim.render_model   # physics model + tissue flexes (scene/visual.py)
         for what, v, cap in (("width", width, m.vis.global_.offwidth), ("height", height, m.vis.global_.offheight)):
             if not isinstance(v, int) or v <= 0 or v > cap:
                 raise ConfigError(f"render {what} must be an integer in [1, {cap}] px, got {v!r}; "
@@ -52,8 +52,8 @@ class SceneRenderer:
         """One RGB frame from ``camera`` (a camera name, an index, or -1 for the free camera)."""
         if isinstance(camera, str) and camera not in self.cameras:
             raise ConfigError(f"unknown camera {camera!r}; cameras in this scene: {self.cameras}")
-        self.sim.sync_visual()
-        self._renderer.update_scene(self.sim.data, camera=camera)
+        data = self.sim.sync_visual()
+        self._renderer.update_scene(data, camera=camera)
         return self._renderer.render().copy()
 
     def close(self) -> None:

@@ -62,6 +62,37 @@ def _gather_geoms(geom_ids, geom_body, body_root, bodies, geom_xpos, geom_xmat, 
             out_com[t, j] = xipos[bodies[t], j]
 
 
+@njit(cache=True)
+def _rate_limit(ctrl, goal, rate, dt):
+    """Move ``ctrl`` towards ``goal`` by at most ``rate * dt`` per entry; True while any entry still moves."""
+    moving = False
+    for i in range(ctrl.shape[0]):
+        delta = goal[i] - ctrl[i]
+        lim = rate[i] * dt
+        if delta > lim:
+            delta = lim
+        elif delta < -lim:
+            delta = -lim
+        ctrl[i] += delta
+        if abs(goal[i] - ctrl[i]) > 1e-12:
+            moving = True
+    return moving
+
+
+@njit(cache=True)
+def _write_rows(xfrc, bodies, wrench):
+    for k in range(bodies.shape[0]):
+        for j in range(6):
+            xfrc[bodies[k], j] = wrench[k, j]
+
+
+@njit(cache=True)
+def _zero_rows(xfrc, bodies):
+    for k in range(bodies.shape[0]):
+        for j in range(6):
+            xfrc[bodies[k], j] = 0.0
+
+
 class Simulation:
     """Owns the MjModel/MjData, the tissue models and one ContactModel per tissue.
 
@@ -84,6 +115,9 @@ class Simulation:
         self.model = scene.model
         self.model.opt.timestep = self.dt
         self.data = mujoco.MjData(self.model)
+        # cached views of the MjData arrays the step loop touches (an attribute access builds a new view)
+        self._views = {k: getattr(self.data, k) for k in ("geom_xpos", "geom_xmat", "cvel", "subtree_com", "xipos",
+                                                          "ctrl", "xfrc_applied")}
         self.tissues = dict(scene.tissues)
         self.tools = dict(scene.tools)
         self.proxies = dict(scene.proxies)
@@ -105,6 +139,7 @@ class Simulation:
                                                node_masses=model.masses, surface=model.surface,
                                                surface_subdivisions=self._surface_subdivisions(model))
         self._pairs = [(self.tissues[n], self.contacts[n]) for n in self.tissues]
+        self._has_tools = bool(len(self._geom_ids))
         self.steps = 0
         self.reset()
         self._check_initial_penetration()
@@ -162,7 +197,7 @@ class Simulation:
         if opt is None:
             return 1
         if opt == "auto":
-            tips = [float(t.config.tip_radius) for t in self.tools.values() if t.kind == "probe"]
+            tips = [float(t.contact_feature_radius) for t in self.tools.values() if t.contact_feature_radius is not None]
             if not tips:
                 return 1
             edge = typical_edge_length(tissue.positions, tissue.surface)
@@ -177,11 +212,8 @@ class Simulation:
         self._goal = np.zeros(m.nu)
         self._rate = np.full(m.nu, np.inf)
         for tool in self.tools.values():
-            cfg = tool.config
-            for a in tool.actuator_ids:
-                self._rate[a] = float(cfg.speed)
-            if tool.kind == "grasper":
-                self._rate[tool.jaw_actuator_id] = float(cfg.closing_speed)
+            for a, rate in tool.actuator_rates().items():
+                self._rate[a] = rate
         self._moving = False
 
     def _check_initial_penetration(self) -> None:
@@ -240,17 +272,21 @@ class Simulation:
             self.physics_step()
 
     def _gather(self) -> None:
-        d = self.data
-        _gather_geoms(self._geom_ids, self._geom_body, self._geom_root, self._bodies, d.geom_xpos, d.geom_xmat,
-                      d.cvel, d.subtree_com, d.xipos, self._gpos, self._gmat, self._gvel, self._tcom)
+        v = self._views
+        _gather_geoms(self._geom_ids, self._geom_body, self._geom_root, self._bodies, v["geom_xpos"], v["geom_xmat"],
+                      v["cvel"], v["subtree_com"], v["xipos"], self._gpos, self._gmat, self._gvel, self._tcom)
 
     def physics_step(self) -> None:
-        """One physics step in the documented order (module docstring)."""
+        """One physics step in the documented order (module docstring).
+
+        Kept to a handful of Python calls (measured: docs/benchmarks.md "Env step"): the MjData
+        arrays are cached views, the control rate limiter and the reaction write are numba kernels.
+        """
         m, d, dt = self.model, self.data, self.dt
         if self._moving:
-            self._advance_controls()
+            self._moving = _rate_limit(self._views["ctrl"], self._goal, self._rate, dt)
         mujoco.mj_step1(m, d)
-        if len(self._geom_ids):
+        if self._has_tools:
             self._gather()
             w = self._wrench
             w[:] = 0.0
@@ -258,11 +294,16 @@ class Simulation:
                 res = contact.compute(tissue.positions, tissue.velocities, self._shape_kind, self._shape_tool,
                                       self._shape_size, self._gpos, self._gmat, self._gvel, self._tcom, dt)
                 tissue.step(dt, res.forces, res.stiffness)
+                # CONTRACT (issue 10), for SCENE's restructuring: an implicit integrator integrates
+                # forces + an increment from the contact stiffness; the tools must get the reaction
+                # of exactly tissue.integrated_external_forces or momentum leaks (11-14 % measured).
+                contact.attribute_increment(tissue.integrated_external_forces)
                 w[:, :3] += res.tool_force
                 w[:, 3:] += res.tool_torque
-            d.xfrc_applied[self._bodies] = w
+            xfrc = self._views["xfrc_applied"]
+            _write_rows(xfrc, self._bodies, w)
             mujoco.mj_step2(m, d)
-            d.xfrc_applied[self._bodies] = 0.0
+            _zero_rows(xfrc, self._bodies)
         else:
             for tissue in self.tissues.values():
                 tissue.step(dt)
@@ -270,11 +311,7 @@ class Simulation:
         self.steps += 1
 
     def _advance_controls(self) -> None:
-        d = self.data
-        delta = self._goal - d.ctrl
-        lim = self._rate * self.dt
-        d.ctrl[:] = d.ctrl + np.clip(delta, -lim, lim)
-        self._moving = bool(np.any(np.abs(self._goal - d.ctrl) > 1e-12))
+        self._moving = _rate_limit(self._views["ctrl"], self._goal, self._rate, self.dt)
 
     # ------------------------------------------------------------------------------------------
     # tool commands
@@ -323,26 +360,29 @@ class Simulation:
             raise ConfigError(f"speed must be a positive number (m/s), or math.inf for no limit, got {speed!r}")
         self._rate[actuators] = float(speed)
 
-    def set_jaw_opening(self, name: str, radius: float, speed: float | None = None) -> None:
-        """Close or open grasper ``name`` to ``radius`` m (axis to each jaw's inner face) at ``speed`` m/s."""
-        tool = self.tool(name)
-        if tool.kind != "grasper":
-            raise ConfigError(f"tool '{name}' is a {tool.kind}, not a grasper; it has no jaws")
-        cfg = tool.config
-        if not (isinstance(radius, (int, float)) and cfg.min_radius - 1e-12 <= radius <= cfg.open_radius + 1e-12):
-            raise ConfigError(f"jaw opening {radius!r} m is outside [{cfg.min_radius}, {cfg.open_radius:.4f}] m "
-                              f"(min_radius .. open_radius) of grasper '{name}'")
-        self._goal[tool.jaw_actuator_id] = cfg.open_radius - float(radius)
+    def set_actuator_goal(self, actuator: int, goal: float, speed: float | None = None) -> None:
+        """Move actuator ``actuator``'s target towards ``goal`` at ``speed`` (None = its default rate);
+        the command primitive tool kinds build on (:mod:`surgsim_envs.scene.tools`)."""
+        self._goal[actuator] = float(goal)
         if speed is not None:
-            self._set_rate([tool.jaw_actuator_id], speed)
+            self._set_rate([actuator], speed)
         self._moving = True
 
-    def jaw_opening(self, name: str) -> float:
-        """Current distance (m) from the axis to jaw 1's inner face."""
+    def geom_rows(self, geom_ids) -> list[int]:
+        """Rows of the contact arrays (``ContactModel.result.geom_*``) of the tool geoms ``geom_ids``."""
+        return [self._geom_index[int(g)] for g in geom_ids]
+
+    def set_jaw_opening(self, name: str, radius: float, speed: float | None = None) -> None:
+        """Close or open tool ``name``'s jaws to ``radius`` m (axis to each jaw's inner face) at ``speed`` m/s."""
         tool = self.tool(name)
-        if tool.kind != "grasper":
-            raise ConfigError(f"tool '{name}' is not a grasper")
-        return float(tool.config.open_radius - self.data.qpos[tool.jaw_qpos_adr[0]])
+        tool.require("set_jaw_opening")
+        tool.set_jaw_opening(self, radius, speed)
+
+    def jaw_opening(self, name: str) -> float:
+        """Current distance (m) from the axis to jaw 1's inner face of tool ``name``."""
+        tool = self.tool(name)
+        tool.require("jaw_opening")
+        return tool.jaw_opening(self)
 
     def _proxy_tool(self, name: str):
         if name in self.proxies:
@@ -419,16 +459,10 @@ class Simulation:
         return out
 
     def jaw_forces(self, name: str) -> dict[str, np.ndarray]:
-        """Per-jaw contact forces of grasper ``name``: {"normal": (3,) N, "tangential": (3,) N}."""
+        """Per-jaw contact forces of tool ``name``: {"normal": (3,) N, "tangential": (3,) N}."""
         tool = self.tool(name)
-        if tool.kind != "grasper":
-            raise ConfigError(f"tool '{name}' is a {tool.kind}, not a grasper")
-        rows = [self._geom_index[int(g)] for g in tool.jaw_geom_ids]
-        fn, ft = np.zeros(3), np.zeros(3)
-        for contact in self.contacts.values():
-            fn += contact.result.geom_normal_force[rows]
-            ft += contact.result.geom_tangential_force[rows]
-        return {"normal": fn, "tangential": ft}
+        tool.require("jaw_forces")
+        return tool.jaw_forces(self)
 
     def tissue(self, name: str | None = None):
         """The TissueModel ``name`` (the only one if None)."""
@@ -458,7 +492,18 @@ class Simulation:
         return p
 
     # ------------------------------------------------------------------------------------------
-    def sync_visual(self) -> None:
-        """Write every tissue surface into ``d.flexvert_xpos`` (call right before rendering)."""
-        for binding in self.bindings.values():
-            binding.write(self.data)
+    @property
+    def render_model(self) -> mujoco.MjModel:
+        """The render MjModel: the physics model plus the tissue surface flexes (scene/visual.py);
+        give it to ``mujoco.Renderer`` / ``mujoco.viewer``, never step it."""
+        return self.scene.visual.model
+
+    @property
+    def render_data(self) -> mujoco.MjData:
+        """The render MjData as of the last :meth:`sync_visual`."""
+        return self.scene.visual.data
+
+    def sync_visual(self) -> mujoco.MjData:
+        """Copy the physics state into the render twin and write every tissue surface into its
+        ``flexvert_xpos`` (call right before rendering); returns :attr:`render_data`."""
+        return self.scene.visual.sync(self.model, self.data)

@@ -28,6 +28,7 @@ import numpy as np
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.embedding import embed_points, interpolate
+from surgsim_envs.scene.field_colors import COLORMAP_SIZE, FieldColors, colormap_rgb
 
 VISUAL_MODES = ("auto", "smooth", "lattice")
 
@@ -47,10 +48,13 @@ class TissueBinding:
     name: flex name in the MuJoCo model; tissue: a TissueModel (reads ``positions``,
     ``surface``, ``surface_nodes``, ``volume``); rgba: surface colour; visual: "auto" (smooth
     surface when the volume has a ``source_surface``, else the lattice surface), "smooth" (error
-    if there is none) or "lattice".
+    if there is none) or "lattice"; render_field: None (plain colour) or a node field of the model
+    (``tissue.field_names()``, e.g. "displacement", "stress") to colour the surface by
+    (:mod:`surgsim_envs.scene.field_colors`), over ``render_range`` (lo, hi) or 0..max seen.
     """
 
-    def __init__(self, name: str, tissue, rgba=(0.78, 0.33, 0.30, 1.0), visual: str = "auto"):
+    def __init__(self, name: str, tissue, rgba=(0.78, 0.33, 0.30, 1.0), visual: str = "auto",
+                 render_field: str | None = None, render_range=None):
         if visual not in VISUAL_MODES:
             raise ConfigError(f"tissue '{name}': visual={visual!r}; choose one of {VISUAL_MODES}")
         self.name = name
@@ -78,6 +82,17 @@ class TissueBinding:
             self.elements = remap[surface]
             self.n_vertices = len(self.vertex_nodes)
         self._buffer = np.zeros((self.n_vertices, 3))
+        self.colors = None if render_field is None else FieldColors(tissue, render_field, render_range)
+        self._texcoord = np.zeros((self.n_vertices, 2))
+        self._model = None
+        self.texcoordadr = -1
+
+    def vertex_values(self, node_values: np.ndarray) -> np.ndarray:
+        """(V,) a per-node scalar field (N,) at the flex vertices (interpolated on the smooth surface)."""
+        f = np.asarray(node_values, dtype=np.float64)
+        if self.embedding is not None:
+            return np.einsum("vk,vk->v", self.embedding.weights, f[self.embedding.tet_nodes])
+        return f[self.vertex_nodes]
 
     @property
     def smooth(self) -> bool:
@@ -106,6 +121,17 @@ class TissueBinding:
         flex.radius = 0.0002
         flex.rgba = self.rgba
         flex.group = 0
+        if self.colors is not None:   # colour map texture, one texture coordinate per vertex
+            tex = spec.add_texture(name=f"{self.name}_colormap", type=mujoco.mjtTexture.mjTEXTURE_2D,
+                                   width=COLORMAP_SIZE, height=1, nchannel=3)
+            tex.data = colormap_rgb().tobytes()
+            mat = spec.add_material(name=f"{self.name}_colormap")
+            mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = f"{self.name}_colormap"
+            flex.material = f"{self.name}_colormap"
+            flex.rgba = [1.0, 1.0, 1.0, self.rgba[3]]
+            self._texcoord[:, 0] = 0.01
+            self._texcoord[:, 1] = 0.5
+            flex.texcoord = self._texcoord.reshape(-1).tolist()
 
     def bind(self, m: mujoco.MjModel) -> None:
         """Find the flex's vertex block in the compiled model."""
@@ -115,8 +141,15 @@ class TissueBinding:
         if int(m.flex_vertnum[fid]) != self.n_vertices:
             raise ConfigError(f"flex {self.name!r} has {m.flex_vertnum[fid]} vertices, expected {self.n_vertices}")
         self.vertadr = int(m.flex_vertadr[fid])
+        if self.colors is not None:
+            self._model = m
+            self.texcoordadr = int(m.flex_texcoordadr[fid])
 
     def write(self, d: mujoco.MjData) -> None:
         """Write the current surface (m) into ``d.flexvert_xpos``: the tissue's surface nodes, or the
         smooth surface interpolated from its tets."""
         d.flexvert_xpos[self.vertadr:self.vertadr + self.n_vertices] = self.vertex_positions()
+        if self.colors is not None and self._model is not None:
+            values = self.vertex_values(self.tissue.node_field(self.colors.field))
+            self.colors.coordinates(values, self._texcoord)
+            self._model.flex_texcoord[self.texcoordadr:self.texcoordadr + self.n_vertices] = self._texcoord

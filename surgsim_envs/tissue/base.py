@@ -20,14 +20,25 @@ import numpy as np
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.volume import Volume
+from surgsim_envs.tissue.capabilities import CAPABILITIES, CapabilityError, check_names
+from surgsim_envs.tissue.capabilities import require as _require
 from surgsim_envs.tissue.guard import StabilityGuard
 from surgsim_envs.tissue.materials import Material, get_material
 
 ELEMENT_FIELDS = ("young", "poisson", "density", "damping", "relax_fraction", "relax_time", "nonlinear")
-#: integrator="auto" runs the explicit integrator while dt <= AUTO_SAFETY x critical_dt(), else the implicit one
-AUTO_SAFETY = 0.8
+#: THE safety factor on the explicit stability limit (the only one anywhere): ``stable_dt() =
+#: DT_SAFETY * critical_dt()``; integrator="auto" runs the explicit integrator while dt <= stable_dt()
+#: (contact stiffness included), else the implicit one; scenes, benchmarks and guards use stable_dt().
+DT_SAFETY = 0.8
 #: integrator="auto" re-evaluates critical_dt() when dt changes and every AUTO_RECHECK_STEPS steps
 AUTO_RECHECK_STEPS = 100
+
+
+def von_mises(sig: np.ndarray) -> np.ndarray:
+    """(T,) von Mises equivalent (Pa) of stresses (T,3,3)."""
+    tr = np.trace(sig, axis1=1, axis2=2)
+    dev = sig - tr[:, None, None] / 3.0 * np.eye(3)
+    return np.sqrt(1.5 * np.einsum("tij,tij->t", dev, dev))
 
 
 class TissueModel(abc.ABC):
@@ -58,10 +69,42 @@ class TissueModel(abc.ABC):
     auto_pair: ClassVar[tuple[str, str] | None] = None
     #: integrator used when none is given (None: ``integrators[0]``; may be "auto" if ``auto_pair`` is set)
     default_integrator: ClassVar[str | None] = None
-    #: True for models that only use the surface mesh (e.g. paper 000)
+    #: what the model can do (tissue/capabilities.py); scenes and tasks query these, never the name
+    capabilities: ClassVar[frozenset[str]] = frozenset({"forces"})
+    #: material fields :meth:`scale_material` / :meth:`set_field` may change (the model re-derives
+    #: whatever depends on them in :meth:`_on_material_changed`)
+    material_fields: ClassVar[tuple[str, ...]] = ()
+    #: names of the per-node scalar fields :meth:`node_fields` returns
+    node_field_names: ClassVar[tuple[str, ...]] = ("displacement", "stress")
+    #: derived from ``capabilities`` ("surface_only"); kept as attributes for the base-class logic
     surface_only: ClassVar[bool] = False
-    #: True for models solved quasi-statically (no inertia; velocities are finite differences)
+    #: derived from ``capabilities`` ("quasi_static")
     quasi_static: ClassVar[bool] = False
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        caps = check_names(cls.capabilities, f"model class {cls.__name__}")
+        # older plugins set the booleans; keep them and the capability set consistent
+        if cls.surface_only:
+            caps |= {"surface_only"}
+        if cls.quasi_static:
+            caps |= {"quasi_static"}
+        cls.capabilities = frozenset(caps)
+        cls.surface_only = "surface_only" in caps
+        cls.quasi_static = "quasi_static" in caps
+
+    @classmethod
+    def require(cls, capability: str, task: str = "this task") -> None:
+        """Raise :class:`CapabilityError` (a ConfigError naming the model, the capability and
+        ``task``) unless this model declares ``capability``."""
+        _require(cls, capability, task)
+
+    @classmethod
+    def has(cls, capability: str) -> bool:
+        """Whether the model declares ``capability`` (ConfigError for an unknown name)."""
+        if capability not in CAPABILITIES:
+            raise ConfigError(f"unknown capability {capability!r}; valid capabilities: {sorted(CAPABILITIES)}")
+        return capability in cls.capabilities
 
     def __init__(self, volume: Volume, material: Material | str | Mapping[str, Any] = "liver", *,
                  region_materials: Mapping[int, Any] | None = None, fixed=None,
@@ -97,6 +140,7 @@ class TissueModel(abc.ABC):
         self.surface_nodes = volume.surface_nodes
         n = len(self.rest_positions)
         self.fields = self._build_fields()
+        self._fields0 = {k: v.copy() for k, v in self.fields.items()}
         self.masses = self._lumped_masses()
         if np.any(self.masses <= 0):
             bad = int(np.flatnonzero(self.masses <= 0)[0])
@@ -111,6 +155,9 @@ class TissueModel(abc.ABC):
         self.positions = self.rest_positions.copy()
         self.velocities = np.zeros_like(self.positions)
         self.external_forces = np.zeros_like(self.positions)
+        #: (N,3) N, the external force integrated over the last step (contract v2): the forces given
+        #: plus, for an implicit treatment of the contact stiffness, the increment it added
+        self.integrated_external_forces = np.zeros_like(self.positions)
         self.time = 0.0
         self.steps = 0
         self._last_dt = float("nan")
@@ -136,6 +183,125 @@ class TissueModel(abc.ABC):
         m = np.zeros(n)
         np.add.at(m, self.volume.tets.reshape(-1), np.repeat(self.fields["density"] * vol / 4.0, 4))
         return m
+
+    def element_centroids(self) -> np.ndarray:
+        """(T,3) m rest centroids of the elements that carry the material fields (tets; for a
+        surface-only model its nodes), to build masks for :meth:`scale_material`."""
+        if self.surface_only:
+            return self.rest_positions.copy()
+        return self.rest_positions[self.volume.tets].mean(axis=1)
+
+    def _check_field_name(self, name: str) -> None:
+        if name not in self.fields:
+            raise ConfigError(f"unknown material field {name!r}; fields: {sorted(self.fields)}")
+        if name not in self.material_fields:
+            raise CapabilityError(f"tissue model '{self.name}' cannot change material field {name!r} after build; "
+                                  f"it re-derives only {sorted(self.material_fields)}")
+
+    def scale_material(self, name: str = "young", factor=1.0, mask=None) -> None:
+        """Multiply material field ``name`` by ``factor`` (a scalar or (T,) array, > 0) relative to
+        its value at build, on the elements where ``mask`` ((T,) bool, default all) is True; the
+        others keep their current value. The model re-derives what depends on it (springs, element
+        stiffness, factorisations). E.g. an inclusion three times stiffer than a slab scaled by 0.9::
+
+            model.scale_material("young", 0.9)
+            model.scale_material("young", 2.7, mask=inside)
+        """
+        self._check_field_name(name)
+        t = len(self.fields[name])
+        f = np.asarray(factor, dtype=np.float64)
+        if f.ndim not in (0, 1) or (f.ndim == 1 and f.shape != (t,)):
+            raise ConfigError(f"scale_material: factor must be a number or a ({t},) array, got shape {f.shape}")
+        if not np.all(np.isfinite(f)) or np.any(f <= 0):
+            raise ConfigError(f"scale_material: factor must be finite and > 0, got min {float(np.min(f)):.3g}")
+        values = self.fields[name].copy()
+        new = self._fields0[name] * np.broadcast_to(f, (t,))
+        if mask is None:
+            values[:] = new
+        else:
+            m = np.asarray(mask)
+            if m.dtype != bool or m.shape != (t,):
+                raise ConfigError(f"scale_material: mask must be a ({t},) bool array (one per element, see "
+                                  f"element_centroids()), got dtype {m.dtype} shape {m.shape}")
+            values[m] = new[m]
+        self._apply_field(name, values)
+
+    def set_field(self, name: str, values) -> None:
+        """Set material field ``name`` to absolute ``values`` (a number or (T,) array, SI units)."""
+        self._check_field_name(name)
+        t = len(self.fields[name])
+        v = np.asarray(values, dtype=np.float64)
+        if v.ndim not in (0, 1) or (v.ndim == 1 and v.shape != (t,)) or not np.all(np.isfinite(v)):
+            raise ConfigError(f"set_field({name!r}): values must be a finite number or ({t},) array, got shape {v.shape}")
+        self._apply_field(name, np.broadcast_to(v, (t,)).copy())
+
+    def _apply_field(self, name: str, values: np.ndarray) -> None:
+        old = self.fields[name]
+        self.fields[name] = values
+        try:
+            if name == "density":
+                if np.any(values <= 0):
+                    raise ConfigError("density must be > 0 kg/m^3 in every element")
+                self.masses = self._lumped_masses()
+            self._on_material_changed(name)
+        except Exception:
+            self.fields[name] = old
+            if name == "density":
+                self.masses = self._lumped_masses()
+            self._on_material_changed(name)
+            raise
+        if self.integrator == "auto":
+            self._auto_crit = float("nan")   # re-evaluate critical_dt() at the next step
+
+    def _on_material_changed(self, name: str) -> None:
+        """Hook: re-derive everything that depends on material field ``name`` (masses are done)."""
+
+    # ---------------------------------------------------------------------------------------
+    # Scalar fields for display
+    @classmethod
+    def field_names(cls) -> list[str]:
+        """Names of the per-node scalar fields (``node_fields()`` keys)."""
+        return list(cls.node_field_names)
+
+    def node_fields(self, names=None) -> dict[str, np.ndarray]:
+        """{name: (N,) array} per-node scalar fields for display: ``"displacement"`` (m, |x - X|),
+        ``"stress"`` (Pa, a von Mises measure), plus the model's own; ``names`` selects some."""
+        names = self.field_names() if names is None else [names] if isinstance(names, str) else list(names)
+        out = {}
+        for n in names:
+            out[n] = self.node_field(n)
+        return out
+
+    def node_field(self, name: str) -> np.ndarray:
+        """One per-node scalar field (see :meth:`node_fields`); ConfigError listing the names if unknown."""
+        if name not in self.node_field_names:
+            raise ConfigError(f"model '{self.name}' has no node field {name!r}; fields: {self.field_names()}")
+        if name == "displacement":
+            return np.linalg.norm(self.positions - self.rest_positions, axis=1)
+        if name == "stress":
+            return self.node_stress()
+        return np.asarray(self._node_field(name), dtype=np.float64)
+
+    def _node_field(self, name: str) -> np.ndarray:
+        """Hook for model-specific node fields beyond displacement and stress."""
+        raise ConfigError(f"model '{self.name}' lists node field {name!r} but does not compute it")
+
+    def node_stress(self) -> np.ndarray:
+        """(N,) Pa von Mises stress per node: the volume-weighted mean over the node's elements of
+        ``element_stress()`` (models without elements override this)."""
+        sig = self.element_stress()
+        vm = von_mises(sig)
+        tets = self.volume.tets
+        w = np.abs(self.volume.tet_volumes())
+        num = np.zeros(self.n_nodes)
+        den = np.zeros(self.n_nodes)
+        np.add.at(num, tets.ravel(), np.repeat(vm * w, 4))
+        np.add.at(den, tets.ravel(), np.repeat(w, 4))
+        return num / np.where(den > 0, den, 1.0)
+
+    def element_stress(self) -> np.ndarray:
+        """(T,3,3) Cauchy stress (Pa) per element (models with elements implement it)."""
+        raise NotImplementedError(f"model '{self.name}' implements neither element_stress() nor node_stress()")
 
     @property
     def n_nodes(self) -> int:
@@ -207,7 +373,9 @@ class TissueModel(abc.ABC):
             forces = self.external_forces
         elif forces.shape != self.positions.shape:
             raise ConfigError(f"forces must have shape {self.positions.shape}, got {forces.shape}")
+        self.guard.check_inputs(self, forces, stiffness)  # NaN/inf input: refused before it reaches the state
         self._last_dt = float(dt)
+        np.copyto(self.integrated_external_forces, forces)
         if self.integrator == "auto":
             self._active = self._auto_choice(float(dt), stiffness)
         self._advance(float(dt), forces, stiffness)
@@ -242,7 +410,7 @@ class TissueModel(abc.ABC):
     def choose_integrator(self, dt: float, stiffness: np.ndarray | None = None) -> str:
         """The integrator "auto" picks (or would pick, for models built with an explicit name) for a
         step of ``dt`` s at the current state: the explicit one
-        if ``dt <= AUTO_SAFETY * critical_dt()`` (contact ``stiffness`` (N,) N/m, if given, lowers
+        if ``dt <= stable_dt() = DT_SAFETY * critical_dt()`` (contact ``stiffness`` (N,) N/m, if given, lowers
         the critical dt: omega^2 += max(k_c / m)), else the implicit one. Pure function of the state."""
         if self.auto_pair is None:
             return self.active_integrator
@@ -266,7 +434,7 @@ class TissueModel(abc.ABC):
         if contact_rate > 0 and math.isfinite(crit):
             omega = 2.0 / crit                    # the model's limit as an undamped frequency (1/s)
             crit = 2.0 / math.sqrt(omega * omega + contact_rate)
-        return explicit if dt <= AUTO_SAFETY * crit else implicit
+        return explicit if dt <= DT_SAFETY * crit else implicit
 
     def _auto_choice(self, dt: float, stiffness) -> str:
         """Integrator for this step under "auto": critical_dt() is re-evaluated when dt changes,
@@ -310,7 +478,13 @@ class TissueModel(abc.ABC):
 
     @abc.abstractmethod
     def critical_dt(self) -> float:
-        """Estimated largest stable dt (s) for the explicit integrator (inf if unconditionally stable)."""
+        """Estimated largest stable dt (s) for the explicit integrator, the raw estimate with NO
+        safety factor (inf if unconditionally stable). Use :meth:`stable_dt` to choose a step."""
+
+    def stable_dt(self) -> float:
+        """``DT_SAFETY * critical_dt()`` (s): the step the explicit integrator may take (the only
+        place a safety factor is applied)."""
+        return DT_SAFETY * float(self.critical_dt())
 
     def inverted_elements(self) -> int:
         """Number of inverted elements (0 for models without elements)."""
@@ -324,6 +498,7 @@ class TissueModel(abc.ABC):
         self.positions[fx] = self.fixed_targets[fx]
         self.velocities = np.zeros_like(self.positions)
         self.external_forces = np.zeros_like(self.positions)
+        self.integrated_external_forces = np.zeros_like(self.positions)
         self.time = 0.0
         self.steps = 0
         self.guard.reset()

@@ -16,7 +16,10 @@ interactive surgery simulation:
   corotational one, preconditioned by Jacobi or, for nearly incompressible ANP materials, by the
   "pressure" preconditioner: the exact inverse (Woodbury, cached sparse LU of an N x N pressure
   Schur complement) of the diagonal part plus the rest-state ANP volumetric term) and ``"symplectic"`` (semi-implicit Euler, numba kernels); the default
-  ``"auto"`` runs symplectic while dt <= 0.8 x critical_dt(), else implicit (TissueModel.choose_integrator);
+  ``"auto"`` runs symplectic while dt <= stable_dt(), else implicit (TissueModel.choose_integrator);
+* viscoelasticity (material ``relax_fraction`` g / ``relax_time`` tau): a standard-linear-solid
+  (one-term Prony) branch per element on the corotated stress, :mod:`fem_viscous`; a held strain
+  relaxes the stress to (1 - g) of its instantaneous value with time constant tau;
 * damping ``C = alpha M + beta K`` with alpha = material ``damping`` (1/s, per element) and
   beta = ``stiffness_damping`` (s, default ``material.extra.get("stiffness_damping", 0)``).
 
@@ -35,6 +38,7 @@ import numba
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue import fem_kernels as kern
+from surgsim_envs.tissue import fem_viscous as visc
 from surgsim_envs.tissue.base import TissueModel
 
 FORMULATIONS = ("anp", "standard")
@@ -70,6 +74,8 @@ class TetFEMModel(TissueModel):
     integrators = ("implicit", "symplectic")
     auto_pair = ("symplectic", "implicit")
     default_integrator = "auto"
+    capabilities = frozenset({"forces", "implicit_contact", "viscoelastic", "static_solve"})
+    material_fields = ("young", "poisson", "density", "damping", "relax_fraction", "relax_time")
 
     def __init__(self, volume, material="liver", *, integrator=None, corotational: bool = True,
                  formulation: str = "anp", stiffness_damping: float | None = None,
@@ -116,13 +122,46 @@ class TetFEMModel(TissueModel):
         n = vol.n_nodes
         self.tets = np.ascontiguousarray(vol.tets, dtype=np.int64)
         self.grads, self.tet_volume, self.dm_inv = asm.shape_gradients(self.rest_positions, self.tets)
+        self.node_volume = asm.nodal_volumes(self.tets, self.tet_volume, n)
+        t = len(self.tets)
+        self._rots = np.ascontiguousarray(np.broadcast_to(np.eye(3), (t, 3, 3)).copy())
+        self._work = kern.make_work(self.tets, n)
+        self._ybuf = np.zeros((n, 3))
+        self._fbuf = np.zeros((n, 3))
+        self._v_prev = None       # velocity before the last implicit step (CG warm start 2 v - v_prev)
+        # viscoelastic branch state (fem_viscous): h (T,3,3) Pa, sigma0 at the last commit, pending step
+        self._h = np.zeros((t, 3, 3))
+        self._sig_prev = np.zeros((t, 3, 3))
+        self._sig_now = np.zeros((t, 3, 3))
+        self._trv = np.zeros(t)
+        self._pnode = np.zeros(n)
+        self._pending_dt = 0.0
+        self._setup_material()
+
+    def _on_material_changed(self, name: str) -> None:
+        """Re-derive moduli, element stiffness, damping and viscoelastic coefficients; drop the
+        cached factorisations, preconditioner and critical dt (contract v2 ``scale_material``)."""
+        self._setup_material()
+
+    def _setup_material(self) -> None:
+        """Everything derived from the per-element material fields (called at build and by
+        :meth:`scale_material` / :meth:`set_field`)."""
+        n = self.n_nodes
         young, poisson = self.fields["young"], self.fields["poisson"]
         bad = np.flatnonzero((young <= 0) | (poisson >= 0.5) | (poisson <= -1))
         if len(bad):
             raise ConfigError(f"linear FEM needs E > 0 and -1 < nu < 0.5; element {bad[0]} has E={young[bad[0]]!r} Pa, "
                               f"nu={poisson[bad[0]]!r}. Use nu <= 0.499 for nearly incompressible tissue")
+        g, tau = self.fields["relax_fraction"], self.fields["relax_time"]
+        bad = np.flatnonzero((g < 0) | (g >= 1) | (tau <= 0))
+        if len(bad):
+            raise ConfigError(f"FEM viscoelasticity needs 0 <= relax_fraction < 1 and relax_time > 0 s; element "
+                              f"{bad[0]} has relax_fraction={g[bad[0]]!r}, relax_time={tau[bad[0]]!r}")
+        self.relax_g, self.relax_tau = g.copy(), tau.copy()
+        self._visco = bool(np.any(g > 0))
+        self._visco_cache: dict = {}     # dt -> (decay, gamma, c, mu_c, lam_c, kappa_c, kdiag_c, kdev_c)
         self.mu, self.lam, kappa = asm.lame_parameters(young, poisson)
-        self.node_volume = asm.nodal_volumes(self.tets, self.tet_volume, n)
+        self._kappa_el = kappa
         self.kappa_node = asm.nodal_average(self.tets, self.tet_volume, kappa, n)
         # mass-proportional damping per node: mass-weighted average of the element values
         md = np.zeros(n)
@@ -133,30 +172,44 @@ class TetFEMModel(TissueModel):
             self._ke = asm.element_stiffness(b, asm.deviatoric_d_matrices(young, poisson), self.tet_volume)
         else:
             self._ke = asm.element_stiffness(b, asm.d_matrices(young, poisson), self.tet_volume)
-        self.stiffness_matrix = self._assemble_stiffness(None)
-        self._kdiag_node = self.stiffness_matrix.diagonal().reshape(-1, 3).mean(axis=1)
+        self._k_rest = self._assemble_stiffness(None)
+        self._kdiag_node = self._k_rest.diagonal().reshape(-1, 3).mean(axis=1)
+        self._kdev_diag_node = None
         if self.formulation == "anp":   # diagonal of the deviatoric part (for the pressure preconditioner)
             self._kdev_diag_node = asm.assemble(self.tets, self._ke, n).diagonal().reshape(-1, 3).mean(axis=1)
-        t = len(self.tets)
-        self._rots = np.ascontiguousarray(np.broadcast_to(np.eye(3), (t, 3, 3)).copy())
-        self._work = kern.make_work(self.tets, n)
-        self._ybuf = np.zeros((n, 3))
-        self._fbuf = np.zeros((n, 3))
         self._lin = None          # cached (dt, fixed mask, LU of A_ff) for the linear implicit step
-        self._v_prev = None       # velocity before the last implicit step (CG warm start 2 v - v_prev)
         self._pre_refresh = False
         self._pre_base_iters = None
         self._pre = None          # cached pressure preconditioner (see _pressure_preconditioner)
         self._crit = None
 
-    def _assemble_stiffness(self, rotations) -> sp.csr_matrix:
-        """Global (3N,3N) stiffness (N/m), warped by per-element ``rotations`` if given."""
-        ke = self._ke if rotations is None else asm.rotate_element_matrices(self._ke, rotations)
+    def _assemble_stiffness(self, rotations, scale=None) -> sp.csr_matrix:
+        """Global (3N,3N) stiffness (N/m), warped by per-element ``rotations`` if given, with every
+        element's moduli multiplied by ``scale`` (T,) if given (viscoelastic effective stiffness)."""
+        ke = self._ke if scale is None else self._ke * scale[:, None, None]
+        ke = ke if rotations is None else asm.rotate_element_matrices(ke, rotations)
         k = asm.assemble(self.tets, ke, self.n_nodes)
         if self.formulation == "anp":
-            k = k + asm.anp_volumetric_matrix(self.tets, self.grads, self.tet_volume, self.kappa_node,
+            kappa = self.kappa_node if scale is None else self._scaled_kappa_node(scale)
+            k = k + asm.anp_volumetric_matrix(self.tets, self.grads, self.tet_volume, kappa,
                                               self.n_nodes, rotations)
         return k.tocsr()
+
+    def _scaled_kappa_node(self, scale) -> np.ndarray:
+        return asm.nodal_average(self.tets, self.tet_volume, self._kappa_el * scale, self.n_nodes)
+
+    def stiffness_matrix(self, relaxed: bool = False, clamp: bool = False) -> sp.csr_matrix:
+        """Tangent stiffness ``-df/dx`` (scipy.sparse CSR, 3N x 3N, N/m, dof = 3 * node + axis),
+        warped by the current element rotations (corotational) or at rest (linear).
+
+        relaxed: long-term stiffness (viscoelastic branches relaxed: moduli x (1 - relax_fraction));
+        else the instantaneous one. clamp: accepted for the common signature (the linear element
+        stiffness is already positive semi-definite)."""
+        rots = self._rots.copy() if self.corotational and np.any(self._rots != np.eye(3)) else None
+        scale = (1.0 - self.relax_g) if (relaxed and self._visco) else None
+        if rots is None and scale is None:
+            return self._k_rest.copy()
+        return self._assemble_stiffness(rots, scale)
 
     @property
     def _anp(self) -> bool:
@@ -197,14 +250,71 @@ class TetFEMModel(TissueModel):
         if x.shape != self.positions.shape:
             raise ConfigError(f"positions must have shape {self.positions.shape}, got {x.shape}")
         self._update_rotations(x, tol=1e-10)
-        return -self._stiffness_product(x, True)
+        f = -self._stiffness_product(x, True)
+        if self._visco:
+            self._add_branch_forces(f, self._branch_excess(x))
+        return f
 
     def internal_forces(self) -> np.ndarray:
-        """Elastic + viscous (Rayleigh beta K v and mass-proportional alpha M v) nodal forces (N)."""
+        """Elastic (with the viscoelastic branches) + viscous (Rayleigh beta K v and
+        mass-proportional alpha M v) nodal forces (N)."""
         self._update_rotations(self.positions, tol=1e-10)
         y = self.positions + self.stiffness_damping * self.velocities
         f = -self._stiffness_product(y, True)
+        if self._visco:
+            self._add_branch_forces(f, self._branch_excess(self.positions))
         return f - (self.alpha_node * self.masses)[:, None] * self.velocities
+
+    # ------------------------------------------------------------------------------------------
+    # Viscoelastic branches (fem_viscous)
+    def _instant_stress(self, x, out) -> np.ndarray:
+        """Corotated instantaneous stress sigma0 (T,3,3) Pa at x with the current rotations."""
+        visc.corotated_stress(np.ascontiguousarray(x), self.tets, self.dm_inv, self.tet_volume, self._rots,
+                              self.mu, self.lam, self._anp, self.kappa_node, self.node_volume, self._trv,
+                              self._pnode, out)
+        return out
+
+    def _branch_state_at(self, sig0) -> np.ndarray:
+        """h (T,3,3) Pa brought from the last commit to a state with instantaneous stress sig0."""
+        decay, gamma = self._coeffs(self._pending_dt)[:2]
+        return decay[:, None, None] * self._h + gamma[:, None, None] * (sig0 - self._sig_prev)
+
+    def _branch_excess(self, x) -> np.ndarray:
+        """g (h - sigma0) (T,3,3) Pa at x: the stress to add to the instantaneous elastic one."""
+        sig0 = self._instant_stress(x, np.empty_like(self._h))
+        return self.relax_g[:, None, None] * (self._branch_state_at(sig0) - sig0)
+
+    def _add_branch_forces(self, f, stress) -> None:
+        visc.add_stress_forces(self.tets, self.grads, self.tet_volume, self._rots, np.ascontiguousarray(stress), f)
+
+    def _coeffs(self, h: float):
+        """Per-dt cache: (decay, gamma, c, mu_c, lam_c, kappa_node_c, kdiag_c, kdev_c), with c = 1 - g + g gamma
+        the effective modulus factor of an implicit step of length h."""
+        hit = self._visco_cache.get(h)
+        if hit is not None:
+            return hit
+        decay, gamma = visc.branch_coefficients(h, self.relax_tau)
+        c = 1.0 - self.relax_g + self.relax_g * gamma
+        out = (decay, gamma, c)
+        if h > 0 and self._visco:
+            k = self._assemble_stiffness(None, c)
+            kdev = None
+            if self._anp:
+                kdev = asm.assemble(self.tets, self._ke * c[:, None, None], self.n_nodes).diagonal().reshape(-1, 3).mean(axis=1)
+            out = out + (self.mu * c, self.lam * c, self._scaled_kappa_node(c),
+                         k.diagonal().reshape(-1, 3).mean(axis=1), kdev, k)
+        if len(self._visco_cache) > 8:
+            self._visco_cache.clear()
+        self._visco_cache[h] = out
+        return out
+
+    def _commit_branches(self) -> np.ndarray:
+        """Bring h to the current state x_n (sigma0 with the current rotations); returns sigma0_n."""
+        sig0 = self._instant_stress(self.positions, self._sig_now)
+        self._h[:] = self._branch_state_at(sig0)
+        self._sig_prev[:] = sig0
+        self._pending_dt = 0.0
+        return sig0
 
     def elastic_energy(self) -> float:
         """Stored energy (J) at the current positions. The rotations are first iterated (same
@@ -219,8 +329,13 @@ class TetFEMModel(TissueModel):
         return int(kern.count_inverted(self.positions, self.tets))
 
     def element_stress(self) -> np.ndarray:
-        """(T,3,3) Cauchy stress (Pa) per tet (linear/corotated: R sigma R^T), incl. ANP pressure."""
+        """(T,3,3) Cauchy stress (Pa) per tet (linear/corotated: R sigma R^T), incl. ANP pressure
+        and the viscoelastic branches."""
         self._update_rotations(self.positions, tol=1e-10)
+        if self._visco:
+            sig = self._instant_stress(self.positions, np.empty_like(self._h))
+            sig = sig + self.relax_g[:, None, None] * (self._branch_state_at(sig) - sig)
+            return np.einsum("tij,tjk,tlk->til", self._rots, sig, self._rots)
         x = self.positions
         ds = np.stack([x[self.tets[:, k]] - x[self.tets[:, 0]] for k in (1, 2, 3)], axis=2)
         g = np.einsum("tji,tjk,tkl->til", self._rots, ds, self.dm_inv) - np.eye(3)
@@ -239,7 +354,8 @@ class TetFEMModel(TissueModel):
     # ------------------------------------------------------------------------------------------
     # Stability
     def critical_dt(self, method: str = "spectral") -> float:
-        """Largest stable dt (s) of the symplectic integrator, times a 0.9 safety factor.
+        """Largest stable dt (s) of the symplectic integrator (raw estimate, no safety factor:
+        :meth:`stable_dt` applies the one factor DT_SAFETY).
 
         ``"spectral"`` (default): 2 / omega_max with omega_max^2 the largest eigenvalue of
         M^-1 K (rest stiffness, Lanczos, cached), reduced for stiffness damping beta by
@@ -248,7 +364,7 @@ class TetFEMModel(TissueModel):
         (cheap, usually within a factor ~2 of the spectral value; see docs/models/fem.md).
         """
         if method == "geometric":
-            return 0.9 * self._geometric_dt()
+            return self._geometric_dt()
         if method != "spectral":
             raise ConfigError(f"critical_dt method must be 'spectral' or 'geometric', got {method!r}")
         if self._crit is None:
@@ -257,7 +373,7 @@ class TetFEMModel(TissueModel):
 
     def _max_omega(self) -> float:
         minv = 1.0 / np.sqrt(np.repeat(self.masses, 3))
-        a = sp.diags(minv) @ self.stiffness_matrix @ sp.diags(minv)
+        a = sp.diags(minv) @ self._k_rest @ sp.diags(minv)
         try:
             v0 = np.cos(np.arange(a.shape[0]) * 0.7071)   # fixed start vector: reproducible dt
             lam = spla.eigsh(a, k=1, which="LA", return_eigenvectors=False, tol=1e-4, maxiter=5000, v0=v0)[0]
@@ -269,7 +385,7 @@ class TetFEMModel(TissueModel):
     def _spectral_dt(self) -> float:
         omega = self._max_omega()
         z = 0.5 * self.stiffness_damping * omega
-        return 0.9 * (2.0 / omega) * (math.sqrt(1.0 + z * z) - z)
+        return (2.0 / omega) * (math.sqrt(1.0 + z * z) - z)
 
     def _geometric_dt(self) -> float:
         x = self.rest_positions
@@ -293,17 +409,56 @@ class TetFEMModel(TissueModel):
                 raise ConfigError(f"stiffness must be a finite (N,)={self.n_nodes} array of >= 0 N/m, got shape {kc.shape}")
             if not kc.any():
                 kc = None
-        if self.active_integrator == "symplectic":
+        implicit = self.active_integrator != "symplectic"
+        if self._visco:
+            # branches committed at x_n; their extra stress enters as constant corotated element stress
+            sig0 = self._commit_branches()
+            g = self.relax_g[:, None, None]
+            if implicit:   # end-of-step stress c sigma0_{n+1} + g (decay h_n - gamma sigma0_n)
+                decay, gamma = self._coeffs(dt)[:2]
+                excess = g * (decay[:, None, None] * self._h - gamma[:, None, None] * sig0)
+            else:          # stress at x_n: (1 - g) sigma0_n + g h_n
+                excess = g * (self._h - sig0)
+            forces = forces.copy()
+            self._add_branch_forces(forces, excess)
+            self._pending_dt = dt
+        if not implicit:
             kern.symplectic_step(self.positions, self.velocities, forces, self.masses, self.alpha_node, self.gravity,
                                  self.fixed, dt, self.stiffness_damping, self.corotational, self.rotation_iters, 1e-12,
                                  self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam, self._rots,
                                  self._anp, self.kappa_node, self.node_volume, self._work, self._ybuf,
                                  self._fbuf, self._set_threads())
             return
+        if self._visco:
+            with self._effective_moduli(dt):
+                self._implicit(dt, forces, kc)
+        else:
+            self._implicit(dt, forces, kc)
+        if kc is not None:   # backward Euler integrated f_ext - kc (x_{n+1} - x_n) = f_ext - dt kc v_{n+1}
+            free = ~self.fixed
+            self.integrated_external_forces[free] -= (dt * kc[free])[:, None] * self.velocities[free]
+
+    def _implicit(self, dt, forces, kc) -> None:
         if self.corotational:
             self._implicit_corotational(dt, forces, kc)
         else:
             self._implicit_linear(dt, forces, kc)
+
+    def _effective_moduli(self, dt):
+        """Context: moduli, stiffness and preconditioner diagonals scaled by c = 1 - g + g gamma(dt)
+        (the viscoelastic element over an implicit step of dt) while the solve runs."""
+        import contextlib
+
+        @contextlib.contextmanager
+        def swap():
+            co = self._coeffs(dt)
+            saved = (self.mu, self.lam, self.kappa_node, self._kdiag_node, self._kdev_diag_node, self._k_rest)
+            self.mu, self.lam, self.kappa_node, self._kdiag_node, self._kdev_diag_node, self._k_rest = co[3:9]
+            try:
+                yield
+            finally:
+                self.mu, self.lam, self.kappa_node, self._kdiag_node, self._kdev_diag_node, self._k_rest = saved
+        return swap()
 
     def _prescribed_velocity(self, dt: float) -> np.ndarray:
         vc = np.zeros_like(self.positions)
@@ -318,12 +473,12 @@ class TetFEMModel(TissueModel):
         mdiag = np.repeat(self.masses * (1.0 + self.alpha_node * dt), 3)
         lin = self._lin
         if lin is None or lin[0] != dt or not np.array_equal(lin[1], self.fixed):
-            a = (sp.diags(mdiag) + c_k * self.stiffness_matrix).tocsr()
+            a = (sp.diags(mdiag) + c_k * self._k_rest).tocsr()
             a_ff = a[free3][:, free3].tocsc()
             lin = self._lin = (dt, self.fixed.copy(), spla.splu(a_ff))
         lu = lin[2]
         x, v = self.positions, self.velocities
-        k = self.stiffness_matrix
+        k = self._k_rest
         f_el = -(k @ (x - self.rest_positions).ravel())
         rhs = np.repeat(self.masses, 3) * v.ravel() + dt * (f_el + forces.ravel() + np.repeat(self.masses, 3) * np.tile(self.gravity, self.n_nodes))
         vc = self._prescribed_velocity(dt).ravel()
@@ -449,8 +604,27 @@ class TetFEMModel(TissueModel):
         """Equilibrium positions (N,3) m under external ``forces`` (N,3) N (+ gravity) and the
         current Dirichlet nodes/targets: solves K u = R (linear) or iterates with the warped
         stiffness R K R^T until the update is below ``tol`` times the body size (corotational).
+        Viscoelastic materials give the long-term (relaxed) equilibrium, moduli x (1 - relax_fraction),
+        as the mass-spring model's static_solve; the branches are left fully relaxed there.
         Updates ``positions`` (velocities are zeroed) and returns a copy.
         """
+        if not self._visco:
+            return self._static_solve(forces, max_iter, tol)
+        r = 1.0 - self.relax_g
+        saved = (self.mu, self.lam, self.kappa_node, self._k_rest, self._ke, self._kappa_el)
+        self.mu, self.lam, self._ke, self._kappa_el = self.mu * r, self.lam * r, self._ke * r[:, None, None], self._kappa_el * r
+        self.kappa_node = self._scaled_kappa_node(np.ones_like(r))
+        self._k_rest = self._assemble_stiffness(None)
+        try:
+            x = self._static_solve(forces, max_iter, tol)
+        finally:
+            self.mu, self.lam, self.kappa_node, self._k_rest, self._ke, self._kappa_el = saved
+        self._instant_stress(self.positions, self._sig_prev)
+        self._h[:] = 0.0
+        self._pending_dt = 0.0
+        return x
+
+    def _static_solve(self, forces, max_iter, tol) -> np.ndarray:
         if not self.fixed.any():
             raise ConfigError("static_solve needs Dirichlet nodes (the free body has rigid modes); "
                               "call set_fixed(nodes) first")
@@ -475,7 +649,7 @@ class TetFEMModel(TissueModel):
                 k = self._assemble_stiffness(self._rots)
                 lu = spla.splu(k[free3][:, free3].tocsc())
             elif lu is None:
-                lu = spla.splu(self.stiffness_matrix[free3][:, free3].tocsc())
+                lu = spla.splu(self._k_rest[free3][:, free3].tocsc())
             r = (load - self._stiffness_product(x, True)).ravel()
             dx = lu.solve(r[free3])
             if not np.all(np.isfinite(dx)):
@@ -491,6 +665,9 @@ class TetFEMModel(TissueModel):
     def _reset_state(self) -> None:
         self._rots[:] = np.eye(3)
         self._v_prev = None
+        self._h[:] = 0.0
+        self._sig_prev[:] = 0.0
+        self._pending_dt = 0.0
 
     def describe(self) -> dict:
         out = super().describe()

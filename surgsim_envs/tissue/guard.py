@@ -4,6 +4,16 @@ Checks after every step, cheapest first: non-finite state (every step), runaway 
 (every step), inverted elements and energy blow-up (every ``check_every`` steps). Any failure
 raises :class:`TissueUnstableError` naming the model, dt and its critical-dt estimate, so a
 diverging simulation never hands NaN to the caller.
+
+The critical dt quoted is that of the *last good state*: the guard keeps a copy of positions and
+velocities from the last step that passed every check (refreshed every ``check_every`` steps;
+the rest state before that) and evaluates ``model.critical_dt()`` on it, because the estimate on
+the diverged state (huge strains) is off by orders of magnitude.
+
+Before a step, :meth:`StabilityGuard.check_inputs` rejects non-finite external forces or contact
+stiffness as bad input (:class:`~surgsim_envs.errors.NonFiniteInputError`, naming the array, the
+first bad node and its value) while the state is still untouched, so a NaN force is never blamed
+on dt and never leaves the model NaN.
 """
 
 from __future__ import annotations
@@ -14,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from surgsim_envs.errors import TissueUnstableError
+from surgsim_envs.errors import NonFiniteInputError, TissueUnstableError
 
 
 @njit(cache=True, nogil=True)
@@ -29,6 +39,17 @@ def max_speed_squared(pos, vel):
         if v2 > vmax2:
             vmax2 = v2
     return vmax2
+
+
+@njit(cache=True, nogil=True)
+def first_non_finite(a):
+    """Flat index of the first non-finite entry of the C-contiguous array ``a``, or -1."""
+    flat = a.reshape(-1)
+    for i in range(flat.shape[0]):
+        if not np.isfinite(flat[i]):
+            return i
+    return -1
+
 
 if TYPE_CHECKING:
     from surgsim_envs.tissue.base import TissueModel
@@ -52,12 +73,68 @@ class StabilityGuard:
 
     def reset(self) -> None:
         self._energy_ref = 0.0
+        self._good_pos: np.ndarray | None = None
+        self._good_vel: np.ndarray | None = None
+        self._good_time = 0.0
 
-    def fail(self, model: "TissueModel", dt: float, reason: str) -> None:
+    def check_inputs(self, model: "TissueModel", forces: np.ndarray, stiffness: np.ndarray | None = None) -> None:
+        """Raise :class:`NonFiniteInputError` if ``forces`` (N,3) N or ``stiffness`` (N,) N/m hold
+        NaN/inf (call before the step: the state stays as it was)."""
+        for name, arr, unit in (("external forces", forces, "N"), ("contact stiffness", stiffness, "N/m")):
+            if arr is None:
+                continue
+            a = np.ascontiguousarray(arr, dtype=np.float64)
+            i = int(first_non_finite(a))
+            if i >= 0:
+                node = i // a.shape[1] if a.ndim == 2 else i
+                raise NonFiniteInputError(
+                    f"tissue model '{model.name}': {name} hold {a.reshape(-1)[i]!r} {unit} at node {node} "
+                    f"(t={model.time:.4g} s); the step was refused and the state is unchanged. Find what produced "
+                    "the non-finite value (a contact or tool force, a user-supplied array) and pass finite numbers")
+
+    def _snapshot(self, model: "TissueModel") -> None:
+        if self._good_pos is None or self._good_pos.shape != model.positions.shape:
+            self._good_pos = model.positions.copy()
+            self._good_vel = model.velocities.copy()
+        else:
+            np.copyto(self._good_pos, model.positions)
+            np.copyto(self._good_vel, model.velocities)
+        self._good_time = float(model.time)
+
+    def critical_dt_of_last_good_state(self, model: "TissueModel") -> float:
+        """``model.critical_dt()`` evaluated on the last state that passed every check (the rest
+        state when none has yet); the model's state is restored afterwards. NaN if it fails."""
+        pos, vel = model.positions, model.velocities
+        good_pos = self._good_pos
+        good_vel = self._good_vel
+        if good_pos is None or good_pos.shape != pos.shape:
+            rest = getattr(model, "rest_positions", None)
+            if rest is None or rest.shape != pos.shape:
+                good_pos, good_vel = None, None
+            else:
+                good_pos, good_vel = rest, np.zeros_like(vel)
+        if good_pos is None:
+            saved = None
+        else:
+            saved = (pos.copy(), vel.copy())
+            np.copyto(pos, good_pos)
+            np.copyto(vel, good_vel)
         try:
             crit = float(model.critical_dt())
-        except Exception:  # the estimate itself may fail on a NaN state
+        except Exception:  # noqa: BLE001 - the estimate itself may fail; the error must still be raised
             crit = float("nan")
+        finally:
+            if saved is not None:
+                np.copyto(pos, saved[0])
+                np.copyto(vel, saved[1])
+        return crit
+
+    def fail(self, model: "TissueModel", dt: float, reason: str) -> None:
+        crit = self.critical_dt_of_last_good_state(model)
+        if self._good_pos is not None:
+            reason += f" (critical dt evaluated on the last good state, t={self._good_time:.4g} s)"
+        else:
+            reason += " (critical dt evaluated on the rest state)"
         raise TissueUnstableError(model.name, dt, crit, reason)
 
     def check(self, model: "TissueModel", dt: float) -> None:
@@ -77,3 +154,4 @@ class StabilityGuard:
         if ke > limit:
             self.fail(model, dt, f"kinetic energy {ke:.3g} J blew up (limit {limit:.3g} J) at t={model.time:.4g} s")
         self._energy_ref = max(self._energy_ref, ke + model.elastic_energy())
+        self._snapshot(model)

@@ -84,7 +84,7 @@ class MassSpringModel(TissueModel):
     ----------
     volume, material: see :class:`TissueModel`. Per-tet fields (``self.fields``) set the springs,
         so region materials (inclusions) make the springs around them stiffer.
-    integrator: "auto" (default: "symplectic" while dt <= 0.8 x :meth:`critical_dt`, else
+    integrator: "auto" (default: "symplectic" while dt <= :meth:`stable_dt` (DT_SAFETY x critical_dt), else
         "implicit"; see :meth:`TissueModel.choose_integrator`), "symplectic" (semi-implicit Euler,
         explicit: dt < :meth:`critical_dt`) or "implicit" (backward Euler, one Newton step,
         conjugate gradients; stable at 1 ms).
@@ -109,9 +109,16 @@ class MassSpringModel(TissueModel):
     integrators: ClassVar[tuple[str, ...]] = ("symplectic", "implicit")
     auto_pair: ClassVar[tuple[str, str] | None] = ("symplectic", "implicit")
     default_integrator: ClassVar[str | None] = "auto"
+    capabilities: ClassVar[frozenset[str]] = frozenset(
+        {"forces", "implicit_contact", "viscoelastic", "static_solve"})
+    material_fields: ClassVar[tuple[str, ...]] = ("young", "poisson", "density", "damping", "relax_fraction",
+                                                  "relax_time", "nonlinear")
 
     def __init__(self, volume, material="liver", *, integrator=None, springs="edges",
-                 K1=None, K2=None, b0=None, b1=None, volume_stiffness=None, **base_kwargs):
+                 K1=None, K2=None, b0=None, b1=None, volume_stiffness=None, cg_tol: float = CG_TOLERANCE,
+                 **base_kwargs):
+        if not (isinstance(cg_tol, (int, float)) and math.isfinite(cg_tol) and 0 < cg_tol < 1):
+            raise ConfigError(f"mass_spring: cg_tol={cg_tol!r} must lie in (0, 1) (relative CG residual)")
         if springs != "edges":
             raise ConfigError(f"mass_spring: springs={springs!r} is not supported; use springs='edges' "
                               "(one spring per tet edge)")
@@ -121,6 +128,7 @@ class MassSpringModel(TissueModel):
         for key, value in (("K1", K1), ("K2", K2), ("b0", b0), ("b1", b1)):
             value = extra.get(key) if value is None else value
             overrides[key] = None if value is None else _check_scalar(key, value, positive=(key == "K1"))
+        self._overrides = overrides
         self._setup_volume_term(volume_stiffness)
         self._build_springs(overrides)
         n, ne = self.n_nodes, len(self.springs)
@@ -134,6 +142,9 @@ class MassSpringModel(TissueModel):
         self._f = np.zeros((n, 3))
         self._zero_kc = np.zeros(n)
         self._cg: list[np.ndarray] | None = None   # implicit work buffers, allocated on first use
+        #: relative residual at which the implicit step's conjugate gradients stop (the momentum
+        #: handed to the tools is exact up to this residual)
+        self.cg_tol = float(cg_tol)
         self.last_cg_iterations = 0
 
     # ---------------------------------------------------------------------------------------
@@ -141,8 +152,9 @@ class MassSpringModel(TissueModel):
     def _build_springs(self, overrides: dict[str, float | None]) -> None:
         vol = self.volume
         n = vol.n_nodes
-        edges = vol.edges().astype(np.int64)
-        self.springs = edges
+        if not hasattr(self, "_edge_of"):
+            self._edge_topology()
+        edges = self.springs
         self.si = np.ascontiguousarray(edges[:, 0])
         self.sj = np.ascontiguousarray(edges[:, 1])
         X = self.rest_positions
@@ -153,10 +165,9 @@ class MassSpringModel(TissueModel):
 
         # tets around each edge: k_e = c * sum_t E_t V_t / L0^2; other fields E V-weighted means
         tets = vol.tets.astype(np.int64)
-        pairs = np.sort(np.stack([tets[:, [0, 0, 0, 1, 1, 2]].ravel(), tets[:, [1, 2, 3, 2, 3, 3]].ravel()], axis=1), axis=1)
-        edge_of = np.searchsorted(edges[:, 0] * n + edges[:, 1], pairs[:, 0] * n + pairs[:, 1])
+        edge_of = self._edge_of
         f = self.fields
-        tet_vol = vol.tet_volumes()
+        tet_vol = self._tet_vol
         w_tet = f["young"] * tet_vol
         w = np.repeat(w_tet, 6)
         ne = len(edges)
@@ -192,6 +203,31 @@ class MassSpringModel(TissueModel):
         self.K1, self.K2, self.kM, self.b1, self.b0 = K1, K2, kM, b1, b0
         with np.errstate(divide="ignore", invalid="ignore"):
             self.tau = np.where(kM > 0, b1 / np.where(kM > 0, kM, 1.0), np.inf)
+
+    def _edge_topology(self) -> None:
+        """Springs (unique tet edges), the edge of each tet's six edges, tet volumes (built once)."""
+        vol = self.volume
+        n = vol.n_nodes
+        edges = vol.edges().astype(np.int64)
+        self.springs = edges
+        tets = vol.tets.astype(np.int64)
+        pairs = np.sort(np.stack([tets[:, [0, 0, 0, 1, 1, 2]].ravel(), tets[:, [1, 2, 3, 2, 3, 3]].ravel()], axis=1), axis=1)
+        self._edge_of = np.searchsorted(edges[:, 0] * n + edges[:, 1], pairs[:, 0] * n + pairs[:, 1])
+        self._tet_vol = vol.tet_volumes()
+
+    def _on_material_changed(self, name: str) -> None:
+        """Re-derive springs, dashpots, the volume term and masses from the per-tet fields
+        (contract v2 ``scale_material`` / ``set_field``; about 0.1-1 ms for 1k nodes). The Maxwell
+        branch state (force s) is kept: a change between episodes follows a reset anyway."""
+        if name == "relax_fraction" and np.any((self.fields[name] < 0) | (self.fields[name] >= 1)):
+            raise ConfigError("relax_fraction must lie in [0, 1) in every element")
+        if name in ("young", "relax_time") and np.any(self.fields[name] <= 0):
+            raise ConfigError(f"{name} must be > 0 in every element")
+        if self.volume_stiffness is not None:
+            self._setup_volume_term(self.volume_stiffness)
+        self._build_springs(self._overrides)
+        self.inv_mass = 1.0 / self.masses
+        self._coeff_cache.clear()
 
     def _setup_volume_term(self, volume_stiffness) -> None:
         """Per-tet volume stiffness ``volume_kv`` (Pa) and rest volumes ``volume_rest`` (m^3)."""
@@ -277,7 +313,10 @@ class MassSpringModel(TissueModel):
                 self.positions, self.velocities, self.masses, self.b0, fext, self.gravity, self.fixed, kc, dt,
                 self.si, self.sj, self.rest_lengths, self.K1, self.K2, kMg, decay, kMg_next, self._s, self._dl,
                 self._f, self._coef_a, self._coef_g, self._unit, self._diag, pre, r, z, p, ap,
-                CG_TOLERANCE, CG_MAX_ITER, self._vtets, self.volume_rest, self.volume_kv, self._vgrad, self._vcoef)
+                self.cg_tol, CG_MAX_ITER, self._vtets, self.volume_rest, self.volume_kv, self._vgrad, self._vcoef)
+            if stiffness is not None:   # backward Euler integrated f_ext - kc (x_{n+1} - x_n) = f_ext - dt kc v_{n+1}
+                free = ~self.fixed
+                self.integrated_external_forces[free] -= (dt * kc[free])[:, None] * self.velocities[free]
         self._pending_dt = dt
 
     def _allocate_implicit_buffers(self) -> None:
@@ -331,6 +370,29 @@ class MassSpringModel(TissueModel):
             kern.volume_forces(self.positions, self._vtets, self.volume_rest, self.volume_kv, f)
         return f
 
+    def node_stress(self) -> np.ndarray:
+        """(N,) Pa von Mises stress per node from the virial of its springs:
+        ``sigma_i = 1/(2 V_i) sum_{e at i} f_e d_e d_e^T / |d_e|`` (f_e the spring tension incl. the
+        Maxwell branch, V_i the node's share of the tet volume); hydrostatic parts (the volume term)
+        do not enter the von Mises measure."""
+        x = self.positions
+        d = x[self.sj] - x[self.si]
+        ln = np.linalg.norm(d, axis=1)
+        dl = ln - self.rest_lengths
+        f = self.K1 * dl + self.K2 * dl ** 3 + self.branch_forces()
+        outer = ((f / np.maximum(ln, 1e-300))[:, None, None] * d[:, :, None] * d[:, None, :]).reshape(-1, 9)
+        n = self.n_nodes
+        if getattr(self, "_vnode", None) is None:
+            self._vnode = np.bincount(self.volume.tets.reshape(-1), weights=np.repeat(np.abs(self._tet_vol) / 4.0, 4),
+                                      minlength=n)
+        sig = np.empty((n, 9))
+        for k in range(9):
+            sig[:, k] = (np.bincount(self.si, weights=outer[:, k], minlength=n)
+                         + np.bincount(self.sj, weights=outer[:, k], minlength=n))
+        sig = sig.reshape(n, 3, 3) / (2.0 * self._vnode)[:, None, None]
+        from surgsim_envs.tissue.base import von_mises
+        return von_mises(sig)
+
     def elastic_energy(self) -> float:
         """Energy (J) in the springs (0.5 K1 dl^2 + 0.25 K2 dl^4), Maxwell springs (s^2 / 2 kM) and
         the volume term (0.5 k_v (V - V0)^2 / V0)."""
@@ -354,7 +416,7 @@ class MassSpringModel(TissueModel):
         beta = float(np.max(self.b0 * self.inv_mass)) if self.n_nodes else 0.0
         if lam <= 0:
             return math.inf if beta == 0 else 2.0 / beta
-        return (-beta + math.sqrt(beta * beta + 4.0 * lam)) / lam
+        return (-beta + math.sqrt(beta * beta + 4.0 * lam)) / lam   # no safety factor: see stable_dt()
 
     def stiffness_matrix(self, relaxed: bool = False, clamp: bool = False):
         """Tangent stiffness ``-df/dx`` (scipy.sparse CSR, 3N x 3N, N/m, dof = 3 * node + axis).

@@ -61,6 +61,8 @@ def names() -> list[str]:
 def get(name: str):
     """The model class registered as ``name``."""
     _load_entry_points()
+    if not isinstance(name, str):
+        raise ConfigError(f"tissue model name must be a string, got {type(name).__name__}; registered models: {names()}")
     target = _registry.get(name, BUILTIN_MODELS.get(name))
     if target is None:
         raise ConfigError(f"unknown tissue model {name!r}; registered models: {names()}. "
@@ -80,13 +82,15 @@ def describe() -> dict[str, str]:
 
 
 def make(name: str, volume, material: Any = "liver", **options):
-    """Build tissue model ``name`` on ``volume`` (a Volume, or an organ name for
-    :func:`surgsim_envs.geometry.make_volume`, with ``spacing`` in options) with ``material``
+    """Build tissue model ``name`` on ``volume`` (a Volume, a registered organ name or a mesh path
+    for :func:`surgsim_envs.geometry.organ_volume`, with ``spacing`` / ``units`` in options) with ``material``
     (Material, preset name or dict). Remaining options go to the model's constructor."""
     cls = get(name)
-    if isinstance(volume, str):
-        from surgsim_envs.geometry import make_volume
+    from surgsim_envs.geometry import Volume
 
-        geo_opts = {k: options.pop(k) for k in ("spacing",) if k in options}
-        volume = make_volume(volume, **geo_opts)
+    if not isinstance(volume, Volume):   # a registered organ name or a mesh path
+        from surgsim_envs.geometry import organ_volume
+
+        geo_opts = {k: options.pop(k) for k in ("spacing", "units") if k in options}
+        volume = organ_volume(volume, **geo_opts)
     return cls(volume, material, **options)

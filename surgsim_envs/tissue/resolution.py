@@ -8,7 +8,7 @@ which sits above the scene. ``surgsim_envs.bench.choose`` re-exports it unchange
 The rule (documented in docs/benchmarks.md, "Speed against accuracy"):
 
 1. candidates are the rows of the measured table (``surgsim bench accuracy``; a copy ships in
-   ``surgsim_envs/bench/data/accuracy_table.json``) for ``scene`` with a measured cost, optionally
+   ``surgsim_envs/tissue/data/accuracy_table.json``, data of the tissue layer) for ``scene`` with a measured cost, optionally
    restricted to some models and integrators; baseline rows (MuJoCo flex) never qualify;
 2. a row qualifies if its force error against the reference is <= ``error_tolerance`` (fraction,
    0.1 = 10 %) and its cost of simulating 1 ms (``us_per_ms``: wall time of all physics steps
@@ -32,7 +32,7 @@ from typing import Any, Iterable
 from surgsim_envs.errors import ConfigError
 
 #: the shipped measured table (written by ``surgsim bench accuracy``; data only, no bench import)
-TABLE_PATH = os.path.join(os.path.dirname(os.path.dirname(__file__)), "bench", "data", "accuracy_table.json")
+TABLE_PATH = os.path.join(os.path.dirname(__file__), "data", "accuracy_table.json")
 
 
 @dataclass(frozen=True)

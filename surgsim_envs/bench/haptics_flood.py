@@ -1,0 +1,179 @@
+"""``surgsim bench haptics-flood``: the 1 kHz servo period while its UDP port is flooded.
+
+A device client process sends genuine pose packets at ``--pose-hz`` (1 kHz) to a
+:class:`~surgsim_envs.haptics.udp_bridge.UdpDevice` on loopback; the threaded servo loop runs
+against the analytic spring wall with ``--fake-work`` s of busy work per physics step (or the
+palpation scene with ``--scene``) for ``--duration`` s. The same run is made twice in this
+process: once quiet, once while ``--flooders`` other processes send garbage datagrams (random
+lengths and bytes, a quarter of them valid-length packets with a bad magic) as fast as they can
+(or at ``--flood-rate`` datagrams/s each).
+
+Reported per run: servo period median / p99 / max (ms), overruns, genuine poses accepted, the
+bridge's received / malformed / truncated-poll counts, and the flood rate actually achieved
+(datagrams/s sent, the *load*). Every figure depends on the machine and its load (reported);
+no test asserts them. The bound that keeps the servo alive is ``UdpDevice.max_drain`` datagrams
+and ``max_poll_s`` s per poll (see udp_bridge).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import time
+
+import numpy as np
+
+from surgsim_envs.errors import ConfigError
+
+
+def _pose_sender(addr, rate_hz: float, stop, sent, ready) -> None:  # runs in a child process
+    from surgsim_envs.haptics.udp_bridge import UdpHapticClient
+
+    with UdpHapticClient(tuple(addr)) as client:
+        ready.set()
+        t0 = time.perf_counter()
+        i = 0
+        while not stop.is_set():
+            deadline = t0 + i / rate_hz
+            now = time.perf_counter()
+            if deadline > now:
+                time.sleep(deadline - now)
+            client.send_pose(time.perf_counter() - t0, (0.0, 0.0, -0.002 - 0.001 * np.sin(i * 1e-3)))
+            i += 1
+            if i % 100 == 0:
+                sent.value = i
+        sent.value = i
+
+
+def _flooder(addr, seed: int, stop, sent, ready, rate: float) -> None:  # runs in a child process
+    import socket
+
+    from surgsim_envs.haptics.udp_bridge import POSE_SIZE
+
+    rng = np.random.default_rng(seed)
+    pool = [rng.bytes(int(n)) for n in rng.integers(1, 1400, 64)]
+    pool += [b"XXXX" + rng.bytes(POSE_SIZE - 4) for _ in range(21)]
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    n = 0
+    ready.set()
+    t0 = time.perf_counter()
+    try:
+        while not stop.is_set():
+            for data in pool:
+                try:
+                    sock.sendto(data, tuple(addr))
+                    n += 1
+                except OSError:
+                    pass
+            sent.value = n
+            if rate > 0:  # hold the average rate
+                ahead = n / rate - (time.perf_counter() - t0)
+                if ahead > 0:
+                    time.sleep(ahead)
+    finally:
+        sock.close()
+        sent.value = n
+
+
+def _physics(scene: bool, fake_work: float):
+    if scene:
+        from surgsim_envs.bench.haptics_speed import _build_physics
+
+        phys, info, contact_z, home = _build_physics(False, fake_work)
+        return phys, info, home
+    from surgsim_envs.haptics.fake_physics import SpringWallPhysics
+
+    phys = SpringWallPhysics(start_position=(0.0, 0.0, 0.005), work_seconds=fake_work)
+    return phys, {"physics": "fake_spring_wall", "fake_work_s": fake_work}, np.zeros(3)
+
+
+def _one_run(duration: float, flooders: int, pose_hz: float, scene: bool, fake_work: float, max_drain: int,
+             max_poll_s: float, flood_rate: float = 0.0) -> dict:
+    from surgsim_envs.haptics import DeviceLimits, DeviceMapping, ServoConfig, ServoLoop
+    from surgsim_envs.haptics.udp_bridge import UdpDevice
+
+    ctx = mp.get_context("spawn")
+    phys, info, home = _physics(scene, fake_work)
+    dev = UdpDevice(port=0, limits=DeviceLimits(max_force=10.0), max_drain=max_drain, max_poll_s=max_poll_s)
+    stop = ctx.Event()
+    procs = []
+    with dev:
+        addr = dev.address
+        pose_sent = ctx.Value("q", 0)
+        flood_sent = [ctx.Value("q", 0) for _ in range(flooders)]
+        ready = [ctx.Event() for _ in range(1 + flooders)]
+        procs.append(ctx.Process(target=_pose_sender, args=(addr, pose_hz, stop, pose_sent, ready[0]), daemon=True))
+        procs += [ctx.Process(target=_flooder, args=(addr, 100 + k, stop, flood_sent[k], ready[1 + k], flood_rate),
+                              daemon=True) for k in range(flooders)]
+        for p in procs:
+            p.start()
+        try:
+            for ev in ready:  # spawned children import numpy: slow on a loaded machine
+                if not ev.wait(timeout=60.0):
+                    raise ConfigError("a pose/flood child process did not start within 60 s")
+            time.sleep(0.5)  # the flood builds up
+            flood0 = dev.stats.received
+            f0 = sum(v.value for v in flood_sent)
+            loop = ServoLoop(dev, phys, ServoConfig(mapping=DeviceMapping(origin=tuple(home))))
+            t0 = time.perf_counter()
+            stats = loop.run_realtime(duration, frame_period=0.05)
+            wall = time.perf_counter() - t0
+            f1 = sum(v.value for v in flood_sent)
+        finally:
+            stop.set()
+            for p in procs:
+                p.join(timeout=5.0)
+                if p.is_alive():
+                    p.terminate()
+        bridge = dev.stats
+    return {
+        "flooders": flooders, "period_median_ms": stats.period_median_ms, "period_p99_ms": stats.period_p99_ms,
+        "period_max_ms": stats.period_max_ms, "overruns": stats.overruns, "ticks": stats.ticks, "wall_s": wall,
+        "poses_sent": int(pose_sent.value), "poses_accepted": bridge.accepted, "datagrams_received": bridge.received,
+        "received_during_run": bridge.received - flood0, "malformed": bridge.malformed,
+        "polls_truncated": bridge.polls_truncated, "flood_datagrams_sent_during_run": int(f1 - f0),
+        "flood_rate_per_s": (f1 - f0) / wall if flooders else 0.0, "max_force_n": stats.max_force_n, **info,
+    }
+
+
+def run_bench(duration: float = 5.0, flooders: int = 1, pose_hz: float = 1000.0, scene: bool = False,
+              fake_work: float = 3e-4, max_drain: int = 32, max_poll_s: float = 2e-4, flood_rate: float = 0.0) -> dict:
+    """A quiet run, then a flooded one; returns both rows and the machine load."""
+    if not (duration > 0 and flooders >= 1 and pose_hz > 0):
+        raise ConfigError(f"--duration, --flooders and --pose-hz must be > 0, got {duration}, {flooders}, {pose_hz}")
+    quiet = _one_run(duration, 0, pose_hz, scene, fake_work, max_drain, max_poll_s)
+    flooded = _one_run(duration, flooders, pose_hz, scene, fake_work, max_drain, max_poll_s, flood_rate)
+    return {"quiet": quiet, "flooded": flooded, "max_drain": max_drain, "max_poll_s": max_poll_s,
+            "flood_rate_limit_per_s": flood_rate,
+            "load_avg": list(os.getloadavg()), "cpus": os.cpu_count()}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--duration", type=float, default=5.0, help="s of servo per run; default 5")
+    parser.add_argument("--flooders", type=int, default=1, help="garbage-sending processes; default 1")
+    parser.add_argument("--pose-hz", type=float, default=1000.0, help="genuine pose packets per second; default 1000")
+    parser.add_argument("--scene", action="store_true", help="the palpation scene instead of the fake spring wall")
+    parser.add_argument("--fake-work", type=float, default=3e-4, help="s of busy work per fake physics step")
+    parser.add_argument("--max-drain", type=int, default=32, help="datagrams read per servo tick at most")
+    parser.add_argument("--max-poll-s", type=float, default=2e-4, help="s spent reading per servo tick at most")
+    parser.add_argument("--flood-rate", type=float, default=0.0,
+                        help="datagrams/s per flooder (0 = as fast as it can; default 0)")
+    parser.add_argument("--json", action="store_true", help="print the JSON rows")
+
+
+def run(args) -> int:
+    res = run_bench(args.duration, args.flooders, args.pose_hz, args.scene, args.fake_work, args.max_drain,
+                    args.max_poll_s, args.flood_rate)
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    for name in ("quiet", "flooded"):
+        r = res[name]
+        print(f"{name:<8} period median {r['period_median_ms']:.3f} ms, p99 {r['period_p99_ms']:.3f} ms, "
+              f"max {r['period_max_ms']:.2f} ms, overruns {r['overruns']}; poses {r['poses_accepted']}/"
+              f"{r['poses_sent']} accepted; flood {r['flood_rate_per_s']:.0f} datagrams/s sent, "
+              f"{r['malformed']} malformed read, {r['polls_truncated']} polls truncated")
+    print(f"load average {res['load_avg'][0]:.2f} on {res['cpus']} cores")
+    return 0

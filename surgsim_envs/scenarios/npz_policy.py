@@ -1,0 +1,241 @@
+"""Data policies: a multilayer perceptron stored as plain arrays in a ``.npz`` file, run in numpy.
+
+A ``.npz`` policy is *data*: loading it runs no code (``numpy.load(allow_pickle=False)``), so a
+scenario may name one without ``--allow-code``. Format ``surgsim-mlp-v1`` (every array name is
+fixed; shapes in brackets; ``L`` layers, ``n_0`` observation size, ``n_L`` action size):
+
+==================  ===========================  =================================================
+key                 shape / type                 meaning
+==================  ===========================  =================================================
+``format``          str                          ``"surgsim-mlp-v1"``
+``W0`` .. ``W{L-1}``  (n_i, n_{i+1}) float         layer weights: ``h_{i+1} = act(h_i @ W_i + b_i)``
+``b0`` .. ``b{L-1}``  (n_{i+1},) float             layer biases
+``activation``      str                          hidden activation: tanh | relu | elu | identity
+``output_activation``  str (optional)            last layer: identity (default) | tanh
+``obs_mean``        (n_0,) (optional, 0)         observation normalisation:
+``obs_std``         (n_0,) (optional, 1)         ``h_0 = clip((obs - obs_mean) / obs_std, -obs_clip, obs_clip)``
+``obs_clip``        scalar (optional, inf)
+``action_scale``    (n_L,) (optional, 1)         ``action = clip(action_bias + action_scale * h_L,``
+``action_bias``     (n_L,) (optional, 0)         ``action_low, action_high)``
+``action_low``      (n_L,) (optional, -inf)
+``action_high``     (n_L,) (optional, +inf)
+``obs_keys``        (k,) str (optional)          dict observations: concatenate these keys (flattened)
+``action_keys``     (m,) str (optional)          dict actions: split the action into these keys ...
+``action_sizes``    (m,) int (optional)          ... of these sizes (size 1 gives a scalar)
+==================  ===========================  =================================================
+
+Every array must be finite; std must be > 0; at most :data:`MAX_LAYERS` layers and
+:data:`MAX_PARAMETERS` numbers. A stable-baselines3 MLP policy maps onto it directly (issue 15
+exports one): its ``mlp_extractor.policy_net`` + ``action_net`` layers, tanh activation, the
+VecNormalize mean/std as ``obs_mean``/``obs_std`` and the action space bounds as
+``action_low``/``action_high``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from surgsim_envs.errors import ConfigError
+
+FORMAT = "surgsim-mlp-v1"
+MAX_LAYERS = 32
+MAX_PARAMETERS = 50_000_000
+ACTIVATIONS = {
+    "identity": lambda x: x,
+    "tanh": np.tanh,
+    "relu": lambda x: np.maximum(x, 0.0),
+    "elu": lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0.0))),
+}
+OUTPUT_ACTIVATIONS = ("identity", "tanh")
+
+
+class NpzPolicy:
+    """A numpy MLP policy (see module docstring): ``policy(obs) -> action``."""
+
+    def __init__(self, weights, biases, activation: str = "tanh", output_activation: str = "identity",
+                 obs_mean=None, obs_std=None, obs_clip: float = np.inf, action_scale=None, action_bias=None,
+                 action_low=None, action_high=None, obs_keys=None, action_keys=None, action_sizes=None,
+                 source: str = "<npz policy>"):
+        self.source = source
+        if not (isinstance(weights, (list, tuple)) and isinstance(biases, (list, tuple))):
+            raise self._bad("weights and biases must be lists of arrays (one per layer)")
+        if not (1 <= len(weights) <= MAX_LAYERS) or len(weights) != len(biases):
+            raise self._bad(f"needs 1..{MAX_LAYERS} layers with one bias each, got {len(weights)} weight and "
+                            f"{len(biases)} bias arrays")
+        self.weights = [self._finite(w, f"W{i}", ndim=2) for i, w in enumerate(weights)]
+        self.biases = [self._finite(b, f"b{i}", ndim=1) for i, b in enumerate(biases)]
+        total = sum(w.size + b.size for w, b in zip(self.weights, self.biases))
+        if total > MAX_PARAMETERS:
+            raise self._bad(f"{total} parameters exceed the limit of {MAX_PARAMETERS}")
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            if b.shape[0] != w.shape[1]:
+                raise self._bad(f"b{i} has {b.shape[0]} values but W{i} has {w.shape[1]} outputs")
+            if i and w.shape[0] != self.weights[i - 1].shape[1]:
+                raise self._bad(f"W{i} takes {w.shape[0]} inputs but layer {i - 1} gives {self.weights[i - 1].shape[1]}")
+        if activation not in ACTIVATIONS:
+            raise self._bad(f"activation {activation!r} unknown; choose one of {sorted(ACTIVATIONS)}")
+        if output_activation not in OUTPUT_ACTIVATIONS:
+            raise self._bad(f"output_activation {output_activation!r} unknown; choose one of {list(OUTPUT_ACTIVATIONS)}")
+        self.activation, self.output_activation = activation, output_activation
+        n_in, n_out = self.weights[0].shape[0], self.weights[-1].shape[1]
+        self.obs_size, self.action_size = n_in, n_out
+        self.obs_mean = self._vector(obs_mean, n_in, 0.0, "obs_mean")
+        self.obs_std = self._vector(obs_std, n_in, 1.0, "obs_std")
+        if np.any(self.obs_std <= 0):
+            raise self._bad(f"obs_std must be > 0 everywhere, got min {self.obs_std.min()}")
+        self.obs_clip = float(obs_clip)
+        if not self.obs_clip > 0:  # inf allowed
+            raise self._bad(f"obs_clip must be > 0 (inf for none), got {obs_clip!r}")
+        self.action_scale = self._vector(action_scale, n_out, 1.0, "action_scale")
+        self.action_bias = self._vector(action_bias, n_out, 0.0, "action_bias")
+        self.action_low = self._vector(action_low, n_out, -np.inf, "action_low", finite=False)
+        self.action_high = self._vector(action_high, n_out, np.inf, "action_high", finite=False)
+        if np.any(np.isnan(self.action_low)) or np.any(np.isnan(self.action_high)) or np.any(self.action_low > self.action_high):
+            raise self._bad("action_low must be <= action_high (no NaN)")
+        self.obs_keys = None if obs_keys is None else [str(k) for k in np.asarray(obs_keys).reshape(-1)]
+        self.action_keys = None if action_keys is None else [str(k) for k in np.asarray(action_keys).reshape(-1)]
+        if self.action_keys is not None:
+            sizes = [1] * len(self.action_keys) if action_sizes is None else np.asarray(action_sizes).reshape(-1)
+            if len(sizes) != len(self.action_keys) or any(int(s) < 1 for s in sizes) or sum(int(s) for s in sizes) != n_out:
+                raise self._bad(f"action_keys {self.action_keys} with sizes {list(sizes)} must split the {n_out} "
+                                "outputs exactly")
+            self.action_sizes = [int(s) for s in sizes]
+
+    # -- validation helpers -------------------------------------------------------------------
+    def _bad(self, msg: str) -> ConfigError:
+        return ConfigError(f"policy {self.source}: {msg} (format {FORMAT}, see surgsim_envs.scenarios.npz_policy)")
+
+    def _finite(self, a, name: str, ndim: int) -> np.ndarray:
+        try:
+            arr = np.asarray(a, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise self._bad(f"{name} is not a numeric array") from None
+        if arr.ndim != ndim or 0 in arr.shape:
+            raise self._bad(f"{name} must be a non-empty {ndim}-D array, got shape {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise self._bad(f"{name} holds NaN or inf")
+        return arr
+
+    def _vector(self, a, n: int, default: float, name: str, finite: bool = True) -> np.ndarray:
+        if a is None:
+            return np.full(n, default)
+        try:
+            arr = np.asarray(a, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise self._bad(f"{name} is not numeric") from None
+        if arr.size == 1:
+            arr = np.full(n, float(arr[0]))
+        if arr.shape != (n,):
+            raise self._bad(f"{name} must have {n} values, got {arr.size}")
+        if finite and not np.all(np.isfinite(arr)):
+            raise self._bad(f"{name} holds NaN or inf")
+        return arr
+
+    # -- evaluation ---------------------------------------------------------------------------
+    def _flatten(self, obs) -> np.ndarray:
+        if self.obs_keys is not None:
+            if not isinstance(obs, dict):
+                raise self._bad(f"expects a dict observation with keys {self.obs_keys}, got {type(obs).__name__}")
+            missing = [k for k in self.obs_keys if k not in obs]
+            if missing:
+                raise self._bad(f"observation lacks keys {missing} (has {sorted(obs)})")
+            parts = [np.asarray(obs[k], dtype=np.float64).reshape(-1) for k in self.obs_keys]
+            x = np.concatenate(parts) if parts else np.zeros(0)
+        else:
+            try:
+                x = np.asarray(obs, dtype=np.float64).reshape(-1)
+            except (TypeError, ValueError):
+                raise self._bad(f"observation {obs!r} is not numeric; give obs_keys for dict observations") from None
+        if x.shape != (self.obs_size,):
+            raise self._bad(f"expects {self.obs_size} observation values, got {x.size}")
+        return x
+
+    def forward(self, x: np.ndarray) -> np.ndarray:
+        """The raw network output ``h_L`` for one flat observation (before action scaling)."""
+        h = np.clip((x - self.obs_mean) / self.obs_std, -self.obs_clip, self.obs_clip)
+        act = ACTIVATIONS[self.activation]
+        last = len(self.weights) - 1
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            h = h @ w + b
+            h = (np.tanh(h) if self.output_activation == "tanh" else h) if i == last else act(h)
+        return h
+
+    def __call__(self, obs):
+        x = self._flatten(obs)
+        if not np.all(np.isfinite(x)):
+            raise self._bad(f"observation holds NaN or inf: {x.tolist()}")
+        with np.errstate(over="ignore", invalid="ignore"):
+            a = np.clip(self.action_bias + self.action_scale * self.forward(x), self.action_low, self.action_high)
+        if not np.all(np.isfinite(a)):
+            raise self._bad("the network output overflowed (NaN/inf action); check the weights and scaling")
+        if self.action_keys is None:
+            return a.astype(np.float32)
+        out, i = {}, 0
+        for k, s in zip(self.action_keys, self.action_sizes):
+            out[k] = float(a[i]) if s == 1 else a[i:i + s].copy()
+            i += s
+        return out
+
+    # -- files --------------------------------------------------------------------------------
+    def arrays(self) -> dict:
+        """The ``.npz`` arrays of this policy."""
+        d = {"format": np.array(FORMAT), "activation": np.array(self.activation),
+             "output_activation": np.array(self.output_activation), "obs_mean": self.obs_mean,
+             "obs_std": self.obs_std, "obs_clip": np.array(self.obs_clip), "action_scale": self.action_scale,
+             "action_bias": self.action_bias, "action_low": self.action_low, "action_high": self.action_high}
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            d[f"W{i}"], d[f"b{i}"] = w, b
+        if self.obs_keys is not None:
+            d["obs_keys"] = np.array(self.obs_keys)
+        if self.action_keys is not None:
+            d["action_keys"], d["action_sizes"] = np.array(self.action_keys), np.array(self.action_sizes)
+        return d
+
+    def save(self, path) -> Path:
+        """Write the policy to ``path`` (.npz)."""
+        p = Path(path)
+        np.savez(p, **self.arrays())
+        return p if p.suffix == ".npz" else p.with_name(p.name + ".npz")
+
+    @classmethod
+    def load(cls, path) -> "NpzPolicy":
+        """Read and validate a ``.npz`` policy (no pickles: loading runs no code)."""
+        p = Path(path)
+        if not p.is_file():
+            raise ConfigError(f"policy file {str(p)!r} not found")
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except (OSError, ValueError, EOFError) as exc:
+            raise ConfigError(f"policy {p}: not a readable .npz file ({exc})") from None
+        fmt = str(data.get("format", ""))
+        if fmt != FORMAT:
+            raise ConfigError(f"policy {p}: format {fmt!r} is not {FORMAT!r}; see surgsim_envs.scenarios.npz_policy")
+        n = 0
+        while f"W{n}" in data and n <= MAX_LAYERS:
+            n += 1
+        weights = [data[f"W{i}"] for i in range(n)]
+        biases = [data.get(f"b{i}") for i in range(n)]
+        if any(b is None for b in biases):
+            raise ConfigError(f"policy {p}: every W<i> needs its b<i>")
+
+        def opt(key, kind=None):
+            v = data.get(key)
+            if v is None:
+                return None
+            return str(v) if kind is str else v
+
+        try:
+            obs_clip = float(data["obs_clip"]) if "obs_clip" in data else np.inf
+            return cls(weights, biases, activation=opt("activation", str) or "tanh",
+                       output_activation=opt("output_activation", str) or "identity",
+                       obs_mean=opt("obs_mean"), obs_std=opt("obs_std"), obs_clip=obs_clip,
+                       action_scale=opt("action_scale"), action_bias=opt("action_bias"),
+                       action_low=opt("action_low"), action_high=opt("action_high"), obs_keys=opt("obs_keys"),
+                       action_keys=opt("action_keys"), action_sizes=opt("action_sizes"), source=str(p))
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, ConfigError):
+                raise
+            raise ConfigError(f"policy {p}: malformed array ({exc}); see surgsim_envs.scenarios.npz_policy") from None

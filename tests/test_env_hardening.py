@@ -1,0 +1,91 @@
+"""Issue 14, env items: each test reproduced the failure before the fix."""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import surgsim_envs  # noqa: F401
+from surgsim_envs.errors import ConfigError, RenderingUnavailableError
+
+
+@pytest.fixture(scope="module")
+def palpation():
+    env = gym.make("SurgSim/Palpation-v0")
+    yield env
+    env.close()
+
+
+def test_failed_first_reset_does_not_break_later_calls(palpation):
+    """Gymnasium's passive checker kept no reset data after a raising first reset, and every later
+    step failed with 'TypeError: cannot unpack non-iterable NoneType object'."""
+    env = gym.make("SurgSim/Palpation-v0")
+    with pytest.raises(ConfigError, match="bogus"):
+        env.reset(options={"bogus": 1})
+    obs, _ = env.reset(seed=0)
+    obs, reward, term, trunc, info = env.step(np.zeros(4, dtype=np.float32))
+    assert np.all(np.isfinite(obs)) and np.isfinite(reward)
+    env.close()
+
+
+@pytest.mark.parametrize("action, kind", [
+    (np.array([1 + 2j, 0, 0, 0]), "complex"),
+    (["0.1", "0", "0", "0"], "<U"),
+    (np.array([True, False, True, False]), "bool"),
+    ("abcd", "<U"),
+    ([object(), 0, 0, 0], "object"),
+])
+def test_non_real_actions_are_rejected_by_name(palpation, action, kind):
+    """complex actions lost their imaginary part silently, strings were parsed, bools became 0/1."""
+    palpation.reset(seed=0)
+    with pytest.raises(ConfigError, match=kind):
+        palpation.step(action)
+
+
+@pytest.mark.parametrize("task", ["SurgSim/Grasp-v0", "SurgSim/Slippage-v0", "SurgSim/Palpation-v0"])
+def test_control_hz_outside_its_physical_range_is_rejected(task):
+    """Grasp/Slippage accepted control_hz=1e9 (a control period of 1 ns, shorter than one physics step)."""
+    with pytest.raises(ConfigError, match=r"control_hz=1000000000.0 Hz is outside its physical range \[.*\] Hz"):
+        gym.make(task, control_hz=1e9)
+    with pytest.raises(ConfigError, match="control_hz"):
+        gym.make(task, control_hz=1e-6)    # a period longer than the episode
+
+
+def test_human_render_without_display_raises_instead_of_exiting():
+    """render_mode='human' without a display made MuJoCo exit the process (GLFW init failure),
+    also inside gymnasium's check_env. Run in a child process so an exit would show."""
+    code = textwrap.dedent("""
+        import gymnasium as gym, surgsim_envs
+        from surgsim_envs.errors import RenderingUnavailableError
+        try:
+            gym.make("SurgSim/Palpation-v0", render_mode="human")
+        except RenderingUnavailableError as exc:
+            print("RAISED", exc)
+        env = gym.make("SurgSim/Palpation-v0")
+        env.unwrapped.render_mode = "human"          # the path check_env's render check takes
+        try:
+            env.reset(seed=0)
+        except RenderingUnavailableError:
+            print("RAISED-IN-RESET")
+        print("ALIVE")
+    """)
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "RAISED render_mode='human' needs a display" in out.stdout
+    assert "RAISED-IN-RESET" in out.stdout and "ALIVE" in out.stdout
+
+
+def test_require_display_names_the_fix(monkeypatch):
+    from surgsim_envs.scene.display import require_display
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the DISPLAY check applies on Linux")
+    with pytest.raises(RenderingUnavailableError, match="DISPLAY.*rgb_array"):
+        require_display()

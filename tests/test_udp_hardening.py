@@ -1,0 +1,161 @@
+"""UDP bridge hardening (issue 14): overflowing quaternions, the sequence window and session
+restarts, bounded reads under a garbage flood, zero force before the first pose."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from surgsim_envs.haptics import DeviceLimits, DeviceMapping, ServoConfig, ServoLoop, SpringWallPhysics
+from surgsim_envs.haptics.device import DeviceState, HapticDevice
+from surgsim_envs.haptics.quaternion import unit_quaternion
+from surgsim_envs.haptics.udp_bridge import (
+    RESYNC_PACKETS,
+    SEQ_WINDOW,
+    SESSION_TIMEOUT_S,
+    SequenceGate,
+    UdpDevice,
+    UdpHapticClient,
+    decode_pose,
+    encode_pose,
+)
+
+
+def _poll_until(dev, predicate, tries=300):
+    for _ in range(tries):
+        dev.poll()
+        if predicate():
+            return True
+        time.sleep(0.001)
+    return False
+
+
+@pytest.mark.parametrize("quat, expected", [
+    ((1e300, 0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)),
+    ((1e300, 1e300, 0.0, 0.0), (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)),
+    ((0.0, 0.0, -1.7e308, 1.7e308), (0.0, 0.0, -math.sqrt(0.5), math.sqrt(0.5))),
+    ((3e-6, 0.0, 4e-6, 0.0), (0.6, 0.0, 0.8, 0.0)),
+])
+def test_decoded_quaternion_is_unit_even_when_squares_overflow(quat, expected):
+    p = decode_pose(encode_pose(1, 0.0, (0, 0, 0), quat))
+    np.testing.assert_allclose(p.quaternion, expected, rtol=1e-15)
+    assert unit_quaternion((0.0, 0.0, 0.0, 0.0)) is None
+    assert unit_quaternion((1e-7, 0, 0, 0)) is None
+
+
+class _HugeQuatDevice(HapticDevice):
+    """A device whose reading holds a quaternion that overflows when squared."""
+
+    def _read(self, t):
+        return DeviceState(time=t, position=np.zeros(3), quaternion=np.array([1e300, 0.0, 1e300, 0.0]))
+
+
+def test_servo_normalises_an_overflowing_quaternion_instead_of_zeroing_it():
+    phys = SpringWallPhysics(start_position=(0, 0, 0.01))
+    with _HugeQuatDevice() as dev:
+        loop = ServoLoop(dev, phys)
+        for i in range(5):
+            loop.tick(i * 1e-3, physics_until=phys.time + 1e-3)
+    np.testing.assert_allclose(phys.proxy_quat, (math.sqrt(0.5), 0.0, math.sqrt(0.5), 0.0), rtol=1e-12)
+    assert loop.stats.rejected_poses == 0
+
+
+def test_sequence_gate_window_restart_and_timeout():
+    g = SequenceGate()
+    a, b = ("127.0.0.1", 5000), ("127.0.0.1", 6000)
+    assert all(g.admit(s, a, 0.001 * s) for s in range(10))
+    # one stray far-ahead packet is dropped and does not lock out the genuine stream
+    assert not g.admit(0x7FFFFFF0, b, 0.0105)
+    assert all(g.admit(s, a, 0.001 * s) for s in range(10, 20))
+    assert g.last_seq == 19 and g.resyncs == 0
+    # exactly SEQ_WINDOW ahead is in window, one more is not
+    assert not g.admit(19 + SEQ_WINDOW + 1, b, 0.0201)
+    assert g.admit(19 + SEQ_WINDOW, a, 0.0202)
+    # a restarting client (sequence 0 again) is adopted after RESYNC_PACKETS counting packets
+    admitted = [g.admit(s, a, 0.03 + 0.001 * s) for s in range(6)]
+    assert admitted == [False] * (RESYNC_PACKETS - 1) + [True] * (6 - RESYNC_PACKETS + 1)
+    assert g.resyncs == 1 and g.last_seq == 5
+    # interleaved strays from two addresses never reach RESYNC_PACKETS
+    for k in range(10):
+        assert not g.admit(1_000_000 + k, a if k % 2 else b, 0.05)
+    # silence longer than the session timeout: the next valid pose starts a new session
+    assert g.admit(123_456_789, a, 0.05 + SESSION_TIMEOUT_S + 0.01)
+    assert g.resyncs == 2 and g.last_seq == 123_456_789
+
+
+def test_bridge_survives_a_far_ahead_packet_and_a_client_restart():
+    dev = UdpDevice(port=0)
+    with dev, UdpHapticClient(dev.address) as client:
+        for i in range(5):
+            client.send_pose(i * 1e-3, (0.0, 0.0, 0.001 * i))
+        assert _poll_until(dev, lambda: dev.stats.accepted == 5)
+        client.send_raw(encode_pose(0xFFFF0000, 0.0, (0.05, 0.05, 0.05)))  # stray
+        for i in range(5, 10):
+            client.send_pose(i * 1e-3, (0.0, 0.0, 0.001 * i))
+        assert _poll_until(dev, lambda: dev.stats.accepted == 10)
+        assert dev.stats.stale == 1
+        assert dev.read(0.0).position[2] == pytest.approx(0.009)
+    # a new client process (new port, sequence from 0) takes over after RESYNC_PACKETS poses
+    with dev, UdpHapticClient(dev.address) as restarted:
+        for i in range(6):
+            restarted.send_pose(i * 1e-3, (0.0, 0.01 * i, 0.0))
+        assert _poll_until(dev, lambda: dev.stats.accepted == 10 + 6 - RESYNC_PACKETS + 1)
+        assert dev.stats.resyncs == 1
+        assert dev.read(0.0).position[1] == pytest.approx(0.05)
+
+
+def test_garbage_flood_is_read_in_bounded_batches_and_the_pose_gets_through():
+    dev = UdpDevice(port=0, max_drain=16)
+    with dev, UdpHapticClient(dev.address) as client:
+        for k in range(200):  # fewer than the kernel's default receive buffer holds
+            client.send_raw(bytes([k % 256]) * (1 + k % 200))
+        client.send_pose(0.0, (0.01, 0.0, 0.0))
+        polls = 0
+        while dev.stats.accepted == 0 and polls < 300:
+            before = dev.stats.received
+            dev.poll()
+            assert dev.stats.received - before <= 16  # one servo tick never reads more
+            polls += 1
+            if dev.stats.received == before:
+                time.sleep(0.001)
+        assert dev.stats.accepted == 1 and dev.stats.malformed == 200
+        assert polls >= 200 // 16
+        assert dev.read(0.0).position[0] == pytest.approx(0.01)
+
+
+def test_no_force_reaches_the_device_before_its_first_pose():
+    # the workspace centre maps 2.5 cm into a stiff wall: rendering it would saturate the device
+    phys = SpringWallPhysics(start_position=(0, 0, 0.0))
+    dev = UdpDevice(port=0, limits=DeviceLimits(max_force=3.3))
+    config = ServoConfig(mapping=DeviceMapping(origin=(0.0, 0.0, -0.05)))
+    with dev, UdpHapticClient(dev.address) as client:
+        loop = ServoLoop(dev, phys, config)
+        assert not dev.has_pose
+        for i in range(50):
+            loop.tick(i * 1e-3, physics_until=phys.time + 1e-3)
+        assert np.all(dev.force_log.forces == 0.0) and loop.proxy_target is None
+        assert phys.steps == 0 and loop.stats.saturated == 0
+        client.send_pose(0.05, (0.0, 0.0, 0.05))  # the hand, out of contact
+        assert _poll_until(dev, lambda: dev.has_pose)
+        loop.tick(0.05, physics_until=phys.time + 1e-3)
+        assert loop.proxy_target[2] == pytest.approx(0.0)
+
+
+def test_one_overflowing_packet_does_not_end_a_teleoperation_of_the_scene():
+    scene_adapter = pytest.importorskip("surgsim_envs.haptics.scene_adapter", exc_type=ImportError)
+    phys = scene_adapter.make_haptic_simulation("palpation")
+    dev = UdpDevice(port=0)
+    config = ServoConfig(mapping=DeviceMapping(origin=tuple(phys.home_position)))
+    with dev, UdpHapticClient(dev.address) as client:
+        loop = ServoLoop(dev, phys, config)
+        client.send_pose(0.0, (0.0, 0.0, 0.0))
+        assert _poll_until(dev, lambda: dev.has_pose)
+        client.send_raw(encode_pose(1, 0.001, (0.0, 0.0, 0.0), (1e300, 0.0, 0.0, 1e300)))
+        for i in range(20):
+            loop.tick(i * 1e-3, physics_until=phys.time + 1e-3)
+        assert dev.stats.accepted == 2 and dev.stats.malformed == 0
+        np.testing.assert_allclose(loop._target_quat, (math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)), rtol=1e-12)
+        assert np.all(np.isfinite(dev.force_log.forces))
