@@ -46,19 +46,14 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from surgsim_envs.errors import ConfigError
-from surgsim_envs.tissue import base as _base
 from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue import fractional_calculus as fc
 from surgsim_envs.tissue import fractional_kernels as kern
 from surgsim_envs.tissue.base import TissueModel
 from surgsim_envs.tissue.fem_kernels import count_inverted
 
-#: contract v2: the one safety factor (defined in tissue/base.py once the contract lands there)
-DT_SAFETY = getattr(_base, "DT_SAFETY", 0.8)
 DEFAULT_ORDER = 0.3
 DEFAULT_MEMORY = 100
-#: fields scale_material / set_field accept (all per element)
-MATERIAL_FIELDS = ("young", "poisson", "relax_fraction", "relax_time", "damping", "density")
 
 
 class FractionalTetModel(TissueModel):
@@ -78,6 +73,8 @@ class FractionalTetModel(TissueModel):
     auto_pair = ("symplectic", "implicit")
     default_integrator = "auto"
     capabilities: ClassVar[frozenset] = frozenset({"forces", "history", "viscoelastic", "static_solve"})
+    material_fields = ("young", "poisson", "density", "damping", "relax_fraction", "relax_time")
+    node_field_names = ("displacement", "stress", "order")
 
     def __init__(self, volume, material="liver", *, integrator=None, order=None, memory: int = DEFAULT_MEMORY,
                  branch_fraction: float | None = None, **base_kwargs):
@@ -95,7 +92,7 @@ class FractionalTetModel(TissueModel):
             raise ConfigError(f"order q must be < 1 for the tissue model (q = 1 is a pure viscous fluid), got {self.order.values}")
         if branch_fraction is not None:
             self.fields["relax_fraction"] = np.full(len(self.volume.tets), float(branch_fraction))
-        self._fields0 = {k: v.copy() for k, v in self.fields.items()}
+            self._fields0["relax_fraction"] = self.fields["relax_fraction"].copy()
         self._setup()
 
     # ------------------------------------------------------------------------------------------
@@ -125,7 +122,7 @@ class FractionalTetModel(TissueModel):
         self._build_material()
 
     def _build_material(self) -> None:
-        """Element stiffness, the K_el / K_inf data and masses from the current fields."""
+        """Element stiffness, the K_el / K_inf data, masses and damping from the current fields."""
         young, poisson = self.fields["young"], self.fields["poisson"]
         bad = np.flatnonzero((young <= 0) | (poisson >= 0.5) | (poisson <= -1))
         if len(bad):
@@ -173,47 +170,10 @@ class FractionalTetModel(TissueModel):
         n3 = 3 * self.n_nodes
         return sp.bsr_matrix((data.reshape(-1, 3, 3), self._indices, self._indptr), shape=(n3, n3)).tocsr()
 
-    def element_centroids(self) -> np.ndarray:
-        """(T,3) rest centroids (m) of the tets that carry the material fields."""
-        return self.rest_positions[self.tets].mean(axis=1)
-
-    def scale_material(self, name: str = "young", factor=1.0, mask=None) -> None:
-        """Multiply element field ``name`` by ``factor`` (scalar or (T,)) relative to its value at
-        build, where ``mask`` (T,) bool is True; stiffness, masses and factorisations follow."""
-        base = self._field_check(name)
-        t = len(self.tets)
-        fac = np.broadcast_to(np.asarray(factor, dtype=float), (t,)) if np.ndim(factor) else np.full(t, float(factor))
-        if fac.shape != (t,) or not np.all(np.isfinite(fac)) or np.any(fac <= 0):
-            raise ConfigError(f"scale_material factor must be a positive number or a ({t},) array of them, got shape {np.shape(factor)}")
-        sel = np.ones(t, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-        if sel.shape != (t,):
-            raise ConfigError(f"mask must be a ({t},) boolean array over the tets, got shape {sel.shape}")
-        values = self.fields[name].copy()
-        values[sel] = base[sel] * fac[sel]
-        self._set(name, values)
-
-    def set_field(self, name: str, values) -> None:
-        """Set element field ``name`` to absolute (T,) ``values`` (SI units)."""
-        self._field_check(name)
-        values = np.broadcast_to(np.asarray(values, dtype=float), (len(self.tets),)).copy()
-        self._set(name, values)
-
-    def _field_check(self, name: str) -> np.ndarray:
-        if name not in MATERIAL_FIELDS:
-            raise ConfigError(f"fractional model has no material field {name!r}; choose one of {list(MATERIAL_FIELDS)}")
-        return self._fields0[name]
-
-    def _set(self, name: str, values: np.ndarray) -> None:
-        if not np.all(np.isfinite(values)):
-            raise ConfigError(f"field {name!r} values must be finite")
-        old = self.fields[name]
-        self.fields[name] = values
-        try:
-            self._build_material()
-        except ConfigError:
-            self.fields[name] = old
-            self._build_material()
-            raise
+    def _on_material_changed(self, name: str) -> None:
+        """Contract v2 ``scale_material`` / ``set_field`` hook: re-derive stiffness, masses, damping;
+        drop the LU and the critical dt."""
+        self._build_material()
 
     # ------------------------------------------------------------------------------------------
     # stepping
@@ -324,10 +284,6 @@ class FractionalTetModel(TissueModel):
                 self._crit = lo
         return self._crit
 
-    def stable_dt(self) -> float:
-        """``DT_SAFETY * critical_dt()`` (contract v2)."""
-        return DT_SAFETY * self.critical_dt()
-
     def _lambda_max(self, data: np.ndarray) -> float:
         if not np.any(data):
             return 0.0
@@ -335,7 +291,8 @@ class FractionalTetModel(TissueModel):
         sm = np.repeat(1.0 / np.sqrt(self.masses), 3)
         k = self._matrix(data)
         a = (sp.diags(sm) @ k @ sp.diags(sm)).tocsr()[free3][:, free3]
-        val = spla.eigsh(a, k=1, which="LA", return_eigenvectors=False, tol=1e-6, maxiter=5000)
+        v0 = np.cos(np.arange(a.shape[0]) * 0.7071)            # fixed start vector: reproducible dt
+        val = spla.eigsh(a, k=1, which="LA", return_eigenvectors=False, tol=1e-6, maxiter=5000, v0=v0)
         return float(val[0]) * 1.0001
 
     # ------------------------------------------------------------------------------------------
@@ -358,32 +315,26 @@ class FractionalTetModel(TissueModel):
         return int(count_inverted(self.positions, self.tets))
 
     def element_stress(self) -> np.ndarray:
-        """(T,6) Voigt stress (Pa) per tet: (1 - g) C eps(d_n) + g tau^q dt^-q C eps(s_n)."""
-        d = (self.positions - self.rest_positions)[self.tets].reshape(len(self.tets), 12)
-        s = self._s_last.reshape(-1, 3)[self.tets].reshape(len(self.tets), 12)
-        dmat = asm.d_matrices(self.fields["young"], self.fields["poisson"])
+        """(T,3,3) Cauchy stress (Pa) per tet: (1 - g) C eps(d_n) + g tau^q dt^-q C eps(s_n), s_n the
+        GL-weighted displacement history of the last step (small strain)."""
+        t = len(self.tets)
+        d = (self.positions - self.rest_positions)[self.tets].reshape(t, 12)
+        s = self._s_last.reshape(-1, 3)[self.tets].reshape(t, 12)
         g = self.fields["relax_fraction"]
         q = self.current_order()
-        eps_d = np.einsum("tij,tj->ti", self._b, d)
-        eps_s = np.einsum("tij,tj->ti", self._b, s)
-        mix = (1 - g)[:, None] * eps_d + (g * self.fields["relax_time"] ** q * self._c_last)[:, None] * eps_s
-        return np.einsum("tij,tj->ti", dmat, mix)
+        mix = (1 - g)[:, None] * np.einsum("tij,tj->ti", self._b, d) + \
+            (g * self.fields["relax_time"] ** q * self._c_last)[:, None] * np.einsum("tij,tj->ti", self._b, s)
+        v = np.einsum("tij,tj->ti", asm.d_matrices(self.fields["young"], self.fields["poisson"]), mix)
+        out = np.empty((t, 3, 3))
+        out[:, 0, 0], out[:, 1, 1], out[:, 2, 2] = v[:, 0], v[:, 1], v[:, 2]
+        out[:, 0, 1] = out[:, 1, 0] = v[:, 3]
+        out[:, 1, 2] = out[:, 2, 1] = v[:, 4]
+        out[:, 0, 2] = out[:, 2, 0] = v[:, 5]
+        return out
 
-    def node_fields(self) -> dict[str, np.ndarray]:
-        """Per-node display fields: ``displacement`` (m), ``stress`` (Pa, von Mises of the tet
-        stresses, volume-weighted to the nodes) and ``order`` (the current q, uniform)."""
-        sig = self.element_stress()
-        sx, sy, sz, txy, tyz, tzx = sig.T
-        vm = np.sqrt(0.5 * ((sx - sy) ** 2 + (sy - sz) ** 2 + (sz - sx) ** 2) + 3 * (txy ** 2 + tyz ** 2 + tzx ** 2))
-        num = np.zeros(self.n_nodes)
-        den = np.zeros(self.n_nodes)
-        np.add.at(num, self.tets.ravel(), np.repeat(vm * self.tet_volume, 4))
-        np.add.at(den, self.tets.ravel(), np.repeat(self.tet_volume, 4))
-        return {"displacement": np.linalg.norm(self.positions - self.rest_positions, axis=1),
-                "stress": num / den, "order": np.full(self.n_nodes, self.current_order())}
-
-    def field_names(self) -> list[str]:
-        return ["displacement", "stress", "order"]
+    def _node_field(self, name: str) -> np.ndarray:
+        """``order``: the current q at every node (uniform; q is a function of time)."""
+        return np.full(self.n_nodes, self.current_order())
 
     # ------------------------------------------------------------------------------------------
     def static_solve(self, forces: np.ndarray | None = None, **kwargs) -> np.ndarray:
