@@ -198,3 +198,19 @@ def test_probe_scene_steps_with_the_fractional_model():
     model = sim.tissue("slab")
     assert model.name == "fractional" and model.node_fields()["displacement"].max() > 1e-3
     assert sim.tool_force("probe")[2] > 0.01           # N: the tissue pushes the probe back up
+
+
+def test_palpation_task_runs_on_the_fractional_tissue():
+    import gymnasium as gym
+
+    from surgsim_envs.envs import register_envs
+
+    register_envs()
+    env = gym.make("SurgSim/Palpation-v0", model="fractional", integrator="auto")   # 1 ms > explicit limit: implicit
+    obs, _ = env.reset(seed=0)
+    for _ in range(5):
+        obs, reward, term, trunc, info = env.step(env.action_space.sample())
+    tissue_model = env.unwrapped.sim.tissue()
+    assert tissue_model.name == "fractional" and tissue_model.active_integrator == "implicit"
+    assert np.all(np.isfinite(obs)) and np.isfinite(reward)
+    env.close()
