@@ -26,7 +26,8 @@ def _synthetic(eta, orders, *, duration=6.0, ramp=1.0, fine=8000, every=20, nois
     return ff.StressRecord(t[::every], eps[::every], noisy, "synthetic")
 
 
-@pytest.mark.parametrize("eta,orders", [(2.0e4, (0.3, 0.55, 0.4)), (5.0e3, (0.7, 0.2, 0.15))])
+@pytest.mark.parametrize("eta,orders", [(2.0e4, (0.3, 0.55, 0.4)),
+                                        pytest.param(5.0e3, (0.7, 0.2, 0.15), marks=pytest.mark.slow)])
 def test_identification_recovers_eta_and_orders_from_noisy_data(eta, orders):
     rec = _synthetic(eta, orders)
     fit = ff.fit_fractional(rec, pieces=3, grid=400, seed=3)
@@ -36,6 +37,7 @@ def test_identification_recovers_eta_and_orders_from_noisy_data(eta, orders):
     assert fit.relative_residual < 0.05            # noise-level misfit
 
 
+@pytest.mark.slow
 def test_a_single_order_cannot_fit_variable_order_data():
     rec = _synthetic(2.0e4, (0.3, 0.55, 0.4), noise=0.0)
     one = ff.fit_fractional(rec, pieces=1, grid=400)
