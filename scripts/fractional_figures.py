@@ -9,6 +9,10 @@
 3. fractional_identification.png: synthetic ramp-and-hold record (1 % noise) and its identification.
 4. fractional_phantoms.png + a table on stdout: identification on the three Ecoflex phantom ramps
    (whole ramp and up to 20 % strain), against an SLS fit.
+5. fractional_relax3d.png: the 3-D model in the virtual relaxation test (bench.material.relax)
+   with short memories L = 100, 1,000 and 3,400 steps (the whole record).
+
+``--only NAME`` (relax_creep, grid2d, identification, phantoms, relax3d) makes one figure.
 """
 
 from __future__ import annotations
@@ -155,16 +159,43 @@ def phantoms(out: Path, data: Path) -> list[dict]:
     return rows
 
 
+def relax3d(out: Path) -> dict:
+    from surgsim_envs.bench.material import relax
+
+    fig, ax = plt.subplots(figsize=(6, 3.8))
+    res = {}
+    for mem in (100, 1000, 3400):
+        r = relax("fractional", "liver", memory=mem, dt=1e-3, integrator="implicit")
+        ax.plot(r.time, r.force, label=f"L = {mem} steps ({mem * 1e-3:g} s)")
+        res[mem] = float(r.force[-1])
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("plate force (N)")
+    ax.set_title("3-D ramp (0.2 s, 5 %) and hold, liver, q = 0.3, implicit dt = 1 ms", fontsize=8)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "fractional_relax3d.png", dpi=120)
+    plt.close(fig)
+    return res
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", default="docs/img")
     parser.add_argument("--data", default=str(Path(__file__).resolve().parents[1].parent / "shared" / "data" / "tissue_mechanics"))
+    parser.add_argument("--only", default=None, choices=["relax_creep", "grid2d", "identification", "phantoms", "relax3d"])
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.only == "relax3d":
+        print("3-D relaxation force at 3.2 s:", relax3d(out))
+        return
+    if args.only:
+        print(globals()[args.only](out) if args.only != "phantoms" else phantoms(out, Path(args.data)))
+        return
     relax_creep(out)
     print("grid2d relative distance to the static solution after 0.2 s:", grid2d(out))
     print("identification:", identification(out))
+    print("3-D relaxation force at 3.2 s:", relax3d(out))
     for r in phantoms(out, Path(args.data)):
         s = r["sls"]
         print(f"| {r['phantom']} | {r['range']} | {r['eta']:.4g} | {', '.join(f'{q:.3f}' for q in r['q'])} | "
