@@ -62,7 +62,10 @@ class FractionalTetModel(TissueModel):
     Parameters (besides those of :class:`TissueModel`)
     ----------
     order: q in [0, 1): a number or a PiecewiseOrder of simulated time (s).
-    memory: short-memory length L (steps of history kept), >= 1.
+    memory: short-memory length L (steps of history kept), >= 1. The model remembers L dt
+        seconds: beyond that relaxation and creep stall (the truncated branch acts as a spring),
+        so for fidelity over the relaxation time use L >= relax_time / dt; the cost per step grows
+        linearly with L (docs/models/fractional.md). Default 100 (the speed target of issue 17).
     branch_fraction: None (use the material's ``relax_fraction`` per element) or a number in
         [0, 1] for every element; 1.0 = the paper's law alone.
     """
@@ -265,24 +268,33 @@ class FractionalTetModel(TissueModel):
         For a mode with omega_inf^2 (of M^-1 K_inf) and omega_f^2 (of M^-1 K_f), the step's
         characteristic equation ``zeta - 2 + 1/zeta = -dt^2 omega_inf^2 - dt^(2-q) omega_f^2
         (1 - 1/zeta)^q`` reaches zeta = -1 when ``dt^2 omega_inf^2 + 2^q dt^(2-q) omega_f^2 = 4``;
-        solved by bisection with the largest eigenvalues (Lanczos, bounds added) and the largest
-        q of the schedule. Cached; reset when the material changes."""
+        solved by bisection with the largest eigenvalues (Lanczos, bounds added), for every order
+        of the schedule (the smallest root wins). Cached; reset when the material changes."""
         if self._crit is None:
-            q = max(self.order.values)
             lam_inf = self._lambda_max(self._a_inf)
-            lam_f = self._lambda_max(self._scatter(self.fields["relax_fraction"] * self.fields["relax_time"] ** q))
-            lo, hi = 0.0, 1.0
-            if lam_inf * hi * hi + 2 ** q * hi ** (2 - q) * lam_f <= 4.0:
-                self._crit = math.inf
-            else:
-                for _ in range(200):
-                    mid = 0.5 * (lo + hi)
-                    if lam_inf * mid * mid + 2 ** q * mid ** (2 - q) * lam_f > 4.0:
-                        hi = mid
-                    else:
-                        lo = mid
-                self._crit = lo
+            crit = math.inf
+            for q in sorted(set(self.order.values)):      # the most restrictive piece of the schedule
+                lam_f = self._lambda_max(self._scatter(self.fields["relax_fraction"] * self.fields["relax_time"] ** q))
+                crit = min(crit, self._root(lam_inf, lam_f, q))
+            self._crit = crit
         return self._crit
+
+    @staticmethod
+    def _root(lam_inf: float, lam_f: float, q: float) -> float:
+        """dt with dt^2 lam_inf + 2^q dt^(2-q) lam_f = 4 (bisection; inf if none below 1 s)."""
+        def lhs(dt):
+            return lam_inf * dt * dt + 2 ** q * dt ** (2 - q) * lam_f
+
+        lo, hi = 0.0, 1.0
+        if lhs(hi) <= 4.0:
+            return math.inf
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            if lhs(mid) > 4.0:
+                hi = mid
+            else:
+                lo = mid
+        return lo
 
     def _lambda_max(self, data: np.ndarray) -> float:
         if not np.any(data):
