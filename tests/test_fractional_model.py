@@ -176,6 +176,8 @@ def test_bad_input(block):
         FractionalTetModel(block, MAT, order=1.0)
     with pytest.raises(ConfigError, match="memory"):
         FractionalTetModel(block, MAT, memory=0)
+    with pytest.raises(ConfigError, match="GB history"):
+        FractionalTetModel(block, MAT, memory=10 ** 8)
     with pytest.raises(ConfigError, match="branch_fraction"):
         FractionalTetModel(block, MAT, branch_fraction=2.0)
     m = FractionalTetModel(block, MAT)

@@ -84,7 +84,12 @@ def read_record(path: str) -> StressRecord:
         it, ie = cols.index("Time (s)"), next(i for i, c in enumerate(cols) if c.startswith("Engineering Strain"))
         isg = next(i for i, c in enumerate(cols) if c.startswith("Engineering Stress"))
         scale = 1e3 if "kPa" in cols[isg] else 1.0
-        rows = np.array([[float(x) for x in ln.split(",")] for ln in lines[header + 1:]])
+        try:
+            rows = np.array([[float(x) for x in ln.split(",")[:len(cols)]] for ln in lines[header + 1:]])
+        except ValueError as exc:
+            raise ConfigError(f"{path}: a data row after the header is not numeric ({exc})") from None
+        if rows.ndim != 2 or rows.shape[1] != len(cols):
+            raise ConfigError(f"{path}: every data row needs {len(cols)} comma-separated columns")
         return StressRecord(rows[:, it], np.abs(rows[:, ie]), scale * np.abs(rows[:, isg]), path)
     rows = []
     for k, ln in enumerate(lines):

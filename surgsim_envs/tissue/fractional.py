@@ -54,6 +54,8 @@ from surgsim_envs.tissue.fem_kernels import count_inverted
 
 DEFAULT_ORDER = 0.3
 DEFAULT_MEMORY = 100
+#: the history ring may not exceed this many bytes (2 (L + 1) x 3N doubles)
+MAX_HISTORY_BYTES = 2 * 1024 ** 3
 
 
 class FractionalTetModel(TissueModel):
@@ -87,6 +89,10 @@ class FractionalTetModel(TissueModel):
         self._branch_override = branch_fraction
         if branch_fraction is not None and not (isinstance(branch_fraction, (int, float)) and 0.0 <= branch_fraction <= 1.0):
             raise ConfigError(f"branch_fraction must be None (material relax_fraction) or a number in [0, 1], got {branch_fraction!r}")
+        ring = 2 * (self.memory + 1) * 3 * volume.n_nodes * 8
+        if ring > MAX_HISTORY_BYTES:
+            raise ConfigError(f"memory={memory} steps on {volume.n_nodes} nodes needs a {ring / 1024 ** 3:.1f} GB history "
+                              f"ring (limit {MAX_HISTORY_BYTES / 1024 ** 3:.0f} GB); use a shorter memory or a coarser mesh")
         super().__init__(volume, material, integrator=integrator, **base_kwargs)
         if order is None:
             order = self.material.extra.get("fractional_order", DEFAULT_ORDER)
