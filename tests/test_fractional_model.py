@@ -216,3 +216,30 @@ def test_palpation_task_runs_on_the_fractional_tissue():
     assert tissue_model.name == "fractional" and tissue_model.active_integrator == "implicit"
     assert np.all(np.isfinite(obs)) and np.isfinite(reward)
     env.close()
+
+
+@pytest.mark.parametrize("integrator", ["implicit", "symplectic"])
+def test_two_level_memory_recovers_the_whole_history_that_truncation_loses(block, integrator):
+    # creep under a constant load for 1,500 steps: the whole history against L = 50 alone and
+    # L = 50 plus 30 block averages of 50 steps (the nested-memory tail)
+    bottom, top = _faces(block)
+    dt = 1e-3 if integrator == "implicit" else 0.5 * FractionalTetModel(block, MAT, order=0.4, integrator="symplectic",
+                                                                      fixed=bottom).critical_dt()
+
+    def run(**kw):
+        m = FractionalTetModel(block, MAT, order=0.4, integrator=integrator, fixed=bottom, **kw)
+        forces = np.zeros((m.n_nodes, 3))
+        forces[top, 2] = -0.02
+        out = []
+        for _ in range(1500):
+            m.step(dt, forces)
+            out.append(block.nodes[top, 2].mean() - m.positions[top, 2].mean())
+        return np.array(out)
+
+    full = run(memory=1500)
+    err = {k: np.max(np.abs(run(memory=50, **kw) - full)) / np.max(full)
+           for k, kw in (("plain", {}), ("nested", {"coarse_blocks": 30, "coarse_step": 50}))}
+    assert err["plain"] > 0.3                    # truncation: the creep stalls after 50 steps
+    assert err["nested"] < 0.02
+    with pytest.raises(ConfigError, match="coarse_step"):
+        FractionalTetModel(block, MAT, memory=10, coarse_blocks=3, coarse_step=20)

@@ -82,10 +82,19 @@ class FractionalTetModel(TissueModel):
     node_field_names = ("displacement", "stress", "order")
 
     def __init__(self, volume, material="liver", *, integrator=None, order=None, memory: int = DEFAULT_MEMORY,
+                 coarse_blocks: int = 0, coarse_step: int | None = None,
                  branch_fraction: float | None = None, **base_kwargs):
         if not (isinstance(memory, (int, np.integer)) and not isinstance(memory, bool) and memory >= 1):
             raise ConfigError(f"memory (short-memory length L in steps) must be an integer >= 1, got {memory!r}")
         self.memory = int(memory)
+        if coarse_step is None:
+            coarse_step = self.memory
+        if not (isinstance(coarse_blocks, (int, np.integer)) and coarse_blocks >= 0):
+            raise ConfigError(f"coarse_blocks (block averages kept beyond the memory) must be an integer >= 0, got {coarse_blocks!r}")
+        if not (isinstance(coarse_step, (int, np.integer)) and 1 <= coarse_step <= self.memory):
+            raise ConfigError(f"coarse_step (steps per block average) must be an integer in [1, memory={self.memory}], "
+                              f"got {coarse_step!r}")
+        self.coarse_blocks, self.coarse_step = int(coarse_blocks), int(coarse_step)
         self._branch_override = branch_fraction
         if branch_fraction is not None and not (isinstance(branch_fraction, (int, float)) and 0.0 <= branch_fraction <= 1.0):
             raise ConfigError(f"branch_fraction must be None (material relax_fraction) or a number in [0, 1], got {branch_fraction!r}")
@@ -121,6 +130,11 @@ class FractionalTetModel(TissueModel):
         self._pos = self.memory + 1
         self._count = 0
         self._work = [np.zeros(3 * n) for _ in range(3)]
+        # two-level memory: block averages of coarse_step end states beyond the fine window
+        self._cbuf = np.zeros((2 * max(self.coarse_blocks, 1), 3 * n))
+        self._csum = np.zeros(3 * n)
+        self._remote = np.zeros(3 * n)
+        self._clear_coarse()
         self._s_last = np.zeros(3 * n)
         self._c_last = 0.0
         self._weights: dict[float, np.ndarray] = {}
@@ -169,10 +183,53 @@ class FractionalTetModel(TissueModel):
         return self._a_f
 
     def _gl(self, q: float) -> np.ndarray:
+        """GL weights w_0..w_Lmax (Lmax = L, or beyond it over the coarse blocks) and, with coarse
+        blocks, their cumulative sums."""
         w = self._weights.get(q)
         if w is None:
-            w = self._weights[q] = fc.gl_weights(q, self.memory)
+            lmax = self.memory + (self.coarse_blocks + 2) * self.coarse_step if self.coarse_blocks else self.memory
+            w = self._weights[q] = fc.gl_weights(q, lmax)
+            self._cumw = getattr(self, "_cumw", {})
+            self._cumw[q] = np.concatenate([[0.0], np.cumsum(w)])
         return w
+
+    def _clear_coarse(self) -> None:
+        self._cpos = max(self.coarse_blocks, 1)
+        self._ccount = 0
+        self._csum[:] = 0.0
+        self._cn = 0
+        self._pushes = 0
+        self._remote[:] = 0.0
+
+    def _remote_sum(self, q: float, shift: int) -> np.ndarray:
+        """sum over the end states older than the fine window (lag > L) of w_lag d, each coarse block
+        contributing its average times the summed weights of its lags beyond L (shift 0: the
+        symplectic lags P - 1 - e, shift 1: the implicit ones P - e; e the end-state index)."""
+        out = self._remote
+        if not self._ccount:
+            out[:] = 0.0
+            return out
+        m, p, fine = self.coarse_step, self._pushes, self.memory
+        cum = self._cumw[q]
+        b = p // m - 1 - np.arange(self._ccount)               # block index of ring entries, newest first
+        lag_hi = p - 1 - b * m + shift                          # oldest state of the block
+        lag_lo = lag_hi - (m - 1)
+        a = np.maximum(lag_lo, fine + 1)
+        wts = np.where(a <= lag_hi, cum[np.minimum(lag_hi, len(cum) - 2) + 1] - cum[np.minimum(a, len(cum) - 1)], 0.0)
+        kern.history_sum(self._cbuf, self._cpos, self._ccount, np.ascontiguousarray(wts), out)
+        return out
+
+    def _push_coarse(self, d: np.ndarray) -> None:
+        self._pushes += 1
+        if not self.coarse_blocks:
+            return
+        self._csum += d
+        self._cn += 1
+        if self._cn == self.coarse_step:
+            self._cpos = kern.push(self._cbuf, self._cpos, self.coarse_blocks, self._csum / self.coarse_step)
+            self._ccount = min(self._ccount + 1, self.coarse_blocks)
+            self._csum[:] = 0.0
+            self._cn = 0
 
     def _matrix(self, data: np.ndarray) -> sp.csr_matrix:
         """scipy (3N, 3N) matrix of block data (B, 9)."""
@@ -204,9 +261,10 @@ class FractionalTetModel(TissueModel):
             # s_n = w_0 d_n + sum_{k>=1} w_k d_{n-k}: d_n is the current state (ring row 0 holds the
             # end of the previous step, equal to it unless set_fixed moved nodes in between)
             older = min(max(self._count - 1, 0), mem)
+            remote = self._remote_sum(q, 0)
             kern.symplectic_step(x, v, self._rest_flat, self._buf, self._pos + 1, older, w, self._indptr,
                                  self._indices, self._a_inf, a_f, c, fext, self._inv_m, self._alpha_node, dt,
-                                 self.gravity, ~self.fixed, d, s, f)
+                                 self.gravity, ~self.fixed, remote, d, s, f)
             self._s_last[:] = s
         else:
             self._implicit(dt, w, a_f, c, fext, x, v, d, s, f)
@@ -214,6 +272,7 @@ class FractionalTetModel(TissueModel):
         np.subtract(x, self._rest_flat, out=d)
         self._pos = kern.push(self._buf, self._pos, mem + 1, d)
         self._count = min(self._count + 1, mem + 1)
+        self._push_coarse(d)
         self.integrated_external_forces = np.asarray(forces, dtype=np.float64).reshape(-1, 3).copy()
 
     def _implicit(self, dt, w, a_f, c, fext, x, v, d, s, f) -> None:
@@ -223,6 +282,7 @@ class FractionalTetModel(TissueModel):
         n = self.n_nodes
         q = self.current_order()
         kern.history_sum(self._buf, self._pos, min(self._count, self.memory), w[1:], s)
+        s += self._remote_sum(q, 1)
         hist = s.copy()
         np.subtract(x, self._rest_flat, out=d)
         s += w[0] * d
@@ -262,6 +322,8 @@ class FractionalTetModel(TissueModel):
         self._buf[:] = 0.0
         self._pos = self.memory + 1
         self._count = 0
+        self._cbuf[:] = 0.0
+        self._clear_coarse()
         self._s_last[:] = 0.0
         self._c_last = 0.0
         self.integrated_external_forces = np.zeros_like(self.positions)

@@ -67,10 +67,10 @@ def branch_forces(indptr, indices, a_inf, a_f, d, s, c, out):
 
 @njit(cache=True, nogil=True)
 def symplectic_step(x, v, rest, buf, pos, count, w, indptr, indices, a_inf, a_f, c, fext, inv_m, alpha, dt,
-                    grav, free, d, s, f):
+                    grav, free, remote, d, s, f):
     """One explicit step (semi-implicit Euler, mass damping implicit):
 
-    d = x - X;  s = w_0 d + sum_{k>=1} w_k d_{n-k};  f = f_ext + m g - (K_inf d + c K_f s);
+    d = x - X;  s = w_0 d + sum_{k>=1} w_k d_{n-k} + remote;  f = f_ext + m g - (K_inf d + c K_f s);
     v <- (v + dt f / m) / (1 + alpha dt);  x <- x + dt v   (free nodes only; all arrays flat 3N).
     ``d``, ``s``, ``f`` are work arrays (left holding this step's values)."""
     n = x.shape[0]
@@ -79,7 +79,7 @@ def symplectic_step(x, v, rest, buf, pos, count, w, indptr, indices, a_inf, a_f,
     history_sum(buf, pos, count, w[1:], s)
     w0 = w[0]
     for i in range(n):
-        s[i] += w0 * d[i]
+        s[i] += w0 * d[i] + remote[i]
     branch_forces(indptr, indices, a_inf, a_f, d, s, c, f)
     for i in range(n):
         node = i // 3
