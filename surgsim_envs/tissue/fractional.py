@@ -22,7 +22,8 @@ steps, default 100). The history is the nodal displacement d = x - X of the last
 the weighted sum of the element strain histories equals the strain of the weighted sum of
 displacements, so ``sum_e B_e^T V_e C_e sum_k w_k eps_e,n-k = K_f sum_k w_k d_{n-k}`` exactly:
 keeping the history per node is the per-element strain history, in 3N instead of 6T numbers per
-step (1,000-node box: 3,000 vs 26,244). Nodal forces::
+step (1,000-node box: 3,000 vs 26,244). Optionally a second ring keeps block averages of older
+states (two-level memory, ``coarse_blocks``/``coarse_step``). Nodal forces::
 
     f = f_ext + m g_grav - K_inf d_n - dt^-q K_f s_n,   s_n = sum_{k=0}^{L} w_k^{(q_n)} d_{n-k}
     K_inf = sum_e (1 - g_e) K_e,   K_f = sum_e g_e tau_e^q K_e
@@ -68,6 +69,10 @@ class FractionalTetModel(TissueModel):
         seconds: beyond that relaxation and creep stall (the truncated branch acts as a spring),
         so for fidelity over the relaxation time use L >= relax_time / dt; the cost per step grows
         linearly with L (docs/models/fractional.md). Default 100 (the speed target of issue 17).
+    coarse_blocks, coarse_step: two-level memory: beyond the L-step window keep ``coarse_blocks``
+        averages of ``coarse_step`` (<= L, default L) end states each, weighted by the exact sum of
+        their lags' GL weights; spans L + coarse_blocks x coarse_step steps for L + coarse_blocks
+        rows of work (default 0: plain truncation).
     branch_fraction: None (use the material's ``relax_fraction`` per element) or a number in
         [0, 1] for every element; 1.0 = the paper's law alone.
     """
