@@ -156,3 +156,32 @@ def test_docs_show_the_example_model_verbatim():
     code = Path(inspect.getfile(LinearSpringsModel)).read_text()
     body = code[code.index("class LinearSpringsModel"):]
     assert body.strip() in doc, "docs/models.md must show surgsim_envs/tissue/example_model.py's class verbatim"
+
+
+@pytest.mark.slow
+def test_bench_accuracy_runs_every_registered_model_by_capability(clean_registry, capsys):
+    from surgsim_envs.bench.accuracy import sweep
+
+    class _NoForces(LinearSpringsModel):
+        name = "display_only"
+        capabilities = frozenset({"history"})
+
+    tissue.register("linear_springs", LinearSpringsModel)
+    tissue.register("display_only", _NoForces)
+    rows = sweep(models=["linear_springs", "display_only"], spacings=(0.003,), progress=False, time_steps=0)
+    assert [(r["model"], r["integrator"]) for r in rows] == [("linear_springs", "symplectic")]
+    assert 0.0 < rows[0]["error"] < 1.0                       # a real force curve against Dimitriadis
+    err = capsys.readouterr().err
+    assert "'display_only' cannot serve surgsim bench accuracy" in err and "'forces'" in err
+
+
+def test_bench_accuracy_skips_a_model_without_forces_naming_the_capability(clean_registry, capsys):
+    from surgsim_envs.bench.accuracy import sweep
+
+    class _NoForces(LinearSpringsModel):
+        name = "display_only"
+        capabilities = frozenset({"history"})
+
+    tissue.register("display_only", _NoForces)
+    assert sweep(models=["display_only"], spacings=(0.003,), progress=False, time_steps=0) == []
+    assert "'display_only' cannot serve surgsim bench accuracy" in capsys.readouterr().err

@@ -1,5 +1,9 @@
 """``surgsim bench accuracy``: force error against cost for every model, integrator and resolution.
 
+Every registered model (built-ins and plugins) that declares the capability ``forces`` is run with
+each of its integrators; models without it are skipped with the CapabilityError naming what
+they lack (no model names in this module).
+
 Scene "indent": a rigid sphere (R = 5 mm) pressed into a 30 mm liver slab (E = 4 kPa, nu = 0.45)
 bonded to a rigid base (:func:`surgsim_envs.bench.material.indent`, graded quarter mesh). Error:
 mean relative force error against Dimitriadis et al. (2002) over depths in [d_v/4, d_v], d_v the
@@ -30,6 +34,10 @@ import sys
 import numpy as np
 
 from surgsim_envs.bench.references import dimitriadis_force, dimitriadis_valid_depth
+from surgsim_envs.tissue.capabilities import CapabilityError
+
+#: the capability the indentation needs (nodal forces in, positions out); asked of every registered model
+NEEDS = "forces"
 
 RADIUS, THICKNESS, MATERIAL = 0.005, 0.03, "liver"  # liver made elastic (relax_fraction = 0)
 SPACINGS = (0.003, 0.002, 0.0015, 0.001, 0.0007)
@@ -58,7 +66,16 @@ def sweep(models=None, spacings=SPACINGS, progress: bool = True, time_steps: int
 
     mat = get_material(MATERIAL).replace(relax_fraction=0.0, nonlinear=0.0)  # elastic: the reference is
     dv = dimitriadis_valid_depth(RADIUS, THICKNESS)
-    classes = [(n, c) for n, c in available_models() if models is None or n in models]
+    classes = []
+    for n, c in available_models():
+        if models is not None and n not in models:
+            continue
+        try:   # every registered model that takes nodal forces; the others say what they lack
+            c.require(NEEDS, task="surgsim bench accuracy (sphere indentation)")
+        except CapabilityError as exc:
+            print(f"surgsim bench accuracy: skipping: {exc}", file=sys.stderr)
+            continue
+        classes.append((n, c))
     jobs = [(c, integ, s) for _, c in classes for integ in c.integrators for s in spacings]
     rows = []
     with tqdm(jobs, desc="bench accuracy", unit="case", file=sys.stderr, disable=not progress) as bar:

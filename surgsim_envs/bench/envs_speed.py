@@ -60,6 +60,7 @@ def single_rate(env_id: str, steps: int, repeats: int) -> dict:
                 env.reset()
         rates.append(steps / (time.perf_counter() - t0))
     substep_us, tissue_us = overhead(env, steps, repeats, rng, pal)
+    step1_us, step1_flex_us = visual_flex_cost(u.sim, repeats)
     t0 = time.perf_counter()
     for r in range(5):
         env.reset(seed=r)
@@ -67,7 +68,8 @@ def single_rate(env_id: str, steps: int, repeats: int) -> dict:
     out = {"task": env_id, "steps_per_s": statistics.median(rates), "control_hz": u.config.control_hz,
            "physics_dt_s": u.sim.dt, "substeps": u.substeps, "tissue_nodes": int(u.sim.tissue().n_nodes),
            "reset_ms": reset_ms, "physics_steps_per_s": statistics.median(rates) * u.substeps,
-           "substep_us": substep_us, "tissue_step_us": tissue_us, "overhead_ratio": substep_us / tissue_us}
+           "substep_us": substep_us, "tissue_step_us": tissue_us, "overhead_ratio": substep_us / tissue_us,
+           "mj_step1_us": step1_us, "mj_step1_with_visual_flex_us": step1_flex_us}
     env.close()
     return out
 
@@ -105,6 +107,27 @@ def overhead(env, steps: int, repeats: int, rng, palpation: bool) -> tuple[float
             tissue.step(sim.dt, forces, stiffness)
         own.append((time.perf_counter() - t0) / k * 1e6)
     return statistics.median(sub), statistics.median(own)
+
+
+def visual_flex_cost(sim, repeats: int, n: int = 500) -> tuple[float, float]:
+    """``(us, us)``: median ``mj_step1`` of the physics model (no flex) and of the render twin (the
+    same model plus the tissue surface flexes, as every physics step paid before the twin),
+    timed alternately on copies of the current state in this process."""
+    import mujoco
+
+    sim.sync_visual()
+    models = [(sim.model, mujoco.MjData(sim.model)), (sim.render_model, mujoco.MjData(sim.render_model))]
+    for m, d in models:
+        d.qpos[:] = sim.data.qpos
+        mujoco.mj_forward(m, d)
+    times = ([], [])
+    for _ in range(repeats):
+        for k, (m, d) in enumerate(models):
+            t0 = time.perf_counter()
+            for _ in range(n):
+                mujoco.mj_step1(m, d)
+            times[k].append((time.perf_counter() - t0) / n * 1e6)
+    return statistics.median(times[0]), statistics.median(times[1])
 
 
 def async_rate(env_id: str, workers: int, steps: int, repeats: int) -> float:

@@ -8,6 +8,9 @@ process: once quiet, once while ``--flooders`` other processes send garbage data
 lengths and bytes, a quarter of them valid-length packets with a bad magic) as fast as they can
 (or at ``--flood-rate`` datagrams/s each).
 
+First, the cost of one ``poll()`` with 200 garbage datagrams queued is measured in this
+process without threads, for this build's bound and for the old unbounded read (256 datagrams,
+no time budget): the servo's own cost per tick under a flood, little affected by CPU contention.
 Reported per run: servo period median / p99 / max (ms), overruns, genuine poses accepted, the
 bridge's received / malformed / truncated-poll counts, and the flood rate actually achieved
 (datagrams/s sent, the *load*). Every figure depends on the machine and its load (reported);
@@ -138,14 +141,45 @@ def _one_run(duration: float, flooders: int, pose_hz: float, scene: bool, fake_w
     }
 
 
+def poll_cost(max_drain: int, max_poll_s: float, polls: int = 300, queue: int = 200) -> dict:
+    """Wall time of one ``UdpDevice.poll()`` with ``queue`` garbage datagrams waiting (refilled
+    before every poll, in this process, no threads): median / p99 / max in ms and datagrams read
+    per poll. This is the servo's cost per tick under a flood, independent of CPU contention."""
+    from surgsim_envs.haptics.udp_bridge import UdpDevice, UdpHapticClient
+
+    rng = np.random.default_rng(0)
+    pool = [rng.bytes(int(n)) for n in rng.integers(1, 1400, 64)]
+    times, reads = [], []
+    dev = UdpDevice(port=0, max_drain=max_drain, max_poll_s=max_poll_s)
+    with dev, UdpHapticClient(dev.address) as client:
+        for _ in range(polls):
+            for k in range(queue):
+                client.send_raw(pool[k % len(pool)])
+            before = dev.stats.received
+            t0 = time.perf_counter()
+            dev.poll()
+            times.append(time.perf_counter() - t0)
+            reads.append(dev.stats.received - before)
+            while True:  # drain the rest so every poll starts from the same queue
+                n = dev.stats.received
+                dev.poll()
+                if dev.stats.received == n:
+                    break
+    t = np.array(times) * 1e3
+    return {"max_drain": max_drain, "max_poll_s": max_poll_s, "queue": queue, "polls": polls,
+            "poll_median_ms": float(np.median(t)), "poll_p99_ms": float(np.percentile(t, 99)),
+            "poll_max_ms": float(t.max()), "reads_per_poll_median": float(np.median(reads))}
+
+
 def run_bench(duration: float = 5.0, flooders: int = 1, pose_hz: float = 1000.0, scene: bool = False,
               fake_work: float = 3e-4, max_drain: int = 32, max_poll_s: float = 2e-4, flood_rate: float = 0.0) -> dict:
     """A quiet run, then a flooded one; returns both rows and the machine load."""
     if not (duration > 0 and flooders >= 1 and pose_hz > 0):
         raise ConfigError(f"--duration, --flooders and --pose-hz must be > 0, got {duration}, {flooders}, {pose_hz}")
+    costs = [poll_cost(max_drain, max_poll_s), poll_cost(256, 1.0)]  # this build's bound vs the old one
     quiet = _one_run(duration, 0, pose_hz, scene, fake_work, max_drain, max_poll_s)
     flooded = _one_run(duration, flooders, pose_hz, scene, fake_work, max_drain, max_poll_s, flood_rate)
-    return {"quiet": quiet, "flooded": flooded, "max_drain": max_drain, "max_poll_s": max_poll_s,
+    return {"poll_cost": costs, "quiet": quiet, "flooded": flooded, "max_drain": max_drain, "max_poll_s": max_poll_s,
             "flood_rate_limit_per_s": flood_rate,
             "load_avg": list(os.getloadavg()), "cpus": os.cpu_count()}
 
@@ -169,6 +203,10 @@ def run(args) -> int:
     if args.json:
         print(json.dumps(res, indent=2))
         return 0
+    for c in res["poll_cost"]:
+        print(f"poll with {c['queue']} garbage datagrams queued, max_drain {c['max_drain']}, max_poll_s "
+              f"{c['max_poll_s']:g}: median {c['poll_median_ms']:.3f} ms, p99 {c['poll_p99_ms']:.3f} ms, "
+              f"{c['reads_per_poll_median']:.0f} datagrams read")
     for name in ("quiet", "flooded"):
         r = res[name]
         print(f"{name:<8} period median {r['period_median_ms']:.3f} ms, p99 {r['period_p99_ms']:.3f} ms, "

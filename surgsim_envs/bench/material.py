@@ -33,9 +33,6 @@ import scipy.sparse.linalg as spla
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.tissue.materials import Material, get_material
 
-#: integrator names treated as unconditionally stable (no explicit dt limit); "auto" switches to
-#: the model's implicit integrator above its explicit limit (TissueModel.choose_integrator)
-IMPLICIT_INTEGRATORS = ("implicit", "static", "quasi_static", "backward_euler", "auto")
 DEFAULT_DT = 1e-3  # s
 
 
@@ -61,17 +58,23 @@ def _positive(**values) -> None:
 
 
 def is_explicit(cls, integrator: str | None) -> bool:
-    integ = integrator or cls.integrators[0]
-    return integ not in IMPLICIT_INTEGRATORS and not getattr(cls, "quasi_static", False)
+    """Whether ``integrator`` of model class ``cls`` has an explicit dt limit, from the contract
+    (no integrator-name lists): quasi-static models and "auto" (which switches to the implicit
+    member of ``auto_pair`` above the limit) have none, nor has the implicit member itself."""
+    integ = integrator or cls.default_integrator or cls.integrators[0]
+    if integ == "auto" or "quasi_static" in cls.capabilities:
+        return False
+    return not (cls.auto_pair is not None and integ == cls.auto_pair[1])
 
 
-def stable_dt(model, dt: float | None = None, safety: float = 0.8) -> float:
-    """``dt`` (default 1 ms), reduced to ``safety`` x the critical dt for explicit integrators."""
+def stable_dt(model, dt: float | None = None) -> float:
+    """``dt`` (default 1 ms), reduced to the model's ``stable_dt()`` (DT_SAFETY x critical dt, the
+    one safety factor) for explicit integrators."""
     dt = DEFAULT_DT if dt is None else float(dt)
     if is_explicit(type(model), model.integrator):
-        crit = float(model.critical_dt())
-        if math.isfinite(crit) and crit > 0:
-            dt = min(dt, safety * crit)
+        limit = float(model.stable_dt())
+        if math.isfinite(limit) and limit > 0:
+            dt = min(dt, limit)
     return dt
 
 
@@ -174,7 +177,7 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
     quarter: simulate a quarter slab with symmetry conditions (exact for a centred sphere; 4x fewer
         nodes); the force is that of the whole slab.
     n_depths: depths sampled uniformly in (0, depth].
-    dt, time_steps: the timed dynamic run (dt default 1 ms, reduced to 0.8 x the critical dt for
+    dt, time_steps: the timed dynamic run (dt default 1 ms, reduced to the model's stable_dt() for
         explicit integrators); ``time_steps=0`` skips it (us_per_step = nan).
     **opts: model options (e.g. integrator="implicit").
 

@@ -20,11 +20,11 @@ from typing import Any
 
 import numpy as np
 
+from surgsim_envs.bench.material import is_explicit
 from surgsim_envs.errors import ConfigError, SurgSimError
 
 SPACING = 0.005  # m
 DEFAULT_SIZES = (250, 1000, 4000)
-IMPLICIT_NAMES = ("implicit", "static", "quasi_static", "backward_euler")
 
 
 def _positive_int(text: str) -> int:
@@ -83,10 +83,10 @@ def time_model(cls, integrator: str, target: int, repeats: int, steps: int, warm
     try:
         model = cls(vol, "liver", integrator=integrator, fixed=bottom)
         dt = 1e-3
-        if integrator not in IMPLICIT_NAMES and not getattr(cls, "quasi_static", False):
-            crit = model.critical_dt()
-            if math.isfinite(crit):
-                dt = min(dt, 0.5 * crit)
+        if is_explicit(cls, integrator):
+            limit = model.stable_dt()            # the one safety factor (tissue/base.py DT_SAFETY)
+            if math.isfinite(limit):
+                dt = min(dt, limit)
         forces = _load(model, top)
         for _ in range(warmup):
             model.step(dt, forces)

@@ -210,14 +210,14 @@ class HapticDevice(ABC):
 # ----------------------------------------------------------------------------------------------
 # One device-spec parser and factory for the CLI, scenarios and teleop
 #: device kinds a spec may name, with the form of their argument
-DEVICE_SPECS = {"scripted": "scripted", "keyboard": "keyboard", "replay": "replay:FILE", "udp": "udp:PORT"}
+DEVICE_SPECS = {"scripted": "scripted", "replay": "replay:FILE", "keyboard": "keyboard", "udp": "udp:PORT"}
 
 
 def parse_device_spec(spec: str) -> tuple[str, str | int | None]:
     """``"scripted"`` / ``"keyboard"`` / ``"replay:FILE"`` / ``"udp:PORT"`` -> ``(kind, argument)``;
     ConfigError naming the spec and the accepted forms otherwise (the file is checked by the
     factory, relative to its base folder)."""
-    forms = ", ".join(DEVICE_SPECS.values())
+    forms = ", ".join(list(DEVICE_SPECS.values())[:-1]) + " or " + list(DEVICE_SPECS.values())[-1]
     if not isinstance(spec, str):
         raise ConfigError(f"device spec must be a string ({forms}), got {spec!r}")
     kind, sep, arg = spec.partition(":")

@@ -50,23 +50,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def parse_device(spec: str) -> tuple[str, str | int | None]:
-    """``"scripted"`` / ``"replay:FILE"`` / ``"keyboard"`` / ``"udp:PORT"`` -> (kind, argument)."""
-    if spec in ("scripted", "keyboard"):
-        return spec, None
-    kind, _, arg = spec.partition(":")
-    if kind == "replay" and arg:
-        if not Path(arg).is_file():
-            raise ConfigError(f"--device replay:{arg}: file not found; give a .csv or .json pose recording")
-        return "replay", arg
-    if kind == "udp" and arg:
-        try:
-            port = int(arg)
-        except ValueError:
-            port = -1
-        if not 0 < port < 65536:
-            raise ConfigError(f"--device udp:{arg}: PORT must be an integer in 1..65535, e.g. udp:9870")
-        return "udp", port
-    raise ConfigError(f"--device {spec!r} not understood; use scripted, replay:FILE, keyboard or udp:PORT")
+    """``"scripted"`` / ``"replay:FILE"`` / ``"keyboard"`` / ``"udp:PORT"`` -> (kind, argument)
+    (:func:`surgsim_envs.haptics.device.parse_device_spec`, the one parser; a replay FILE must exist)."""
+    from surgsim_envs.haptics.device import parse_device_spec
+
+    kind, arg = parse_device_spec(spec)
+    if kind == "replay" and not Path(arg).is_file():
+        raise ConfigError(f"--device replay:{arg}: file not found; give a .csv or .json pose recording")
+    return kind, arg
 
 
 def default_script(task: str, physics, seed: int = 0, tremor: float = 0.0) -> dict:
@@ -104,20 +95,16 @@ def _load_script(path: str) -> dict:
 
 
 def make_device(kind: str, arg, args, physics, limits):
-    """Build the device named on the command line."""
-    from surgsim_envs.haptics.keyboard import KeyboardDevice
-    from surgsim_envs.haptics.replay import ReplayDevice
+    """Build the device named on the command line (:func:`surgsim_envs.haptics.device.make_device`;
+    "scripted" plays ``--script`` or the task's demonstration trajectory)."""
+    from surgsim_envs.haptics.device import make_device as make
     from surgsim_envs.haptics.scripted import ScriptedDevice, TrajectorySpec
-    from surgsim_envs.haptics.udp_bridge import UdpDevice
 
-    if kind == "scripted":
+    def scripted():
         spec = _load_script(args.script) if args.script else default_script(args.task, physics, args.seed, args.tremor)
         return ScriptedDevice(TrajectorySpec.from_dict(spec), limits=limits)
-    if kind == "replay":
-        return ReplayDevice(arg, limits=limits)
-    if kind == "keyboard":
-        return KeyboardDevice(limits=limits)
-    return UdpDevice(port=int(arg), limits=limits)
+
+    return make(args.device, limits=limits, scripted=scripted)
 
 
 def run(args) -> int:

@@ -281,8 +281,10 @@ def check_tools_clear(scene: Scene) -> None:
 # Ready-made scenes
 def palpation_config(organ: str = "slab_inclusion", model: str = "mass_spring") -> SceneConfig:
     """A probe above the middle of a 10 x 10 x 2 cm liver slab with a stiff inclusion, bed fixed."""
+    # coloured by displacement (0-4 mm, viridis): the press shows as a colour change, not only a dent
     tissue = TissueConfig(name="slab", organ=organ, model=model, material="liver", spacing=0.005,
-                          anchors=("bottom",), position=(0.0, 0.0, 0.01),
+                          anchors=("bottom",), position=(0.0, 0.0, 0.01), render_field="displacement",
+                          render_range=(0.0, 0.004),
                           region_materials={1: {"preset": "liver", "young": 20_000.0, "name": "tumour"}},
                           options={"integrator": "symplectic"})
     probe = ProbeConfig(name="probe", tip_radius=0.008, position=(0.0, 0.0, 0.031))

@@ -1,6 +1,6 @@
 """Colour a tissue surface by a per-node scalar field (``render_field="displacement"`` ...).
 
-Measured in MuJoCo 4.0 (docs/scene.md "Scalar fields on screen"): a flex whose material carries a
+Measured in MuJoCo 4.0 (docs/models.md "Scalar fields on screen"): a flex whose material carries a
 2-D texture and which has one texture coordinate per vertex (``flex.texcoord``) is drawn with the
 texture colour at that coordinate, and ``MjModel.flex_texcoord`` may be rewritten between frames
 (``mjv_updateScene`` copies it into ``mjvScene.flextexcoord`` each time). So the colour map is a

@@ -1,4 +1,4 @@
-"""Offscreen rendering of a :class:`Simulation` and MP4 output with OpenCV.
+"""Offscreen rendering of a :class:`Simulation`; MP4 output (:class:`VideoWriter`, scene/media.py).
 
 Headless machines: set ``MUJOCO_GL=egl`` (Mesa EGL, no GPU needed) or ``MUJOCO_GL=osmesa``
 (``apt-get install libosmesa6``) before MuJoCo is imported; :mod:`surgsim_envs.scene` sets
@@ -74,38 +74,5 @@ class SceneRenderer:
             pass
 
 
-class VideoWriter:
-    """Writes RGB frames to an MP4 file (OpenCV, codec mp4v) at ``fps`` frames per second."""
-
-    def __init__(self, path, fps: float, size: tuple[int, int]):
-        import cv2
-
-        if not (isinstance(fps, (int, float)) and fps > 0):
-            raise ConfigError(f"fps must be > 0, got {fps!r}")
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        w, h = size
-        self._writer = cv2.VideoWriter(str(self.path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (int(w), int(h)))
-        if not self._writer.isOpened():
-            raise RenderingUnavailableError(f"OpenCV could not open {self.path} for MP4 (mp4v) writing")
-        self.size = (int(w), int(h))
-        self.frames = 0
-
-    def write(self, rgb: np.ndarray) -> None:
-        import cv2
-
-        if rgb.shape[:2] != (self.size[1], self.size[0]):
-            rgb = cv2.resize(rgb, self.size)
-        self._writer.write(cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
-        self.frames += 1
-
-    def close(self) -> None:
-        if self._writer is not None:
-            self._writer.release()
-            self._writer = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+# MP4 output lives in scene/media.py (H.264 when imageio-ffmpeg is installed, else mp4v, stated)
+from surgsim_envs.scene.media import VideoWriter  # noqa: E402,F401
