@@ -33,6 +33,7 @@ BENCH: dict[str, tuple[str, str]] = {
     "soak": ("surgsim_envs.bench.soak", "long random-action runs: NaN, exceptions, force bounds, memory growth"),
     "diffusion": ("surgsim_envs.bench.diffusion_bench", "diffusion model (paper 000) update time vs the paper's Table 9.1"),
     "growth": ("surgsim_envs.bench.growth_speed", "tissue growth iteration time (paper 004) on a ~10,000-node mesh"),
+    "memory": ("surgsim_envs.bench.fractional_memory", "fractional model: error and step cost against short memory L"),
 }
 
 

@@ -255,3 +255,22 @@ def test_cli_checks_the_device_file_and_a_non_string_phase_type(tmp_path, capsys
     assert "replay file 'missing.csv' not found" in capsys.readouterr().err
     with pytest.raises(ConfigError, match=r"phases\[0\]\.type: give the phase type as a string, got \[1\]"):
         loads_scenario(PHASES.replace('type = "press"', "type = [1]"), "x.toml")
+
+
+def test_npz_policy_drives_a_task_rollout(tmp_path):
+    gym = pytest.importorskip("gymnasium")
+    import surgsim_envs.envs  # noqa: F401
+    from surgsim_envs.scenarios import run_scenario
+
+    env = gym.make("SurgSim/Palpation-v0")
+    n_obs, n_act = env.observation_space.shape[0], env.action_space.shape[0]
+    low, high = env.action_space.low, env.action_space.high
+    env.close()
+    rng = np.random.default_rng(0)
+    NpzPolicy([rng.normal(size=(n_obs, 16)) * 0.1, rng.normal(size=(16, n_act))], [np.zeros(16), np.zeros(n_act)],
+              output_activation="tanh", action_low=low, action_high=high).save(tmp_path / "scan.npz")
+    text = ROLLOUT.format(ref="scan.npz") + "episodes = 1\nmax_steps = 5\n"
+    sc = load_scenario(_write(tmp_path, text))  # no --allow-code needed: data
+    (res,) = run_scenario(sc, progress=False)
+    assert res.error is None or "max_steps" in res.error
+    assert len(res.recording.t) == 5 and np.all(np.isfinite(res.recording.normal))

@@ -1,5 +1,5 @@
-"""Teleop videos run at their nominal frame rate (issue 14): slow rendering duplicates frames
-instead of fast-forwarding the video."""
+"""Teleop recordings (issue 14): videos run at their nominal frame rate (slow rendering duplicates
+frames instead of fast-forwarding the video); malformed force logs name the line."""
 
 from __future__ import annotations
 
@@ -85,3 +85,14 @@ def test_teleop_headless_video_lasts_as_long_as_the_run(tmp_path, capsys):
     assert fps == pytest.approx(20.0)
     wall = json.loads((out / "stats.json").read_text())["duration_s"]  # >= 1 s: the first render is slow
     assert wall >= 1.0 and frames == round(wall * fps)  # plays in real time, however few images were rendered
+
+
+@pytest.mark.parametrize("row, message", [("0.1,1,x,3,0", "line 3: not four numbers"),
+                                          ("0.1,1,nan,3,0", "line 3: non-finite"), ("0.1,1,2", "line 3: not four")])
+def test_malformed_force_log_rows_name_the_line(tmp_path, row, message):
+    from surgsim_envs.haptics.recording import ForceLog
+
+    f = tmp_path / "log.csv"
+    f.write_text("t,fx,fy,fz,saturated\n0.0,0,0,0,0\n" + row + "\n")
+    with pytest.raises(ConfigError, match=message):
+        ForceLog.from_csv(f)

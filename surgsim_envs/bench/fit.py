@@ -11,6 +11,10 @@ Least squares, ``min sum_k (F_model(x_k; p) - F_k)^2`` over the data points (x =
   (a few dozen relaxation simulations of a coarse block).
 
 CSV: two columns (x, force in N), optional header line. The plot shows data against the fit.
+
+Constitutive (1-D stress-strain) fits are registered in ``STRESS_STRAIN_FITS`` (model name ->
+module with ``run_cli(args)``): ``--model fractional --test relax|ramp --data FILE.csv`` reads a
+``time_s, strain, stress_Pa`` record instead (paper 003, :mod:`surgsim_envs.bench.fractional_fit`).
 """
 
 from __future__ import annotations
@@ -25,6 +29,11 @@ import scipy.optimize as so
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.tissue.materials import get_material
+
+#: model name -> module whose ``run_cli(args)`` fits a 1-D stress-strain record (time, strain, stress)
+STRESS_STRAIN_FITS: dict[str, str] = {
+    "fractional": "surgsim_envs.bench.fractional_fit",
+}
 
 
 @dataclass
@@ -198,8 +207,10 @@ def plot_fit(result: FitResult, path: str) -> None:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", required=True, help="registered model name (surgsim models)")
-    parser.add_argument("--test", required=True, choices=["indent", "relax"])
-    parser.add_argument("--data", required=True, help="CSV: depth_m,force_N (indent) or time_s,force_N (relax)")
+    parser.add_argument("--test", required=True, choices=["indent", "relax", "ramp"],
+                        help="indent, relax (force data) or, for stress-strain models (fractional), relax / ramp")
+    parser.add_argument("--data", required=True, help="CSV: depth_m,force_N (indent) or time_s,force_N (relax); "
+                        "stress-strain models: time_s,strain,stress_Pa (or an Instron phantom file)")
     parser.add_argument("--material", default="liver", help="starting material preset (default liver)")
     parser.add_argument("--radius", type=float, default=0.005, help="indent: sphere radius m")
     parser.add_argument("--thickness", type=float, default=0.03, help="indent: slab thickness m")
@@ -211,9 +222,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                         help="model option for the fit runs (repeatable), e.g. --option length=depth")
+    parser.add_argument("--pieces", type=int, default=3, help="fractional: constant-order subintervals of q(t) (default 3)")
+    parser.add_argument("--grid", type=int, default=400, help="fractional: uniform grid samples of the estimate (default 400)")
+    parser.add_argument("--seed", type=int, default=0, help="fractional: differential-evolution seed (default 0)")
+    parser.add_argument("--max-strain", type=float, default=None, help="fractional: use the record up to this strain")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.model in STRESS_STRAIN_FITS:
+        import importlib
+
+        return int(importlib.import_module(STRESS_STRAIN_FITS[args.model]).run_cli(args) or 0)
+    if args.test == "ramp":
+        raise ConfigError(f"--test ramp is a stress-strain fit, available for models {sorted(STRESS_STRAIN_FITS)}; "
+                          f"for {args.model!r} use --test indent or relax")
     x, force = read_csv(args.data)
     if args.test == "indent":
         opts = {"indenter_radius": args.radius, "thickness": args.thickness, "bonded": not args.unbonded}

@@ -195,8 +195,9 @@ def run(args) -> int:
     tasks = sorted(k for k in gym.registry if k.startswith("SurgSim/")) if args.task == "all" else [args.task]
     rows = [soak(t, args.steps, args.seed, args.force_bound, args.max_seconds, args.sample_every,
                  progress=not args.quiet and not args.json) for t in tasks]
-    if args.json:
-        print(json.dumps(rows, indent=2))
+    if args.json:  # strict JSON: NaN (e.g. no RSS baseline in a run of one episode) becomes null
+        print(json.dumps([{k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()}
+                          for r in rows], indent=2))
     else:
         print(f"{'task':<22} {'steps':>9} {'episodes':>8} {'steps/s':>8} {'NaN':>4} {'exc':>4} {'unstable':>8} "
               f"{'obs OOB':>7} {'force OOB':>9} {'RSS growth MB':>13}")

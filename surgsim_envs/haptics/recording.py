@@ -118,7 +118,14 @@ class ForceLog:
             if missing:
                 raise ConfigError(f"force log {str(path)!r} lacks columns {sorted(missing)}; expected header {','.join(CSV_HEADER)}")
             for row in reader:
-                log.append(float(row["t"]), (float(row["fx"]), float(row["fy"]), float(row["fz"])), row["saturated"] == "1")
+                try:
+                    values = [float(row[k]) for k in ("t", "fx", "fy", "fz")]
+                except (TypeError, ValueError):
+                    raise ConfigError(f"force log {str(path)!r}, line {reader.line_num}: not four numbers "
+                                      f"t,fx,fy,fz: {row!r}") from None
+                if not all(math.isfinite(v) for v in values):
+                    raise ConfigError(f"force log {str(path)!r}, line {reader.line_num}: non-finite value in {values}")
+                log.append(values[0], values[1:], row["saturated"] == "1")
         return log
 
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -84,8 +85,6 @@ def run(args) -> int:
         raise ConfigError("--device keyboard needs --viewer (the keys are read from the viewer window)")
     from surgsim_envs.scenarios.report import write_report
     from surgsim_envs.scenarios.runner import run_scenario
-
-    import re
 
     if args.out:
         out = Path(args.out)

@@ -86,7 +86,8 @@ SCENES = ("palpation", "grasp")
 DRIVERS = ("script", "device", "policy")
 MAX_FILE_BYTES = 1_000_000
 NAME_PATTERN = r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,99}"
-#: (key, low, high, low inclusive, unit): physical limits of numeric values, checked at load time
+#: rule -> (low, high, low inclusive, unit): limits of numeric values (high always inclusive),
+#: checked at load time; a phase field ``f`` uses rule ``phase.f`` (arrays: every element)
 LIMITS: dict[str, tuple[float, float, bool, str]] = {
     "scenario.sample_period": (1e-4, 10.0, True, "s"),
     "scenario.duration_scale": (0.0, 100.0, False, ""),

@@ -176,7 +176,7 @@ class TetFEMModel(TissueModel):
         self._kdiag_node = self._k_rest.diagonal().reshape(-1, 3).mean(axis=1)
         self._kdev_diag_node = None
         if self.formulation == "anp":   # diagonal of the deviatoric part (for the pressure preconditioner)
-            self._kdev_diag_node = asm.assemble(self.tets, self._ke, n).diagonal().reshape(-1, 3).mean(axis=1)
+            self._kdev_diag_node = self._element_diagonal(self._ke)
         self._lin = None          # cached (dt, fixed mask, LU of A_ff) for the linear implicit step
         self._pre_refresh = False
         self._pre_base_iters = None
@@ -185,15 +185,50 @@ class TetFEMModel(TissueModel):
 
     def _assemble_stiffness(self, rotations, scale=None) -> sp.csr_matrix:
         """Global (3N,3N) stiffness (N/m), warped by per-element ``rotations`` if given, with every
-        element's moduli multiplied by ``scale`` (T,) if given (viscoelastic effective stiffness)."""
+        element's moduli multiplied by ``scale`` (T,) if given (viscoelastic effective stiffness).
+        At rest (no rotations) the sparsity pattern and the ANP volume operator are cached, so a
+        material change (:meth:`scale_material`) re-assembles by a bincount, not a COO sort."""
         ke = self._ke if scale is None else self._ke * scale[:, None, None]
-        ke = ke if rotations is None else asm.rotate_element_matrices(ke, rotations)
-        k = asm.assemble(self.tets, ke, self.n_nodes)
+        if rotations is not None:
+            k = asm.assemble(self.tets, asm.rotate_element_matrices(ke, rotations), self.n_nodes)
+            if self.formulation == "anp":
+                kappa = self.kappa_node if scale is None else self._scaled_kappa_node(scale)
+                k = k + asm.anp_volumetric_matrix(self.tets, self.grads, self.tet_volume, kappa,
+                                                  self.n_nodes, rotations)
+            return k.tocsr()
+        k = self._assemble_rest(ke)
         if self.formulation == "anp":
             kappa = self.kappa_node if scale is None else self._scaled_kappa_node(scale)
-            k = k + asm.anp_volumetric_matrix(self.tets, self.grads, self.tet_volume, kappa,
-                                              self.n_nodes, rotations)
+            bv, bvt = self._rest_volume_operator()
+            k = k + (bvt @ sp.diags(kappa * self.node_volume) @ bv)
         return k.tocsr()
+
+    def _assemble_rest(self, ke) -> sp.csr_matrix:
+        """Sum of element matrices (T,12,12) into the cached CSR pattern of the mesh."""
+        n3 = 3 * self.n_nodes
+        if getattr(self, "_pattern", None) is None:
+            dofs = asm.element_dofs(self.tets)
+            key = np.repeat(dofs, 12, axis=1).ravel() * n3 + np.tile(dofs, (1, 12)).ravel()
+            uniq, inv = np.unique(key, return_inverse=True)
+            rows = uniq // n3
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n3))])
+            self._pattern = (inv, (uniq % n3).astype(np.int32), indptr.astype(np.int32), len(uniq))
+        inv, indices, indptr, nnz = self._pattern
+        data = np.bincount(inv, weights=ke.ravel(), minlength=nnz)
+        return sp.csr_matrix((data, indices, indptr), shape=(n3, n3))
+
+    def _rest_volume_operator(self):
+        """Cached (Bv, Bv^T) of the rest-state ANP volume average (geometry only)."""
+        if getattr(self, "_bv_rest", None) is None:
+            bv = asm.anp_volume_operator(self.tets, self.grads, self.tet_volume, self.n_nodes).tocsr()
+            self._bv_rest = (bv, bv.T.tocsr())
+        return self._bv_rest
+
+    def _element_diagonal(self, ke) -> np.ndarray:
+        """(N,) mean over the three axes of the diagonal of the assembled element matrices."""
+        d = np.bincount(asm.element_dofs(self.tets).ravel(), weights=np.diagonal(ke, axis1=1, axis2=2).ravel(),
+                        minlength=3 * self.n_nodes)
+        return d.reshape(-1, 3).mean(axis=1)
 
     def _scaled_kappa_node(self, scale) -> np.ndarray:
         return asm.nodal_average(self.tets, self.tet_volume, self._kappa_el * scale, self.n_nodes)
@@ -300,7 +335,7 @@ class TetFEMModel(TissueModel):
             k = self._assemble_stiffness(None, c)
             kdev = None
             if self._anp:
-                kdev = asm.assemble(self.tets, self._ke * c[:, None, None], self.n_nodes).diagonal().reshape(-1, 3).mean(axis=1)
+                kdev = self._element_diagonal(self._ke * c[:, None, None])
             out = out + (self.mu * c, self.lam * c, self._scaled_kappa_node(c),
                          k.diagonal().reshape(-1, 3).mean(axis=1), kdev, k)
         if len(self._visco_cache) > 8:

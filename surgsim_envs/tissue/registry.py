@@ -21,6 +21,7 @@ BUILTIN_MODELS: dict[str, str] = {
     "mass_spring": "surgsim_envs.tissue.mass_spring:MassSpringModel",
     "fem": "surgsim_envs.tissue.fem:TetFEMModel",
     "diffusion": "surgsim_envs.tissue.diffusion:DiffusionModel",
+    "fractional": "surgsim_envs.tissue.fractional:FractionalTetModel",
 }
 
 _registry: dict[str, Any] = {}
