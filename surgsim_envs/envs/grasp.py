@@ -37,35 +37,19 @@ from typing import Any, Sequence
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_on_unstable,
-                                   check_positive, check_range, check_task_resolution, ObsTerm, require_capabilities,
-                                   reward_from_terms, sample)
-from surgsim_envs.envs.grasp_common import (ORGAN_SPACING, SlipTracker, build_grasp_simulation, contact_nodes,
-                                            contact_reward, excess_force_penalty, is_grasped, record_progress,
-                                            slip_fraction)
-from surgsim_envs.errors import ConfigError
+from surgsim_envs.envs.base import ObsTerm, check_positive, check_range, reward_from_terms, sample
+from surgsim_envs.envs.grasp_common import (contact_nodes, contact_reward, excess_force_penalty, is_grasped,
+                                            record_progress, slip_fraction)
+from surgsim_envs.envs.grasp_scene import GraspSceneConfig, GraspSceneEnv
 
 
 @dataclass
-class GraspConfig:
-    """Grasp-v0 settings (SI units). Ranges are (low, high) sampled uniformly per episode."""
+class GraspConfig(GraspSceneConfig):
+    """Grasp-v0 settings (SI units): the shared grasp-scene fields (:class:`GraspSceneConfig`) plus
+    the task's target and reward. Ranges are (low, high) sampled uniformly per episode."""
 
-    control_hz: float = 50.0
-    dt: float = 4e-4                   # s; squeezed, strain-stiffened tissue needs < 0.5 ms
-    episode_seconds: float = 3.0
-    organ: str = "spleen"
-    model: str = "mass_spring"         # any registered tissue model with the "forces" capability
-    integrator: str = "symplectic"     # used if the model has it, else the model's "auto"
-    resolution: float | str | None = None   # None: the organ's task lattice; a spacing in m; "auto"
-    error_tolerance: float = 0.1       # resolution="auto": force error limit (fraction)
-    step_budget_us: float = 5_000.0    # resolution="auto": compute limit, us per simulated ms
-    on_unstable: str = "raise"         # "terminate": a tissue divergence ends the episode (info["unstable"])
-    closing_speed: float = 0.03        # m/s, jaw rate limit
     max_step: float = 0.001            # m per control step (5 cm/s at 50 Hz)
     workspace: float = 0.06            # m, wrist target |offset| from home per axis
-    # randomisation
-    mu: Sequence[float] = (0.6, 1.0)                 # tool-tissue Coulomb friction
-    young_scale: Sequence[float] = (0.8, 1.2)        # organ Young's modulus scale
     target_offset_x: Sequence[float] = (0.012, 0.02)  # m, along the pull direction (out of the organ)
     target_offset_z: Sequence[float] = (0.0, 0.005)   # m, lift
     # reward
@@ -78,44 +62,26 @@ class GraspConfig:
     drop_penalty: float = 0.5
     success_bonus: float = 5.0
     tolerance: float = 0.005           # m
-    camera: str = "overview"
-    render_width: int = 480
-    render_height: int = 480
 
     def validate(self) -> None:
-        for key in ("control_hz", "dt", "episode_seconds", "closing_speed", "max_step", "workspace", "hold_force",
-                    "damage_force", "tolerance"):
+        super().validate()
+        for key in ("max_step", "workspace", "hold_force", "damage_force", "tolerance"):
             check_positive(getattr(self, key), f"GraspConfig.{key}")
-        check_control_rate(self, type(self).__name__)
-        check_task_resolution(self, type(self).__name__)
-        check_on_unstable(self.on_unstable, type(self).__name__)
-        if self.organ not in ORGAN_SPACING:
-            raise ConfigError(f"GraspConfig.organ={self.organ!r}; choose one of {sorted(ORGAN_SPACING)}")
-        check_range(self.mu, "mu", 0.0, 2.0)
-        check_range(self.young_scale, "young_scale", 0.5, 1.25)
         check_range(self.target_offset_x, "target_offset_x", -self.workspace, self.workspace)
         check_range(self.target_offset_z, "target_offset_z", -self.workspace, self.workspace)
 
 
-class GraspEnv(SurgSimEnv):
+class GraspEnv(GraspSceneEnv):
     """Grasp-v0 (see module docstring)."""
 
     config_cls = GraspConfig
     TASK_ID = "SurgSim/Grasp-v0"
-    REQUIRES = ("forces",)      # tissue capabilities the task needs (contract v2)
     OPTIONS = ("organ", "mu", "young_scale", "target_offset_x", "target_offset_z")
-    tool_name = "grasper"
 
     def _build(self) -> None:
         self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
-        self._select(self.config.organ)
-        self.slip = SlipTracker()
+        self._build_scene()
         self._set_observation_terms(self._observation_terms())
-
-    def _reach(self) -> tuple[float, float, float]:
-        """(low, high, span) m of the wrist's reachable world coordinates: home +- travel."""
-        t = float(self.gcfg.travel) * np.sqrt(3.0)      # slides along the (rotated) wrist axes
-        return float(self.home.min()) - t, float(self.home.max()) + t, 2.0 * t
 
     def _observation_terms(self) -> list:
         lo, hi, span = self._reach()
@@ -123,38 +89,6 @@ class GraspEnv(SurgSimEnv):
                 ObsTerm("jaw_opening", "m", 1, 0.0, 2.0 * float(self.gcfg.open_radius)),
                 ObsTerm("jaw_normal_force", "N", 3, 0.0), ObsTerm("jaw_tangential_force", "N", 3, 0.0),
                 ObsTerm("slipping_contacts", "1", 1, 0.0), ObsTerm("contacts", "1", 1, 0.0)]
-
-    def _select(self, organ: str) -> None:
-        if organ not in ORGAN_SPACING:
-            raise ConfigError(f"unknown organ {organ!r}; choose one of {sorted(ORGAN_SPACING)}")
-        if organ not in self._sims:
-            c = self.config
-            require_capabilities(c.model, self.REQUIRES, self.TASK_ID)
-            self._sims[organ] = build_grasp_simulation(organ, c.dt, self.substeps, c.closing_speed, c.resolution,
-                                                       c.error_tolerance, c.step_budget_us, model=c.model,
-                                                       integrator=c.integrator)
-        self.sim = self._sims[organ]
-        self.organ = organ
-        tool = self.sim.tool(self.tool_name)
-        self.home = tool.home.copy()
-        self.frame = tool.frame
-        self.gcfg = tool.config
-        self.pull_dir = -np.asarray(self.gcfg.axis, dtype=float) / np.linalg.norm(self.gcfg.axis)
-
-    def _randomise_common(self, options: dict[str, Any]) -> None:
-        c, rng = self.config, self.np_random
-        self._select(options.get("organ", self.config.organ))
-        mu = sample(rng, options.get("mu", c.mu), "mu", 0.0, 2.0)
-        scale = sample(rng, options.get("young_scale", c.young_scale), "young_scale", 0.5, 1.25)
-        self.sim.tissue().scale_material("young", scale)   # the contract's only way to change stiffness
-        for contact in self.sim.contacts.values():
-            contact.tool_friction[:] = mu
-        self.sim.reset(seed=int(rng.integers(2**31)))
-        check_explicit_step(self.sim.tissue(), self.sim.dt, f"young_scale {scale:.2f}")
-        self.mu, self.young_scale = mu, scale
-        self.slip.reset()
-        self.slip_distance = 0.0
-        self.was_grasped = False
 
     def _randomise(self, options: dict[str, Any]) -> None:
         c, rng = self.config, self.np_random
@@ -178,12 +112,6 @@ class GraspEnv(SurgSimEnv):
         radius = g.open_radius - (a[3] + 1.0) / 2.0 * (g.open_radius - g.min_radius)
         self.sim.set_jaw_opening(self.tool_name, float(np.clip(radius, g.min_radius, g.open_radius)))
         self.sim.step()
-
-    def _readings(self):
-        sim = self.sim
-        jaws = sim.jaw_forces(self.tool_name)
-        rep = sim.contact_report()[self.tool_name]
-        return sim.tool_position(self.tool_name), jaws["normal"], jaws["tangential"], rep
 
     def _observe(self) -> np.ndarray:
         pos, fn, ft, rep = self._readings()
@@ -227,10 +155,6 @@ class GraspEnv(SurgSimEnv):
         self.prev_dist = dist
         reward, terms["reward_terms"] = reward_from_terms(rt)
         return reward, terminated, terms
-
-    def _metrics(self) -> dict[str, Any]:
-        return {"organ": self.organ, "mu": self.mu, "young_scale": self.young_scale,
-                "slip_distance_m": self.slip_distance, "success": False, "is_success": False, "dropped": False}
 
 
 def grasp_expert(env, close_action: float = 1.0, close_steps: int = 30):

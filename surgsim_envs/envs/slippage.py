@@ -33,14 +33,15 @@ import numpy as np
 from gymnasium import spaces
 
 from surgsim_envs.envs.base import ObsTerm, check_positive, check_range, reward_from_terms, sample
-from surgsim_envs.envs.grasp import GraspConfig, GraspEnv
+from surgsim_envs.envs.grasp_scene import GraspSceneConfig, GraspSceneEnv
 from surgsim_envs.envs.grasp_common import contact_nodes
 from surgsim_envs.errors import ConfigError
 
 
 @dataclass
-class SlippageConfig(GraspConfig):
-    """Slippage-v0 settings (SI units); inherits the grasp scene settings of :class:`GraspConfig`."""
+class SlippageConfig(GraspSceneConfig):
+    """Slippage-v0 settings (SI units): the shared grasp-scene fields (:class:`GraspSceneConfig`)
+    plus the pull and the task's own reward (no fields of Grasp-v0's reward)."""
 
     episode_seconds: float = 3.0
     dt: float = 4e-4                   # s; the squeezed, strain-stiffened tissue needs < 0.5 ms
@@ -94,7 +95,7 @@ def slip_penalty(slip_now: float, slip_before: float, weight_per_mm: float) -> f
     return -weight_per_mm * max(0.0, slip_now - slip_before) * 1e3
 
 
-class SlippageEnv(GraspEnv):
+class SlippageEnv(GraspSceneEnv):
     """Slippage-v0 (see module docstring)."""
 
     config_cls = SlippageConfig
@@ -102,8 +103,9 @@ class SlippageEnv(GraspEnv):
     OPTIONS = ("organ", "mu", "young_scale", "pull_rate", "pull_amplitude", "pull_frequency")
 
     def _build(self) -> None:
-        super()._build()
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self._build_scene()
+        self._set_observation_terms(self._observation_terms())
 
     def _observation_terms(self) -> list:
         _, _, span = self._reach()
@@ -114,20 +116,20 @@ class SlippageEnv(GraspEnv):
                 ObsTerm("wrist_displacement_along_pull", "m", 1, -span, span),
                 ObsTerm("slip_distance", "m", 1, 0.0)]
 
-    def _select(self, organ: str) -> None:
-        new = organ not in self._sims
-        super()._select(organ)
-        tool = self.sim.tool(self.tool_name)
-        self._pull_act = int(tool.actuator_ids[2])      # slide along the tool axis: + is out of the organ
-        self._jaw_act = int(tool.jaw_actuator_id)
-        if new:
-            m = self.sim.model
-            a, dof = self._pull_act, int(tool.dof_adr[2])
-            m.actuator_gainprm[a, :] = 0.0
-            m.actuator_gainprm[a, 0] = 1.0
-            m.actuator_biasprm[a, :] = 0.0
-            m.actuator_ctrlrange[a] = [-self.config.max_pull, self.config.max_pull]
-            m.dof_damping[dof] = self.config.pull_damping
+    def _select_tool(self) -> None:
+        super()._select_tool()
+        self._pull_act = int(self.tool.actuator_ids[2])      # slide along the tool axis: + is out of the organ
+        self._jaw_act = int(self.tool.jaw_actuator_id)
+
+    def _on_new_simulation(self, sim) -> None:
+        """The along-axis wrist drive becomes a force motor (the pull) with joint damping."""
+        m = sim.model
+        a, dof = self._pull_act, int(self.tool.dof_adr[2])
+        m.actuator_gainprm[a, :] = 0.0
+        m.actuator_gainprm[a, 0] = 1.0
+        m.actuator_biasprm[a, :] = 0.0
+        m.actuator_ctrlrange[a] = [-self.config.max_pull, self.config.max_pull]
+        m.dof_damping[dof] = self.config.pull_damping
 
     def _closure_ctrl(self, action_value: float) -> float:
         """Jaw actuator target (closing travel, m) of a closure action in [-1, 1]."""

@@ -1,0 +1,125 @@
+"""The grasp scene shared by the grasp tasks (Grasp-v0, Slippage-v0): config fields and env part.
+
+:class:`GraspSceneConfig` holds what both tasks set the same way (timing, organ, tissue model
+and resolution, jaw speed, friction and stiffness randomisation, rendering);
+:class:`GraspSceneEnv` owns one Simulation per organ, the per-episode randomisation of friction
+and stiffness (through ``model.scale_material``) and the grasper readings. Each task composes
+its own observation terms, reward terms and termination from these and the term functions of
+:mod:`surgsim_envs.envs.grasp_common`; neither task inherits the other.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar, Sequence
+
+import numpy as np
+
+from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_on_unstable,
+                                   check_positive, check_range, check_task_resolution, require_capabilities, sample)
+from surgsim_envs.envs.grasp_common import ORGAN_SPACING, SlipTracker, build_grasp_simulation
+from surgsim_envs.errors import ConfigError
+
+
+@dataclass
+class GraspSceneConfig:
+    """Settings every grasp task shares (SI units); ranges are (low, high) sampled per episode."""
+
+    control_hz: float = 50.0
+    dt: float = 4e-4                   # s; squeezed, strain-stiffened tissue needs < 0.5 ms
+    episode_seconds: float = 3.0
+    organ: str = "spleen"
+    model: str = "mass_spring"         # any registered tissue model with the "forces" capability
+    integrator: str = "symplectic"     # used if the model has it, else the model's "auto"
+    resolution: float | str | None = None   # None: the organ's task lattice; a spacing in m; "auto"
+    error_tolerance: float = 0.1       # resolution="auto": force error limit (fraction)
+    step_budget_us: float = 5_000.0    # resolution="auto": compute limit, us per simulated ms
+    on_unstable: str = "raise"         # "terminate": a tissue divergence ends the episode (info["unstable"])
+    closing_speed: float = 0.03        # m/s, jaw rate limit
+    mu: Sequence[float] = (0.6, 1.0)                 # tool-tissue Coulomb friction
+    young_scale: Sequence[float] = (0.8, 1.2)        # organ Young's modulus scale
+    camera: str = "overview"
+    render_width: int = 480
+    render_height: int = 480
+
+    def validate(self) -> None:
+        what = type(self).__name__
+        for key in ("control_hz", "dt", "episode_seconds", "closing_speed"):
+            check_positive(getattr(self, key), f"{what}.{key}")
+        check_control_rate(self, what)
+        check_task_resolution(self, what)
+        check_on_unstable(self.on_unstable, what)
+        if self.organ not in ORGAN_SPACING:
+            raise ConfigError(f"{what}.organ={self.organ!r}; choose one of {sorted(ORGAN_SPACING)}")
+        check_range(self.mu, "mu", 0.0, 2.0)
+        check_range(self.young_scale, "young_scale", 0.5, 1.25)
+
+
+class GraspSceneEnv(SurgSimEnv):
+    """The env part every grasp task shares (see the module docstring)."""
+
+    TASK_ID: ClassVar[str] = ""
+    REQUIRES: ClassVar[tuple[str, ...]] = ("forces",)      # tissue capabilities the task needs
+    tool_name = "grasper"
+
+    def _build_scene(self) -> None:
+        self._select(self.config.organ)
+        self.slip = SlipTracker()
+
+    def _on_new_simulation(self, sim) -> None:
+        """Hook: a simulation for a new organ was just built (e.g. Slippage turns a drive into a motor)."""
+
+    def _select(self, organ: str) -> None:
+        if organ not in ORGAN_SPACING:
+            raise ConfigError(f"unknown organ {organ!r}; choose one of {sorted(ORGAN_SPACING)}")
+        if organ not in self._sims:
+            c = self.config
+            require_capabilities(c.model, self.REQUIRES, self.TASK_ID)
+            self._sims[organ] = build_grasp_simulation(organ, c.dt, self.substeps, c.closing_speed, c.resolution,
+                                                       c.error_tolerance, c.step_budget_us, model=c.model,
+                                                       integrator=c.integrator)
+            self.sim = self._sims[organ]
+            self._select_tool()
+            self._on_new_simulation(self.sim)
+        self.sim = self._sims[organ]
+        self.organ = organ
+        self._select_tool()
+
+    def _select_tool(self) -> None:
+        tool = self.sim.tool(self.tool_name)
+        self.tool = tool
+        self.home = tool.home.copy()
+        self.frame = tool.frame
+        self.gcfg = tool.config
+        self.pull_dir = -np.asarray(self.gcfg.axis, dtype=float) / np.linalg.norm(self.gcfg.axis)
+
+    def _reach(self) -> tuple[float, float, float]:
+        """(low, high, span) m of the wrist's reachable world coordinates: home +- travel."""
+        t = float(self.gcfg.travel) * np.sqrt(3.0)      # slides along the (rotated) wrist axes
+        return float(self.home.min()) - t, float(self.home.max()) + t, 2.0 * t
+
+    def _randomise_common(self, options: dict[str, Any]) -> None:
+        c, rng = self.config, self.np_random
+        self._select(options.get("organ", self.config.organ))
+        mu = sample(rng, options.get("mu", c.mu), "mu", 0.0, 2.0)
+        scale = sample(rng, options.get("young_scale", c.young_scale), "young_scale", 0.5, 1.25)
+        self.sim.tissue().scale_material("young", scale)   # the contract's only way to change stiffness
+        for contact in self.sim.contacts.values():
+            contact.tool_friction[:] = mu
+        self.sim.reset(seed=int(rng.integers(2**31)))
+        check_explicit_step(self.sim.tissue(), self.sim.dt, f"young_scale {scale:.2f}")
+        self.mu, self.young_scale = mu, scale
+        self.slip.reset()
+        self.slip_distance = 0.0
+        self.was_grasped = False
+
+    def _readings(self):
+        """(wrist position (3,) m, per-jaw normal (3,) N, per-jaw tangential (3,) N, contact report)."""
+        sim = self.sim
+        jaws = sim.jaw_forces(self.tool_name)
+        rep = sim.contact_report()[self.tool_name]
+        return sim.tool_position(self.tool_name), jaws["normal"], jaws["tangential"], rep
+
+    def _metrics(self) -> dict[str, Any]:
+        return {"organ": self.organ, "mu": self.mu, "young_scale": self.young_scale,
+                "slip_distance_m": self.slip_distance, "success": False, "is_success": False, "dropped": False}
