@@ -80,3 +80,42 @@ def test_a_model_without_forces_is_refused_by_name(task, monkeypatch):
     with pytest.raises(CapabilityError, match=rf"tissue model 'no_forces_model' cannot serve {task}: it lacks "
                                               r"the capability 'forces'"):
         gym.make(task, model=NoForces.name, **COARSE[task])
+
+
+class _FakeTissue:
+    """A tissue whose explicit limit scales like 1 / sqrt(Young's modulus) (a spring network)."""
+    auto_pair = ("symplectic", "implicit")
+
+    def __init__(self, stable_dt_at_1, integrator="symplectic"):
+        self.base, self.scale, self.integrator = stable_dt_at_1, 1.0, integrator
+
+    def scale_material(self, name="young", factor=1.0, mask=None):
+        assert name == "young" and mask is None
+        self.scale = float(factor)
+
+    def stable_dt(self):
+        return self.base / np.sqrt(self.scale)
+
+
+def test_integrator_for_range_keeps_explicit_only_if_stable_over_the_whole_range():
+    from surgsim_envs.envs.base import integrator_for_range
+
+    t = _FakeTissue(5e-4)
+    assert integrator_for_range(t, 4e-4, 1.2) is None          # 5e-4 / sqrt(1.2) = 4.56e-4 >= 4e-4
+    assert t.scale == 1.0                                      # the material is restored
+    assert integrator_for_range(t, 4e-4, 1.6) == "auto"        # 5e-4 / sqrt(1.6) = 3.95e-4 < 4e-4
+    assert t.scale == 1.0
+    assert integrator_for_range(_FakeTissue(1e-5, "implicit"), 4e-4, 2.0) is None   # already implicit
+    t.auto_pair = None                                         # no pair: nothing to switch to
+    assert integrator_for_range(t, 4e-4, 1.6) is None
+
+
+@pytest.mark.parametrize("model, expected", [("mass_spring", "symplectic"), ("fractional", "auto")])
+def test_grasp_keeps_explicit_mass_spring_and_gives_a_stiffer_model_auto(model, expected):
+    """Grasp-v0 (dt 0.4 ms, young_scale up to 1.2): mass_spring's explicit limit (stable_dt 0.49 ms
+    at 1.2x) keeps its symplectic step; fractional's (0.14 ms) makes the task take its "auto"."""
+    env = gym.make("SurgSim/Grasp-v0", model=model, resolution=0.015 if model == "fractional" else None)
+    tissue = env.unwrapped.sim.tissue()
+    assert tissue.integrator == expected
+    env.reset(seed=3, options={"young_scale": 1.2})
+    env.close()

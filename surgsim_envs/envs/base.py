@@ -134,6 +134,34 @@ def tissue_options(model: str, integrator: str) -> dict[str, Any]:
     return {"integrator": "auto"} if "auto" in names else {}
 
 
+def explicit_stable_over(tissue, dt: float, max_scale: float) -> bool:
+    """True if tissue ``tissue`` (built, unscaled) steps explicitly at ``dt`` s with every element's
+    Young's modulus scaled by up to ``max_scale``: ``dt <= stable_dt()`` with the whole tissue at
+    ``max_scale`` (a bound for any local scaling up to it: the stiffest node limits the step). The
+    material is restored (``scale_material`` is relative to the build) before returning."""
+    tissue.scale_material("young", float(max_scale))
+    try:
+        return float(dt) <= tissue.stable_dt()
+    finally:
+        tissue.scale_material("young", 1.0)
+
+
+def integrator_for_range(tissue, dt: float, max_scale: float) -> str | None:
+    """The integrator a task must rebuild its tissue with, or None to keep the one built.
+
+    A task asks for "symplectic" by default (the explicit one: fast and, for the mass-spring tasks,
+    stable). If the built tissue steps with its explicit integrator (the first of the model's
+    ``auto_pair``) but ``dt`` exceeds its :meth:`stable_dt` somewhere in the stiffness
+    randomisation (Young's modulus scaled up to ``max_scale``), the task takes the model's "auto"
+    instead (explicit while stable at the current state, else implicit). A model without an
+    explicit/implicit pair keeps what it has, and the per-episode :func:`check_explicit_step` names
+    the problem. Decided from capability (``auto_pair``, ``stable_dt()``), never from a model name."""
+    pair = getattr(tissue, "auto_pair", None)
+    if pair is None or getattr(tissue, "integrator", None) != pair[0]:
+        return None
+    return None if explicit_stable_over(tissue, dt, max_scale) else "auto"
+
+
 def require_capabilities(model: str, capabilities, task: str) -> None:
     """Before building: CapabilityError (a ConfigError naming model, capability and task) unless
     tissue model ``model`` declares every one of ``capabilities`` (tissue contract v2)."""

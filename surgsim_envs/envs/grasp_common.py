@@ -1,8 +1,9 @@
 """Shared pieces of the grasp tasks: the coarse grasp scene and grasp-state terms.
 
 The scene is :func:`surgsim_envs.scene.grasp_config` with a coarse lattice (spleen 11 mm: 232
-nodes; liver lobe 15 mm: 296 nodes), the explicit (symplectic) mass-spring integrator and a
-0.5 ms physics step (critical dt 0.67 ms / 0.95 ms), built once per organ and cached by the env.
+nodes; liver lobe 15 mm: 296 nodes), the explicit (symplectic) integrator when it is stable over
+the whole stiffness randomisation (mass_spring: critical dt 0.67 ms / 0.95 ms against a 0.4 ms
+step), else the model's "auto", built once per organ and cached by the env.
 """
 
 from __future__ import annotations
@@ -17,14 +18,17 @@ ORGAN_SPACING = {"spleen": 0.011, "liver_lobe": 0.015}
 
 def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: float, resolution=None,
                            error_tolerance: float = 0.1, step_budget_us: float = 5_000.0, model: str = "mass_spring",
-                           integrator: str = "symplectic"):
+                           integrator: str = "symplectic", max_young_scale: float = 1.0):
     """A Simulation of the grasp scene for ``organ`` ("spleen" or "liver_lobe").
 
     resolution: None (the organ's :data:`ORGAN_SPACING`), a spacing in m, or "auto" (the cheapest
     measured mass-spring/symplectic spacing meeting ``error_tolerance`` (fraction) and
     ``step_budget_us`` (us per simulated ms); see :class:`surgsim_envs.scene.TissueConfig`).
+    integrator: asked for (if the model has it); an explicit one that is not stable at ``dt`` over
+    the whole stiffness randomisation (Young's modulus up to ``max_young_scale``) is replaced by
+    the model's "auto" (:func:`surgsim_envs.envs.base.integrator_for_range`).
     """
-    from surgsim_envs.envs.base import tissue_options
+    from surgsim_envs.envs.base import integrator_for_range, tissue_options
     from surgsim_envs.scene import Simulation, grasp_config, grasp_scene
 
     if organ not in ORGAN_SPACING:
@@ -36,6 +40,11 @@ def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: 
     t.options = tissue_options(model, integrator)
     cfg.tool("grasper").closing_speed = float(closing_speed)
     cfg.dt = float(dt)
+    sim = Simulation(grasp_scene(cfg), dt=dt, substeps=substeps)
+    switch = integrator_for_range(sim.tissue(), dt, max_young_scale)
+    if switch is None:
+        return sim
+    t.options = {**t.options, "integrator": switch}
     return Simulation(grasp_scene(cfg), dt=dt, substeps=substeps)
 
 

@@ -30,7 +30,7 @@ class GraspSceneConfig:
     episode_seconds: float = 3.0
     organ: str = "spleen"
     model: str = "mass_spring"         # any registered tissue model with the "forces" capability
-    integrator: str = "symplectic"     # used if the model has it, else the model's "auto"
+    integrator: str = "symplectic"     # if the model has it and it is stable over young_scale, else "auto"
     resolution: float | str | None = None   # None: the organ's task lattice; a spacing in m; "auto"
     error_tolerance: float = 0.1       # resolution="auto": force error limit (fraction)
     step_budget_us: float = 5_000.0    # resolution="auto": compute limit, us per simulated ms
@@ -77,7 +77,8 @@ class GraspSceneEnv(SurgSimEnv):
             require_capabilities(c.model, self.REQUIRES, self.TASK_ID)
             self._sims[organ] = build_grasp_simulation(organ, c.dt, self.substeps, c.closing_speed, c.resolution,
                                                        c.error_tolerance, c.step_budget_us, model=c.model,
-                                                       integrator=c.integrator)
+                                                       integrator=c.integrator,
+                                                       max_young_scale=check_range(c.young_scale, "young_scale")[1])
             self.sim = self._sims[organ]
             self._select_tool()
             self._on_new_simulation(self.sim)

@@ -48,7 +48,7 @@ from gymnasium import spaces
 
 from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_on_unstable,
                                    check_positive, check_range, check_task_resolution, ObsTerm, require_capabilities,
-                                   reward_from_terms, sample, sphere_mask, tissue_options)
+                                   integrator_for_range, reward_from_terms, sample, sphere_mask, tissue_options)
 from surgsim_envs.errors import ConfigError
 
 
@@ -68,7 +68,7 @@ class PalpationConfig:
     slab_size: Sequence[float] = (0.1, 0.1, 0.02)   # m
     material: str = "liver"
     model: str = "mass_spring"         # any registered tissue model with the "forces" capability
-    integrator: str = "symplectic"     # used if the model has it, else the model's "auto"
+    integrator: str = "symplectic"     # if the model has it and it is stable over the stiffness ranges, else "auto"
     tip_radius: float = 0.01           # m, probe tip
     probe_speed: float = 0.2           # m/s, rate limit of the probe target
     # action scaling
@@ -239,6 +239,11 @@ class PalpationEnv(SurgSimEnv):
         cfg.dt = c.dt
         require_capabilities(c.model, self.REQUIRES, self.TASK_ID)
         self.sim = Simulation(palpation_scene(cfg), dt=c.dt, substeps=self.substeps)
+        stiffest = check_range(c.young_scale, "young_scale")[1] * check_range(c.stiffness_contrast, "contrast")[1]
+        switch = integrator_for_range(self.sim.tissue(), c.dt, stiffest)   # inclusion: young_scale x contrast
+        if switch is not None:
+            t.options = {**t.options, "integrator": switch}
+            self.sim = Simulation(palpation_scene(cfg), dt=c.dt, substeps=self.substeps)
         self.centroids = self.sim.tissue().element_centroids()     # (T,3) m, rest frame: inclusion masks
         self.home = np.asarray(p.position, dtype=float)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
