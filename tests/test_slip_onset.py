@@ -30,8 +30,9 @@ def test_rig_onset_pull_is_mu_times_grip():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("model", ["mass_spring", "mass_spring_calibrated", "fem"])
+@pytest.mark.parametrize("model", ["mass_spring", "mass_spring_calibrated"])
 @pytest.mark.parametrize("mu", [0.1, 0.6, 1.2])
 def test_onset_across_mu_and_models(model, mu):
-    res = slip(model, mu=mu, pull_time=1.2, handle_speed=0.01 * min(1.0, mu / 0.3))
+    """Quasi-static pull (handle slower at low mu, longer at high mu). fem: see docs/benchmarks.md (12 min a case)."""
+    res = slip(model, mu=mu, pull_time=0.6 + 1.0 * mu, handle_speed=0.01 * min(1.0, mu / 0.3))
     assert res.slip_onset_pull == pytest.approx(mu * res.slip_onset_normal, rel=0.05)
