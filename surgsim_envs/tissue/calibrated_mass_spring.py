@@ -202,8 +202,10 @@ class CalibratedMassSpringModel(MassSpringModel):
         return (k + (G.T @ sp.diags(c) @ G)).tocsr()
 
     def static_solve(self, forces=None, **kwargs):
-        raise ConfigError("mass_spring_calibrated has no static_solve yet (its Newton residual would miss the "
-                          "nodal volume term); use model 'fem' or 'mass_spring' for static solves")
+        """Not available yet: raises NotImplementedError (callers such as scripts/truthcube.py then relax
+        dynamically)."""
+        raise NotImplementedError("mass_spring_calibrated has no static_solve yet (its Newton residual would miss "
+                                  "the nodal volume term); step it to rest, or use model 'fem' or 'mass_spring'")
 
     def describe(self):
         out = super().describe()

@@ -21,6 +21,7 @@ BUILTIN_MODELS: dict[str, str] = {
     "mass_spring": "surgsim_envs.tissue.mass_spring:MassSpringModel",
     "fem": "surgsim_envs.tissue.fem:TetFEMModel",
     "mass_spring_calibrated": "surgsim_envs.tissue.calibrated_mass_spring:CalibratedMassSpringModel",
+    "neo_hookean": "surgsim_envs.tissue.neo_hookean:NeoHookeanModel",
 }
 
 _registry: dict[str, Any] = {}
