@@ -34,9 +34,10 @@ def test_homogeneous_large_strain_energy_and_interior_forces_match_the_closed_fo
     assert np.abs(f[inner]).max() < 1e-9 * np.abs(f).max()
 
 
-def test_small_strain_limit_is_linear_elasticity():
+@pytest.mark.parametrize("c01_fraction", [0.0, 0.7])
+def test_small_strain_limit_is_linear_elasticity(c01_fraction):
     vol = box_volume((0.01, 0.01, 0.01), 0.005)
-    m = make("neo_hookean", vol, MAT)
+    m = make("neo_hookean", vol, MAT, c01_fraction=c01_fraction)
     mu, lam = _lame()
     rng = np.random.default_rng(2)
     e = rng.normal(size=(3, 3)) * 1e-5
@@ -45,9 +46,10 @@ def test_small_strain_limit_is_linear_elasticity():
     assert m.elastic_energy() == pytest.approx(1e-6 * (mu * np.sum(e * e) + 0.5 * lam * np.trace(e) ** 2), rel=1e-3)
 
 
-def test_forces_are_minus_the_energy_gradient():
+@pytest.mark.parametrize("c01_fraction", [0.0, 0.7])
+def test_forces_are_minus_the_energy_gradient(c01_fraction):
     vol = box_volume((0.01, 0.01, 0.01), 0.005)
-    m = make("neo_hookean", vol, MAT)
+    m = make("neo_hookean", vol, MAT, c01_fraction=c01_fraction)
     rng = np.random.default_rng(0)
     x = vol.nodes + rng.normal(scale=5e-4, size=vol.nodes.shape)
     m.positions = x
@@ -61,6 +63,21 @@ def test_forces_are_minus_the_energy_gradient():
         m.positions[a, k] -= h
         em = m.elastic_energy()
         assert f[a, k] == pytest.approx(-(ep - em) / (2 * h), rel=1e-5)
+
+
+def test_mooney_rivlin_homogeneous_energy():
+    """c01_fraction f: Psi = C10 (I1-3) + C01 (I2-3) - (2 C10 + 4 C01)(J-1) + k/2 (J-1)^2, mu = 2 (C10 + C01)."""
+    vol = box_volume((0.02, 0.02, 0.02), 0.005)
+    m = make("neo_hookean", vol, MAT, c01_fraction=0.7)
+    mu, lam = _lame()
+    c10, c01 = 0.3 * mu / 2, 0.7 * mu / 2
+    F = np.diag([1.1, 1.15, 0.75])
+    m.positions = vol.nodes @ F.T
+    C = F.T @ F
+    i1, J = np.trace(C), np.linalg.det(F)
+    i2 = 0.5 * (i1 ** 2 - np.sum(C * C))
+    psi = c10 * (i1 - 3) + c01 * (i2 - 3) - (2 * c10 + 4 * c01) * (J - 1) + (lam + 0.3 * mu) / 2 * (J - 1) ** 2
+    assert m.elastic_energy() == pytest.approx(0.02 ** 3 * psi, rel=1e-9)
 
 
 @pytest.mark.slow

@@ -56,8 +56,13 @@ class NeoHookeanModel(TissueModel):
     quasi_static: ClassVar[bool] = True
     capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "quasi_static", "static_solve"})
 
-    def __init__(self, volume, material="silicone", *, newton_tol: float = 1e-8, max_iter: int = 30, **base_kwargs):
+    def __init__(self, volume, material="silicone", *, newton_tol: float = 1e-8, max_iter: int = 30,
+                 c01_fraction: float = 0.0, **base_kwargs):
         super().__init__(volume, material, **base_kwargs)
+        if not (isinstance(c01_fraction, (int, float)) and 0.0 <= c01_fraction <= 1.0):
+            raise ConfigError(f"c01_fraction={c01_fraction!r} must lie in [0, 1] (share of the shear modulus "
+                              "carried by the Mooney-Rivlin I2 term; 0 = Neo-Hookean)")
+        self.c01_fraction = float(c01_fraction)
         if not (math.isfinite(newton_tol) and 0 < newton_tol < 1):
             raise ConfigError(f"newton_tol={newton_tol!r} must lie in (0, 1)")
         if not (isinstance(max_iter, (int, np.integer)) and max_iter >= 1):
@@ -69,10 +74,15 @@ class NeoHookeanModel(TissueModel):
         if np.any(nu >= 0.5) or np.any(nu <= -1) or np.any(E <= 0):
             raise ConfigError("neo_hookean needs E > 0 and -1 < nu < 0.5 in every tet (use nu <= 0.499)")
         self.mu, lam, _ = asm.lame_parameters(E, nu)
+        # mu = 2 (C10 + C01): C10 = (1 - f) mu / 2, C01 = f mu / 2
+        self._c10 = (1.0 - self.c01_fraction) * self.mu / 2.0
+        self._c01 = self.c01_fraction * self.mu / 2.0
+        self._beta = 2.0 * self._c10 + 4.0 * self._c01     # rest stability: P(I) = 0
         n = self.n_nodes
         self.node_rest_volume = np.zeros(n)
         nvk.node_volumes(np.ascontiguousarray(self.rest_positions), self.tets, self.node_rest_volume)
-        self.node_bulk = asm.nodal_average(self.tets, self.tet_volume, lam + self.mu, n)
+        # small-strain Lame lambda = k - (1 - c01_fraction) mu (checked numerically in the tests)
+        self.node_bulk = asm.nodal_average(self.tets, self.tet_volume, lam + (1.0 - self.c01_fraction) * self.mu, n)
         nt = len(self.tets)
         # dF/dx: F_ij = sum_a x_ai g_aj -> B (T, 9, 12), row 3i+j, column 3a+i
         B = np.zeros((nt, 9, 12))
@@ -94,7 +104,10 @@ class NeoHookeanModel(TissueModel):
     def _energy(self, x, F_ext) -> float:
         F = self._deformation(x)
         J = np.linalg.det(F)
-        psi = 0.5 * self.mu * (np.einsum("tij,tij->t", F, F) - 3.0) - self.mu * (J - 1.0)
+        C = np.einsum("tki,tkj->tij", F, F)
+        i1 = np.einsum("tii->t", C)
+        i2 = 0.5 * (i1 ** 2 - np.einsum("tij,tij->t", C, C))
+        psi = self._c10 * (i1 - 3.0) + self._c01 * (i2 - 3.0) - self._beta * (J - 1.0)
         e = float(np.sum(self.tet_volume * psi))
         e += float(nvk.energy(np.ascontiguousarray(x), self.tets, self.node_rest_volume, self.node_bulk, self._vbuf))
         return e - float(np.sum(F_ext[~self.fixed] * x[~self.fixed]))
@@ -103,7 +116,11 @@ class NeoHookeanModel(TissueModel):
         """Internal elastic forces (N,3) N at x."""
         F = self._deformation(x)
         cof = np.linalg.det(F)[:, None, None] * np.transpose(np.linalg.inv(F), (0, 2, 1))
-        P = self.mu[:, None, None] * (F - cof)
+        C = np.einsum("tki,tkj->tij", F, F)
+        i1 = np.einsum("tii->t", C)
+        FC = np.einsum("tik,tkj->tij", F, C)
+        P = (2.0 * self._c10[:, None, None] * F + 2.0 * self._c01[:, None, None] * (i1[:, None, None] * F - FC)
+             - self._beta[:, None, None] * cof)
         fa = -np.einsum("t,tij,taj->tai", self.tet_volume, P, self.grads)
         out = np.zeros_like(x)
         np.add.at(out, self.tets.reshape(-1), fa.reshape(-1, 3))
@@ -113,7 +130,17 @@ class NeoHookeanModel(TissueModel):
     def _hessian(self, x) -> sp.csr_matrix:
         F = self._deformation(x)
         dcof = np.einsum("ikn,jlq,tnq->tijkl", _EPS, _EPS, F).reshape(-1, 9, 9)
-        A = self.mu[:, None, None] * (np.eye(9)[None] - dcof)
+        C = np.einsum("tki,tkj->tij", F, F)
+        i1 = np.einsum("tii->t", C)
+        eye3 = np.eye(3)
+        FF = np.einsum("tij,tkl->tijkl", F, F)
+        # d(F F^T F)_ij / dF_kl = d_ik C_lj + F_il F_kj + (F F^T)_ik d_jl
+        B_ = F @ np.transpose(F, (0, 2, 1))
+        dFCF = (np.einsum("ik,tlj->tijkl", eye3, C) + np.einsum("til,tkj->tijkl", F, F)
+                + np.einsum("tik,jl->tijkl", B_, eye3))
+        hi2 = 2.0 * (2.0 * FF + i1[:, None, None, None, None] * np.eye(9).reshape(3, 3, 3, 3)[None] - dFCF)
+        A = (2.0 * self._c10[:, None, None] * np.eye(9)[None] + self._c01[:, None, None] * hi2.reshape(-1, 9, 9)
+             - self._beta[:, None, None] * dcof)
         w, v = np.linalg.eigh(A)
         A = np.einsum("tik,tk,tjk->tij", v, np.maximum(w, 0.0), v)
         ke = np.einsum("t,tai,tab,tbj->tij", self.tet_volume, self._B, A, self._B)
