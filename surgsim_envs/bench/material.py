@@ -378,12 +378,21 @@ class SlipResult:
     mu: float
     nodes: int
     model: str = ""
+    #: share of the contact points sliding (at the Coulomb cap) and axial speed (m/s) of the contact
+    #: patch relative to the jaws, per sample (see :mod:`surgsim_envs.bench.slip_onset`)
+    slip_share: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    patch_speed: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: |sum of friction forces| / (mu * sum of normal forces): 1 when every contact is at its cap
+    mobilised: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    onset: str = "slide"
 
     def as_dict(self) -> dict:
         return {"pull": [float(v) for v in self.pull], "normal_sum": [float(v) for v in self.normal_sum],
                 "slip_onset_pull": self.slip_onset_pull, "slip_onset_normal": self.slip_onset_normal,
                 "time": [float(v) for v in self.time], "slide": [float(v) for v in self.slide],
-                "mu": self.mu, "nodes": self.nodes, "model": self.model}
+                "slip_share": [float(v) for v in self.slip_share], "patch_speed": [float(v) for v in self.patch_speed],
+                "mobilised": [float(v) for v in self.mobilised],
+                "onset": self.onset, "mu": self.mu, "nodes": self.nodes, "model": self.model}
 
 
 SLIP_MATERIAL = Material(young=20_000.0, poisson=0.45, density=1000.0, damping=10.0, name="gel")
@@ -411,14 +420,17 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
          spacing: float = 0.003, squeeze: float = 0.0005, dt: float = 5e-5, contact_stiffness: float = 60.0,
          contact_damping: float = 0.02, handle_stiffness: float = 100.0, handle_speed: float = 0.01,
          close_time: float = 0.15, settle_time: float = 0.1, pull_time: float = 0.6, onset_slide: float = 2.5e-3,
-         volume=None, **opts) -> SlipResult:
+         volume=None, onset: str = "contact", **opts) -> SlipResult:
     """Three flat jaws (120 degrees apart, longer than the tissue) close radially by ``squeeze`` (m)
     on a tissue cylinder (``radius``, ``length`` m) over ``close_time`` s, hold for ``settle_time`` s,
     then a handle spring (``handle_stiffness`` N/m, far end moving at ``handle_speed`` m/s) pulls the
     tissue along its axis (as a body force spread by mass) for ``pull_time`` s.
 
     Coulomb friction ``mu`` on the jaws; penalty contact ``contact_stiffness`` N/m per node.
-    Gross slip (reference: mu * sum(N)) is taken to start when the tissue has slid ``onset_slide`` m.
+    Gross slip (reference: mu * sum(N)): ``onset="contact"`` (default) reads it from the contact
+    state (:func:`surgsim_envs.bench.slip_onset.gross_slip_index`: the share of contact points
+    sliding and the motion of the contact patch); ``onset="slide"`` when the tissue has slid
+    ``onset_slide`` m (the earlier rule, which lands on a stick-slip dip at low mu).
     ``material`` defaults to a 20 kPa gel. ``tests/test_grasp_slip.py`` asserts the Coulomb behaviour of this rig.
     """
     from surgsim_envs.contact import BOX, ContactModel, ContactParams
@@ -430,6 +442,8 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     _positive(radius=radius, length=length, spacing=spacing, squeeze=squeeze, dt=dt, close_time=close_time,
               settle_time=settle_time, pull_time=pull_time, handle_stiffness=handle_stiffness,
               handle_speed=handle_speed, onset_slide=onset_slide)
+    if onset not in ("contact", "slide"):
+        raise ConfigError(f"onset={onset!r} must be 'contact' (from the contact state) or 'slide' (a slide distance)")
     vol = grasp_cylinder(radius, length, spacing) if volume is None else volume
     tissue = _build(cls, vol, mat, opts)
     cm = ContactModel(tissue.n_nodes, tissue.surface_nodes, [float(mu)],
@@ -460,14 +474,26 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
             if z0 is None:
                 z0, t0 = zc, t
             pull = max(handle_stiffness * (handle_speed * (t - t0) - (zc - z0)), 0.0)
-            rows.append((t - t0, pull, float(res.report.normal_force[0]), zc - z0))
+            touching = np.any(res.forces != 0.0, axis=1)
+            speed = float(tissue.velocities[touching, 2].mean()) if touching.any() else 0.0
+            share = float(res.report.slipping[0]) / max(int(res.report.contacts[0]), 1)
+            fn = float(res.report.normal_force[0])
+            mobilised = float(res.report.tangential_force[0]) / (mu * fn) if mu * fn > 0 else 0.0
+            rows.append((t - t0, pull, fn, zc - z0, share, speed, mobilised))
         np.copyto(forces, res.forces)
         forces[:, 2] += pull * weights
         tissue.step(dt, forces, res.stiffness)
     if res is None or res.report.contacts[0] == 0:
         raise ConfigError("slip: the jaws never touched the tissue; increase squeeze")
-    tt, pull, normal, slide = np.array(rows).T
-    hit = np.flatnonzero(slide > onset_slide)
+    tt, pull, normal, slide, share, speed, mobilised = np.array(rows).T
+    if onset == "contact":
+        from surgsim_envs.bench.slip_onset import gross_slip_index
+
+        k = gross_slip_index(share, mobilised, speed, handle_speed)
+        hit = np.array([k]) if k is not None else np.zeros(0, dtype=int)
+    else:
+        hit = np.flatnonzero(slide > onset_slide)
     onset_pull = float(pull[hit[0]]) if len(hit) else math.nan
     onset_normal = float(normal[hit[0]]) if len(hit) else math.nan
-    return SlipResult(tt, pull, normal, slide, onset_pull, onset_normal, float(mu), vol.n_nodes, cls.name)
+    return SlipResult(tt, pull, normal, slide, onset_pull, onset_normal, float(mu), vol.n_nodes, cls.name,
+                      share, speed, mobilised, onset)

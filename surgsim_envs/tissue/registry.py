@@ -22,6 +22,8 @@ BUILTIN_MODELS: dict[str, str] = {
     "fem": "surgsim_envs.tissue.fem:TetFEMModel",
     "diffusion": "surgsim_envs.tissue.diffusion:DiffusionModel",
     "fractional": "surgsim_envs.tissue.fractional:FractionalTetModel",
+    "mass_spring_calibrated": "surgsim_envs.tissue.calibrated_mass_spring:CalibratedMassSpringModel",
+    "neo_hookean": "surgsim_envs.tissue.neo_hookean:NeoHookeanModel",
 }
 
 _registry: dict[str, Any] = {}

@@ -1,0 +1,215 @@
+"""``mass_spring_calibrated``: the paper-002 mass-spring network with spring constants identified
+from linear elasticity, so that its small-strain response matches FEM.
+
+Same springs law, Maxwell branches, nodal damping and integrators as :class:`MassSpringModel`
+(``auto``/``symplectic``/``implicit``), but
+
+* the springs are the tet edges plus cross-face springs, with constants fitted per spring so
+  that every node's share of the network carries the material's ``mu T`` (the fully symmetric
+  part of isotropic elasticity) -- see :mod:`surgsim_envs.tissue.spring_calibration`;
+* a volume term on the averaged nodal volumes carries the rest, ``lambda - mu`` (no locking as
+  nu -> 0.5), numba kernels in :mod:`surgsim_envs.tissue.nodal_volume_kernels`.
+
+The viscoelastic split is the base model's: ``K1 = (1 - g1) k``, ``kM = g1 k`` per spring with the
+spring's ``relax_fraction``/``relax_time``/``nonlinear`` the E V-weighted mean of its two end
+nodes' tets; the volume term is elastic (bulk does not relax).
+Docs: docs/models/mass_spring_calibrated.md.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+import numpy as np
+
+from surgsim_envs.errors import ConfigError
+from surgsim_envs.tissue import msd_kernels as kern
+from surgsim_envs.tissue import nodal_volume_kernels as nvk
+from surgsim_envs.tissue.mass_spring import (CG_MAX_ITER, CG_TOLERANCE, NONLINEAR_NETWORK_FACTOR,
+                                             MassSpringModel)
+from surgsim_envs.tissue.spring_calibration import calibrate
+
+
+class CalibratedMassSpringModel(MassSpringModel):
+    """Mass-spring-damper network whose spring constants and nodal volume term are identified from
+    the material's (E, nu) per tet (see module docstring).
+
+    Parameters: as :class:`MassSpringModel` except ``springs``, ``K1`` and ``volume_stiffness``
+    (set by the calibration); ``K2``, ``b0``, ``b1`` overrides work as there.
+    ``calibration`` (after construction) holds the fitted springs and the fit residual.
+    """
+
+    name: ClassVar[str] = "mass_spring_calibrated"
+    summary: ClassVar[str] = ("mass-spring network (paper 002) with spring constants and a nodal volume term "
+                              "identified from linear elasticity (matches FEM at small strain), auto/symplectic/implicit")
+    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "implicit_contact", "viscoelastic"})
+
+    def __init__(self, volume, material="liver", *, integrator=None, K2=None, b0=None, b1=None, **base_kwargs):
+        for key in ("K1", "springs", "volume_stiffness"):
+            if key in base_kwargs:
+                raise ConfigError(f"mass_spring_calibrated: {key} is set by the calibration; use model 'mass_spring' "
+                                  f"to choose {key} yourself")
+        super().__init__(volume, material, integrator=integrator, K2=K2, b0=b0, b1=b1, **base_kwargs)
+        n = self.n_nodes
+        self._vbuf = np.zeros(n)
+        self._fvol = np.zeros((n, 3))
+
+    # ---------------------------------------------------------------------------------------
+    # Parameters (hooks called by MassSpringModel.__init__)
+    def _setup_volume_term(self, volume_stiffness) -> None:
+        super()._setup_volume_term(None)           # no per-tet term
+        self.calibration = calibrate(self.volume, self.fields["young"], self.fields["poisson"])
+        tets = np.ascontiguousarray(self.volume.tets, dtype=np.int64)
+        x = self.rest_positions
+        v0 = np.zeros(len(x))
+        nvk.node_volumes(np.ascontiguousarray(x), tets, v0)
+        if np.any(v0 <= 0):
+            raise ConfigError(f"mass_spring_calibrated: volume '{self.volume.name}' has nodes with non-positive "
+                              "volume; the volume term needs positively oriented tets")
+        self._ntets = tets
+        self.node_rest_volume = v0
+        self.node_bulk = np.ascontiguousarray(self.calibration.node_bulk)
+        self.volume_stiffness = "calibrated"
+
+    def _build_springs(self, overrides) -> None:
+        if overrides.get("K1") is not None:
+            raise ConfigError("mass_spring_calibrated: K1 is set by the calibration (material.extra has 'K1'); "
+                              "use model 'mass_spring' for a fixed K1")
+        cal = self.calibration
+        pairs = cal.pairs
+        n = self.n_nodes
+        self.springs = pairs
+        self.si = np.ascontiguousarray(pairs[:, 0])
+        self.sj = np.ascontiguousarray(pairs[:, 1])
+        X = self.rest_positions
+        L0 = np.linalg.norm(X[self.sj] - X[self.si], axis=1)
+        self.rest_lengths = L0
+        tets = self.volume.tets.astype(np.int64).reshape(-1)
+        f = self.fields
+        w_tet = np.repeat(f["young"] * self.volume.tet_volumes() / 4.0, 4)
+        wnode = np.bincount(tets, weights=w_tet, minlength=n)
+
+        def spring_mean(field: str) -> np.ndarray:
+            node = np.bincount(tets, weights=w_tet * np.repeat(f[field], 4), minlength=n) / wnode
+            return 0.5 * (node[self.si] + node[self.sj])
+
+        g1, tau, nonlin = spring_mean("relax_fraction"), spring_mean("relax_time"), spring_mean("nonlinear")
+        k = cal.stiffness
+        self.edge_stiffness = k
+        K1 = (1.0 - g1) * k
+        K2 = (np.full(len(k), overrides["K2"]) if overrides.get("K2") is not None
+              else NONLINEAR_NETWORK_FACTOR * nonlin * K1 / (3.0 * L0 ** 2))
+        kM = g1 * k
+        if overrides.get("b1") is not None:
+            b1 = np.full(len(k), overrides["b1"])
+        else:
+            b1 = kM * tau
+        if overrides.get("b0") is not None:
+            b0 = np.full(n, overrides["b0"])
+        else:
+            b0 = np.zeros(n)
+            vol = self.volume.tet_volumes()
+            np.add.at(b0, tets, np.repeat(f["damping"] * f["density"] * vol / 4.0, 4))
+        self.K1, self.K2, self.kM, self.b1, self.b0 = K1, K2, kM, b1, b0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self.tau = np.where(kM > 0, b1 / np.where(kM > 0, kM, 1.0), np.inf)
+
+    # ---------------------------------------------------------------------------------------
+    # Stepping
+    def _advance(self, dt: float, forces: np.ndarray, stiffness: np.ndarray | None) -> None:
+        kMg, decay = self._branch_coeffs(self._pending_dt)
+        fext = np.ascontiguousarray(forces, dtype=np.float64)
+        if stiffness is None:
+            kc = self._zero_kc
+        else:
+            kc = np.ascontiguousarray(stiffness, dtype=np.float64)
+            if kc.shape != (self.n_nodes,) or not np.all(np.isfinite(kc)) or np.any(kc < 0):
+                raise ConfigError(f"stiffness must be a finite, non-negative ({self.n_nodes},) array in N/m, "
+                                  f"got shape {np.shape(stiffness)}")
+        if self.active_integrator == "symplectic":
+            np.copyto(self._fvol, fext)
+            nvk.add_forces(self.positions, self._ntets, self.node_rest_volume, self.node_bulk, self._vbuf, self._fvol)
+            kern.symplectic_step(self.positions, self.velocities, self.inv_mass, self.b0, self._fvol, self.gravity,
+                                 self.fixed, dt, self.si, self.sj, self.rest_lengths, self.K1, self.K2,
+                                 kMg, decay, self._s, self._dl, self._f, self._vtets, self.volume_rest, self.volume_kv)
+        else:
+            kMg_next, _ = self._branch_coeffs(dt)
+            if self._cg is None:
+                self._allocate_implicit_buffers()
+            r, z, p, ap, pre = self._cg
+            self.last_cg_iterations = nvk.implicit_step(
+                self.positions, self.velocities, self.masses, self.b0, fext, self.gravity, self.fixed, kc, dt,
+                self.si, self.sj, self.rest_lengths, self.K1, self.K2, kMg, decay, kMg_next, self._s, self._dl,
+                self._f, self._coef_a, self._coef_g, self._unit, self._diag, pre, r, z, p, ap,
+                CG_TOLERANCE, CG_MAX_ITER, self._ntets, self.node_rest_volume, self.node_bulk,
+                self._ngrad, self._nc, self._vbuf, self._nsbuf)
+        self._pending_dt = dt
+
+    def _allocate_implicit_buffers(self) -> None:
+        super()._allocate_implicit_buffers()
+        self._ngrad = np.zeros((len(self._ntets), 4, 3))
+        self._nc = np.zeros(self.n_nodes)
+        self._nsbuf = np.zeros(self.n_nodes)
+
+    # ---------------------------------------------------------------------------------------
+    # Forces, energies, stiffness
+    def volume_forces(self, positions: np.ndarray | None = None) -> np.ndarray:
+        """(N,3) nodal forces (N) of the nodal volume term at ``positions`` (default current)."""
+        x = self.positions if positions is None else np.ascontiguousarray(positions, dtype=np.float64)
+        out = np.zeros_like(x)
+        nvk.add_forces(x, self._ntets, self.node_rest_volume, self.node_bulk, np.zeros(len(x)), out)
+        return out
+
+    def volume_energy(self, positions: np.ndarray | None = None) -> float:
+        """Energy (J) of the nodal volume term, sum 0.5 k_v,i (V_i - V0_i)^2 / V0_i."""
+        x = self.positions if positions is None else np.ascontiguousarray(positions, dtype=np.float64)
+        return float(nvk.energy(x, self._ntets, self.node_rest_volume, self.node_bulk, np.zeros(len(x))))
+
+    def internal_forces(self) -> np.ndarray:
+        """(N,3) springs + Maxwell branches + nodal volume term + nodal damping (N)."""
+        return self.spring_forces() - self.b0[:, None] * self.velocities + self.volume_forces()
+
+    def critical_dt(self) -> float:
+        """Largest stable dt (s) of the symplectic integrator (Gershgorin bound of springs plus the
+        volume term's Gauss-Newton tangent; see :meth:`MassSpringModel.critical_dt`)."""
+        kMg, decay = self._branch_coeffs(self._pending_dt)
+        lam = float(kern.gershgorin_lambda_max(self.positions, self.inv_mass, self.si, self.sj, self.rest_lengths,
+                                               self.K1, self.K2, self.kM, self._s, self._dl, decay, kMg,
+                                               self._vtets, self.volume_rest, self.volume_kv))
+        rows = np.zeros((self.n_nodes, 3))
+        nvk.row_sums(self.positions, self._ntets, self.node_bulk / self.node_rest_volume, rows)
+        lam += float(np.max(rows * self.inv_mass[:, None], initial=0.0))
+        beta = float(np.max(self.b0 * self.inv_mass)) if self.n_nodes else 0.0
+        if lam <= 0:
+            return math.inf if beta == 0 else 2.0 / beta
+        return (-beta + math.sqrt(beta * beta + 4.0 * lam)) / lam
+
+    def _tangent(self, positions: np.ndarray, relaxed: bool, clamp: bool):
+        """Springs (base class) plus the nodal volume term's Gauss-Newton tangent sum_i c_i G_i G_i^T."""
+        import scipy.sparse as sp
+
+        k = super()._tangent(positions, relaxed, clamp)
+        tets = self._ntets
+        nt, n = len(tets), self.n_nodes
+        g = np.zeros((nt, 4, 3))
+        nvk.tangents(np.ascontiguousarray(positions), tets, g)
+        rows = np.repeat(tets, 12, axis=1).ravel()                       # node i of the tet ...
+        cols = np.tile((3 * tets[:, :, None] + np.arange(3)).reshape(nt, 12), (1, 4)).ravel()   # ... dof of node a
+        vals = np.tile(0.25 * g.reshape(nt, 12), (1, 4)).ravel()
+        G = sp.csr_matrix((vals, (rows, cols)), shape=(n, 3 * n))
+        c = self.node_bulk / self.node_rest_volume
+        return (k + (G.T @ sp.diags(c) @ G)).tocsr()
+
+    def static_solve(self, forces=None, **kwargs):
+        """Not available yet: raises NotImplementedError (callers such as scripts/truthcube.py then relax
+        dynamically)."""
+        raise NotImplementedError("mass_spring_calibrated has no static_solve yet (its Newton residual would miss "
+                                  "the nodal volume term); step it to rest, or use model 'fem' or 'mass_spring'")
+
+    def describe(self):
+        out = super().describe()
+        out.update({"calibration_residual": self.calibration.residual,
+                    "cross_springs": int(len(self.springs) - self.calibration.n_edges),
+                    "node_bulk_mean_Pa": float(self.node_bulk.mean())})
+        return out

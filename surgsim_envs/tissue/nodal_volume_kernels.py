@@ -1,0 +1,233 @@
+"""Numba kernels of the averaged-nodal-volume term of the calibrated mass-spring model.
+
+Each node i owns the volume V_i = sum over its tets of V_t / 4 (V_t signed, m^3) and stores
+
+    E_i = 0.5 kv_i (V_i - V0_i)^2 / V0_i          (J; kv_i in Pa)
+
+Forces: with p_i = kv_i (V_i - V0_i) / V0_i (Pa), ``f_a = -sum_t (sum_{i in t} p_i / 4) dV_t/dx_a``
+(Bonet & Burton 1998 averaged nodal pressure, the volumetric part of ``fem``'s ANP). Gauss-Newton
+tangent: ``K = sum_i c_i G_i G_i^T``, c_i = kv_i / V0_i, G_i = dV_i/dx = sum_{t ∋ i} (dV_t/dx) / 4;
+the product K x is two passes over the tets (s_i = G_i . x, then scatter). The indefinite
+``p_i d2V_i/dx2`` part is left out (zero at rest), as in the per-tet term of
+:mod:`surgsim_envs.tissue.msd_kernels`. :func:`implicit_step` is that module's backward-Euler
+step (springs + Maxwell branches) with this term in place of the per-tet one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from surgsim_envs.tissue.msd_kernels import _system_matvec, _tet_volume_gradient, spring_forces, spring_tangents
+
+
+@njit(cache=True, fastmath=True)
+def node_volumes(pos, tets, out):
+    """out[i] = sum over the tets of node i of V_t / 4 (m^3) at ``pos``."""
+    g = np.empty((4, 3))
+    out[:] = 0.0
+    for t in range(tets.shape[0]):
+        q = 0.25 * _tet_volume_gradient(pos, tets, t, g)
+        for a in range(4):
+            out[tets[t, a]] += q
+
+
+@njit(cache=True, fastmath=True)
+def add_forces(pos, tets, V0, kv, vbuf, f_out):
+    """Add the nodal-volume forces (N) to ``f_out`` (N,3); ``vbuf`` (N,) is work space."""
+    node_volumes(pos, tets, vbuf)
+    for i in range(vbuf.shape[0]):
+        vbuf[i] = kv[i] * (vbuf[i] - V0[i]) / V0[i]        # pressure p_i (Pa)
+    g = np.empty((4, 3))
+    for t in range(tets.shape[0]):
+        _tet_volume_gradient(pos, tets, t, g)
+        p = 0.25 * (vbuf[tets[t, 0]] + vbuf[tets[t, 1]] + vbuf[tets[t, 2]] + vbuf[tets[t, 3]])
+        for a in range(4):
+            n = tets[t, a]
+            f_out[n, 0] -= p * g[a, 0]
+            f_out[n, 1] -= p * g[a, 1]
+            f_out[n, 2] -= p * g[a, 2]
+
+
+@njit(cache=True, fastmath=True)
+def energy(pos, tets, V0, kv, vbuf):
+    """Energy (J) of the nodal-volume term at ``pos``."""
+    node_volumes(pos, tets, vbuf)
+    total = 0.0
+    for i in range(vbuf.shape[0]):
+        d = vbuf[i] - V0[i]
+        total += 0.5 * kv[i] * d * d / V0[i]
+    return total
+
+
+@njit(cache=True, fastmath=True)
+def tangents(pos, tets, vgrad):
+    """dV_t/dx_a (m^2) of every tet at ``pos`` into ``vgrad`` (T,4,3)."""
+    g = np.empty((4, 3))
+    for t in range(tets.shape[0]):
+        _tet_volume_gradient(pos, tets, t, g)
+        for a in range(4):
+            for k in range(3):
+                vgrad[t, a, k] = g[a, k]
+
+
+@njit(cache=True, fastmath=True)
+def matvec_add(x, h2, tets, vgrad, c, sbuf, out):
+    """out += h2 * sum_i c_i G_i (G_i . x) (the term's Gauss-Newton tangent times x)."""
+    sbuf[:] = 0.0
+    for t in range(tets.shape[0]):
+        q = 0.0
+        for a in range(4):
+            n = tets[t, a]
+            q += vgrad[t, a, 0] * x[n, 0] + vgrad[t, a, 1] * x[n, 1] + vgrad[t, a, 2] * x[n, 2]
+        q *= 0.25
+        for a in range(4):
+            sbuf[tets[t, a]] += q
+    for t in range(tets.shape[0]):
+        p = 0.0
+        for a in range(4):
+            n = tets[t, a]
+            p += c[n] * sbuf[n]
+        p *= 0.25 * h2
+        for a in range(4):
+            n = tets[t, a]
+            out[n, 0] += p * vgrad[t, a, 0]
+            out[n, 1] += p * vgrad[t, a, 1]
+            out[n, 2] += p * vgrad[t, a, 2]
+
+
+@njit(cache=True, fastmath=True)
+def row_sums(pos, tets, c, out):
+    """Upper bound of the absolute row sums (N/m) of the Gauss-Newton tangent into ``out`` (N,3):
+    |K_ra| <= sum_{t ∋ r} |g_t,r| / 4 * sum_{i in t} c_i |G_i|_1, |G_i|_1 <= sum_{t ∋ i} |g_t|_1 / 4."""
+    n = pos.shape[0]
+    g1 = np.zeros(n)
+    g = np.empty((4, 3))
+    for t in range(tets.shape[0]):
+        _tet_volume_gradient(pos, tets, t, g)
+        s = 0.0
+        for a in range(4):
+            s += abs(g[a, 0]) + abs(g[a, 1]) + abs(g[a, 2])
+        for a in range(4):
+            g1[tets[t, a]] += 0.25 * s
+    out[:, :] = 0.0
+    for t in range(tets.shape[0]):
+        _tet_volume_gradient(pos, tets, t, g)
+        w = 0.0
+        for a in range(4):
+            w += c[tets[t, a]] * g1[tets[t, a]]
+        for a in range(4):
+            n = tets[t, a]
+            for k in range(3):
+                out[n, k] += 0.25 * abs(g[a, k]) * w
+
+
+@njit(cache=True, fastmath=True)
+def _matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out, no_tets, no_grad, no_coef,
+            tets, vgrad, c, sbuf):
+    _system_matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out, no_tets, no_grad, no_coef)
+    matvec_add(x, h2, tets, vgrad, c, sbuf, out)
+    for a in range(x.shape[0]):
+        if fixed[a]:
+            out[a, 0] = 0.0
+            out[a, 1] = 0.0
+            out[a, 2] = 0.0
+
+
+@njit(cache=True, fastmath=True, nogil=True)
+def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
+                  si, sj, L0, K1, K2, kMg, decay, kMg_next, s_state, dl_state,
+                  f_buf, coef_a, coef_g, unit, diag_m, precond, r, z, p, ap, tol, max_iter,
+                  tets, V0, kv, vgrad, c, vbuf, sbuf):
+    """One linearly implicit backward-Euler step in place (one Newton step, Jacobi-preconditioned
+    matrix-free CG): (M + dt B + dt^2 (K_springs + K_volume + Kc)) v_new = M v + dt (f + f_ext + M g),
+    x += dt v_new. As :func:`surgsim_envs.tissue.msd_kernels.implicit_step` with the nodal-volume
+    term (``tets``, ``V0``, ``kv`` per node; buffers ``vgrad`` (T,4,3), ``c``, ``vbuf``, ``sbuf`` (N,)).
+    Returns the number of CG iterations."""
+    n = pos.shape[0]
+    no_tets = np.zeros((0, 4), dtype=tets.dtype)
+    no_grad = np.zeros((0, 4, 3))
+    no_coef = np.zeros(0)
+    spring_forces(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, True, f_buf)
+    spring_tangents(pos, si, sj, L0, K1, K2, kMg_next, s_state, True, coef_a, coef_g, unit)
+    add_forces(pos, tets, V0, kv, vbuf, f_buf)
+    tangents(pos, tets, vgrad)
+    for i in range(n):
+        c[i] = kv[i] / V0[i]
+    h2 = dt * dt
+    for a in range(n):
+        diag_m[a] = mass[a] + dt * b0[a] + h2 * kc[a]
+        precond[a, 0] = diag_m[a]
+        precond[a, 1] = diag_m[a]
+        precond[a, 2] = diag_m[a]
+    for e in range(si.shape[0]):
+        i = si[e]
+        j = sj[e]
+        for k in range(3):
+            d = h2 * (coef_a[e] * unit[e, k] * unit[e, k] + coef_g[e])
+            precond[i, k] += d
+            precond[j, k] += d
+    for t in range(tets.shape[0]):     # diagonal of the volume tangent, cross-tet terms left out
+        w = 0.0
+        for a in range(4):
+            w += c[tets[t, a]]
+        w *= h2 / 16.0
+        for a in range(4):
+            m = tets[t, a]
+            for k in range(3):
+                precond[m, k] += w * vgrad[t, a, k] * vgrad[t, a, k]
+    rhs_norm2 = 0.0
+    for a in range(n):
+        for k in range(3):
+            if fixed[a]:
+                z[a, k] = 0.0
+                vel[a, k] = 0.0
+            else:
+                z[a, k] = mass[a] * vel[a, k] + dt * (f_buf[a, k] + fext[a, k] + mass[a] * gravity[k])
+                rhs_norm2 += z[a, k] * z[a, k]
+    _matvec(vel, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap, no_tets, no_grad, no_coef, tets, vgrad, c, sbuf)
+    rz = 0.0
+    r_norm2 = 0.0
+    for a in range(n):
+        for k in range(3):
+            rv = z[a, k] - ap[a, k]
+            r[a, k] = rv
+            zv = rv / precond[a, k]
+            z[a, k] = zv
+            p[a, k] = zv
+            rz += rv * zv
+            r_norm2 += rv * rv
+    limit = tol * tol * rhs_norm2
+    it = 0
+    while it < max_iter and r_norm2 > limit and r_norm2 > 1e-300:
+        _matvec(p, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap, no_tets, no_grad, no_coef, tets, vgrad, c, sbuf)
+        pap = 0.0
+        for a in range(n):
+            pap += p[a, 0] * ap[a, 0] + p[a, 1] * ap[a, 1] + p[a, 2] * ap[a, 2]
+        if not (pap > 0.0):
+            break
+        alpha = rz / pap
+        rz_new = 0.0
+        r_norm2 = 0.0
+        for a in range(n):
+            for k in range(3):
+                vel[a, k] += alpha * p[a, k]
+                rv = r[a, k] - alpha * ap[a, k]
+                r[a, k] = rv
+                zv = rv / precond[a, k]
+                z[a, k] = zv
+                rz_new += rv * zv
+                r_norm2 += rv * rv
+        beta = rz_new / rz
+        rz = rz_new
+        for a in range(n):
+            for k in range(3):
+                p[a, k] = z[a, k] + beta * p[a, k]
+        it += 1
+    for a in range(n):
+        if fixed[a]:
+            continue
+        pos[a, 0] += dt * vel[a, 0]
+        pos[a, 1] += dt * vel[a, 1]
+        pos[a, 2] += dt * vel[a, 2]
+    return it

@@ -1,0 +1,38 @@
+"""Gross-slip onset from the contact state (bench/slip_onset.py) and in the grasp-and-pull rig."""
+
+import numpy as np
+import pytest
+
+from surgsim_envs.bench.material import slip
+from surgsim_envs.bench.slip_onset import gross_slip_index
+from surgsim_envs.errors import ConfigError
+
+
+def test_onset_needs_mobilised_friction_sliding_contacts_and_patch_motion():
+    n = 50
+    share = np.linspace(0, 1, n)
+    mob = np.clip(np.linspace(0.2, 1.5, n), 0, 1)   # >= 0.98 from sample 30
+    speed = np.where(np.arange(n) > 30, 0.01, 0.001)
+    k = gross_slip_index(share, mob, speed, handle_speed=0.01)
+    assert k == 31                                        # the last condition to hold is the patch motion
+    assert gross_slip_index(share, mob * 0.9, speed, 0.01) is None   # friction never at its cap
+    blip = np.zeros(n)
+    blip[10:12] = 0.01                                    # two samples are not a slip
+    assert gross_slip_index(np.ones(n), np.ones(n), blip, 0.01) is None
+    with pytest.raises(ConfigError):
+        gross_slip_index(share, mob[:-1], speed, 0.01)
+
+
+def test_rig_onset_pull_is_mu_times_grip():
+    """mass_spring rig at mu = 0.2, where the slide-distance rule read 0.82: within 5 %."""
+    res = slip("mass_spring", mu=0.2)
+    assert res.slip_onset_pull == pytest.approx(0.2 * res.slip_onset_normal, rel=0.05)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", ["mass_spring", "mass_spring_calibrated"])
+@pytest.mark.parametrize("mu", [0.1, 0.6, 1.2])
+def test_onset_across_mu_and_models(model, mu):
+    """Quasi-static pull (handle slower at low mu, longer at high mu). fem: see docs/benchmarks.md (12 min a case)."""
+    res = slip(model, mu=mu, pull_time=0.6 + 1.0 * mu, handle_speed=0.01 * min(1.0, mu / 0.3))
+    assert res.slip_onset_pull == pytest.approx(mu * res.slip_onset_normal, rel=0.05)
