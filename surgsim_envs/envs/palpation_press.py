@@ -15,7 +15,7 @@ Action (3,) in [-1, 1]: ``[x, y, report]``; the press site is ``(x, y) * map_hal
 (:func:`~surgsim_envs.envs.palpation.stiffness_weighted_estimate`) is the guess (also after
 ``max_presses`` presses).
 
-Observation (``map_cells``\\ :sup:`2` + 14,) float32: the stiffness map (per cell the largest sample
+Observation (``map_cells``\\ :sup:`2` + 13,) float32: the stiffness map (per cell the largest sample
 over the largest so far, 0 = never sampled); the running estimate (x, y) m (0, 0 before a sample);
 the last press site (x, y) m, its force F_z N and stiffness N/m; the stiffest cell's centre (x, y)
 m; the centre (x, y) m of the next unsampled cell in boustrophedon (raster) order (the last
