@@ -5,7 +5,8 @@
     # on a cluster (after `ray start --head` on one node and `ray start --address=HEAD:6379` on the others):
     RAY_ADDRESS=auto python scripts/train_rllib.py --task SurgSim/PalpationPress-v0 --workers 32 --iterations 200
 
-Each env is created by :func:`surgsim_envs.distributed.rllib_env.make_creator` and seeded from its
+``--local`` starts a private one-CPU Ray on this machine and samples in the driver process (the
+successor of Ray's removed ``local_mode``). Each env is created by :func:`surgsim_envs.distributed.rllib_env.make_creator` and seeded from its
 worker and vector index (``--seed`` is the base). Without ``--local`` the script joins the cluster
 named by ``RAY_ADDRESS`` (or starts a single-node Ray). Prints one line per iteration (mean episode
 return) and writes ``result.json`` in ``--out``.
@@ -14,9 +15,14 @@ return) and writes ``result.json`` in ``--out``.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import sys
 from pathlib import Path
+
+# DESIGN.md: import triton before anything loads MuJoCo's GL when torch is present
+if importlib.util.find_spec("triton") is not None:
+    import triton  # noqa: F401
 
 
 def parse(argv=None):
@@ -27,7 +33,8 @@ def parse(argv=None):
     p.add_argument("--envs-per-worker", type=int, default=1)
     p.add_argument("--batch", type=int, default=64, help="train batch size in env steps per iteration")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--local", action="store_true", help="Ray local mode (one process; for tests and debugging)")
+    p.add_argument("--local", action="store_true", help="local run: a private 1-CPU Ray, sampling in the driver "
+                   "(Ray's old local_mode, removed in recent Ray; for tests and debugging)")
     p.add_argument("--out", default="surgsim-train/rllib")
     args = p.parse_args(argv)
     if args.iterations <= 0 or args.workers < 0 or args.envs_per_worker <= 0 or args.batch <= 0:
@@ -66,7 +73,10 @@ def main(argv=None) -> int:
     from surgsim_envs.distributed.rllib_env import register_rllib_envs
 
     if args.local:
-        ray.init(local_mode=True, num_cpus=1, include_dashboard=False, ignore_reinit_error=True)
+        # Ray's local_mode (one process) was removed in recent Ray (RuntimeError in 2.60); the
+        # equivalent here is a private single-node Ray that samples in the driver (no env runners)
+        args.workers = 0
+        ray.init(num_cpus=1, include_dashboard=False, ignore_reinit_error=True, log_to_driver=False)
     else:
         ray.init(ignore_reinit_error=True)       # RAY_ADDRESS=auto joins a running cluster
     register_rllib_envs([args.task])

@@ -47,6 +47,7 @@ def parse(argv=None):
                    "(surgsim_envs.scenarios.npz_policy; evaluated too)")
     p.add_argument("--net-arch", default="64,64", help="hidden layer sizes, comma separated")
     p.add_argument("--learning-rate", type=float, default=3e-4)
+    p.add_argument("--train-freq", type=int, default=1, help="SAC: one gradient step every N env steps (CPU budget)")
     p.add_argument("--target-success", type=float, default=0.8,
                    help="report the wall time when the success rate of the last 20 training episodes first reaches this")
     args = p.parse_args(argv)
@@ -122,7 +123,7 @@ def main(argv=None) -> int:
     else:
         model = sb3.SAC("MlpPolicy", venv, seed=args.seed, verbose=0, device="cpu",
                          learning_starts=min(1000, max(100, args.steps // 10)), gamma=args.gamma,
-                         learning_rate=args.learning_rate, policy_kwargs={"net_arch": arch})
+                         learning_rate=args.learning_rate, policy_kwargs={"net_arch": arch}, train_freq=args.train_freq)
 
     import time
 

@@ -8,6 +8,11 @@ import importlib.util
 import sys
 from pathlib import Path
 
+# DESIGN.md: with torch installed, triton must be imported before MuJoCo/EGL is (else torch's
+# optimiser set-up segfaulted here, in RLlib's learner build)
+if importlib.util.find_spec("triton") is not None:
+    import triton  # noqa: F401
+
 import numpy as np
 import pytest
 
