@@ -47,6 +47,8 @@ def parse(argv=None):
                    "(surgsim_envs.scenarios.npz_policy; evaluated too)")
     p.add_argument("--net-arch", default="64,64", help="hidden layer sizes, comma separated")
     p.add_argument("--learning-rate", type=float, default=3e-4)
+    p.add_argument("--resume", default=None, help="continue training the model.zip + vecnormalize.pkl in this folder "
+                   "(same task and algo; SAC starts with an empty replay buffer)")
     p.add_argument("--train-freq", type=int, default=1, help="SAC: one gradient step every N env steps (CPU budget)")
     p.add_argument("--target-success", type=float, default=0.8,
                    help="report the wall time when the success rate of the last 20 training episodes first reaches this")
@@ -112,10 +114,15 @@ def main(argv=None) -> int:
     env_kwargs = {"on_unstable": args.on_unstable}
     venv = make_vec_env(f"surgsim_envs:{args.task}", n_envs=args.n_envs, seed=args.seed, vec_env_cls=vec_cls,
                         env_kwargs=env_kwargs)
-    venv = VecNormalize(venv, norm_obs=True, norm_reward=True)
+    if args.resume:
+        venv = VecNormalize.load(str(Path(args.resume) / "vecnormalize.pkl"), venv)
+    else:
+        venv = VecNormalize(venv, norm_obs=True, norm_reward=True)
     arch = [int(n) for n in args.net_arch.split(",") if n.strip()]
     steps_per_episode = gym.spec(args.task).max_episode_steps or 1000
-    if args.algo == "ppo":
+    if args.resume:
+        model = getattr(sb3, args.algo.upper()).load(str(Path(args.resume) / "model.zip"), env=venv, device="cpu")
+    elif args.algo == "ppo":
         n_steps = 512 if steps_per_episode > 100 else 128
         model = sb3.PPO("MlpPolicy", venv, seed=args.seed, n_steps=n_steps, batch_size=min(256, n_steps * args.n_envs),
                          gamma=args.gamma, verbose=0, device="cpu", learning_rate=args.learning_rate,
@@ -148,7 +155,7 @@ def main(argv=None) -> int:
         def _on_training_end(self):
             self.bar.close()
 
-    model.learn(total_timesteps=args.steps, callback=Progress())
+    model.learn(total_timesteps=args.steps, callback=Progress(), reset_num_timesteps=not args.resume)
     model.save(out / "model.zip")
     venv.save(str(out / "vecnormalize.pkl"))
     venv.training = False
