@@ -1,8 +1,11 @@
 """Train PPO or SAC (stable-baselines3) on a SurgSim task; save the model, a learning curve and a
-comparison against a random policy.
+comparison against a random policy; optionally export the policy as a numpy ``.npz`` MLP
+(``--export-npz``, format of surgsim_envs.scenarios.npz_policy, checked to give SB3's actions).
 
     pip install -e .[train]
     python scripts/train_sb3.py --task SurgSim/Palpation-v0 --algo ppo --steps 50000 --n-envs 2 --seed 0
+    python scripts/train_sb3.py --task SurgSim/PalpationPress-v0 --algo sac --steps 6000 --n-envs 1 \
+        --export-npz surgsim_envs/policies/palpation_press_v0.npz
 
 Writes to ``--out`` (default ./surgsim-train/<task>-<algo>-<seed>/): ``model.zip``,
 ``vecnormalize.pkl``, ``learning_curve.png``, ``eval.json`` (mean return and success rate of the
@@ -40,6 +43,15 @@ def parse(argv=None):
     p.add_argument("--out", default=None)
     p.add_argument("--on-unstable", choices=["terminate", "raise"], default="terminate",
                    help="a diverging tissue ends the episode (info['unstable']) instead of killing the run")
+    p.add_argument("--export-npz", default=None, help="also write the policy as a numpy .npz MLP here "
+                   "(surgsim_envs.scenarios.npz_policy; evaluated too)")
+    p.add_argument("--net-arch", default="64,64", help="hidden layer sizes, comma separated")
+    p.add_argument("--learning-rate", type=float, default=3e-4)
+    p.add_argument("--resume", default=None, help="continue training the model.zip + vecnormalize.pkl in this folder "
+                   "(same task and algo; SAC starts with an empty replay buffer)")
+    p.add_argument("--train-freq", type=int, default=1, help="SAC: one gradient step every N env steps (CPU budget)")
+    p.add_argument("--target-success", type=float, default=0.8,
+                   help="report the wall time when the success rate of the last 20 training episodes first reaches this")
     args = p.parse_args(argv)
     if args.steps <= 0 or args.n_envs <= 0 or args.eval_episodes <= 0:
         p.error("--steps, --n-envs and --eval-episodes must be positive")
@@ -49,7 +61,9 @@ def parse(argv=None):
 
 
 def evaluate(policy, task, episodes, seed, env_kwargs=None):
-    """Mean return, success rate and unstable episodes of ``policy(obs) -> action`` over ``episodes``."""
+    """Mean return, success rate and unstable episodes of ``policy(obs) -> action`` over ``episodes``
+    (reset seeds ``seed + 10000 + k``: training resets use ``seed .. seed + n_envs - 1`` and then the
+    env's own generator, so these are seeds it never trained on)."""
     import gymnasium as gym
 
     env = gym.make(task, **(env_kwargs or {}))
@@ -100,15 +114,29 @@ def main(argv=None) -> int:
     env_kwargs = {"on_unstable": args.on_unstable}
     venv = make_vec_env(f"surgsim_envs:{args.task}", n_envs=args.n_envs, seed=args.seed, vec_env_cls=vec_cls,
                         env_kwargs=env_kwargs)
-    venv = VecNormalize(venv, norm_obs=True, norm_reward=True)
-    if args.algo == "ppo":
-        model = sb3.PPO("MlpPolicy", venv, seed=args.seed, n_steps=512, batch_size=256, gamma=args.gamma, verbose=0,
-                         device="cpu")
+    if args.resume:
+        venv = VecNormalize.load(str(Path(args.resume) / "vecnormalize.pkl"), venv)
     else:
-        model = sb3.SAC("MlpPolicy", venv, seed=args.seed, verbose=0, device="cpu", learning_starts=1000, gamma=args.gamma)
+        venv = VecNormalize(venv, norm_obs=True, norm_reward=True)
+    arch = [int(n) for n in args.net_arch.split(",") if n.strip()]
+    steps_per_episode = gym.spec(args.task).max_episode_steps or 1000
+    if args.resume:
+        model = getattr(sb3, args.algo.upper()).load(str(Path(args.resume) / "model.zip"), env=venv, device="cpu")
+    elif args.algo == "ppo":
+        n_steps = 512 if steps_per_episode > 100 else 128
+        model = sb3.PPO("MlpPolicy", venv, seed=args.seed, n_steps=n_steps, batch_size=min(256, n_steps * args.n_envs),
+                         gamma=args.gamma, verbose=0, device="cpu", learning_rate=args.learning_rate,
+                         policy_kwargs={"net_arch": arch})
+    else:
+        model = sb3.SAC("MlpPolicy", venv, seed=args.seed, verbose=0, device="cpu",
+                         learning_starts=min(1000, max(100, args.steps // 10)), gamma=args.gamma,
+                         learning_rate=args.learning_rate, policy_kwargs={"net_arch": arch}, train_freq=args.train_freq)
+
+    import time
 
     curve = []
     unstable = [0]
+    t0 = time.perf_counter()
 
     class Progress(BaseCallback):
         def _on_training_start(self):
@@ -120,13 +148,14 @@ def main(argv=None) -> int:
                 ep = info.get("episode")
                 unstable[0] += bool(info.get("unstable", False))
                 if ep:
-                    curve.append((self.num_timesteps, float(ep["r"]), bool(info.get("success", False))))
+                    curve.append((self.num_timesteps, float(ep["r"]), bool(info.get("success", False)),
+                                  time.perf_counter() - t0))
             return True
 
         def _on_training_end(self):
             self.bar.close()
 
-    model.learn(total_timesteps=args.steps, callback=Progress())
+    model.learn(total_timesteps=args.steps, callback=Progress(), reset_num_timesteps=not args.resume)
     model.save(out / "model.zip")
     venv.save(str(out / "vecnormalize.pkl"))
     venv.training = False
@@ -136,13 +165,37 @@ def main(argv=None) -> int:
         a, _ = model.predict(venv.normalize_obs(obs[None]), deterministic=True)
         return a[0]
 
+    train_wall = time.perf_counter() - t0
+    reach = None
+    for i in range(20, len(curve) + 1):
+        if np.mean([c[2] for c in curve[i - 20:i]]) >= args.target_success:
+            reach = {"env_steps": curve[i - 1][0], "wall_s": round(curve[i - 1][3], 1)}
+            break
     space = gym.make(args.task).action_space
     space.seed(args.seed)
     result = {"task": args.task, "algo": args.algo, "steps": args.steps, "n_envs": args.n_envs, "seed": args.seed,
-              "gamma": args.gamma,
+              "gamma": args.gamma, "net_arch": arch, "learning_rate": args.learning_rate,
+              "train_wall_s": round(train_wall, 1), "training_episodes": len(curve),
+              f"first_reached_{args.target_success:g}_success_last20": reach,
               "unstable_training_episodes": unstable[0],
+              "eval_seeds": [args.seed + 10_000, args.seed + 10_000 + args.eval_episodes - 1],
               "trained": evaluate(trained, args.task, args.eval_episodes, args.seed, env_kwargs),
               "random": evaluate(lambda obs: space.sample(), args.task, args.eval_episodes, args.seed, env_kwargs)}
+    if args.export_npz:
+        from surgsim_envs.policies.export_sb3 import check_export, sb3_to_npz
+
+        npz = sb3_to_npz(model, venv, source=args.export_npz)
+        sample_env = gym.make(args.task, **env_kwargs)
+        obs_samples = [sample_env.reset(seed=args.seed + 20_000 + k)[0] for k in range(4)]
+        o = obs_samples[-1]
+        for _ in range(16):
+            o, *_ = sample_env.step(space.sample())
+            obs_samples.append(o)
+        result["npz_max_action_difference"] = check_export(model, npz, np.array(obs_samples), venv)
+        path = npz.save(args.export_npz)
+        result["npz"] = {"path": str(path), "eval": evaluate(npz, args.task, args.eval_episodes, args.seed, env_kwargs)}
+    with open(out / "curve.json", "w") as fh:
+        json.dump([list(c) for c in curve], fh)
     with open(out / "eval.json", "w") as fh:
         json.dump(result, fh, indent=2)
     import matplotlib
@@ -150,17 +203,26 @@ def main(argv=None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4))
     if curve:
-        t, r, _ = zip(*curve)
+        t, r, ok, _ = zip(*curve)
         ax.plot(t, r, ".", alpha=0.3, label="episode return")
         k = max(1, len(r) // 20)
         ax.plot(t[k - 1:], np.convolve(r, np.ones(k) / k, mode="valid"), label=f"moving mean ({k})")
+        k2 = min(20, len(ok))
+        ax2.plot(t[k2 - 1:], np.convolve(np.asarray(ok, float), np.ones(k2) / k2, mode="valid"),
+                 label=f"training episodes (mean of {k2})")
     ax.axhline(result["random"]["mean_return"], color="grey", ls="--", label="random policy")
+    ax2.axhline(result["random"]["success_rate"], color="grey", ls="--", label="random (eval seeds)")
+    ax2.axhline(result["trained"]["success_rate"], color="C2", ls=":", label="trained, deterministic (eval seeds)")
     ax.set_xlabel("environment steps")
     ax.set_ylabel("episode return")
+    ax2.set_xlabel("environment steps")
+    ax2.set_ylabel("success rate")
+    ax2.set_ylim(-0.02, 1.02)
     ax.set_title(f"{args.algo.upper()} on {args.task}")
     ax.legend()
+    ax2.legend()
     fig.tight_layout()
     fig.savefig(out / "learning_curve.png", dpi=100)
     print(json.dumps(result, indent=2))

@@ -26,6 +26,7 @@ BENCH: dict[str, tuple[str, str]] = {
     "speed": ("surgsim_envs.bench.speed", "tissue model step time per model, integrator, node count"),
     "loop": ("surgsim_envs.bench.loop", "full physics step (MuJoCo + contact + tissue) vs MuJoCo flex"),
     "envs": ("surgsim_envs.bench.envs_speed", "Gymnasium env steps per second"),
+    "sb3-vec": ("surgsim_envs.bench.sb3_vec", "stable-baselines3 DummyVecEnv vs SubprocVecEnv(n) env steps per second"),
     "haptics": ("surgsim_envs.bench.haptics_speed", "haptic servo loop period"),
     "haptics-flood": ("surgsim_envs.bench.haptics_flood", "haptic servo period while its UDP port is flooded"),
     "accuracy": ("surgsim_envs.bench.accuracy", "speed against accuracy chart (Pareto front)"),

@@ -10,7 +10,7 @@ from surgsim_envs.envs import MAX_EPISODE_STEPS, TASKS
 from surgsim_envs.errors import ConfigError
 
 FAST = {"SurgSim/Palpation-v0": {"spacing": 0.02}, "SurgSim/Grasp-v0": {"resolution": 0.015},
-        "SurgSim/Slippage-v0": {"resolution": 0.015}}
+        "SurgSim/Slippage-v0": {"resolution": 0.015}, "SurgSim/PalpationPress-v0": {"spacing": 0.02}}
 
 
 @pytest.mark.parametrize("task", sorted(TASKS))
@@ -58,3 +58,6 @@ def test_registered_limits_match_the_default_configs():
     for task, cfg in (("SurgSim/Palpation-v0", PalpationConfig()), ("SurgSim/Grasp-v0", GraspConfig()),
                       ("SurgSim/Slippage-v0", SlippageConfig())):
         assert MAX_EPISODE_STEPS[task] == round(cfg.episode_seconds * cfg.control_hz)
+    from surgsim_envs.envs.palpation_press import PalpationPressConfig
+
+    assert MAX_EPISODE_STEPS["SurgSim/PalpationPress-v0"] == PalpationPressConfig().max_presses   # one step = one press

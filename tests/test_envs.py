@@ -48,7 +48,9 @@ def _force_columns(env_id):
             "SurgSim/Slippage-v0": slice(1, 7)}[env_id]
 
 
-@pytest.mark.parametrize("env_id", IDS)
+# control-step tasks only: 2000 steps of PalpationPress-v0 are 2000 whole presses (~4 min here);
+# its random presses are checked in tests/test_palpation_press.py and tests/test_env_spaces.py
+@pytest.mark.parametrize("env_id", [i for i in IDS if i != "SurgSim/PalpationPress-v0"])
 def test_random_actions_stay_physical(envs, env_id):
     env = envs[env_id]
     env.action_space.seed(3)

@@ -20,7 +20,8 @@ from surgsim_envs.scenarios.schema import CriterionSpec
 ROOT = Path(__file__).resolve().parents[1]
 TASKS = sorted((ROOT / "tasks").glob("*.toml"))
 SCENARIO_TASKS = [p for p in TASKS if p.stem in {"palpation_find_inclusion", "spleen_grasp_and_retract",
-                                                   "grasp_slippage_mu_sweep", "palpation_policy"}]
+                                                   "grasp_slippage_mu_sweep", "palpation_policy",
+                                                   "palpation_press_policy"}]
 GOOD = """
 [scenario]
 name = "ok"

@@ -15,11 +15,13 @@ TASKS = {
     "SurgSim/Palpation-v0": "surgsim_envs.envs.palpation:PalpationEnv",
     "SurgSim/Grasp-v0": "surgsim_envs.envs.grasp:GraspEnv",
     "SurgSim/Slippage-v0": "surgsim_envs.envs.slippage:SlippageEnv",
+    "SurgSim/PalpationPress-v0": "surgsim_envs.envs.palpation_press:PalpationPressEnv",
 }
 
 #: task id -> control steps per episode of the default config (episode_seconds x control_hz); a
 #: test keeps these equal to the configs. A changed config needs gym.make(..., max_episode_steps=N).
-MAX_EPISODE_STEPS = {"SurgSim/Palpation-v0": 600, "SurgSim/Grasp-v0": 150, "SurgSim/Slippage-v0": 150}
+MAX_EPISODE_STEPS = {"SurgSim/Palpation-v0": 600, "SurgSim/Grasp-v0": 150, "SurgSim/Slippage-v0": 150,
+                     "SurgSim/PalpationPress-v0": 25}   # one step = one press
 
 
 def register_envs() -> None:

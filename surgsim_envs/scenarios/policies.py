@@ -8,7 +8,10 @@ Built-in policies (scenario files name them ``"builtin:NAME"`` or
 * :func:`hold_still` (phase scenarios): keeps the tool where it is.
 
 
-Loading (:func:`load_policy`): built-ins and ``.npz`` data policies
+Trained policies shipped with the package (:mod:`surgsim_envs.policies`, .npz data):
+``"shipped:SurgSim/PalpationPress-v0"``.
+
+Loading (:func:`load_policy`): built-ins, shipped and ``.npz`` data policies
 (:mod:`~surgsim_envs.scenarios.npz_policy`) always; code (``file.py:function``,
 ``module:function``, stable-baselines3 ``.zip``) only with ``allow_code`` (``--allow-code``), and
 from a scenario file only from ``.py``/``.zip`` files inside the scenario's own folder.
@@ -78,6 +81,8 @@ def hold_still(obs: dict) -> dict:
 # Loading a policy reference, with the trust model of docs/scenarios.md
 BUILTIN = {"palpation_scan": palpation_scan, "hold_still": hold_still}
 BUILTIN_MODULES = ("builtin", "surgsim_envs.scenarios.policies")
+#: ``shipped:TASK_ID`` names the trained .npz policy shipped for a task (surgsim_envs.policies)
+SHIPPED_PREFIX = "shipped:"
 
 
 def policy_kind(ref: str) -> str:
@@ -88,6 +93,8 @@ def policy_kind(ref: str) -> str:
         raise ConfigError(f"policy must be a .npz data policy, 'builtin:NAME' or 'module:function', got {ref!r}")
     if ref.endswith(".npz"):
         return "data"
+    if ref.startswith(SHIPPED_PREFIX):
+        return "shipped"
     if ref.endswith(".zip"):
         return "code"
     mod, sep, attr = ref.rpartition(":")
@@ -132,6 +139,11 @@ def check_policy_reference(ref: str, base: Path | None = None, allow_code: bool 
             raise ConfigError(f"policy {ref!r}: module surgsim_envs.scenarios.policies has no {name!r}; "
                               f"built-in policies: {sorted(BUILTIN)}")
         return kind
+    if kind == "shipped":
+        from surgsim_envs.policies import shipped_path
+
+        shipped_path(ref[len(SHIPPED_PREFIX):])     # ConfigError naming the shipped tasks
+        return kind
     if kind == "data":
         path = resolve_policy_file(ref, base)
         if not path.is_file():
@@ -170,6 +182,10 @@ def load_policy(ref: str, base: Path | None = None, allow_code: bool = False, tr
     kind = check_policy_reference(ref, base, allow_code, trusted)
     if kind == "builtin":
         return BUILTIN[ref.rpartition(":")[2]]
+    if kind == "shipped":
+        from surgsim_envs.policies import load_shipped
+
+        return load_shipped(ref[len(SHIPPED_PREFIX):])
     if kind == "data":
         from surgsim_envs.scenarios.npz_policy import NpzPolicy
 

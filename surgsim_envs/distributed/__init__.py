@@ -1,0 +1,2 @@
+"""Training beyond one machine on an existing engine: Ray RLlib (issue 15). See
+:mod:`.rllib_env` and ``scripts/train_rllib.py``; the ``[distributed]`` extra installs Ray."""

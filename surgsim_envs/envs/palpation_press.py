@@ -1,0 +1,235 @@
+"""SurgSim/PalpationPress-v0: Palpation-v0 with one decision per press (issue 15).
+
+The same slab, inclusion, randomisation and stiffness estimate as
+:mod:`surgsim_envs.envs.palpation`, but one env step is one whole press: the env lifts the probe
+``clearance`` m above the rest surface, moves it to the chosen site (``move_speed``), presses it
+``press_depth`` m deep at ``press_speed`` and holds for ``hold_steps`` physics steps; the stiffness
+sample is the mean of F_z / depth (N/m) over the last ``average_steps`` physics steps (the tissue
+rings after the press). The agent decides *where* to press next and *when* to report, a few dozen
+decisions per episode instead of 600 continuous-control steps (Palpation-v0 was not learned by PPO
+in 400k steps: docs/training.md).
+
+Action (3,) in [-1, 1]: ``[x, y, report]``; the press site is ``(x, y) * map_half_width`` m
+(clipped to ``xy_limit``); ``report > 0`` ends the episode *instead of* pressing (honoured from
+``min_presses`` presses on) and the env's stiffness-weighted estimate
+(:func:`~surgsim_envs.envs.palpation.stiffness_weighted_estimate`) is the guess (also after
+``max_presses`` presses).
+
+Observation (``map_cells``\\ :sup:`2` + 13,) float32: the stiffness map (per cell the largest sample
+over the largest so far, 0 = never sampled); the running estimate (x, y) m (0, 0 before a sample);
+the last press site (x, y) m, its force F_z N and stiffness N/m; the stiffest cell's centre (x, y)
+m; the centre (x, y) m of the next unsampled cell in boustrophedon (raster) order (the last
+cell's centre once all are sampled) -- a coverage feature that makes "press where you have not
+pressed" a linear function of the observation; the fraction of unsampled cells; the stiffness
+contrast seen (max / median sample); the fraction of ``max_presses`` used.
+
+Reward: ``cell_reward`` for the first sample in each map cell; ``- press_cost`` per press;
+potential-based shaping on the estimate's error (as Palpation-v0; sums to ``shaping_weight *
+phi_final``); ``- damage_weight`` per N of press force above ``damage_force``; at the end the
+localisation reward + ``success_bonus`` if the guess is within ``tolerance_mm`` (``info["success"]``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from surgsim_envs.envs.base import ObsTerm, check_positive, reward_from_terms
+from surgsim_envs.envs.palpation import (PalpationConfig, PalpationEnv, damage_penalty, indentation_depth,
+                                        localisation_error, map_cell, stiffness_map, stiffness_weighted_estimate)
+from surgsim_envs.errors import ConfigError
+
+
+@dataclass
+class PalpationPressConfig(PalpationConfig):
+    """PalpationPress-v0 settings (SI units); slab, inclusion ranges and the localisation reward
+    are those of :class:`PalpationConfig` (its continuous-control fields are unused)."""
+
+    press_depth: float = 0.006       # m below the rest surface
+    clearance: float = 0.004         # m above the rest surface while moving between sites
+    move_speed: float = 1.0          # m/s, probe target rate while moving
+    press_speed: float = 0.5         # m/s, probe target rate while pressing
+    settle_steps: int = 8            # physics steps after the move before descending
+    hold_steps: int = 30             # physics steps from the start of the descent to the reading
+    average_steps: int = 10          # physics steps averaged for the stiffness sample
+    max_presses: int = 25            # presses per episode (the time limit)
+    min_presses: int = 1             # report is ignored before this many presses
+    press_cost: float = 0.02         # per press
+    cell_reward: float = 0.1         # first sample in each map cell
+    map_cells: int = 5
+
+    def validate(self) -> None:
+        super().validate()
+        for key in ("press_depth", "clearance", "move_speed", "press_speed"):
+            check_positive(getattr(self, key), f"PalpationPressConfig.{key}")
+        for key in ("settle_steps", "hold_steps", "average_steps", "max_presses"):
+            v = getattr(self, key)
+            if not (isinstance(v, (int, np.integer)) and v >= 1):
+                raise ConfigError(f"PalpationPressConfig.{key}={v!r} must be an integer >= 1")
+        if self.average_steps > self.hold_steps:
+            raise ConfigError(f"PalpationPressConfig.average_steps={self.average_steps} must be <= hold_steps="
+                              f"{self.hold_steps}")
+        if not (isinstance(self.min_presses, (int, np.integer)) and 0 <= self.min_presses <= self.max_presses):
+            raise ConfigError(f"PalpationPressConfig.min_presses={self.min_presses!r} must be an integer in "
+                              f"[0, max_presses={self.max_presses}]")
+        if self.press_depth <= self.press_min_depth:
+            raise ConfigError(f"press_depth={self.press_depth} m must exceed press_min_depth={self.press_min_depth} m "
+                              "(shallower presses give no stiffness sample)")
+
+
+def raster_order(cells: int) -> np.ndarray:
+    """Row-major cell indices in boustrophedon order (row 0 left to right, row 1 right to left, ...)."""
+    rows = [list(range(r * cells, (r + 1) * cells)) for r in range(cells)]
+    return np.array([i for r, row in enumerate(rows) for i in (row if r % 2 == 0 else row[::-1])], dtype=int)
+
+
+def cell_centre(index: int, cells: int, half_width: float) -> np.ndarray:
+    """(x, y) m of the centre of row-major map cell ``index`` (inverse of ``map_cell``)."""
+    w = 2 * half_width / cells
+    return np.array([-half_width + (index % cells + 0.5) * w, -half_width + (index // cells + 0.5) * w])
+
+
+class PalpationPressEnv(PalpationEnv):
+    """PalpationPress-v0 (see module docstring)."""
+
+    config_cls = PalpationPressConfig
+    TASK_ID = "SurgSim/PalpationPress-v0"
+
+    def _build(self) -> None:
+        super()._build()
+        c = self.config
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+        lo, hi = -float(c.map_half_width), float(c.map_half_width)
+        self._order = raster_order(int(c.map_cells))
+        self._set_observation_terms([
+            ObsTerm("stiffness_map", "1", self.n_cells, 0.0, 1.0),
+            ObsTerm("estimate_xy", "m", 2, lo, hi),
+            ObsTerm("last_press_xy", "m", 2, lo, hi),
+            ObsTerm("last_press_force_z", "N", 1),
+            ObsTerm("last_press_stiffness", "N/m", 1, 0.0),
+            ObsTerm("stiffest_cell_xy", "m", 2, lo, hi),
+            ObsTerm("next_unsampled_cell_xy", "m", 2, lo, hi),
+            ObsTerm("unsampled_fraction", "1", 1, 0.0, 1.0),
+            ObsTerm("stiffness_contrast_seen", "1", 1, 1.0),
+            ObsTerm("presses_fraction", "1", 1, 0.0, 1.0)])
+
+    @property
+    def max_episode_steps(self) -> int:
+        return int(self.config.max_presses)
+
+    def _randomise(self, options: dict[str, Any]) -> None:
+        super()._randomise(options)
+        self.last = (0.0, 0.0, 0.0, 0.0)     # x, y, F_z, k of the last press
+        self.reported = False
+        self.sim.set_tool_target("probe", self._hover_target(self.home[:2]), speed=self.config.move_speed)
+
+    def _hover_target(self, xy) -> np.ndarray:
+        return np.array([xy[0], xy[1], self.surface_z + self.config.tip_radius + self.config.clearance])
+
+    # -- one press ------------------------------------------------------------------------------
+    def _apply_action(self, a: np.ndarray) -> None:
+        c = self.config
+        self.reported = bool(a[2] > 0.0) and self.steps > c.min_presses
+        if self.reported:
+            return
+        sim, probe = self.sim, "probe"
+        site = np.clip(a[:2] * c.map_half_width, -c.xy_limit, c.xy_limit)
+        here = sim.tool_position(probe)
+        sim.set_tool_target(probe, self._hover_target(here[:2]), speed=c.move_speed)     # lift
+        lift = max(0.0, self._hover_target(here[:2])[2] - here[2])
+        travel = float(np.hypot(*(site - here[:2])))
+        for _ in range(int(np.ceil(lift / c.move_speed / sim.dt))):
+            sim.physics_step()
+        sim.set_tool_target(probe, self._hover_target(site), speed=c.move_speed)
+        for _ in range(int(np.ceil(travel / c.move_speed / sim.dt)) + c.settle_steps):
+            sim.physics_step()
+        bottom = np.array([site[0], site[1], self.surface_z + c.tip_radius - c.press_depth])
+        sim.set_tool_target(probe, bottom, speed=c.press_speed)
+        fz, depth, fmax = [], [], 0.0
+        for i in range(c.hold_steps):
+            sim.physics_step()
+            f = sim.tool_force(probe)
+            fmax = max(fmax, float(np.linalg.norm(f)))
+            if i >= c.hold_steps - c.average_steps:
+                fz.append(float(f[2]))
+                depth.append(indentation_depth(sim.tool_position(probe)[2], self.surface_z, c.tip_radius))
+        self.press_peak = fmax
+        self.peak_force = max(self.peak_force, fmax)
+        d = float(np.mean(depth))
+        k = float(np.mean(fz)) / d if d >= c.press_min_depth else 0.0
+        pos = sim.tool_position(probe)
+        self.last = (float(pos[0]), float(pos[1]), float(np.mean(fz)), k)
+
+    # -- observation ----------------------------------------------------------------------------
+    def _next_unsampled(self) -> np.ndarray:
+        c = self.config
+        free = [i for i in self._order if self.cell_k[i] == 0.0]
+        return cell_centre(int(free[0] if free else self._order[-1]), int(c.map_cells), c.map_half_width)
+
+    def _observe(self) -> np.ndarray:
+        c = self.config
+        est = self.estimate if self.estimate is not None else np.zeros(2)
+        stiffest = (cell_centre(int(np.argmax(self.cell_k)), int(c.map_cells), c.map_half_width)
+                    if self.cell_k.any() else np.zeros(2))
+        return np.array([*stiffness_map(self.cell_k), est[0], est[1], self.last[0], self.last[1], self.last[2],
+                         self.last[3], stiffest[0], stiffest[1], *self._next_unsampled(),
+                         float(np.mean(self.cell_k == 0.0)), self.contrast_seen,
+                         min(1.0, self.steps / c.max_presses)], dtype=np.float32)
+
+    # -- reward ---------------------------------------------------------------------------------
+    def _evaluate(self, a: np.ndarray):
+        c = self.config
+        rt = {"damage": 0.0, "coverage": 0.0, "shaping": 0.0, "press_cost": 0.0, "localisation": 0.0}
+        terms: dict[str, Any] = {}
+        if self.reported:
+            r, t = self._finish(self.sim.tool_position("probe"))
+            rt["localisation"] += r
+            terms.update(t)
+            reward, terms["reward_terms"] = reward_from_terms(rt)
+            return reward, True, terms
+        x, y, fz, k = self.last
+        rt["press_cost"] = -c.press_cost
+        rt["damage"] = damage_penalty(np.array([0.0, 0.0, self.press_peak]), c.damage_force, c.damage_weight)
+        if k > 0.0:
+            xy = np.array([x, y])
+            self.samples_xy.append(xy)
+            self.samples_k.append(k)
+            self.sites.append(xy)
+            if k > self.best[2]:
+                self.best = (x, y, k)
+            cell = map_cell(xy, int(c.map_cells), c.map_half_width)
+            if self.cell_k[cell] == 0.0:
+                rt["coverage"] += c.cell_reward
+            self.cell_k[cell] = max(self.cell_k[cell], k)
+            self.estimate = stiffness_weighted_estimate(np.array(self.samples_xy), np.array(self.samples_k))
+            med = float(np.median(self.samples_k))
+            self.contrast_seen = float(max(self.samples_k)) / med if med > 0 else 1.0
+            err = localisation_error(self.estimate, self.inclusion["centre"][:2])
+            phi = 1.0 - min(err / c.localisation_scale, 1.0)
+            rt["shaping"] += c.shaping_weight * (phi - self.phi)
+            self.phi = phi
+        terms.update({"press_force_z_N": fz, "stiffness_estimate_N_per_m": k,
+                      "estimate_xy_m": None if self.estimate is None else self.estimate.tolist()})
+        reward, terms["reward_terms"] = reward_from_terms(rt)
+        return reward, False, terms
+
+
+def press_expert(env) -> Any:
+    """Scripted policy: press the centre of every map cell in raster order (the observation's
+    ``next_unsampled_cell_xy``), report when all are sampled. Returns ``policy(obs) -> action``."""
+    u = env.unwrapped
+    hw = float(u.config.map_half_width)
+    names = u.observation_names
+    i_next, i_free = names.index("next_unsampled_cell_xy[0] [m]"), names.index("unsampled_fraction [1]")
+
+    def policy(obs):
+        obs = np.asarray(obs, dtype=float)
+        nxt, unsampled = obs[i_next:i_next + 2], obs[i_free]
+        if unsampled <= 0.0:
+            return np.array([0.0, 0.0, 1.0], dtype=np.float32)
+        return np.array([nxt[0] / hw, nxt[1] / hw, -1.0], dtype=np.float32)
+
+    return policy
