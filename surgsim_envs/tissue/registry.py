@@ -20,6 +20,7 @@ ENTRY_POINT_GROUP = "surgsim_envs.tissue_models"
 BUILTIN_MODELS: dict[str, str] = {
     "mass_spring": "surgsim_envs.tissue.mass_spring:MassSpringModel",
     "fem": "surgsim_envs.tissue.fem:TetFEMModel",
+    "layered": "surgsim_envs.tissue.layered:LayeredModel",
 }
 
 _registry: dict[str, Any] = {}
