@@ -169,6 +169,11 @@ def _layered(kind: str):
         from surgsim_envs.geometry import anatomy
 
         return (anatomy.abdominal_wall_volume if kind == "abdominal_wall" else anatomy.thigh_volume)(spacing, **shape)
+    names = {"abdominal_wall": ("size", "skin", "fat", "muscle", "peritoneum", "fat_variation"),
+             "thigh": ("radius", "length", "skin", "fat", "bone_radius", "bone_offset", "sections")}[kind]
+    build.__signature__ = inspect.Signature(  # option names for make_volume's check (no import of anatomy)
+        [inspect.Parameter("spacing", inspect.Parameter.POSITIONAL_OR_KEYWORD)]
+        + [inspect.Parameter(n, inspect.Parameter.KEYWORD_ONLY, default=None) for n in names])
     return build
 
 

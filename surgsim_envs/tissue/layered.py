@@ -91,7 +91,8 @@ class LayeredModel(TissueModel):
         if not (isinstance(max_updates, (int, np.integer)) and max_updates >= 1):
             raise ConfigError(f"layered: max_updates must be a positive integer, got {max_updates!r}")
         if region_materials is None:
-            region_materials = {k: volume.material_table[m] for k, m in enumerate(volume.layer_names)}
+            present = set(np.unique(volume.labels).tolist())  # a layer thinner than the lattice may own no tet
+            region_materials = {k: volume.material_table[m] for k, m in enumerate(volume.layer_names) if k in present}
         if material is None:
             material = volume.material_table[volume.layer_names[0]]
         super().__init__(volume, material, region_materials=region_materials, **base_kwargs)
@@ -308,14 +309,16 @@ class LayeredModel(TissueModel):
         self.external_forces = ext
         return updates
 
-    def static_solve(self, forces=None, stiffness=None, method: str = "direct", **kwargs) -> np.ndarray:
+    def static_solve(self, forces=None, stiffness=None, method: str = "direct", max_sweeps: int = 400,
+                     **kwargs) -> np.ndarray:
         """Equilibrium positions (N,3) m under ``forces`` (N,3) N (and implicit ``stiffness`` (N,) N/m)
         with every free node active: the all-node solution.
 
         method "direct": a sparse direct solve of the springs' linear system (eq. 2.8 for all nodes at
         once), then the constrained local iteration from there to enforce the NBB / extreme lengths
         and accumulate the forces (it stops at once where no constraint is active); "local": the
-        local iteration alone from the current state (slow for large volumes).
+        local iteration alone from the current state (slow for large volumes). At most
+        ``max_sweeps`` x N node updates; ``self.unconverged`` counts the nodes still active after.
         """
         if method not in ("direct", "local"):
             raise ConfigError(f"layered: static_solve method must be 'direct' or 'local', got {method!r}")
@@ -344,7 +347,8 @@ class LayeredModel(TissueModel):
             self.push[:] = 0.0
             # the direct solution may violate the NBB; clamp it back inside before the local iteration
             self._clamp_into_nbb()
-        self.solve(ext, kc, all_nodes=True, max_updates=2 ** 62)
+        self.solve(ext, kc, all_nodes=True, max_updates=int(max_sweeps) * n)
+        self._n_queue = 0  # a static solve leaves no work for the next step
         return self.positions.copy()
 
     def _clamp_into_nbb(self) -> None:
