@@ -27,11 +27,14 @@ def _box(z0=0.0, z1=0.03, s=0.05):
 # ---------------------------------------------------------------------------------------------
 # geometry
 def test_interface_points_lie_on_their_sheets(wall):
-    """Z-ray snapping (eq. 2.3) puts one node per column exactly on each sheet; flags follow."""
+    """Z-ray snapping (eq. 2.3) puts one node per column exactly on the fat/muscle sheet (10 mm
+    from any other surface); every flagged node of every sheet lies on it; flags follow."""
     layers = abdominal_wall_layers(size=(0.05, 0.05))
+    ij = wall.lattice_index[:, :2]
+    interior = len(np.unique(ij[(ij > ij.min(axis=0)).all(axis=1) & (ij < ij.max(axis=0)).all(axis=1)], axis=0))
+    assert np.count_nonzero(wall.node_interface == 1) >= interior  # side-boundary nodes snap to the boundary
     for k, iface in enumerate(layers.interfaces):
         on = wall.node_interface == k
-        assert on.sum() >= 0.9 * len(np.unique(wall.lattice_index[:, :2], axis=0))
         z = iface.surface(wall.nodes[on, 0], wall.nodes[on, 1])
         np.testing.assert_allclose(wall.nodes[on, 2], z, atol=1e-12)
     fascia = wall.material_names.index("fascia")
@@ -47,8 +50,10 @@ def test_springs_follow_paper_rules(wall):
     ok = down >= 0
     assert np.all(wall.node_material[down[ok]] == muscle)
     assert np.all(wall.spring_material[on[ok], 4] == muscle)
-    lateral = wall.spring_material[on, 1]
-    assert np.all(lateral[wall.neighbours[on, 1] >= 0] == fascia)
+    right = wall.neighbours[on, 1]
+    both = (right >= 0) & (wall.node_interface[np.maximum(right, 0)] == 1)
+    assert both.sum() > 10
+    assert np.all(wall.spring_material[on[both], 1] == fascia)   # along the interface: its own material
 
 
 def test_x_rays_move_existing_points_onto_a_steep_interface():
@@ -134,7 +139,8 @@ def test_local_iteration_reaches_the_linear_equilibrium(wall):
     model.positions[:] = model.rest_positions
     model.positions[model.fixed] = model.fixed_targets[model.fixed]
     model.push[:] = 0.0
-    model.static_solve(method="local")
+    model.static_solve(method="local", max_sweeps=20000)
+    assert model.unconverged == 0
     assert f_direct > 0
     assert abs(probe.force()[2] / f_direct - 1) < 0.01
     assert np.abs(model.positions - x_direct).max() < 0.02 * 0.002
@@ -156,6 +162,7 @@ def test_upper_layers_deform_more_and_never_interpenetrate(wall):
     assert np.count_nonzero(model.push > 0) > 0          # extreme springs carry accumulated force
 
 
+@pytest.mark.slow
 def test_force_accumulation_against_bone_rises_sharply():
     """Fig. 2.16: once the soft layers over the femur reach their extreme length the probe force
     grows far faster than in the soft range (slope ratio > 5)."""
@@ -170,6 +177,7 @@ def test_force_accumulation_against_bone_rises_sharply():
     assert hard > 5 * soft
 
 
+@pytest.mark.slow
 def test_deep_path_force_several_times_shallow():
     """Fig. 2.15: pressing deep (muscle engaged) gives several times the force of a shallow path,
     and along the deep path the force is largest where the fat is thinnest (-x)."""
@@ -194,15 +202,13 @@ def test_scene_contact_matches_integrated_force(wall):
     kc = np.zeros(model.n_nodes)
     f[centre, 2] = -0.05
     kc[centre] = 200.0
+    x_start = model.positions[centre].copy()
     model.step(1e-3, f, kc)
-    for _ in range(3):
-        model.step(1e-3, f, kc)
     g = model.integrated_external_forces[centre]
-    x0 = model.positions[centre].copy()
-    model.step(1e-3, f, kc)  # at equilibrium the next step changes nothing
-    np.testing.assert_allclose(model.positions[centre], x0, atol=1e-6)
+    np.testing.assert_allclose(g, f[centre] + kc[centre] * (x_start - model.positions[centre]), rtol=1e-12)
+    assert g[2] < 0 and abs(g[2]) < 0.05                 # the contact spring relaxed part of the load
     spring = model.internal_forces()[centre]
-    np.testing.assert_allclose(g + spring, 0.0, atol=5e-4)
+    np.testing.assert_allclose(g + spring, 0.0, atol=1e-3 * 0.05)   # local equilibrium of eq. 2.9
     assert "quasi_static" in model.capabilities and np.isinf(model.stable_dt())
 
 
