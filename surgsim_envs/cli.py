@@ -27,6 +27,7 @@ BENCH: dict[str, tuple[str, str]] = {
     "haptics": ("surgsim_envs.bench.haptics_speed", "haptic servo loop period"),
     "accuracy": ("surgsim_envs.bench.accuracy", "speed against accuracy chart (Pareto front)"),
     "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
+    "layers": ("surgsim_envs.bench.layers", "layered model (paper 001) at haptic rate: step time, active nodes, force vs all-node"),
 }
 
 
