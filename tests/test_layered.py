@@ -234,3 +234,24 @@ def test_laplace_modulus_matches_boussinesq_punch():
     """G_L = E / (2 (1 - nu^2)): Laplace punch 4 a G_L d equals Boussinesq 2 a E d / (1 - nu^2)."""
     E, nu, a, d = 3e4, 0.45, 0.01, 0.001
     assert np.isclose(4 * a * laplace_modulus(E, nu) * d, 2 * a * E * d / (1 - nu ** 2))
+
+
+def test_layered_palpation_task_feels_the_nodule():
+    """SurgSim/LayeredPalpation-v0: pressing over the hidden stiff nodule gives a larger force (N)
+    than pressing the same depth away from it; committing there pays more than far away."""
+    import gymnasium as gym
+
+    import surgsim_envs  # noqa: F401 - registers the tasks
+    from surgsim_envs.envs import register_envs
+
+    register_envs()
+    env = gym.make("SurgSim/LayeredPalpation-v0").unwrapped
+    env.reset(seed=3)
+    cfg = env.config
+    ax, ay = env.nodule[0] / (0.5 * cfg.size[0]), env.nodule[1] / (0.5 * cfg.size[1])
+    far = (-np.sign(ax) * 0.9, -np.sign(ay) * 0.9)
+    obs_on, *_ = env.step([ax, ay, 0.5, -1.0])
+    obs_off, *_ = env.step([far[0], far[1], 0.5, -1.0])
+    assert obs_on[3] > 1.2 * obs_off[3] > 0
+    _, r_on, term, _, _ = env.step([ax, ay, 0.5, 1.0])
+    assert term and r_on > 0.9

@@ -15,6 +15,7 @@ TASKS = {
     "SurgSim/Palpation-v0": "surgsim_envs.envs.palpation:PalpationEnv",
     "SurgSim/Grasp-v0": "surgsim_envs.envs.grasp:GraspEnv",
     "SurgSim/Slippage-v0": "surgsim_envs.envs.slippage:SlippageEnv",
+    "SurgSim/LayeredPalpation-v0": "surgsim_envs.envs.layered_palpation:LayeredPalpationEnv",
 }
 
 
