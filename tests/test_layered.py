@@ -255,3 +255,22 @@ def test_layered_palpation_task_feels_the_nodule():
     assert obs_on[3] > 1.2 * obs_off[3] > 0
     _, r_on, term, _, _ = env.step([ax, ay, 0.5, 1.0])
     assert term and r_on > 0.9
+
+
+def test_probe_scene_steps_with_the_layered_model():
+    """A MuJoCo probe scene runs the layered model: the probe pushed into the wall feels an upward
+    force (N) from the integrated contact, and no layer passes another."""
+    from surgsim_envs.scene.builder import build_scene
+    from surgsim_envs.scene.config import ProbeConfig, SceneConfig, TissueConfig
+    from surgsim_envs.scene.simulation import Simulation
+
+    t = TissueConfig(name="wall", organ="abdominal_wall", model="layered", material=None, spacing=0.005,
+                     volume_options={"size": (0.05, 0.05)}, position=(0, 0, 0.0145), anchors=("bottom",))
+    sim = Simulation(build_scene(SceneConfig(tissues=[t], probes=[ProbeConfig(position=(0, 0, 0.036))], dt=1e-3)))
+    tis = sim.tissue()
+    top = tis.positions[:, 2].max()
+    sim.set_tool_target("probe", (0, 0, top + 0.005 - 0.003), speed=0.05)
+    sim.step(150)
+    assert sim.tool_force("probe")[2] > 0.01
+    assert tis.interpenetrations() == 0
+    assert np.all(np.isfinite(tis.positions))
