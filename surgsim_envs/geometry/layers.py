@@ -547,3 +547,59 @@ def series_modulus(a: float, b: float) -> float:
 
 __all__ = ["Interface", "LayerSet", "LayeredVolume", "layered_volume", "resolve_material", "DIRECTIONS",
            "volume_summary", "series_modulus"]
+
+
+def layered_from_grid(volume: Volume, materials: dict, name: str | None = None) -> LayeredVolume:
+    """A :class:`LayeredVolume` from a plain tet ``volume`` whose nodes lie on a tensor-product grid
+    (``box_volume``, graded benchmark slabs): NBB neighbours are the adjacent grid nodes, spring
+    areas the dual-cell faces, node materials from ``volume.node_labels`` with ``materials``
+    {label: Material}. ConfigError if the nodes are not on such a grid (snapped organ lattices)."""
+    X = volume.nodes
+    idx = np.zeros((len(X), 3), dtype=np.int64)
+    coords = []
+    for a in range(3):
+        scale = max(float(np.ptp(X[:, a])), 1e-12)
+        key = np.round(X[:, a] / scale, 9)
+        u, inv = np.unique(key, return_inverse=True)
+        idx[:, a] = inv
+        coords.append(np.array([X[inv == k, a].mean() for k in range(len(u))]))
+    counts = np.array([len(c) for c in coords])
+    flat = np.ravel_multi_index(idx.T, counts)
+    if len(np.unique(flat)) != len(X) or np.prod(counts) > 20 * len(X):
+        raise ConfigError(f"volume '{volume.name}': the layered model needs nodes on a regular (tensor-product) "
+                          "lattice; build it with surgsim_envs.geometry.layers.layered_volume or box_volume")
+    lookup = np.full(int(np.prod(counts)), -1, dtype=np.int64)
+    lookup[flat] = np.arange(len(X))
+    n = len(X)
+    neighbours = np.full((n, 6), -1, dtype=np.int32)
+    for d, off in enumerate(DIRECTIONS):
+        nb = idx + off
+        ok = np.all((nb >= 0) & (nb < counts), axis=1)
+        j = np.full(n, -1, dtype=np.int64)
+        j[ok] = lookup[np.ravel_multi_index(nb[ok].T, counts)]
+        neighbours[:, d] = j
+    half = np.zeros((n, 6))  # half distance to the neighbour in each direction (0 if none)
+    for d in range(6):
+        j = neighbours[:, d]
+        ok = j >= 0
+        half[ok, d] = 0.5 * np.abs(X[j[ok], d // 2] - X[ok, d // 2])
+    area = np.zeros((n, 6))
+    for d in range(6):
+        b, c = [a for a in range(3) if a != d // 2]
+        area[:, d] = (half[:, 2 * b] + half[:, 2 * b + 1]) * (half[:, 2 * c] + half[:, 2 * c + 1])
+    area[neighbours < 0] = 0.0
+    labels = sorted(set(np.unique(volume.labels).tolist()))
+    names = [f"label{k}" for k in labels]
+    table = {f"label{k}": materials[k] for k in labels}
+    node_material = np.searchsorted(labels, volume.node_labels).astype(np.int64)
+    on_iface = np.full(n, -1, dtype=np.int64)
+    out = LayeredVolume(X, volume.tets, volume.surface, volume.labels, name=name or volume.name,
+                        node_labels=volume.node_labels, lattice_index=idx, neighbours=neighbours, spring_area=area,
+                        spring_material=_spring_materials(neighbours, node_material, on_iface),
+                        node_material=node_material, node_interface=on_iface, material_names=names,
+                        material_table=table, layer_names=names, interface_names=[], rigid_materials=(),
+                        spacing=float(np.median(2 * half[half > 0])))
+    src = getattr(volume, "source_surface", None)
+    if src is not None:
+        out.source_surface = src
+    return out

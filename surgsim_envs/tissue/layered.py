@@ -32,7 +32,7 @@ from typing import ClassVar
 import numpy as np
 
 from surgsim_envs.errors import ConfigError
-from surgsim_envs.geometry.layers import DIRECTIONS, LayeredVolume
+from surgsim_envs.geometry.layers import DIRECTIONS, LayeredVolume, layered_from_grid
 from surgsim_envs.tissue import layered_kernels as kern
 from surgsim_envs.tissue.base import TissueModel
 
@@ -77,10 +77,18 @@ class LayeredModel(TissueModel):
 
     def __init__(self, volume, material=None, *, max_compression: float = MAX_COMPRESSION, f_tol: float = F_TOL,
                  x_tol: float = X_TOL, max_updates: int = MAX_UPDATES, omega: float = OMEGA, region_materials=None, **base_kwargs):
-        if not isinstance(volume, LayeredVolume):
-            raise ConfigError(f"model 'layered' needs a LayeredVolume (surgsim_envs.geometry.layers.layered_volume or "
-                              f"an anatomy organ such as 'abdominal_wall'), got {type(volume).__name__} "
-                              f"'{getattr(volume, 'name', '?')}'")
+        if not isinstance(volume, LayeredVolume):  # a plain lattice volume: one material per region label
+            from surgsim_envs.geometry.volume import Volume
+            from surgsim_envs.tissue.materials import get_material
+
+            if not isinstance(volume, Volume):
+                raise ConfigError(f"model 'layered' needs a LayeredVolume (surgsim_envs.geometry.layers.layered_volume "
+                                  f"or an anatomy organ such as 'abdominal_wall'), got {type(volume).__name__}")
+            base = get_material(material if material is not None else "liver")
+            mats = {int(k): base for k in np.unique(volume.labels)}
+            mats.update({int(k): get_material(v) for k, v in (region_materials or {}).items()})
+            volume = layered_from_grid(volume, mats)
+            material, region_materials = base, None
         if not (0.0 < float(max_compression) < 1.0):
             raise ConfigError(f"layered: max_compression must be in (0, 1), got {max_compression!r}")
         for key, val in (("f_tol", f_tol), ("x_tol", x_tol)):
