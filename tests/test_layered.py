@@ -276,6 +276,7 @@ def test_probe_scene_steps_with_the_layered_model():
     assert np.all(np.isfinite(tis.positions))
 
 
+@pytest.mark.slow
 def test_homogeneous_block_matches_fem_and_boussinesq():
     """On a box lattice the layered model builds its NBB from the grid. A 6 cm homogeneous block
     under a rigid flat punch (radius 8 mm, 1 mm): the layered springs (G_L = E / (2 (1 - nu^2)),
