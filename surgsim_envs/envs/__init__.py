@@ -17,11 +17,17 @@ TASKS = {
     "SurgSim/Slippage-v0": "surgsim_envs.envs.slippage:SlippageEnv",
     "SurgSim/PalpationPress-v0": "surgsim_envs.envs.palpation_press:PalpationPressEnv",
 }
+#: quasi-static tasks (one equilibrium solve per step: seconds, not microseconds; kept out of the
+#: generic physics-rate env tests)
+QUASI_STATIC_TASKS = {
+    "SurgSim/LayeredPalpation-v0": "surgsim_envs.envs.layered_palpation:LayeredPalpationEnv",
+}
 
 #: task id -> control steps per episode of the default config (episode_seconds x control_hz); a
 #: test keeps these equal to the configs. A changed config needs gym.make(..., max_episode_steps=N).
 MAX_EPISODE_STEPS = {"SurgSim/Palpation-v0": 600, "SurgSim/Grasp-v0": 150, "SurgSim/Slippage-v0": 150,
-                     "SurgSim/PalpationPress-v0": 25}   # one step = one press
+                     "SurgSim/PalpationPress-v0": 25,    # one step = one press
+                     "SurgSim/LayeredPalpation-v0": 30}  # one step = one quasi-static press
 
 
 def register_envs() -> None:
@@ -35,11 +41,11 @@ def register_envs() -> None:
     passes on every task (tests/test_envs.py)."""
     import gymnasium as gym
 
-    for env_id, entry in TASKS.items():
+    for env_id, entry in {**TASKS, **QUASI_STATIC_TASKS}.items():
         if env_id in gym.registry:
             continue
         gym.register(id=env_id, entry_point=entry, disable_env_checker=True,
                      max_episode_steps=MAX_EPISODE_STEPS[env_id])
 
 
-__all__ = ["TASKS", "MAX_EPISODE_STEPS", "register_envs"]
+__all__ = ["TASKS", "QUASI_STATIC_TASKS", "MAX_EPISODE_STEPS", "register_envs"]

@@ -34,7 +34,7 @@ from surgsim_envs.geometry.volume import Volume
 
 #: default lattice spacing (m) per organ: about 800-1,500 nodes, fit for a real-time simulation
 DEFAULT_SPACING = {"slab": 0.005, "slab_inclusion": 0.005, "spleen": 0.0058, "liver_lobe": 0.0085,
-                   "rounded_cube": 0.1 / 12}
+                   "rounded_cube": 0.1 / 12, "abdominal_wall": 0.004, "thigh": 0.005}
 
 SLAB_SIZE = (0.1, 0.1, 0.02)
 INCLUSION_SLAB_SIZE = (0.08, 0.08, 0.02)
@@ -165,8 +165,24 @@ def _organ(surface_fn, name):
     return build
 
 
+def _layered(kind: str):
+    """Layered anatomy of paper 001 (surgsim_envs.geometry.anatomy), imported on use."""
+    def build(spacing: float, **shape) -> Volume:
+        from surgsim_envs.geometry import anatomy
+
+        return (anatomy.abdominal_wall_volume if kind == "abdominal_wall" else anatomy.thigh_volume)(spacing, **shape)
+    names = {"abdominal_wall": ("size", "skin", "fat", "muscle", "peritoneum", "fat_variation"),
+             "thigh": ("radius", "length", "skin", "fat", "bone_radius", "bone_offset", "sections")}[kind]
+    build.__signature__ = inspect.Signature(  # option names for make_volume's check (no import of anatomy)
+        [inspect.Parameter("spacing", inspect.Parameter.POSITIONAL_OR_KEYWORD)]
+        + [inspect.Parameter(n, inspect.Parameter.KEYWORD_ONLY, default=None) for n in names])
+    return build
+
+
 _BUILDERS = {
     "slab": _slab,
+    "abdominal_wall": _layered("abdominal_wall"),
+    "thigh": _layered("thigh"),
     "slab_inclusion": _slab_inclusion,
     "spleen": _organ(spleen_surface, "spleen"),
     "liver_lobe": _organ(liver_lobe_surface, "liver_lobe"),

@@ -119,7 +119,13 @@ def placed_volume(cfg: TissueConfig):
         shift = (lo2 + hi2) / 2.0
         nodes = nodes - shift
     nodes = nodes + np.asarray(cfg.position, dtype=float)
-    out = Volume(nodes, vol.tets.copy(), vol.surface.copy(), vol.labels.copy(), vol.name, vol.node_labels.copy())
+    if hasattr(vol, "with_nodes"):  # volumes carrying more structure (layered lattices) keep it
+        if any(float(a) != 0.0 for a in cfg.euler):
+            raise ConfigError(f"tissue '{cfg.name}': a layered volume cannot be rotated (its neighbouring bounding "
+                              "boxes are axis-aligned); use euler=(0, 0, 0)")
+        out = vol.with_nodes(nodes)
+    else:
+        out = Volume(nodes, vol.tets.copy(), vol.surface.copy(), vol.labels.copy(), vol.name, vol.node_labels.copy())
     src = getattr(vol, "source_surface", None)
     if src is not None:  # the smooth organ surface, placed like the nodes (rendered by TissueBinding)
         out.source_surface = ((src[0] - centre) @ rot.T - shift + np.asarray(cfg.position, dtype=float), src[1].copy())

@@ -24,6 +24,7 @@ BUILTIN_MODELS: dict[str, str] = {
     "fractional": "surgsim_envs.tissue.fractional:FractionalTetModel",
     "mass_spring_calibrated": "surgsim_envs.tissue.calibrated_mass_spring:CalibratedMassSpringModel",
     "neo_hookean": "surgsim_envs.tissue.neo_hookean:NeoHookeanModel",
+    "layered": "surgsim_envs.tissue.layered:LayeredModel",
 }
 
 _registry: dict[str, Any] = {}

@@ -1,0 +1,90 @@
+"""``surgsim bench layers``: the layered model (paper 001) at haptic rate on a large abdominal wall.
+
+A >= 50,000-node abdominal wall (dd = 2 mm, 12 x 12 cm); a position-controlled 5 mm sphere is
+pressed ``depth`` into it (all-node static solve), then moved along x at ``speed`` m/s in 1 ms
+steps. Each step pins the covered nodes and calls ``model.step`` (active-node local static
+integration with a per-step budget of ``max_updates`` node updates; the rest carries over). Per
+step: wall time of ``model.step`` (median), active nodes (median), and at ``samples`` steps the
+probe force against the all-node solution at the same pose (a deep copy solved by
+``static_solve``). Timings depend on the machine's load, reported with them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--spacing", type=float, default=0.002, help="lattice spacing dd, m (default 0.002: ~60k nodes)")
+    p.add_argument("--steps", type=int, default=300, help="1 ms steps of probe motion (default 300)")
+    p.add_argument("--depth", type=float, default=0.004, help="press depth, m")
+    p.add_argument("--speed", type=float, default=0.01, help="probe speed along x, m/s")
+    p.add_argument("--max-updates", type=int, default=20000, help="node updates per step (budget)")
+    p.add_argument("--samples", type=int, default=3, help="steps compared with the all-node solution")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--out", default=None, help="also write the JSON here")
+
+
+def run_bench(spacing=0.002, steps=300, depth=0.004, speed=0.01, max_updates=20000, samples=3,
+              progress=True) -> dict:
+    from tqdm import tqdm
+
+    from surgsim_envs.contact.kinematic_probe import KinematicProbe
+    from surgsim_envs.geometry.anatomy import abdominal_wall_volume
+    from surgsim_envs.tissue.layered import LayeredModel
+
+    t0 = time.perf_counter()
+    vol = abdominal_wall_volume(spacing, size=(0.12, 0.12))
+    bottom = vol.nodes[:, 2] <= vol.nodes[:, 2].min() + 1e-9
+    model = LayeredModel(vol, fixed=bottom, max_updates=int(max_updates))
+    build_s = time.perf_counter() - t0
+    top = np.flatnonzero(vol.neighbours[:, 5] < 0)
+    z_top = float(vol.nodes[top, 2].max())
+    radius, x0 = 0.005, -0.02
+    probe = KinematicProbe(model, top, radius)
+    probe.move_to((x0, 0.0, z_top + radius - depth))
+    model.static_solve()
+    sample_at = set(np.linspace(steps // samples, steps - 1, samples).astype(int).tolist()) if samples else set()
+    times, active, forces, cmp = [], [], [], []
+    for k in tqdm(range(steps), desc="bench layers", unit="step", file=sys.stderr, disable=not progress):
+        probe.move_to((x0 + speed * 1e-3 * (k + 1), 0.0, z_top + radius - depth))
+        t = time.perf_counter()
+        model.step(1e-3)
+        times.append(time.perf_counter() - t)
+        active.append(model.last_active)
+        forces.append(float(probe.force()[2]))
+        if k in sample_at:
+            ref = copy.deepcopy(model)
+            ref.static_solve()
+            f_ref = float(ref.contact_force(probe.nodes)[2])
+            cmp.append({"step": k, "force": forces[-1], "all_node_force": f_ref,
+                        "error": abs(forces[-1] / f_ref - 1.0), "left_over": int(model.unconverged)})
+    return {"bench": "layers", "nodes": int(vol.n_nodes), "surface_triangles": int(len(vol.surface)),
+            "spacing_m": spacing, "depth_m": depth, "speed_m_s": speed, "steps": steps,
+            "max_updates": int(max_updates), "build_s": build_s,
+            "ms_per_step_median": 1e3 * float(np.median(times)), "ms_per_step_p90": 1e3 * float(np.percentile(times, 90)),
+            "active_nodes_median": float(np.median(active)), "force_N_median": float(np.median(forces)),
+            "force_vs_all_node": cmp, "max_force_error": max((c["error"] for c in cmp), default=float("nan")),
+            "load": os.getloadavg(), "cpus": os.cpu_count()}
+
+
+def run(args) -> int:
+    res = run_bench(args.spacing, args.steps, args.depth, args.speed, args.max_updates, args.samples)
+    text = json.dumps(res, indent=2)
+    if args.out:
+        with open(args.out, "w") as fh:
+            fh.write(text)
+    if args.json:
+        print(text)
+    else:
+        print(f"layered: {res['nodes']:,} nodes, {res['ms_per_step_median']:.2f} ms/step (median), "
+              f"{res['active_nodes_median']:.0f} active nodes, force error vs all-node <= {res['max_force_error']:.1%} "
+              f"(load {res['load'][0]:.1f} on {res['cpus']} cpus)")
+    return 0

@@ -1,0 +1,76 @@
+"""A rigid spherical probe held at a pose: the tissue nodes it covers are pinned onto its surface.
+
+The paper-001 way of pressing tissue with a position-controlled haptic tool: the contact mass points
+are the surface nodes under the sphere; each is held (Dirichlet) where the sphere's lower surface
+passes over its rest position, and the tool force is the sum of their spring forces (eq. 2.4-2.5,
+``model.contact_force(nodes)``). Works with any model that has ``set_fixed``/``release``. Units m.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from surgsim_envs.errors import ConfigError
+
+
+def sphere_contact(rest: np.ndarray, candidates: np.ndarray, centre, radius: float, axis: int = 2):
+    """Contact nodes and their targets for a sphere (``centre`` (3,) m, ``radius`` m) pressing along
+    ``-axis`` onto the nodes ``candidates`` (their rest positions ``rest[candidates]``).
+
+    A candidate is in contact if it lies within the sphere's footprint and the sphere's lower surface
+    there is below its rest height; its target keeps its rest footprint coordinates and takes the
+    sphere's surface height. Returns (nodes (K,) int64, targets (K,3) m).
+    """
+    c = np.asarray(centre, dtype=np.float64).reshape(-1)
+    if c.shape != (3,) or not np.all(np.isfinite(c)):
+        raise ConfigError(f"probe centre must be 3 finite numbers (m), got {centre!r}")
+    if not (np.isfinite(radius) and radius > 0):
+        raise ConfigError(f"probe radius must be > 0 m, got {radius!r}")
+    cand = np.asarray(candidates, dtype=np.int64)
+    x = rest[cand]
+    others = [a for a in range(3) if a != axis]
+    r2 = (x[:, others[0]] - c[others[0]]) ** 2 + (x[:, others[1]] - c[others[1]]) ** 2
+    inside = r2 < radius * radius
+    h = np.full(len(cand), np.inf)
+    h[inside] = c[axis] - np.sqrt(radius * radius - r2[inside])
+    hit = inside & (h < x[:, axis])
+    targets = x[hit].copy()
+    targets[:, axis] = h[hit]
+    return cand[hit], targets
+
+
+class KinematicProbe:
+    """Holds a model's contact nodes on a sphere moved by :meth:`move_to`; ``force()`` in N.
+
+    model: a tissue model with ``set_fixed``, ``release`` and ``contact_force`` (or ``internal_forces``);
+    candidates: surface nodes the probe may touch (e.g. the top face); radius: m.
+    """
+
+    def __init__(self, model, candidates, radius: float = 0.005, axis: int = 2):
+        self.model = model
+        self.candidates = np.asarray(candidates, dtype=np.int64)
+        self.radius = float(radius)
+        self.axis = int(axis)
+        self.nodes = np.zeros(0, dtype=np.int64)
+        self._base_fixed = model.fixed.copy()
+
+    def move_to(self, centre) -> np.ndarray:
+        """Place the probe; pins the covered nodes, frees the ones it left. Returns the contact nodes."""
+        nodes, targets = sphere_contact(self.model.rest_positions, self.candidates, centre, self.radius, self.axis)
+        left = np.setdiff1d(self.nodes, nodes)
+        left = left[~self._base_fixed[left]]
+        if len(left):
+            self.model.release(left)
+        if len(nodes):
+            self.model.set_fixed(nodes, targets)
+        self.nodes = nodes
+        return nodes
+
+    def force(self) -> np.ndarray:
+        """(3,) N the tissue exerts on the probe."""
+        if len(self.nodes) == 0:
+            return np.zeros(3)
+        cf = getattr(self.model, "contact_force", None)
+        if cf is not None:
+            return cf(self.nodes)
+        return -self.model.internal_forces()[self.nodes].sum(axis=0)

@@ -1,0 +1,473 @@
+"""Heterogeneous multi-layer tissue with constrained local static integration (paper 001, section 2.4).
+
+The volume is a :class:`~surgsim_envs.geometry.layers.LayeredVolume`: a lattice whose nodes carry
+material flags and whose springs join each node to its six direct neighbours (the neighbouring
+bounding box, NBB, Fig. 2.11). Each spring is linear in the displacements (eq. 2.8):
+
+    f_i = sum_j K_ij [(P_j - P_i) - (P0_j - P0_i)]                              (N)
+
+with ``K_ij = G_L A_ij / L0_ij``: ``A_ij`` the cross-section the spring represents (a quarter cell
+face per kept cell around the edge), ``L0_ij`` its rest length and ``G_L = E / (2 (1 - nu^2))`` of
+the spring's material (the paper's rules, :mod:`surgsim_envs.geometry.layers`). In the continuum
+limit this is ``G_L laplace(u) + g = 0`` per component; ``G_L = G / (1 - nu)`` makes the stiffness
+of a rigid flat punch on a half-space (Laplace: ``F = 4 a G_L d``) equal Boussinesq's
+(``F = 2 a E d / (1 - nu^2)``). See docs/models/layered.md.
+
+No inertia (quasi-static): every step solves the local equilibrium of each ACTIVE node (eq. 2.9)
+with its neighbours held, clamped into its NBB shrunk by the extreme lengths
+``lmin = (1 - max_compression) L0`` (so nodes never pass their neighbours: no interpenetration of
+layers), and iterates (eq. 2.10) until no node moves more than ``x_tol`` nor changes a spring force
+by more than ``f_tol``. Active nodes: the loaded ones and those a moving neighbour disturbs; the
+set grows and shrinks with the contact. A spring at its extreme length is rigid and passes the
+force on to the next node, recursively (force accumulation, eq. 2.5, Fig. 2.10). Rigid materials
+(bone) are fixed. The force on a contact (Dirichlet) node is the interpolated spring force
+:meth:`contact_force`; with scene contact, the integrated contact force (``implicit_contact``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+import numpy as np
+
+from surgsim_envs.errors import ConfigError
+from surgsim_envs.geometry.layers import DIRECTIONS, LayeredVolume, layered_from_grid
+from surgsim_envs.tissue import layered_kernels as kern
+from surgsim_envs.tissue.base import TissueModel
+
+#: default largest compressive strain of a spring before it turns rigid (extreme length = 0.2 L0)
+MAX_COMPRESSION = 0.8
+#: default force threshold (N): a node whose update changes a neighbour's spring force by less stays idle
+F_TOL = 1e-6
+#: default displacement threshold (m)
+X_TOL = 1e-7
+#: default over-relaxation of the local solve (projected SOR; 1.0 is the paper's plain iteration)
+OMEGA = 1.8
+#: default node updates per step (bounds the step time; what is left continues next step)
+MAX_UPDATES = 2_000_000
+
+
+def laplace_modulus(young: np.ndarray, poisson: np.ndarray) -> np.ndarray:
+    """G_L = E / (2 (1 - nu^2)) (Pa): the spring modulus whose half-space punch stiffness equals elasticity's."""
+    return np.asarray(young, dtype=np.float64) / (2.0 * (1.0 - np.asarray(poisson, dtype=np.float64) ** 2))
+
+
+class LayeredModel(TissueModel):
+    """Paper 001's heterogeneous layered tissue (module docstring).
+
+    Parameters
+    ----------
+    volume: a LayeredVolume (:func:`surgsim_envs.geometry.layers.layered_volume`,
+        :mod:`surgsim_envs.geometry.anatomy`). Its materials come from the volume's layers; the
+        ``material`` argument is ignored except for reports (pass the base material).
+    max_compression: largest compressive strain of a spring in (0, 1) before it becomes rigid.
+    f_tol: N, force threshold of the active set; x_tol: m, displacement threshold.
+    max_updates: node updates per step (the work left over continues in the next step).
+    omega: over-relaxation in [1, 2) of each local move (1 = the paper's plain iteration).
+    **base_kwargs: fixed, gravity (ignored: quasi-static without body load), guard.
+    """
+
+    name: ClassVar[str] = "layered"
+    summary: ClassVar[str] = ("heterogeneous layered tissue (paper 001): NBB springs from material layers, "
+                              "constrained local static integration on active nodes, force accumulation")
+    integrators: ClassVar[tuple[str, ...]] = ("local_static",)
+    quasi_static: ClassVar[bool] = True
+    capabilities: ClassVar[frozenset] = frozenset({"forces", "implicit_contact", "quasi_static", "static_solve"})
+
+    def __init__(self, volume, material=None, *, max_compression: float = MAX_COMPRESSION, f_tol: float = F_TOL,
+                 x_tol: float = X_TOL, max_updates: int = MAX_UPDATES, omega: float = OMEGA, region_materials=None, **base_kwargs):
+        if not isinstance(volume, LayeredVolume):  # a plain lattice volume: one material per region label
+            from surgsim_envs.geometry.volume import Volume
+            from surgsim_envs.tissue.materials import get_material
+
+            if not isinstance(volume, Volume):
+                raise ConfigError(f"model 'layered' needs a LayeredVolume (surgsim_envs.geometry.layers.layered_volume "
+                                  f"or an anatomy organ such as 'abdominal_wall'), got {type(volume).__name__}")
+            base = get_material(material if material is not None else "liver")
+            mats = {int(k): base for k in np.unique(volume.labels)}
+            mats.update({int(k): get_material(v) for k, v in (region_materials or {}).items()})
+            volume = layered_from_grid(volume, mats)
+            material, region_materials = base, None
+        if not (0.0 < float(max_compression) < 1.0):
+            raise ConfigError(f"layered: max_compression must be in (0, 1), got {max_compression!r}")
+        for key, val in (("f_tol", f_tol), ("x_tol", x_tol)):
+            if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
+                raise ConfigError(f"layered: {key} must be > 0, got {val!r}")
+        if not (isinstance(omega, (int, float)) and 1.0 <= omega < 2.0):
+            raise ConfigError(f"layered: omega must be in [1, 2) (1 = plain local static iteration), got {omega!r}")
+        if not (isinstance(max_updates, (int, np.integer)) and max_updates >= 1):
+            raise ConfigError(f"layered: max_updates must be a positive integer, got {max_updates!r}")
+        if region_materials is None:
+            present = set(np.unique(volume.labels).tolist())  # a layer thinner than the lattice may own no tet
+            region_materials = {k: volume.material_table[m] for k, m in enumerate(volume.layer_names) if k in present}
+        if material is None:
+            material = volume.material_table[volume.layer_names[0]]
+        super().__init__(volume, material, region_materials=region_materials, **base_kwargs)
+        self.max_compression = float(max_compression)
+        self.f_tol, self.x_tol, self.max_updates = float(f_tol), float(x_tol), int(max_updates)
+        self.omega = float(omega)
+        n = self.n_nodes
+        self.nbr = np.ascontiguousarray(volume.neighbours, dtype=np.int32)
+        X = self.rest_positions
+        L0 = np.zeros((n, 6))
+        sep = np.zeros((n, 6))
+        for d in range(6):
+            j = self.nbr[:, d]
+            ok = j >= 0
+            L0[ok, d] = np.linalg.norm(X[j[ok]] - X[ok], axis=1)
+            sep[ok, d] = np.abs(X[j[ok], d // 2] - X[ok, d // 2])
+        if np.any(L0[self.nbr >= 0] <= 0):
+            raise ConfigError(f"layered: volume '{volume.name}' has coincident neighbour nodes; remesh")
+        self.rest_lengths = L0
+        self.lmin = np.ascontiguousarray((1.0 - self.max_compression) * sep)
+        self._spring_tets = self._map_springs_to_tets()
+        self._build_g = laplace_modulus(self.fields["young"], self.fields["poisson"])
+        self.kk_build = self._paper_springs()
+        self.kk = self.kk_build.copy()
+        # rigid materials (bone) never move
+        rigid = volume.rigid_nodes
+        if len(rigid):
+            self.set_fixed(np.union1d(rigid, np.flatnonzero(self.fixed)).astype(np.int64))
+        self.rigid_nodes = rigid
+        self._alloc()
+
+    # ------------------------------------------------------------------------------------------
+    def _paper_springs(self) -> np.ndarray:
+        """K_ij (N,6) N/m from the volume's spring materials (paper's rules)."""
+        vol = self.volume
+        tab = vol.material_table
+        gl = np.array([laplace_modulus(tab[m].young, tab[m].poisson) for m in vol.material_names])
+        code = vol.spring_material
+        g = np.zeros(code.shape)
+        direct = code >= 0
+        g[direct] = gl[code[direct]]
+        series = code <= -2
+        if series.any():
+            own = -2 - code[series]
+            i_idx, d_idx = np.nonzero(series)
+            other = vol.node_material[self.nbr[i_idx, d_idx]]
+            ga, gb = gl[own], gl[other]
+            g[series] = 2.0 * ga * gb / (ga + gb)
+        kk = np.zeros_like(g)
+        ok = self.nbr >= 0
+        kk[ok] = g[ok] * vol.spring_area[ok] / self.rest_lengths[ok]
+        return np.ascontiguousarray(kk)
+
+    def _map_springs_to_tets(self):
+        """(spring rows, tet ids) pairs: the tets sharing each NBB spring's edge (for scale_material)."""
+        n = self.n_nodes
+        tets = self.volume.tets.astype(np.int64)
+        pairs = np.stack([tets[:, [0, 0, 0, 1, 1, 2]].ravel(), tets[:, [1, 2, 3, 2, 3, 3]].ravel()], axis=1)
+        pairs.sort(axis=1)
+        tkey = pairs[:, 0] * n + pairs[:, 1]
+        tet_of = np.repeat(np.arange(len(tets)), 6)
+        order = np.argsort(tkey, kind="stable")
+        tkey, tet_of = tkey[order], tet_of[order]
+        i_idx, d_idx = np.nonzero(self.nbr >= 0)
+        j = self.nbr[i_idx, d_idx].astype(np.int64)
+        skey = np.minimum(i_idx, j) * n + np.maximum(i_idx, j)
+        lo = np.searchsorted(tkey, skey, side="left")
+        hi = np.searchsorted(tkey, skey, side="right")
+        counts = hi - lo
+        rows = np.repeat(np.arange(len(skey)), counts)
+        starts = np.repeat(lo - np.cumsum(np.r_[0, counts[:-1]]), counts)
+        tets_per = tet_of[np.arange(counts.sum()) + starts]
+        return i_idx, d_idx, rows, tets_per, counts
+
+    def _update_springs(self) -> None:
+        """Scale every spring by the mean change of G_L of the tets around it (scale_material/set_field)."""
+        i_idx, d_idx, rows, tets_per, counts = self._spring_tets
+        ratio = laplace_modulus(self.fields["young"], self.fields["poisson"]) / self._build_g
+        s = np.bincount(rows, weights=ratio[tets_per], minlength=len(i_idx))
+        factor = np.where(counts > 0, s / np.maximum(counts, 1), 1.0)
+        kk = self.kk_build.copy()
+        kk[i_idx, d_idx] *= factor
+        self.kk = np.ascontiguousarray(kk)
+        self._seed_all = True
+
+    def scale_material(self, name: str = "young", factor=1.0, mask=None) -> None:
+        """Multiply tet field ``name`` by ``factor`` (scalar or (T,)) where ``mask`` (T,) is True,
+        relative to its value at build; the springs follow (contract v2)."""
+        if name not in self.fields:
+            raise ConfigError(f"layered: unknown material field {name!r}; fields: {sorted(self.fields)}")
+        base = getattr(self, "_field_build", None)
+        if base is None:
+            self._field_build = base = {k: v.copy() for k, v in self.fields.items()}
+        t = len(self.volume.tets)
+        f = np.broadcast_to(np.asarray(factor, dtype=np.float64), (t,))
+        m = np.ones(t, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        if m.shape != (t,):
+            raise ConfigError(f"layered: mask must have shape ({t},), got {m.shape}")
+        if not np.all(np.isfinite(f)) or np.any(f[m] <= 0):
+            raise ConfigError("layered: scale factors must be finite and > 0")
+        self.fields[name] = np.where(m, base[name] * f, self.fields[name])
+        self._update_springs()
+
+    def set_field(self, name: str, values) -> None:
+        """Set tet field ``name`` to absolute (T,) values; the springs follow."""
+        if name not in self.fields:
+            raise ConfigError(f"layered: unknown material field {name!r}; fields: {sorted(self.fields)}")
+        v = np.asarray(values, dtype=np.float64)
+        if v.shape != self.fields[name].shape or not np.all(np.isfinite(v)):
+            raise ConfigError(f"layered: {name} values must be finite with shape {self.fields[name].shape}")
+        if getattr(self, "_field_build", None) is None:
+            self._field_build = {k: x.copy() for k, x in self.fields.items()}
+        self.fields[name] = v.copy()
+        self._update_springs()
+
+    # ------------------------------------------------------------------------------------------
+    def _alloc(self) -> None:
+        n = self.n_nodes
+        self.push = np.zeros((n, 6))
+        self._xs = np.zeros((n, 3))
+        self._tstamp = np.full(n, -1, dtype=np.int64)
+        self._qstamp = np.full(n, -1, dtype=np.int64)
+        self._queue = np.zeros(7 * n + 8, dtype=np.int64)
+        self._nxt = np.zeros(7 * n + 8, dtype=np.int64)
+        self._n_queue = 0
+        self._qid = 0
+        self._touched = np.zeros(n, dtype=np.int64)
+        self._n_touched = 0
+        self._loaded = np.zeros(n, dtype=np.int64)
+        self._loaded_prev = np.zeros(n, dtype=np.int64)
+        self._n_loaded = 0
+        self._moved_fixed = np.zeros(0, dtype=np.int64)
+        self._seed_all = False
+        self.integrated_external_forces = np.zeros((n, 3))
+        self._zero_kc = np.zeros(n)
+        self.last_updates = 0
+        self.last_sweeps = 0
+        self.last_active = 0
+        self.unconverged = 0
+
+    def _reset_state(self) -> None:
+        self._alloc()
+
+    def set_fixed(self, nodes, targets=None) -> None:
+        """Dirichlet nodes (contact points pressed by a kinematic tool, anchors); moving them
+        activates their neighbours."""
+        idx = self._as_indices(nodes, "fixed nodes")
+        super().set_fixed(idx, targets)
+        if hasattr(self, "_moved_fixed"):
+            self._moved_fixed = np.union1d(self._moved_fixed, idx).astype(np.int64)
+
+    def release(self, nodes=None) -> None:
+        """Free ``nodes`` (all if None) except rigid-material nodes; they relax at the next step."""
+        idx = np.flatnonzero(self.fixed) if nodes is None else self._as_indices(nodes, "released nodes")
+        keep = np.isin(idx, getattr(self, "rigid_nodes", np.zeros(0, np.int64)))
+        super().release(idx[~keep])
+        if hasattr(self, "_moved_fixed"):
+            self._moved_fixed = np.union1d(self._moved_fixed, idx[~keep]).astype(np.int64)
+
+    # ------------------------------------------------------------------------------------------
+    def _advance(self, dt: float, forces: np.ndarray, stiffness: np.ndarray | None) -> None:
+        self.solve(forces, stiffness, dt=dt)
+
+    def solve(self, forces=None, stiffness=None, *, dt: float | None = None, all_nodes: bool = False,
+              max_updates: int | None = None) -> int:
+        """Relax to the local static equilibrium under ``forces`` (N,3) N with implicit contact
+        ``stiffness`` (N,) N/m; returns the number of node updates. ``all_nodes`` starts from every
+        free node (the all-node solution); ``dt`` only sets the finite-difference velocities."""
+        n = self.n_nodes
+        ext = self.external_forces if forces is None else np.ascontiguousarray(forces, dtype=np.float64)
+        kc = self._zero_kc if stiffness is None else np.ascontiguousarray(stiffness, dtype=np.float64)
+        if kc.shape != (n,) or np.any(kc < 0):
+            raise ConfigError(f"layered: stiffness must be (N,) >= 0 N/m, got shape {kc.shape}")
+        step_id = self.steps
+        self._qid += 1
+        qid = self._qid
+        # carried-over active nodes keep their places; loads and moved Dirichlet nodes add more
+        self._loaded_prev, self._loaded = self._loaded, self._loaded_prev
+        n_prev = self._n_loaded
+        n_loaded, nq = kern.seed_loaded(ext, kc, self.fixed, self._loaded_prev, n_prev, self._loaded, self._queue,
+                                        self._n_queue, self._qstamp, qid)
+        if self._moved_fixed.size:
+            nq = kern.seed_neighbours(self._moved_fixed, self.nbr, self.fixed, self._queue, nq, self._qstamp, qid)
+            self._moved_fixed = np.zeros(0, dtype=np.int64)
+        if all_nodes or self._seed_all:
+            free = np.flatnonzero(~self.fixed)
+            self._queue[:len(free)] = free
+            nq = len(free)
+            self._qstamp[free] = qid
+            self._seed_all = False
+        # forget the previous step's finite-difference velocities
+        prev_touched = self._touched[:self._n_touched].copy()
+        self.velocities[prev_touched] = 0.0
+        budget = self.max_updates if max_updates is None else int(max_updates)
+        n_touched, nq, updates, qid, sweeps = kern.relax(
+            self.positions, self.rest_positions, self.nbr, self.kk, self.lmin, self.fixed, ext, kc, self.push,
+            self._xs, self._tstamp, step_id, self._touched, 0, self._queue, nq, self._nxt, self._qstamp, qid,
+            self.f_tol, self.x_tol, budget, self.omega)
+        self._qid = qid
+        self._n_queue = nq
+        self._n_touched = n_touched
+        self._n_loaded = n_loaded
+        self.last_updates, self.last_sweeps, self.last_active, self.unconverged = updates, sweeps, n_touched, nq
+        touched = self._touched[:n_touched]
+        if dt is not None and dt > 0:
+            self.velocities[touched] = (self.positions[touched] - self._xs[touched]) / dt
+        # external force actually integrated: g + kc (xs - x) on loaded nodes
+        prev_loaded = self._loaded_prev[:n_prev]
+        self.integrated_external_forces[prev_loaded] = 0.0
+        ld = self._loaded[:n_loaded]
+        if len(ld):
+            xs = np.where((self._tstamp[ld] == step_id)[:, None], self._xs[ld], self.positions[ld])
+            self.integrated_external_forces[ld] = ext[ld] + kc[ld, None] * (xs - self.positions[ld])
+        self.external_forces = ext
+        return updates
+
+    def static_solve(self, forces=None, stiffness=None, method: str = "direct", max_sweeps: int = 400,
+                     **kwargs) -> np.ndarray:
+        """Equilibrium positions (N,3) m under ``forces`` (N,3) N (and implicit ``stiffness`` (N,) N/m)
+        with every free node active: the all-node solution.
+
+        method "direct": a sparse direct solve of the springs' linear system (eq. 2.8 for all nodes at
+        once), then the constrained local iteration from there to enforce the NBB / extreme lengths
+        and accumulate the forces (it stops at once where no constraint is active); "local": the
+        local iteration alone from the current state (slow for large volumes). At most
+        ``max_sweeps`` x N node updates; ``self.unconverged`` counts the nodes still active after.
+        """
+        if method not in ("direct", "local"):
+            raise ConfigError(f"layered: static_solve method must be 'direct' or 'local', got {method!r}")
+        n = self.n_nodes
+        ext = self.external_forces if forces is None else np.ascontiguousarray(forces, dtype=np.float64)
+        kc = self._zero_kc if stiffness is None else np.ascontiguousarray(stiffness, dtype=np.float64)
+        if method == "direct":
+            import scipy.sparse as sp
+            import scipy.sparse.linalg as spla
+
+            i_idx, d_idx = np.nonzero(self.nbr >= 0)
+            j = self.nbr[i_idx, d_idx]
+            k = self.kk[i_idx, d_idx]
+            lap = (sp.coo_matrix((-k, (i_idx, j)), shape=(n, n)).tocsr()
+                   + sp.diags(self.kk.sum(axis=1) + kc)).tocsr()
+            free = np.flatnonzero(~self.fixed)
+            fixed = np.flatnonzero(self.fixed)
+            x = self.positions.copy()
+            x[fixed] = self.fixed_targets[fixed]
+            u_fixed = x[fixed] - self.rest_positions[fixed]
+            rhs = ext[free] + kc[free, None] * (self.positions[free] - self.rest_positions[free])
+            rhs = rhs - lap[free][:, fixed] @ u_fixed
+            lu = spla.splu(lap[free][:, free].tocsc())
+            u = lu.solve(np.ascontiguousarray(rhs))
+            self.positions[free] = self.rest_positions[free] + u
+            self.push[:] = 0.0
+            # the direct solution may violate the NBB; clamp it back inside before the local iteration
+            self._clamp_into_nbb()
+        self.solve(ext, kc, all_nodes=True, max_updates=int(max_sweeps) * n)
+        self._n_queue = 0  # a static solve leaves no work for the next step
+        return self.positions.copy()
+
+    def _clamp_into_nbb(self) -> None:
+        """Move nodes that left their neighbouring bounding box back to its edge (in place)."""
+        x = self.positions
+        for _ in range(50):
+            bad = 0
+            for d in (1, 3, 5):
+                a = d // 2
+                j = self.nbr[:, d]
+                ok = np.flatnonzero(j >= 0)
+                gap = x[j[ok], a] - x[ok, a] - self.lmin[ok, d]
+                viol = gap < 0
+                if viol.any():
+                    bad += int(viol.sum())
+                    ii, jj = ok[viol], j[ok][viol]
+                    mid = 0.5 * (x[ii, a] + x[jj, a])
+                    half = 0.5 * self.lmin[ii, d]
+                    fi, fj = self.fixed[ii], self.fixed[jj]
+                    x[ii[~fi], a] = np.where(fj[~fi], x[jj[~fi], a] - 2 * half[~fi], mid[~fi] - half[~fi])
+                    x[jj[~fj], a] = np.where(fi[~fj], x[ii[~fj], a] + 2 * half[~fj], mid[~fj] + half[~fj])
+            if not bad:
+                break
+
+    # ------------------------------------------------------------------------------------------
+    def internal_forces(self) -> np.ndarray:
+        """(N,3) N spring forces on every node, with forces accumulated through rigid springs."""
+        out = np.zeros((self.n_nodes, 3))
+        kern.spring_forces(self.positions, self.rest_positions, self.nbr, self.kk, self.push,
+                           np.arange(self.n_nodes, dtype=np.int64), out)
+        return out
+
+    def contact_force(self, nodes) -> np.ndarray:
+        """(3,) N, the force the tissue exerts on a tool that holds ``nodes`` (the contact mass points):
+        the sum of their spring forces, accumulated through rigid springs (eqs. 2.4-2.5)."""
+        idx = self._as_indices(nodes, "contact nodes")
+        out = np.zeros((len(idx), 3))
+        kern.spring_forces(self.positions, self.rest_positions, self.nbr, self.kk, self.push, idx, out)
+        return out.sum(axis=0)
+
+    def elastic_energy(self) -> float:
+        return float(kern.elastic_energy(self.positions, self.rest_positions, self.nbr, self.kk))
+
+    def critical_dt(self) -> float:
+        return math.inf
+
+    def stable_dt(self) -> float:
+        """inf: a static solve per step has no explicit stability limit (contract v2)."""
+        return math.inf
+
+    def stiffness_matrix(self, relaxed: bool = True):
+        """Sparse 3N x 3N ``-df/dx`` of the springs (node-major dofs), without the NBB constraints."""
+        import scipy.sparse as sp
+
+        n = self.n_nodes
+        i_idx, d_idx = np.nonzero(self.nbr >= 0)
+        j = self.nbr[i_idx, d_idx]
+        k = self.kk[i_idx, d_idx]
+        lap = sp.coo_matrix((-k, (i_idx, j)), shape=(n, n)).tocsr()
+        lap = lap + sp.diags(self.kk.sum(axis=1))
+        return sp.kron(lap, sp.identity(3), format="csr")
+
+    # ------------------------------------------------------------------------------------------
+    # contract v2 readouts
+    def node_fields(self) -> dict[str, np.ndarray]:
+        """displacement (m), stress (Pa, sqrt(3) G_L |grad u|, a von Mises measure of the shear the
+        springs carry), active (1 on nodes updated in the last step), layer (region index),
+        material (index into ``volume.material_names``)."""
+        u = self.positions - self.rest_positions
+        disp = np.linalg.norm(u, axis=1)
+        g2 = np.zeros(self.n_nodes)
+        gl = np.zeros(self.n_nodes)
+        cnt = np.zeros(self.n_nodes)
+        for d in range(6):
+            j = self.nbr[:, d]
+            ok = j >= 0
+            du = u[j[ok]] - u[ok]
+            g2[ok] += np.einsum("ij,ij->i", du, du) / self.rest_lengths[ok, d] ** 2
+            gl[ok] += self.kk[ok, d] * self.rest_lengths[ok, d] / np.maximum(self.volume.spring_area[ok, d], 1e-300)
+            cnt[ok] += 1
+        gl = gl / np.maximum(cnt, 1)
+        active = np.zeros(self.n_nodes)
+        active[self._touched[:self._n_touched]] = 1.0
+        return {"displacement": disp, "stress": math.sqrt(3.0) * gl * np.sqrt(0.5 * g2),
+                "active": active, "layer": self.volume.node_labels.astype(np.float64),
+                "material": self.volume.node_material.astype(np.float64)}
+
+    def field_names(self) -> list[str]:
+        return list(self.node_fields())
+
+    def element_centroids(self) -> np.ndarray:
+        """(T,3) m rest centroids of the tets (whose labels are the layers)."""
+        return self.rest_positions[self.volume.tets].mean(axis=1)
+
+    def interpenetrations(self) -> int:
+        """Number of neighbour pairs whose order along their axis has flipped (0: no layer passed another)."""
+        x = self.positions
+        bad = 0
+        for d in (1, 3, 5):
+            j = self.nbr[:, d]
+            ok = j >= 0
+            a = d // 2
+            bad += int(np.count_nonzero(x[j[ok], a] - x[ok, a] <= 0.0))
+        return bad
+
+    def describe(self) -> dict:
+        out = super().describe()
+        out.update({"materials": list(self.volume.material_names), "layers": list(self.volume.layer_names),
+                    "rigid_nodes": int(len(self.rigid_nodes)), "max_compression": self.max_compression,
+                    "f_tol": self.f_tol, "x_tol": self.x_tol})
+        return out
+
+
+__all__ = ["LayeredModel", "laplace_modulus", "MAX_COMPRESSION", "DIRECTIONS"]
