@@ -14,7 +14,7 @@ from surgsim_envs.tissue.capabilities import CapabilityError
 
 #: coarse lattices so each pair builds and steps in a few seconds
 COARSE = {"SurgSim/Palpation-v0": {"spacing": 0.02}, "SurgSim/Grasp-v0": {"resolution": 0.015},
-          "SurgSim/Slippage-v0": {"resolution": 0.015}}
+          "SurgSim/Slippage-v0": {"resolution": 0.015}, "SurgSim/PalpationPress-v0": {"spacing": 0.02}}
 
 
 def _env_class(task):
@@ -25,7 +25,9 @@ def _env_class(task):
 @pytest.mark.parametrize("task", sorted(TASKS))
 @pytest.mark.parametrize("model", tissue.names())
 def test_model_in_task(model, task):
-    missing = [c for c in _env_class(task).REQUIRES if c not in tissue.registry.get(model).capabilities]
+    caps = tissue.registry.get(model).capabilities
+    needed = list(_env_class(task).REQUIRES) + (["implicit_contact"] if "quasi_static" in caps else [])
+    missing = [c for c in needed if c not in caps]
     if missing:
         with pytest.raises(CapabilityError) as err:
             gym.make(task, model=model, **COARSE[task])

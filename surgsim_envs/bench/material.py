@@ -228,6 +228,7 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
         cons[side[:1], 1] = True
     r = np.hypot(X[:, 0], X[:, 1])
     cand = np.flatnonzero(np.isclose(X[:, 2], 0.0) & (r < zone))
+    sol = None
     if callable(getattr(tissue, "contact_compliance", None)):
         comp = tissue.contact_compliance(cand, axis=2)  # models whose static response is not a stiffness matrix
     else:
@@ -254,9 +255,12 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
         p = _solve_lcp(comp, gap0 - d)                  # gap g = -d + gap0 (u_z <= g)
         forces[k] = p.sum() * (4.0 if quarter else 1.0)
 
-    u = np.zeros(3 * n)
-    u[free] = -(sol @ p)                               # deformed state at the deepest depth
-    top = vol.surface[np.all(np.isclose(X[vol.surface, 2], 0.0), axis=1)]
+    top_surface = None                                 # deformed top surface at the deepest depth
+    if sol is not None:                                # (models solved through a stiffness matrix)
+        u = np.zeros(3 * n)
+        u[free] = -(sol @ p)
+        top = vol.surface[np.all(np.isclose(X[vol.surface, 2], 0.0), axis=1)]
+        top_surface = (X + u.reshape(-1, 3), top)
     us, dt_used = math.nan, math.nan
     if time_steps:
         load = np.zeros((n, 3))
@@ -269,7 +273,7 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
                         {"bonded": bool(bonded), "quarter": bool(quarter), "thickness": float(thickness),
                          "width": float(width), "radius": R, "young": mat.young, "poisson": mat.poisson,
                          "contact_nodes": int(np.count_nonzero(p)), "candidate_nodes": int(len(cand))},
-                        top_surface=(X + u.reshape(-1, 3), top))
+                        top_surface=top_surface)
 
 
 def _time_steps(tissue, load: np.ndarray, radius: float, depth: float, dt: float | None, steps: int):

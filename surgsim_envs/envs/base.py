@@ -170,6 +170,10 @@ def require_capabilities(model: str, capabilities, task: str) -> None:
     cls = model_class(model)
     for cap in capabilities:
         cls.require(cap, task=task)
+    if "quasi_static" in getattr(cls, "capabilities", ()):
+        # a quasi-static model solves an equilibrium every step: the scene's penalty contact (forces
+        # that change with the positions) must enter that solve, or the solve chases the contact
+        cls.require("implicit_contact", task=f"{task} (a quasi-static model in a contact scene)")
 
 
 def check_explicit_step(tissue, dt: float, what: str) -> None:

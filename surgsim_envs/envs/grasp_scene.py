@@ -59,7 +59,7 @@ class GraspSceneEnv(SurgSimEnv):
     """The env part every grasp task shares (see the module docstring)."""
 
     TASK_ID: ClassVar[str] = ""
-    REQUIRES: ClassVar[tuple[str, ...]] = ("forces",)      # tissue capabilities the task needs
+    REQUIRES: ClassVar[tuple[str, ...]] = ("forces", "unstructured_mesh")      # tissue capabilities the task needs
     tool_name = "grasper"
 
     def _build_scene(self) -> None:

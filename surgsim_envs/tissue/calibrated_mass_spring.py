@@ -43,7 +43,7 @@ class CalibratedMassSpringModel(MassSpringModel):
     name: ClassVar[str] = "mass_spring_calibrated"
     summary: ClassVar[str] = ("mass-spring network (paper 002) with spring constants and a nodal volume term "
                               "identified from linear elasticity (matches FEM at small strain), auto/symplectic/implicit")
-    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "implicit_contact", "viscoelastic"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "implicit_contact", "viscoelastic"})
 
     def __init__(self, volume, material="liver", *, integrator=None, K2=None, b0=None, b1=None, **base_kwargs):
         for key in ("K1", "springs", "volume_stiffness"):

@@ -23,6 +23,8 @@ CAPABILITIES: dict[str, str] = {
     "history": "internal state depends on the strain history (memory buffer); reset() clears it",
     "viscoelastic": "honours the material's relax_fraction / relax_time",
     "static_solve": "static_solve(forces) returns equilibrium positions",
+    "unstructured_mesh": "runs on any tet mesh (snapped organ lattices, user meshes), not only on regular "
+                         "tensor-product grids",
 }
 
 

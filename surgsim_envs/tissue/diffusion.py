@@ -103,7 +103,7 @@ class DiffusionModel(TissueModel):
     summary: ClassVar[str] = ("surface-only: contact load diffuses over the surface (omega per node and direction) "
                               "and dents it; paper 000, explicit")
     integrators: ClassVar[tuple[str, ...]] = ("symplectic",)
-    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "surface_only", "static_solve"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "surface_only", "static_solve"})
     surface_only: ClassVar[bool] = True
     material_fields: ClassVar[tuple[str, ...]] = ("young", "density", "damping", "nonlinear", "omega")
     node_field_names: ClassVar[tuple[str, ...]] = ("displacement", "stress", "concentration", "omega")

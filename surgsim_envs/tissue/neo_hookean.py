@@ -54,7 +54,9 @@ class NeoHookeanModel(TissueModel):
                               "projected-Newton solve: large-strain hyperelasticity")
     integrators: ClassVar[tuple[str, ...]] = ("quasi_static",)
     quasi_static: ClassVar[bool] = True
-    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "quasi_static", "static_solve"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "quasi_static", "static_solve"})
+    #: material fields scale_material / set_field may change (the model re-derives its constants)
+    material_fields: ClassVar[tuple[str, ...]] = ("young", "poisson")
 
     def __init__(self, volume, material="silicone", *, newton_tol: float = 1e-8, max_iter: int = 30,
                  c01_fraction: float = 0.0, **base_kwargs):
@@ -70,19 +72,10 @@ class NeoHookeanModel(TissueModel):
         self.newton_tol, self.max_iter = float(newton_tol), int(max_iter)
         self.tets = np.ascontiguousarray(volume.tets, dtype=np.int64)
         self.grads, self.tet_volume, _ = asm.shape_gradients(self.rest_positions, self.tets)
-        E, nu = self.fields["young"], self.fields["poisson"]
-        if np.any(nu >= 0.5) or np.any(nu <= -1) or np.any(E <= 0):
-            raise ConfigError("neo_hookean needs E > 0 and -1 < nu < 0.5 in every tet (use nu <= 0.499)")
-        self.mu, lam, _ = asm.lame_parameters(E, nu)
-        # mu = 2 (C10 + C01): C10 = (1 - f) mu / 2, C01 = f mu / 2
-        self._c10 = (1.0 - self.c01_fraction) * self.mu / 2.0
-        self._c01 = self.c01_fraction * self.mu / 2.0
-        self._beta = 2.0 * self._c10 + 4.0 * self._c01     # rest stability: P(I) = 0
         n = self.n_nodes
         self.node_rest_volume = np.zeros(n)
         nvk.node_volumes(np.ascontiguousarray(self.rest_positions), self.tets, self.node_rest_volume)
-        # small-strain Lame lambda = k - (1 - c01_fraction) mu (checked numerically in the tests)
-        self.node_bulk = asm.nodal_average(self.tets, self.tet_volume, lam + (1.0 - self.c01_fraction) * self.mu, n)
+        self._derive_material()
         nt = len(self.tets)
         # dF/dx: F_ij = sum_a x_ai g_aj -> B (T, 9, 12), row 3i+j, column 3a+i
         B = np.zeros((nt, 9, 12))
@@ -96,6 +89,23 @@ class NeoHookeanModel(TissueModel):
         self._vbuf = np.zeros(n)
         self.integrated_external_forces = np.zeros((n, 3))
         self.last_newton_iterations = 0
+
+    def _derive_material(self) -> None:
+        """Per-tet Mooney-Rivlin constants and nodal bulk moduli from the young/poisson fields."""
+        E, nu = self.fields["young"], self.fields["poisson"]
+        if np.any(nu >= 0.5) or np.any(nu <= -1) or np.any(E <= 0):
+            raise ConfigError("neo_hookean needs E > 0 and -1 < nu < 0.5 in every tet (use nu <= 0.499)")
+        self.mu, lam, _ = asm.lame_parameters(E, nu)
+        # mu = 2 (C10 + C01): C10 = (1 - f) mu / 2, C01 = f mu / 2
+        self._c10 = (1.0 - self.c01_fraction) * self.mu / 2.0
+        self._c01 = self.c01_fraction * self.mu / 2.0
+        self._beta = 2.0 * self._c10 + 4.0 * self._c01     # rest stability: P(I) = 0
+        # small-strain Lame lambda = k - (1 - c01_fraction) mu (checked numerically in the tests)
+        self.node_bulk = asm.nodal_average(self.tets, self.tet_volume, lam + (1.0 - self.c01_fraction) * self.mu,
+                                           self.n_nodes)
+
+    def _on_material_changed(self, name: str) -> None:
+        self._derive_material()
 
     # ------------------------------------------------------------------------------------------
     def _deformation(self, x):
