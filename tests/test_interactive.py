@@ -1,6 +1,6 @@
 """The interactive paths as a person uses them, under a virtual display (Xvfb): the MuJoCo viewer
 with render_mode="human", `surgsim teleop palpation --device keyboard` driven by synthetic key
-events (xdotool) and `surgsim run ... --viewer`, each checked by a screenshot that shows the scene.
+events (xdotool), `surgsim run ... --viewer` and dm_control's viewer on the dm_control suite, each checked by a screenshot that shows the scene.
 Skips with a reason where Xvfb / xdotool / xwd are absent (Debian: apt-get install xvfb xdotool
 x11-apps; .ci/run installs them when it runs as root).
 
@@ -196,5 +196,39 @@ def test_run_scenario_with_viewer(xvfb, tmp_path):
     assert "Segmentation fault" not in err
     assert "surgsim run: palpation_find_inclusion: score" in out, out
     assert (tmp_path / "report.json").is_file()
+    tissue = _tissue(img)
+    assert img.std() > 10 and tissue.mean() > 0.02, f"the tissue is not on screen ({tissue.mean():.4f})"
+
+
+def test_dm_control_viewer_runs_palpation(xvfb):
+    """dm_control.viewer.launch on surgsim_envs.dm_control_suite.load("palpation"): the window
+    ("Explorer", glfw) shows the tissue; Space un-pauses it and the viewer steps the environment
+    through the policy. viewer.launch blocks until its window closes, so the test ends the child."""
+    code = textwrap.dedent("""
+        import numpy as np
+        from dm_control import viewer
+        import surgsim_envs.dm_control_suite as suite
+        env = suite.load("palpation")
+        spec = env.action_spec()
+        calls = []
+        def policy(time_step):
+            calls.append(1)
+            if len(calls) == 3:
+                print("STEPPED", flush=True)
+            return np.zeros(spec.shape, spec.dtype)
+        viewer.launch(env, policy=policy)
+    """)
+    proc = subprocess.Popen([sys.executable, "-c", code], env=xvfb, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        win = _window(xvfb, "Explorer")
+        _focus(xvfb, win)
+        time.sleep(2.0)
+        _xdotool(xvfb, "key", "space")                 # the viewer starts paused
+        _wait_for(proc, "STEPPED", timeout=120)
+        img = _framed(xvfb, timeout=30)
+    finally:
+        proc.kill()
+        proc.wait(timeout=30)
     tissue = _tissue(img)
     assert img.std() > 10 and tissue.mean() > 0.02, f"the tissue is not on screen ({tissue.mean():.4f})"
