@@ -150,7 +150,7 @@ def test_teleop_keyboard_moves_the_probe(xvfb):
     """Page Down x8 moves the keyboard handle 8 mm down (1 mm a press): the probe presses the
     tissue (a felt force), goes lower on screen, and the run ends at --duration."""
     proc = subprocess.Popen([sys.executable, "-m", "surgsim_envs.cli", "teleop", "palpation", "--device", "keyboard",
-                             "--duration", "20"], env=xvfb, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             "--duration", "30"], env=xvfb, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         win = _window(xvfb)
         t_open = time.time()
@@ -160,7 +160,7 @@ def test_teleop_keyboard_moves_the_probe(xvfb):
         _xdotool(xvfb, "key", "--delay", "100", *(["Next"] * 8))   # Page Down: -z, 1 mm each
         time.sleep(3.0)
         after = _framed(xvfb)
-        assert time.time() - t_open < 18, "the keys came too late for the 20 s run; the machine is too slow"
+        assert time.time() - t_open < 28, "the keys came too late for the 30 s run; the machine is too slow"
         out, err = proc.communicate(timeout=120)          # --duration bounds the run
     finally:
         proc.kill()
@@ -182,7 +182,7 @@ def test_run_scenario_with_viewer(xvfb, tmp_path):
     """`surgsim run TASK.toml --viewer` opens the viewer on the tissue and finishes the scenario."""
     toml = os.path.join(os.path.dirname(__file__), "..", "tasks", "palpation_find_inclusion.toml")
     proc = subprocess.Popen([sys.executable, "-m", "surgsim_envs.cli", "run", toml, "--viewer", "--duration-scale",
-                             "0.25", "--no-video", "--quiet", "--out", str(tmp_path)],
+                             "0.1", "--no-video", "--quiet", "--out", str(tmp_path)],
                             env=xvfb, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         win = _window(xvfb)
