@@ -134,6 +134,10 @@ class Simulation:
         self.seed = int(cfg.seed if seed is None else seed)
         self.rng = np.random.default_rng(self.seed)
         self._setup_contact_arrays()
+        v = self._views   # the arguments of _gather_geoms, bound once (views and buffers never change)
+        self._gather_args = (self._geom_ids, self._geom_body, self._geom_root, self._bodies, v["geom_xpos"],
+                             v["geom_xmat"], v["cvel"], v["subtree_com"], v["xipos"], self._gpos, self._gmat,
+                             self._gvel, self._tcom)
         self._setup_controls()
         self.contacts: dict[str, ContactModel] = {}
         params = ContactParams(stiffness=cfg.contact.stiffness, damping=cfg.contact.damping,
@@ -281,9 +285,7 @@ class Simulation:
         self._physics_steps(int(round(duration / self.dt)))
 
     def _gather(self) -> None:
-        v = self._views
-        _gather_geoms(self._geom_ids, self._geom_body, self._geom_root, self._bodies, v["geom_xpos"], v["geom_xmat"],
-                      v["cvel"], v["subtree_com"], v["xipos"], self._gpos, self._gmat, self._gvel, self._tcom)
+        _gather_geoms(*self._gather_args)
 
     def physics_step(self) -> None:
         """One physics step in the documented order (module docstring)."""
@@ -312,8 +314,7 @@ class Simulation:
                 step2(m, d)
                 self.steps += 1
             return
-        gather_args = (self._geom_ids, self._geom_body, self._geom_root, self._bodies, v["geom_xpos"], v["geom_xmat"],
-                       v["cvel"], v["subtree_com"], v["xipos"], self._gpos, self._gmat, self._gvel, self._tcom)
+        gather_args = self._gather_args
         gpos, gmat, gvel, tcom = self._gpos, self._gmat, self._gvel, self._tcom
         bodies, w, pairs = self._bodies, self._wrench, self._pairs
         for _ in range(count):
