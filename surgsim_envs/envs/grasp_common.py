@@ -1,8 +1,8 @@
 """Shared pieces of the grasp tasks: the coarse grasp scene and grasp-state terms.
 
-The scene is :func:`surgsim_envs.scene.grasp_config` with a coarse lattice (spleen 11 mm: 192
-nodes; liver lobe 15 mm: 257 nodes), the explicit (symplectic) integrator when it is stable over
-the whole stiffness randomisation (mass_spring: critical dt 0.57 ms / 0.90 ms against a 0.4 ms
+The scene is :func:`surgsim_envs.scene.grasp_config` with a coarse lattice (spleen 11 mm: 232
+nodes; liver lobe 15 mm: 296 nodes), the explicit (symplectic) integrator when it is stable over
+the whole stiffness randomisation (mass_spring: critical dt 0.67 ms / 0.92 ms against a 0.4 ms
 step), else the model's "auto", built once per organ and cached by the env.
 """
 
