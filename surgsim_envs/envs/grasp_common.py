@@ -2,7 +2,7 @@
 
 The scene is :func:`surgsim_envs.scene.grasp_config` with a coarse lattice (spleen 11 mm: 232
 nodes; liver lobe 15 mm: 296 nodes), the explicit (symplectic) integrator when it is stable over
-the whole stiffness randomisation (mass_spring: critical dt 0.67 ms / 0.92 ms against a 0.4 ms
+the whole stiffness randomisation (mass_spring: critical dt 0.67 ms / 0.95 ms against a 0.4 ms
 step), else the model's "auto", built once per organ and cached by the env.
 """
 
