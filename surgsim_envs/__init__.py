@@ -14,6 +14,8 @@ import sys
 
 __version__ = "0.1.0"
 
+from surgsim_envs.asset_files import assets_path  # noqa: E402  (pathlib only)
+
 
 def _register_envs() -> None:
     try:

@@ -29,6 +29,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per figure; median reported (default 3)")
     parser.add_argument("--workers", type=int, default=2, help="async vector env size (0 to skip; default 2)")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    parser.add_argument("--checked-loop", action="store_true",
+                        help="also time, alternately in this process, the physics loop through the checked public "
+                             "calls (ContactModel.compute + TissueModel.step per substep) against the prepared one")
 
 
 def _actions(space, n, rng, palpation):
@@ -38,7 +41,7 @@ def _actions(space, n, rng, palpation):
     return a
 
 
-def single_rate(env_id: str, steps: int, repeats: int) -> dict:
+def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = False) -> dict:
     """Median env steps/s of one env in this process, plus its timing settings."""
     import gymnasium as gym
 
@@ -70,6 +73,10 @@ def single_rate(env_id: str, steps: int, repeats: int) -> dict:
            "reset_ms": reset_ms, "physics_steps_per_s": statistics.median(rates) * u.substeps,
            "substep_us": substep_us, "tissue_step_us": tissue_us, "overhead_ratio": substep_us / tissue_us,
            "mj_step1_us": step1_us, "mj_step1_with_visual_flex_us": step1_flex_us}
+    if checked_loop and u.sim._has_tools:
+        checked, prepared = checked_vs_prepared(env, repeats, rng, pal)
+        out.update(checked_loop_substep_us=checked, prepared_loop_substep_us=prepared,
+                   checked_over_prepared=checked / prepared)
     env.close()
     return out
 
@@ -107,6 +114,54 @@ def overhead(env, steps: int, repeats: int, rng, palpation: bool) -> tuple[float
             tissue.step(sim.dt, forces, stiffness)
         own.append((time.perf_counter() - t0) / k * 1e6)
     return statistics.median(sub), statistics.median(own)
+
+
+def _checked_physics_step(sim) -> None:
+    """One physics step through the checked public calls (the loop before issue 18's speed work)."""
+    import mujoco
+
+    from surgsim_envs.scene.simulation import _rate_limit, _write_rows, _zero_rows
+
+    m, d, dt = sim.model, sim.data, sim.dt
+    if sim._moving:
+        sim._moving = _rate_limit(sim._views["ctrl"], sim._goal, sim._rate, dt)
+    mujoco.mj_step1(m, d)
+    sim._gather()
+    w = sim._wrench
+    w[:] = 0.0
+    for tissue, contact in sim._pairs:
+        res = contact.compute(tissue.positions, tissue.velocities, sim._shape_kind, sim._shape_tool,
+                              sim._shape_size, sim._gpos, sim._gmat, sim._gvel, sim._tcom, dt)
+        tissue.step(dt, res.forces, res.stiffness)
+        contact.attribute_increment(tissue.integrated_external_forces)
+        w[:, :3] += res.tool_force
+        w[:, 3:] += res.tool_torque
+    xfrc = sim._views["xfrc_applied"]
+    _write_rows(xfrc, sim._bodies, w)
+    mujoco.mj_step2(m, d)
+    _zero_rows(xfrc, sim._bodies)
+    sim.steps += 1
+
+
+def checked_vs_prepared(env, repeats: int, rng, palpation: bool, n: int = 200) -> tuple[float, float]:
+    """``(checked_us, prepared_us)``: median wall time of one physics substep through the checked
+    public calls and through ``Simulation``'s prepared loop, alternately from the same env state."""
+    u = env.unwrapped
+    sim = u.sim
+    times = ([], [])
+    for r in range(repeats):
+        for k in range(2):
+            env.reset(seed=r)
+            for a in _actions(env.action_space, 5, rng, palpation):
+                env.step(a)
+            t0 = time.perf_counter()
+            if k == 0:
+                for _ in range(n):
+                    _checked_physics_step(sim)
+            else:
+                sim._physics_steps(n)
+            times[k].append((time.perf_counter() - t0) / n * 1e6)
+    return statistics.median(times[0]), statistics.median(times[1])
 
 
 def visual_flex_cost(sim, repeats: int, n: int = 500) -> tuple[float, float]:
@@ -171,7 +226,7 @@ def run(args) -> int:
         raise ConfigError(f"unknown task(s) {unknown}; known: {list(TASKS)}")
     rows = []
     for t in tasks:
-        row = single_rate(t, args.steps, args.repeats)
+        row = single_rate(t, args.steps, args.repeats, getattr(args, "checked_loop", False))
         if args.workers:
             row["async_workers"] = args.workers
             row["async_steps_per_s"] = async_rate(t, args.workers, args.steps, args.repeats)

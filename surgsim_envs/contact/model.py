@@ -442,6 +442,7 @@ class ContactModel:
         self._last = np.zeros((2, T), dtype=np.int64)
         self._err = np.zeros(2, dtype=np.int64)
         self._n_geoms = -1
+        self._prepared = None
         self._alloc_geoms(0)
 
     def _setup_samples(self, surface, subdivisions, spacing, rest_positions) -> None:
@@ -501,6 +502,7 @@ class ContactModel:
     def _alloc_geoms(self, G: int) -> None:
         C = self.n_points
         self._n_geoms = G
+        self._prepared = None   # prepare() again: the geom count changed
         self._anchor_local = np.zeros((C, G, 3))
         self._anchor_on = np.zeros((C, G), dtype=np.uint8)
         self.result.geom_normal_force = np.zeros(G)
@@ -568,17 +570,71 @@ class ContactModel:
                         rep.normal_force, rep.tangential_force, self._tool_ftv, rep.contacts, rep.slipping,
                         rep.penetration, self._last[0], self._last[1], err)
         if err[0] != _OK:
-            g = int(err[1])
-            if err[0] == _BAD_KIND:
-                raise ConfigError(f"shape_kind[{g}] = {kind[g]} is not a shape code; use 0..{N_KINDS - 1} "
-                                  "(SPHERE, CAPSULE, BOX, CYLINDER)")
-            if err[0] == _BAD_TOOL:
-                raise ConfigError(f"shape_tool[{g}] = {tool[g]} is not a tool index in [0, {T})")
-            raise ConfigError(f"shape_size[{g}] = {size[g].tolist()} m is invalid for shape kind {kind[g]}; "
-                              "sizes must be positive (MuJoCo geom_size convention)")
+            self._raise_kernel_error(kind, tool, size)
         self._com[:] = com
         self._pos[:] = pos
         return r
+
+    def _raise_kernel_error(self, kind, tool, size) -> None:
+        err, N, T = self._err, self.n_nodes, self.n_tools
+        g = int(err[1])
+        if err[0] == _BAD_KIND:
+            raise ConfigError(f"shape_kind[{g}] = {kind[g]} is not a shape code; use 0..{N_KINDS - 1} "
+                              "(SPHERE, CAPSULE, BOX, CYLINDER)")
+        if err[0] == _BAD_TOOL:
+            raise ConfigError(f"shape_tool[{g}] = {tool[g]} is not a tool index in [0, {T})")
+        raise ConfigError(f"shape_size[{g}] = {size[g].tolist()} m is invalid for shape kind {kind[g]}; "
+                          "sizes must be positive (MuJoCo geom_size convention)")
+
+    def prepare(self, shape_kind, shape_tool, shape_size, dt) -> None:
+        """Validate and keep the per-scene constants for :meth:`compute_prepared`: the geom shape
+        codes (G,), tool index per geom (G,), sizes (G,3) m and the time step dt (s), which fixes
+        the penalty stiffness. The arrays are kept by reference (the caller's own buffers)."""
+        kind = np.ascontiguousarray(shape_kind, dtype=np.int64).reshape(-1)
+        G = len(kind)
+        tool = _array(shape_tool, (G,), np.int64, "shape_tool", "tool index per geom")
+        size = _array(shape_size, (G, 3), np.float64, "shape_size", "m")
+        if not (_is_number(dt) and dt > 0):
+            raise ConfigError(f"dt must be a positive number of seconds, got {dt!r}")
+        if G != self._n_geoms:
+            self._alloc_geoms(G)
+        k_n = self.stiffness_for(dt)
+        k_t = self.params.tangential_stiffness or k_n
+        scale = self.point_scale
+        self._prepared = (kind, tool, size, float(k_n) * scale, float(self.params.damping) * scale,
+                          float(k_t) * scale)
+
+    def compute_prepared(self, positions, velocities, shape_pos, shape_mat, shape_vel, tool_com) -> ContactResult:
+        """:meth:`compute` for the scene's hot loop, after :meth:`prepare`: the same kernel and the
+        same result, without the per-call argument checks. ``positions``/``velocities`` (N,3),
+        ``shape_pos`` (G,3), ``shape_mat`` (G,9), ``shape_vel`` (G,6), ``tool_com`` (T,3) must be
+        C-contiguous float64 arrays of those shapes (the simulation's own buffers); use
+        :meth:`compute` for anything user-supplied."""
+        if self._prepared is None:
+            raise ConfigError("compute_prepared() needs prepare(shape_kind, shape_tool, shape_size, dt) first "
+                              "(and again after compute() with a different number of geoms)")
+        kind, tool, size, k_n, c_n, k_t = self._prepared
+        r, rep, err = self.result, self.report, self._err
+        _contact_kernel(positions, velocities, self.candidate_nodes, self.sample_nodes, self.sample_weights,
+                        self._touched, kind, tool, size, shape_pos, shape_mat, shape_vel, tool_com,
+                        self.tool_friction, k_n, c_n, k_t,
+                        self._anchor_local, self._anchor_on, r.forces, r.stiffness, self.node_tool_stiffness,
+                        r.tool_force,
+                        r.tool_torque, r.geom_normal_force, r.geom_tangential_force, self._geom_ftv,
+                        rep.normal_force, rep.tangential_force, self._tool_ftv, rep.contacts, rep.slipping,
+                        rep.penetration, self._last[0], self._last[1], err)
+        if err[0] != _OK:
+            self._raise_kernel_error(kind, tool, size)
+        np.copyto(self._com, tool_com)
+        np.copyto(self._pos, positions)
+        return r
+
+    def attribute_increment_prepared(self, integrated_forces) -> None:
+        """:meth:`attribute_increment` without the argument check (``integrated_forces`` a
+        C-contiguous float64 (N,3) array, e.g. the tissue's ``integrated_external_forces``)."""
+        r = self.result
+        _attribute_increment(self._touched, integrated_forces, r.forces, r.stiffness, self.node_tool_stiffness,
+                             self._pos, self._com, r.tool_force, r.tool_torque)
 
     def attribute_increment(self, integrated_forces) -> None:
         """After the tissue step: add to ``result.tool_force`` / ``tool_torque`` the reaction of

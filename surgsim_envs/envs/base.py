@@ -421,8 +421,7 @@ class SurgSimEnv(gym.Env):
             self._renderer.close()
             self._renderer = None
         if self._viewer is not None:
-            try:
-                self._viewer.close()
-            except Exception:
-                pass
+            from surgsim_envs.scene.display import close_viewer
+
+            close_viewer(self._viewer)  # joins the window thread: exiting under it segfaults
             self._viewer = None

@@ -14,12 +14,44 @@ from surgsim_envs.errors import ConfigError
 
 #: lattice spacing (m) per organ for the RL tasks (stable explicit step at 0.5 ms)
 ORGAN_SPACING = {"spleen": 0.011, "liver_lobe": 0.015}
+#: lattice spacing (m) of any other organ (a surface mesh file) in the grasp tasks
+MESH_SPACING = 0.011
+
+
+def check_grasp_organ(organ, what: str = "organ") -> None:
+    """ConfigError unless ``organ`` is one of :data:`ORGAN_SPACING`, an existing mesh file (surface:
+    filled with a lattice; .vtk: tets) or a :class:`surgsim_envs.geometry.Volume`. The mesh itself
+    is checked (closed, no self-intersections) when the task builds it
+    (:func:`surgsim_envs.geometry.organ_volume`)."""
+    from pathlib import Path
+
+    from surgsim_envs.geometry.loaders import SURFACE_SUFFIXES, TET_SUFFIXES
+    from surgsim_envs.geometry.volume import Volume
+
+    if isinstance(organ, Volume) or (isinstance(organ, str) and organ in ORGAN_SPACING):
+        return
+    suffixes = SURFACE_SUFFIXES + TET_SUFFIXES
+    if isinstance(organ, (str, Path)) and Path(organ).suffix.lower() in suffixes:
+        if not Path(organ).is_file():
+            raise ConfigError(f"{what}={str(organ)!r}: no such mesh file; give an existing closed mesh "
+                              f"({', '.join(suffixes)})")
+        return
+    raise ConfigError(f"{what}={organ!r}; choose one of {sorted(ORGAN_SPACING)}, a closed mesh file "
+                      f"({', '.join(suffixes)}) or a surgsim_envs.geometry.Volume")
+
+
+def organ_key(organ):
+    """Cache key of an organ: its name or path, or the Volume object's id."""
+    from pathlib import Path
+
+    return str(organ) if isinstance(organ, (str, Path)) else id(organ)
 
 
 def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: float, resolution=None,
                            error_tolerance: float = 0.1, step_budget_us: float = 5_000.0, model: str = "mass_spring",
                            integrator: str = "symplectic", max_young_scale: float = 1.0):
-    """A Simulation of the grasp scene for ``organ`` ("spleen" or "liver_lobe").
+    """A Simulation of the grasp scene for ``organ``: "spleen" or "liver_lobe", a closed mesh file
+    (lattice spacing :data:`MESH_SPACING`) or a Volume (:func:`check_grasp_organ`).
 
     resolution: None (the organ's :data:`ORGAN_SPACING`), a spacing in m, or "auto" (the cheapest
     measured mass-spring/symplectic spacing meeting ``error_tolerance`` (fraction) and
@@ -31,11 +63,10 @@ def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: 
     from surgsim_envs.envs.base import integrator_for_range, tissue_options
     from surgsim_envs.scene import Simulation, grasp_config, grasp_scene
 
-    if organ not in ORGAN_SPACING:
-        raise ConfigError(f"unknown organ {organ!r} for the grasp tasks; choose one of {sorted(ORGAN_SPACING)}")
+    check_grasp_organ(organ)
     cfg = grasp_config(organ=organ, model=model)
     t = cfg.tissues[0]
-    t.spacing = ORGAN_SPACING[organ]
+    t.spacing = ORGAN_SPACING.get(organ, MESH_SPACING) if isinstance(organ, str) else MESH_SPACING
     t.resolution, t.error_tolerance, t.step_budget_us = resolution, error_tolerance, step_budget_us
     t.options = tissue_options(model, integrator)
     cfg.tool("grasper").closing_speed = float(closing_speed)

@@ -17,8 +17,7 @@ import numpy as np
 
 from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_on_unstable,
                                    check_positive, check_range, check_task_resolution, require_capabilities, sample)
-from surgsim_envs.envs.grasp_common import ORGAN_SPACING, SlipTracker, build_grasp_simulation
-from surgsim_envs.errors import ConfigError
+from surgsim_envs.envs.grasp_common import SlipTracker, build_grasp_simulation, check_grasp_organ, organ_key
 
 
 @dataclass
@@ -28,7 +27,7 @@ class GraspSceneConfig:
     control_hz: float = 50.0
     dt: float = 4e-4                   # s; squeezed, strain-stiffened tissue needs < 0.5 ms
     episode_seconds: float = 3.0
-    organ: str = "spleen"
+    organ: Any = "spleen"              # "spleen", "liver_lobe", a closed mesh file (STL/OBJ/PLY/VTK) or a Volume
     model: str = "mass_spring"         # any registered tissue model with the "forces" capability
     integrator: str = "symplectic"     # if the model has it and it is stable over young_scale, else "auto"
     resolution: float | str | None = None   # None: the organ's task lattice; a spacing in m; "auto"
@@ -49,8 +48,7 @@ class GraspSceneConfig:
         check_control_rate(self, what)
         check_task_resolution(self, what)
         check_on_unstable(self.on_unstable, what)
-        if self.organ not in ORGAN_SPACING:
-            raise ConfigError(f"{what}.organ={self.organ!r}; choose one of {sorted(ORGAN_SPACING)}")
+        check_grasp_organ(self.organ, f"{what}.organ")
         check_range(self.mu, "mu", 0.0, 2.0)
         check_range(self.young_scale, "young_scale", 0.5, 1.25)
 
@@ -70,19 +68,19 @@ class GraspSceneEnv(SurgSimEnv):
         """Hook: a simulation for a new organ was just built (e.g. Slippage turns a drive into a motor)."""
 
     def _select(self, organ: str) -> None:
-        if organ not in ORGAN_SPACING:
-            raise ConfigError(f"unknown organ {organ!r}; choose one of {sorted(ORGAN_SPACING)}")
-        if organ not in self._sims:
+        check_grasp_organ(organ)
+        key = organ_key(organ)
+        if key not in self._sims:
             c = self.config
             require_capabilities(c.model, self.REQUIRES, self.TASK_ID)
-            self._sims[organ] = build_grasp_simulation(organ, c.dt, self.substeps, c.closing_speed, c.resolution,
+            self._sims[key] = build_grasp_simulation(organ, c.dt, self.substeps, c.closing_speed, c.resolution,
                                                        c.error_tolerance, c.step_budget_us, model=c.model,
                                                        integrator=c.integrator,
                                                        max_young_scale=check_range(c.young_scale, "young_scale")[1])
-            self.sim = self._sims[organ]
+            self.sim = self._sims[key]
             self._select_tool()
             self._on_new_simulation(self.sim)
-        self.sim = self._sims[organ]
+        self.sim = self._sims[key]
         self.organ = organ
         self._select_tool()
 

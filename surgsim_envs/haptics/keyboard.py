@@ -107,6 +107,12 @@ class KeyboardDevice(HapticDevice):
         with self._lock:
             self._pos = self.limits.clamp_position(self._pos + d)
 
+    @property
+    def position(self) -> np.ndarray:
+        """The handle position (3,) m in the device frame (home = origin of the tool's pose)."""
+        with self._lock:
+            return self._pos.copy()
+
     def _read(self, t: float) -> DeviceState:
         with self._lock:
             return DeviceState(time=t, position=self._pos.copy(), quaternion=np.array([1.0, 0.0, 0.0, 0.0]),

@@ -148,6 +148,10 @@ def run(args) -> int:
         else:
             stats = _run_viewer(loop, physics, device, kind, duration)
     print(stats.summary())
+    if kind == "keyboard":
+        x, y, z = device.position
+        print(f"keyboard: {device.keys_handled} keys handled, {device.keys_ignored} ignored; "
+              f"handle at ({x:+.4f}, {y:+.4f}, {z:+.4f}) m from home", flush=True)
     if args.headless:
         out = Path(args.out)
         device.force_log.to_csv(out / "force_log.csv")
@@ -197,12 +201,14 @@ def _run_headless(loop, physics, args, duration: float):
 def _run_viewer(loop, physics, device, kind: str, duration: float):  # pragma: no cover - needs a display
     import mujoco.viewer
 
-    from surgsim_envs.scene.display import require_display
+    from surgsim_envs.scene.display import close_viewer, frame_tissue, require_display
 
     require_display("surgsim teleop (viewer)")   # raises; MuJoCo would exit the process
     sim = physics.sim
     callback = device.key_callback if kind == "keyboard" else None
-    with mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual(), key_callback=callback) as viewer:
+    viewer = mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual(), key_callback=callback)
+    frame_tissue(viewer, sim)   # free camera on the tissue (the default frames the whole floor)
+    try:
         def frame(_loop):
             if not viewer.is_running():
                 return False
@@ -212,4 +218,6 @@ def _run_viewer(loop, physics, device, kind: str, duration: float):  # pragma: n
             return True
 
         stats = loop.run_realtime(duration if math.isfinite(duration) else 1e9, on_frame=frame, frame_period=1 / 60)
+    finally:
+        close_viewer(viewer)  # wait for the window thread: exiting under it segfaults in glfw.terminate
     return stats

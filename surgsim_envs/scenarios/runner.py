@@ -385,6 +385,9 @@ def run_one(sc: Scenario, values: dict | None = None, *, video_path=None, viewer
 
         require_display("surgsim run --viewer")   # raises; MuJoCo would exit the process
         view = mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual())
+        from surgsim_envs.scene.display import frame_tissue
+
+        frame_tissue(view, sim)   # free camera on the tissue (the default frames the whole floor)
     try:
         runner = _Runner(sc, sim, sc.meta.duration_scale, bar, renderer, writer, view, camera, tremor)
         completed, error = runner.run()
@@ -394,7 +397,9 @@ def run_one(sc: Scenario, values: dict | None = None, *, video_path=None, viewer
         if renderer is not None:
             renderer.close()
         if view is not None:  # pragma: no cover
-            view.close()
+            from surgsim_envs.scene.display import close_viewer
+
+            close_viewer(view)  # waits for the window thread (exiting under it segfaults)
     rec = runner.rec.finish()
     info = {"video": str(video_path) if writer is not None else None, "dt": sim.dt,
             "tissue_nodes": int(sim.tissue().n_nodes), "tissue_model": sim.tissue().name}

@@ -341,7 +341,7 @@ def _check_type(value: Any, hint: Any, path: tuple, ctx: _Ctx) -> Any:
         return value
     if hint is str:
         if not isinstance(value, str):
-            raise ctx.error(path, f"expected a string, got {value!r} ({type(value).__name__})")
+            raise ctx.error(path, f"expected a string, got {_short(value)} ({type(value).__name__})")
         return value
     if origin in (list, tuple):
         if not isinstance(value, list):
@@ -500,6 +500,31 @@ def _check_phase_values(ctx: _Ctx, path: tuple, phase) -> None:
                                           f"{MAX_GRID_PRESSES}")
 
 
+#: most levels of nested arrays/tables a scenario value may have (a scenario needs 3-4)
+MAX_NESTING = 16
+
+
+def _nesting_depth(value, limit: int = MAX_NESTING + 1) -> int:
+    """Depth of nested lists/dicts in ``value``, counted iteratively and capped at ``limit``."""
+    deepest, stack = 0, [(value, 0)]
+    while stack:
+        v, d = stack.pop()
+        deepest = max(deepest, d)
+        if deepest >= limit:
+            return deepest
+        if isinstance(v, dict):
+            stack.extend((x, d + 1) for x in v.values())
+        elif isinstance(v, list):
+            stack.extend((x, d + 1) for x in v)
+    return deepest
+
+
+def _short(value, limit: int = 80) -> str:
+    """``repr(value)`` cut to ``limit`` characters, for error messages."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = None, folder: Path | None = None,
                    allow_code: bool = False) -> Scenario:
     """Validate a parsed TOML document and build a :class:`Scenario` (ConfigError on any problem).
@@ -512,6 +537,9 @@ def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = No
     ctx = _Ctx(source, KeyLocator(text))
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: a scenario must be a TOML document (a table), got {type(data).__name__}")
+    if _nesting_depth(data) > MAX_NESTING:
+        raise ConfigError(f"{source}: values nested too deeply (more than {MAX_NESTING} levels of arrays/tables); "
+                          "a scenario needs at most a few levels")
     for key in data:
         if key not in _TOP:
             raise ctx.error((key,), f"unknown top-level table {key!r}; allowed: {', '.join(_TOP)}")

@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
+
+import numpy as np
 
 from surgsim_envs.errors import RenderingUnavailableError
 
@@ -44,3 +47,34 @@ def require_display(what: str = "the MuJoCo viewer") -> None:
     problem = display_problem()
     if problem is not None:
         raise RenderingUnavailableError(f"{what} needs a display: {problem}; {_HINT}")
+
+
+def close_viewer(viewer, timeout: float = 10.0) -> None:
+    """Close a ``mujoco.viewer.launch_passive`` handle and WAIT for its window thread to finish.
+
+    ``Handle.close`` only asks the viewer thread (a daemon) to exit. If the interpreter exits
+    while that thread is still tearing its window down, the ``glfw.terminate`` registered at exit
+    runs under it and the process dies with a segmentation fault (seen with
+    ``surgsim teleop ... --device keyboard``). Joining the thread first makes the exit clean."""
+    try:
+        viewer.close()
+    except Exception:  # pragma: no cover - already gone
+        pass
+    me = threading.current_thread()
+    for thread in threading.enumerate():
+        if thread is not me and thread.name.endswith("(_launch_internal)"):
+            thread.join(timeout)
+
+
+def frame_tissue(viewer, sim, distance: float | None = None) -> None:
+    """Point a passive viewer's free camera at the tissue of ``sim`` (a Simulation), from the
+    front and 30 degrees above, at ``distance`` m (default: 3x the tissue's largest extent, at
+    least 0.15 m). The viewer's default camera frames the whole floor, where a 5 cm organ is a few
+    pixels. The mouse still orbits and zooms from there."""
+    pos = sim.tissue().positions
+    lo, hi = pos.min(axis=0), pos.max(axis=0)
+    if distance is None:
+        distance = max(3.0 * float(np.max(hi - lo)), 0.15)
+    with viewer.lock():
+        viewer.cam.lookat[:] = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2])
+        viewer.cam.distance, viewer.cam.azimuth, viewer.cam.elevation = float(distance), 90.0, -30.0

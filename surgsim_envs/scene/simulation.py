@@ -87,6 +87,15 @@ def _write_rows(xfrc, bodies, wrench):
 
 
 @njit(cache=True)
+def _add_wrench(wrench, force, torque):
+    """``wrench[:, :3] += force; wrench[:, 3:] += torque`` for (T,6), (T,3), (T,3)."""
+    for k in range(wrench.shape[0]):
+        for j in range(3):
+            wrench[k, j] += force[k, j]
+            wrench[k, 3 + j] += torque[k, j]
+
+
+@njit(cache=True)
 def _zero_rows(xfrc, bodies):
     for k in range(bodies.shape[0]):
         for j in range(6):
@@ -125,6 +134,10 @@ class Simulation:
         self.seed = int(cfg.seed if seed is None else seed)
         self.rng = np.random.default_rng(self.seed)
         self._setup_contact_arrays()
+        v = self._views   # the arguments of _gather_geoms, bound once (views and buffers never change)
+        self._gather_args = (self._geom_ids, self._geom_body, self._geom_root, self._bodies, v["geom_xpos"],
+                             v["geom_xmat"], v["cvel"], v["subtree_com"], v["xipos"], self._gpos, self._gmat,
+                             self._gvel, self._tcom)
         self._setup_controls()
         self.contacts: dict[str, ContactModel] = {}
         params = ContactParams(stiffness=cfg.contact.stiffness, damping=cfg.contact.damping,
@@ -139,6 +152,8 @@ class Simulation:
                                                node_masses=model.masses, surface=model.surface,
                                                surface_subdivisions=self._surface_subdivisions(model))
         self._pairs = [(self.tissues[n], self.contacts[n]) for n in self.tissues]
+        for contact in self.contacts.values():   # validated once here; the step loop uses compute_prepared
+            contact.prepare(self._shape_kind, self._shape_tool, self._shape_size, self.dt)
         self._has_tools = bool(len(self._geom_ids))
         self.steps = 0
         self.reset()
@@ -261,54 +276,65 @@ class Simulation:
     # stepping
     def step(self, n: int = 1) -> None:
         """Advance ``n`` control steps of ``substeps`` physics steps each."""
-        for _ in range(int(n) * self.substeps):
-            self.physics_step()
+        self._physics_steps(int(n) * self.substeps)
 
     def run(self, duration: float) -> None:
         """Advance by ``duration`` seconds (rounded to whole physics steps)."""
         if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration >= 0):
             raise ConfigError(f"duration must be a non-negative number of seconds, got {duration!r}")
-        for _ in range(int(round(duration / self.dt))):
-            self.physics_step()
+        self._physics_steps(int(round(duration / self.dt)))
 
     def _gather(self) -> None:
-        v = self._views
-        _gather_geoms(self._geom_ids, self._geom_body, self._geom_root, self._bodies, v["geom_xpos"], v["geom_xmat"],
-                      v["cvel"], v["subtree_com"], v["xipos"], self._gpos, self._gmat, self._gvel, self._tcom)
+        _gather_geoms(*self._gather_args)
 
     def physics_step(self) -> None:
-        """One physics step in the documented order (module docstring).
+        """One physics step in the documented order (module docstring)."""
+        self._physics_steps(1)
 
-        Kept to a handful of Python calls (measured: docs/benchmarks.md "Env step"): the MjData
-        arrays are cached views, the control rate limiter and the reaction write are numba kernels.
-        """
+    def _physics_steps(self, count: int) -> None:
+        """``count`` physics steps, each in the documented order (module docstring), with a handful
+        of Python calls per step (measured: docs/benchmarks.md "Env step"): every array the loop
+        touches is bound once outside it (cached MjData views, the contact buffers), the contact
+        arguments were validated once in ``__init__`` (``ContactModel.prepare``) and the tissue
+        takes them through ``step_prevalidated`` (NaN/inf still refused, guard still runs); the
+        rate limiter, the reaction sum and write are numba kernels."""
         m, d, dt = self.model, self.data, self.dt
-        if self._moving:
-            self._moving = _rate_limit(self._views["ctrl"], self._goal, self._rate, dt)
-        mujoco.mj_step1(m, d)
-        if self._has_tools:
-            self._gather()
-            w = self._wrench
+        v = self._views
+        ctrl, xfrc = v["ctrl"], v["xfrc_applied"]
+        goal, rate = self._goal, self._rate
+        step1, step2 = mujoco.mj_step1, mujoco.mj_step2
+        if not self._has_tools:
+            tissues = list(self.tissues.values())
+            for _ in range(count):
+                if self._moving:
+                    self._moving = _rate_limit(ctrl, goal, rate, dt)
+                step1(m, d)
+                for tissue in tissues:
+                    tissue.step(dt)
+                step2(m, d)
+                self.steps += 1
+            return
+        gather_args = self._gather_args
+        gpos, gmat, gvel, tcom = self._gpos, self._gmat, self._gvel, self._tcom
+        bodies, w, pairs = self._bodies, self._wrench, self._pairs
+        for _ in range(count):
+            if self._moving:
+                self._moving = _rate_limit(ctrl, goal, rate, dt)
+            step1(m, d)
+            _gather_geoms(*gather_args)
             w[:] = 0.0
-            for tissue, contact in self._pairs:
-                res = contact.compute(tissue.positions, tissue.velocities, self._shape_kind, self._shape_tool,
-                                      self._shape_size, self._gpos, self._gmat, self._gvel, self._tcom, dt)
-                tissue.step(dt, res.forces, res.stiffness)
-                # CONTRACT (issue 10), for SCENE's restructuring: an implicit integrator integrates
-                # forces + an increment from the contact stiffness; the tools must get the reaction
-                # of exactly tissue.integrated_external_forces or momentum leaks (11-14 % measured).
-                contact.attribute_increment(tissue.integrated_external_forces)
-                w[:, :3] += res.tool_force
-                w[:, 3:] += res.tool_torque
-            xfrc = self._views["xfrc_applied"]
-            _write_rows(xfrc, self._bodies, w)
-            mujoco.mj_step2(m, d)
-            _zero_rows(xfrc, self._bodies)
-        else:
-            for tissue in self.tissues.values():
-                tissue.step(dt)
-            mujoco.mj_step2(m, d)
-        self.steps += 1
+            for tissue, contact in pairs:
+                res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
+                tissue.step_prevalidated(dt, res.forces, res.stiffness)
+                # CONTRACT (issue 10): an implicit integrator integrates forces + an increment from
+                # the contact stiffness; the tools must get the reaction of exactly
+                # tissue.integrated_external_forces or momentum leaks (11-14 % measured).
+                contact.attribute_increment_prepared(tissue.integrated_external_forces)
+                _add_wrench(w, res.tool_force, res.tool_torque)
+            _write_rows(xfrc, bodies, w)
+            step2(m, d)
+            _zero_rows(xfrc, bodies)
+            self.steps += 1
 
     def _advance_controls(self) -> None:
         self._moving = _rate_limit(self._views["ctrl"], self._goal, self._rate, self.dt)

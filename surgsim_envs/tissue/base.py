@@ -17,12 +17,13 @@ import math
 from typing import Any, ClassVar, Mapping
 
 import numpy as np
+from numba import njit
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.volume import Volume
 from surgsim_envs.tissue.capabilities import CAPABILITIES, CapabilityError, check_names
 from surgsim_envs.tissue.capabilities import require as _require
-from surgsim_envs.tissue.guard import StabilityGuard
+from surgsim_envs.tissue.guard import StabilityGuard, first_non_finite
 from surgsim_envs.tissue.materials import Material, get_material
 
 ELEMENT_FIELDS = ("young", "poisson", "density", "damping", "relax_fraction", "relax_time", "nonlinear")
@@ -32,6 +33,23 @@ ELEMENT_FIELDS = ("young", "poisson", "density", "damping", "relax_fraction", "r
 DT_SAFETY = 0.8
 #: integrator="auto" re-evaluates critical_dt() when dt changes and every AUTO_RECHECK_STEPS steps
 AUTO_RECHECK_STEPS = 100
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _max_ratio(kc, masses):
+    """``np.max(kc / masses)`` as that expression gives it (NaN if any ratio is NaN, e.g. 0/0 at a
+    massless interior node), and 0.0 when every ``kc`` is zero, without the temporary array."""
+    best = -np.inf
+    nonzero = False
+    for i in range(kc.shape[0]):
+        if kc[i] != 0.0:
+            nonzero = True
+        r = kc[i] / masses[i]
+        if r != r:
+            return np.nan
+        if r > best:
+            best = r
+    return best if nonzero else 0.0
 
 
 def von_mises(sig: np.ndarray) -> np.ndarray:
@@ -377,11 +395,24 @@ class TissueModel(abc.ABC):
         elif forces.shape != self.positions.shape:
             raise ConfigError(f"forces must have shape {self.positions.shape}, got {forces.shape}")
         self.guard.check_inputs(self, forces, stiffness)  # NaN/inf input: refused before it reaches the state
-        self._last_dt = float(dt)
+        self._step_body(float(dt), forces, stiffness)
+
+    def step_prevalidated(self, dt: float, forces: np.ndarray, stiffness: np.ndarray | None) -> None:
+        """:meth:`step` for a caller that owns and has checked its arguments once (the scene's
+        physics loop): ``dt`` a positive float (s), ``forces`` a C-contiguous float64 (N,3) array
+        (N), ``stiffness`` None or a C-contiguous float64 (N,) array (N/m). Skips only those
+        type/shape checks: NaN/inf input is still refused with the same error before the state is
+        touched, and the stability guard runs as in :meth:`step`. Physics identical to :meth:`step`."""
+        if first_non_finite(forces) >= 0 or (stiffness is not None and first_non_finite(stiffness) >= 0):
+            self.guard.check_inputs(self, forces, stiffness)   # raises NonFiniteInputError naming the node
+        self._step_body(dt, forces, stiffness)
+
+    def _step_body(self, dt: float, forces: np.ndarray, stiffness: np.ndarray | None) -> None:
+        self._last_dt = dt
         np.copyto(self.integrated_external_forces, forces)
         if self.integrator == "auto":
-            self._active = self._auto_choice(float(dt), stiffness)
-        self._advance(float(dt), forces, stiffness)
+            self._active = self._auto_choice(dt, stiffness)
+        self._advance(dt, forces, stiffness)
         fx = self._fixed_idx
         if fx.size:
             self.positions[fx] = self.fixed_targets[fx]
@@ -425,9 +456,9 @@ class TissueModel(abc.ABC):
         if stiffness is None:
             return 0.0
         kc = np.asarray(stiffness, dtype=np.float64)
-        if kc.shape != self.masses.shape or not kc.any():
+        if kc.shape != self.masses.shape:
             return 0.0
-        rate = float(np.max(kc / self.masses))
+        rate = _max_ratio(kc, self.masses)
         return rate if math.isfinite(rate) and rate > 0 else 0.0
 
     def _pick(self, dt: float, crit: float, contact_rate: float) -> str:

@@ -27,6 +27,7 @@ import math
 from typing import Any, ClassVar
 
 import numpy as np
+from numba import njit
 
 from surgsim_envs.errors import ConfigError, SurgSimError
 from surgsim_envs.tissue import msd_kernels as kern
@@ -53,6 +54,16 @@ CG_MAX_ITER = 500
 
 class StaticSolveError(SurgSimError, RuntimeError):
     """:meth:`MassSpringModel.static_solve` found no equilibrium (Newton failed at the smallest load step)."""
+
+
+@njit(cache=True, nogil=True)
+def _finite_non_negative(a) -> bool:
+    """All entries of the 1-D array ``a`` finite and >= 0 (the contact-stiffness check, no temporaries)."""
+    for i in range(a.shape[0]):
+        v = a[i]
+        if not (np.isfinite(v) and v >= 0.0):
+            return False
+    return True
 
 
 def _count_inverted(x: np.ndarray, tets: np.ndarray) -> int:
@@ -297,7 +308,7 @@ class MassSpringModel(TissueModel):
             kc = self._zero_kc
         else:  # contact stiffness: used by the implicit solve, validated for both
             kc = np.ascontiguousarray(stiffness, dtype=np.float64)
-            if kc.shape != (self.n_nodes,) or not np.all(np.isfinite(kc)) or np.any(kc < 0):
+            if kc.shape != (self.n_nodes,) or not _finite_non_negative(kc):
                 raise ConfigError(f"stiffness must be a finite, non-negative ({self.n_nodes},) array in N/m, "
                                   f"got shape {np.shape(stiffness)}")
         if self.active_integrator == "symplectic":
