@@ -1,6 +1,6 @@
 """Train PPO or SAC (stable-baselines3) on a SurgSim task; save the model, a learning curve and a
 comparison against a random policy; optionally export the policy as a numpy ``.npz`` MLP
-(``--export-npz``, format of surgsim_envs.scenarios.npz_policy, checked to give SB3's actions).
+(``--export-npz``, format of surgsim_envs.policies.npz_policy, checked to give SB3's actions).
 
     pip install -e .[train]
     python scripts/train_sb3.py --task SurgSim/Palpation-v0 --algo ppo --steps 50000 --n-envs 2 --seed 0
@@ -44,7 +44,7 @@ def parse(argv=None):
     p.add_argument("--on-unstable", choices=["terminate", "raise"], default="terminate",
                    help="a diverging tissue ends the episode (info['unstable']) instead of killing the run")
     p.add_argument("--export-npz", default=None, help="also write the policy as a numpy .npz MLP here "
-                   "(surgsim_envs.scenarios.npz_policy; evaluated too)")
+                   "(surgsim_envs.policies.npz_policy; evaluated too)")
     p.add_argument("--net-arch", default="64,64", help="hidden layer sizes, comma separated")
     p.add_argument("--learning-rate", type=float, default=3e-4)
     p.add_argument("--resume", default=None, help="continue training the model.zip + vecnormalize.pkl in this folder "

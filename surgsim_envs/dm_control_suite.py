@@ -93,6 +93,7 @@ def _physics_class():
             physics.last_obs = None
             physics.last_reward = 0.0
             physics.last_terminated = False
+            physics.last_truncated = False
             physics.last_info = {}
             return physics
 
@@ -116,6 +117,7 @@ def _physics_class():
             for _ in range(int(nstep)):
                 obs, reward, terminated, truncated, info = env.step(action)
                 self.last_obs, self.last_reward, self.last_terminated, self.last_info = obs, reward, terminated, info
+                self.last_truncated = bool(truncated)
                 if terminated or truncated:
                     break
             self._sync()
@@ -128,6 +130,7 @@ def _physics_class():
             """Reset the SurgSim task (domain randomisation with ``seed``)."""
             obs, info = self.env.reset(seed=seed)
             self.last_obs, self.last_reward, self.last_terminated, self.last_info = obs, 0.0, False, info
+            self.last_truncated = False
 
         def after_reset(self) -> None:
             self._sync()
@@ -192,7 +195,11 @@ def _task_class():
             return float(physics.last_reward)
 
         def get_termination(self, physics):
-            return 0.0 if physics.last_terminated else None
+            # terminated: discount 0; the task's own step limit (e.g. PalpationPress-v0's max_presses,
+            # where one step is a whole press) ends the episode with discount 1, like the time limit
+            if physics.last_terminated:
+                return 0.0
+            return 1.0 if getattr(physics, "last_truncated", False) else None
 
     return _SurgSimTask
 

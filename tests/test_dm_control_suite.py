@@ -11,7 +11,8 @@ from surgsim_envs.errors import ConfigError  # noqa: E402
 FAST = {"palpation": {"spacing": 0.02, "episode_seconds": 0.05, "min_report_seconds": 0.0,
                       "max_episode_steps": 5},
         "grasp": {"resolution": 0.015, "episode_seconds": 0.1, "max_episode_steps": 5},
-        "slippage": {"resolution": 0.015, "episode_seconds": 0.1, "max_episode_steps": 5}}
+        "slippage": {"resolution": 0.015, "episode_seconds": 0.1, "max_episode_steps": 5},
+        "palpationpress": {"spacing": 0.02, "max_presses": 3, "max_episode_steps": 3}}
 
 
 @pytest.mark.parametrize("name", dm_control_suite.names())

@@ -50,8 +50,16 @@ def test_units_of_a_mesh_file(tmp_path):
 
 
 def test_every_model_builds_on_a_mesh_path(kidney_stl):
+    """Every model that declares "unstructured_mesh" builds and steps on a user mesh (its bottom on
+    a bed); one that does not (a grid-only model) refuses the mesh with a ConfigError."""
     for name in tissue.names():
+        if "unstructured_mesh" not in tissue.get(name).capabilities:
+            with pytest.raises(ConfigError):
+                tissue.make(name, str(kidney_stl), "liver", spacing=0.006)
+            continue
         model = tissue.make(name, str(kidney_stl), "liver", spacing=0.006)
+        z = model.rest_positions[:, 2]
+        model.set_fixed(z < z.min() + 0.003)
         model.step(1e-4)
         assert np.all(np.isfinite(model.positions))
 

@@ -12,7 +12,7 @@ import pytest
 from surgsim_envs.cli import main
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scenarios import load_scenario, loads_scenario
-from surgsim_envs.scenarios.npz_policy import NpzPolicy
+from surgsim_envs.policies.npz_policy import NpzPolicy
 from surgsim_envs.scenarios.policies import check_policy_reference, load_policy
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -6,7 +6,7 @@ import pytest
 from surgsim_envs import geometry, tissue
 from surgsim_envs.bench.stability import block_model, guard_verdict, stable_limit
 from surgsim_envs.errors import TissueUnstableError
-from surgsim_envs.tissue.materials import PRESETS
+from surgsim_envs.materials import PRESETS
 
 
 # FEM with stiff skin (~35 CG iterations per implicit step) and nearly incompressible silicone take 10-20 s

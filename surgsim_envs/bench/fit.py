@@ -28,7 +28,7 @@ import numpy as np
 import scipy.optimize as so
 
 from surgsim_envs.errors import ConfigError
-from surgsim_envs.tissue.materials import get_material
+from surgsim_envs.materials import get_material
 
 #: model name -> module whose ``run_cli(args)`` fits a 1-D stress-strain record (time, strain, stress)
 STRESS_STRAIN_FITS: dict[str, str] = {

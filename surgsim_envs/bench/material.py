@@ -31,7 +31,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from surgsim_envs.errors import ConfigError, TissueUnstableError
-from surgsim_envs.tissue.materials import Material, get_material
+from surgsim_envs.materials import Material, get_material
 
 DEFAULT_DT = 1e-3  # s
 

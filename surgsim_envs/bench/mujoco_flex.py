@@ -170,7 +170,7 @@ def flex_indent(dof: str = "full", material="liver", *, indenter_radius: float =
     """
     import mujoco
 
-    from surgsim_envs.tissue.materials import get_material
+    from surgsim_envs.materials import get_material
 
     mat = get_material(material)
     for key, val in (("indenter_radius", indenter_radius), ("depth", depth), ("thickness", thickness),

@@ -39,7 +39,7 @@ def block_model(model, young: float, spacing: float, integrator: str | None = No
     """The clamped test block of ``material`` with Young's modulus ``young`` (Pa) at ``spacing`` (m)."""
     from surgsim_envs.bench.material import model_class
     from surgsim_envs.geometry import box_volume
-    from surgsim_envs.tissue.materials import get_material
+    from surgsim_envs.materials import get_material
 
     cls = model_class(model)
     mat = get_material(material).replace(young=float(young))

@@ -13,7 +13,7 @@ import numpy as np
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.layers import Interface, LayerSet, LayeredVolume, layered_volume
-from surgsim_envs.tissue.materials import PRESETS, Material
+from surgsim_envs.materials import PRESETS, Material
 
 #: materials of the layered anatomy that are not presets (skin, fat, muscle come from PRESETS)
 ANATOMY_MATERIALS: dict[str, Material] = {

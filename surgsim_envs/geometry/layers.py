@@ -83,7 +83,7 @@ class LayerSet:
     """A boundary, its base material and interfaces (outer to inner); see the module docstring.
 
     materials: optional {name: Material} for names that are not presets of
-    :mod:`surgsim_envs.tissue.materials` (the anatomy modules give fascia, peritoneum, bone...).
+    :mod:`surgsim_envs.materials` (the anatomy modules give fascia, peritoneum, bone...).
     rigid: material names that do not deform (bone): their nodes are held fixed by the model.
     """
 
@@ -145,7 +145,7 @@ class LayeredVolume(Volume):
 # validation
 def resolve_material(name: str, table: dict, what: str):
     """Material of ``name`` from ``table`` or the presets; ConfigError naming ``what`` otherwise."""
-    from surgsim_envs.tissue.materials import PRESETS, Material, get_material
+    from surgsim_envs.materials import PRESETS, Material, get_material
 
     if isinstance(name, Material):
         return name

@@ -1,6 +1,6 @@
 """Trained policies shipped with the package, as numpy ``.npz`` MLPs (issue 15).
 
-Each file is the ``surgsim-mlp-v1`` format of :mod:`surgsim_envs.scenarios.npz_policy` (plain
+Each file is the ``surgsim-mlp-v1`` format of :mod:`surgsim_envs.policies.npz_policy` (plain
 arrays, loaded with ``allow_pickle=False``; numpy only, no torch): exported from
 stable-baselines3 by ``scripts/train_sb3.py --export-npz`` (:mod:`.export_sb3`). Their training
 and evaluation are in docs/training.md.
@@ -40,8 +40,8 @@ def shipped_path(task: str) -> Path:
 
 
 def load_shipped(task: str):
-    """The shipped :class:`~surgsim_envs.scenarios.npz_policy.NpzPolicy` of ``task``."""
-    from surgsim_envs.scenarios.npz_policy import NpzPolicy
+    """The shipped :class:`~surgsim_envs.policies.npz_policy.NpzPolicy` of ``task``."""
+    from surgsim_envs.policies.npz_policy import NpzPolicy
 
     return NpzPolicy.load(shipped_path(task))
 

@@ -1,5 +1,5 @@
 """Export a stable-baselines3 PPO or SAC MLP policy to the ``.npz`` format of
-:mod:`surgsim_envs.scenarios.npz_policy` (issue 15). Needs torch + stable-baselines3 (the
+:mod:`surgsim_envs.policies.npz_policy` (issue 15). Needs torch + stable-baselines3 (the
 ``[train]`` extra) to *export*; the exported file runs with numpy only.
 
 Mapping (deterministic actions, as ``model.predict(obs, deterministic=True)``):
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from surgsim_envs.errors import ConfigError
-from surgsim_envs.scenarios.npz_policy import NpzPolicy
+from surgsim_envs.policies.npz_policy import NpzPolicy
 
 #: torch activation class name -> npz activation name
 _ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu", "ELU": "elu", "Identity": "identity"}

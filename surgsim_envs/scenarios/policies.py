@@ -12,7 +12,7 @@ Trained policies shipped with the package (:mod:`surgsim_envs.policies`, .npz da
 ``"shipped:SurgSim/PalpationPress-v0"``.
 
 Loading (:func:`load_policy`): built-ins, shipped and ``.npz`` data policies
-(:mod:`~surgsim_envs.scenarios.npz_policy`) always; code (``file.py:function``,
+(:mod:`~surgsim_envs.policies.npz_policy`) always; code (``file.py:function``,
 ``module:function``, stable-baselines3 ``.zip``) only with ``allow_code`` (``--allow-code``), and
 from a scenario file only from ``.py``/``.zip`` files inside the scenario's own folder.
 """
@@ -153,7 +153,7 @@ def check_policy_reference(ref: str, base: Path | None = None, allow_code: bool 
         raise ConfigError(f"policy {ref!r} loads and runs Python code (a .py file, an installed module or a pickled "
                           "stable-baselines3 .zip); sharing a scenario must not share a program, so this is off by "
                           "default. Pass --allow-code (allow_code=True) if you trust it, or export it as a .npz data "
-                          "policy (surgsim_envs.scenarios.npz_policy)")
+                          "policy (surgsim_envs.policies.npz_policy)")
     file_part = ref if ref.endswith(".zip") else ref.rpartition(":")[0]
     is_file = file_part.endswith((".py", ".zip"))
     if not is_file:
@@ -174,7 +174,7 @@ def check_policy_reference(ref: str, base: Path | None = None, allow_code: bool 
 def load_policy(ref: str, base: Path | None = None, allow_code: bool = False, trusted: bool = False) -> Callable:
     """A policy callable from a reference (checked by :func:`check_policy_reference` first).
 
-    ``.npz`` gives a :class:`~surgsim_envs.scenarios.npz_policy.NpzPolicy`; ``builtin:NAME`` a
+    ``.npz`` gives a :class:`~surgsim_envs.policies.npz_policy.NpzPolicy`; ``builtin:NAME`` a
     function of this module; a ``module:function`` / ``file.py:function`` object (a class is
     instantiated without arguments); an SB3 ``.zip`` becomes
     ``lambda obs: model.predict(obs, deterministic=True)[0]``.
@@ -187,7 +187,7 @@ def load_policy(ref: str, base: Path | None = None, allow_code: bool = False, tr
 
         return load_shipped(ref[len(SHIPPED_PREFIX):])
     if kind == "data":
-        from surgsim_envs.scenarios.npz_policy import NpzPolicy
+        from surgsim_envs.policies.npz_policy import NpzPolicy
 
         return NpzPolicy.load(resolve_policy_file(ref, base))
     if ref.endswith(".zip"):

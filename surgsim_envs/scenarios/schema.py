@@ -471,7 +471,7 @@ def _check_scene_value(ctx: _Ctx, path: tuple, key: str, value) -> None:
 
         _check_registered(ctx, path, value, registry.names(), "tissue model")
     elif key == "material":
-        from surgsim_envs.tissue.materials import PRESETS
+        from surgsim_envs.materials import PRESETS
 
         _check_registered(ctx, path, value, sorted(PRESETS), "material preset")
 

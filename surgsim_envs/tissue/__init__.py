@@ -9,7 +9,7 @@
 from surgsim_envs.errors import TissueUnstableError
 from surgsim_envs.tissue.base import TissueModel
 from surgsim_envs.tissue.guard import StabilityGuard
-from surgsim_envs.tissue.materials import PRESETS, Material, get_material
+from surgsim_envs.materials import PRESETS, Material, get_material
 from surgsim_envs.tissue.registry import describe, get, make, names, register
 
 __all__ = ["TissueModel", "TissueUnstableError", "StabilityGuard", "Material", "PRESETS", "get_material",

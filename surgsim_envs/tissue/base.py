@@ -24,7 +24,7 @@ from surgsim_envs.geometry.volume import Volume
 from surgsim_envs.tissue.capabilities import CAPABILITIES, CapabilityError, check_names
 from surgsim_envs.tissue.capabilities import require as _require
 from surgsim_envs.tissue.guard import StabilityGuard, first_non_finite
-from surgsim_envs.tissue.materials import Material, get_material
+from surgsim_envs.materials import Material, get_material
 
 ELEMENT_FIELDS = ("young", "poisson", "density", "damping", "relax_fraction", "relax_time", "nonlinear")
 #: THE safety factor on the explicit stability limit (the only one anywhere): ``stable_dt() =

@@ -33,7 +33,7 @@ from surgsim_envs.tissue.diffusion_kernels import (AREA, BETA, COEF_COLUMNS, DAM
 from surgsim_envs.tissue.diffusion_static import (contact_compliance, node_gradients, static_positions,
                                                   steady_concentration)
 from surgsim_envs.tissue.base import TissueModel
-from surgsim_envs.tissue.materials import Material
+from surgsim_envs.materials import Material
 
 SCHEMES = ("auto", "triangles", "grid")
 #: most diffusion sub-steps per step (substeps="auto" uses up to this many)

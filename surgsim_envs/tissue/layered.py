@@ -79,7 +79,7 @@ class LayeredModel(TissueModel):
                  x_tol: float = X_TOL, max_updates: int = MAX_UPDATES, omega: float = OMEGA, region_materials=None, **base_kwargs):
         if not isinstance(volume, LayeredVolume):  # a plain lattice volume: one material per region label
             from surgsim_envs.geometry.volume import Volume
-            from surgsim_envs.tissue.materials import get_material
+            from surgsim_envs.materials import get_material
 
             if not isinstance(volume, Volume):
                 raise ConfigError(f"model 'layered' needs a LayeredVolume (surgsim_envs.geometry.layers.layered_volume "

@@ -167,7 +167,10 @@ class NeoHookeanModel(TissueModel):
         free = np.repeat(~self.fixed, 3)
         x = x.copy()
         energy = self._energy(x, F_ext)
-        scale = max(float(np.abs(F_ext).sum()), 1e-12)
+        # force scale of the tolerance: the load, or (unloaded) the unit-strain force of an element,
+        # mu h^2, so that round-off at rest counts as converged (newton_tol x mu h^2)
+        floor = float(np.mean(self.mu)) * float(np.mean(self.tet_volume)) ** (2.0 / 3.0)
+        scale = max(float(np.abs(F_ext).sum()), floor, 1e-12)
         for it in range(1, self.max_iter + 1):
             r = (self._forces(x) + F_ext).ravel()[free]
             scale = max(scale, float(np.abs(self._forces(x)).sum()) * 1e-3)

@@ -105,7 +105,7 @@ class NpzPolicy:
 
     # -- validation helpers -------------------------------------------------------------------
     def _bad(self, msg: str) -> ConfigError:
-        return ConfigError(f"policy {self.source}: {msg} (format {FORMAT}, see surgsim_envs.scenarios.npz_policy)")
+        return ConfigError(f"policy {self.source}: {msg} (format {FORMAT}, see surgsim_envs.policies.npz_policy)")
 
     def _finite(self, a, name: str, ndim: int) -> np.ndarray:
         try:
@@ -212,7 +212,7 @@ class NpzPolicy:
             raise ConfigError(f"policy {p}: not a readable .npz file ({exc})") from None
         fmt = str(data.get("format", ""))
         if fmt != FORMAT:
-            raise ConfigError(f"policy {p}: format {fmt!r} is not {FORMAT!r}; see surgsim_envs.scenarios.npz_policy")
+            raise ConfigError(f"policy {p}: format {fmt!r} is not {FORMAT!r}; see surgsim_envs.policies.npz_policy")
         n = 0
         while f"W{n}" in data and n <= MAX_LAYERS:
             n += 1
@@ -238,4 +238,4 @@ class NpzPolicy:
         except (TypeError, ValueError) as exc:
             if isinstance(exc, ConfigError):
                 raise
-            raise ConfigError(f"policy {p}: malformed array ({exc}); see surgsim_envs.scenarios.npz_policy") from None
+            raise ConfigError(f"policy {p}: malformed array ({exc}); see surgsim_envs.policies.npz_policy") from None
