@@ -274,3 +274,26 @@ def test_npz_policy_drives_a_task_rollout(tmp_path):
     (res,) = run_scenario(sc, progress=False)
     assert res.error is None or "max_steps" in res.error
     assert len(res.recording.t) == 5 and np.all(np.isfinite(res.recording.normal))
+
+
+def test_scene_organ_may_be_a_mesh_file_next_to_the_scenario(tmp_path):
+    """[scene] organ = "kidney.stl": checked at load (file found next to the scenario, else an error
+    with its line), resolved against the scenario's folder, and built into the scene's tissue."""
+    trimesh = pytest.importorskip("trimesh")
+    from surgsim_envs.scene import build_scene
+    from surgsim_envs.scenarios.runner import scene_config
+
+    text = PHASES.replace('scene = "palpation"', 'scene = "grasp"').replace(
+        'type = "press"\nduration = 1.0\ndepth = 0.004', 'type = "hold"\nduration = 0.1') + \
+        '\n[scene]\norgan = "kidney.stl"\n'
+    with pytest.raises(ConfigError, match=r"line \d+: scene\.organ: organ mesh file 'kidney\.stl' not found"):
+        load_scenario(_write(tmp_path, text))
+    trimesh.creation.capsule(height=0.05, radius=0.012).export(tmp_path / "kidney.stl")
+    sc = load_scenario(_write(tmp_path, text))
+    cfg = scene_config(sc)
+    assert cfg.tissues[0].organ == str(tmp_path / "kidney.stl")
+    scene = build_scene(cfg)
+    nodes = next(iter(scene.tissues.values())).rest_positions
+    assert np.ptp(nodes, axis=0).max() == pytest.approx(0.074, abs=0.015)   # the capsule's 7.4 cm length
+    with pytest.raises(ConfigError, match="unknown organ 'kidnee'"):
+        loads_scenario(text.replace('"kidney.stl"', '"kidnee"'))

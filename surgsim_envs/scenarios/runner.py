@@ -103,7 +103,12 @@ def scene_config(sc: Scenario):
     from surgsim_envs.scene import scene_config as ready_made
 
     o = sc.scene
-    kw = {k: v for k, v in (("organ", o.organ), ("model", o.model)) if v is not None}
+    organ = o.organ
+    if isinstance(organ, str) and Path(organ).suffix:            # a mesh file, relative to the scenario
+        from surgsim_envs.scenarios.schema import resolve_data_file
+
+        organ = str(resolve_data_file(organ, getattr(sc, "folder", None)))
+    kw = {k: v for k, v in (("organ", organ), ("model", o.model)) if v is not None}
     cfg = ready_made(sc.meta.scene, **kw)
     tissue = cfg.tissues[0]
     if o.material is not None:

@@ -289,8 +289,8 @@ class KeyLocator:
 
 
 class _Ctx:
-    def __init__(self, source: str, locator: KeyLocator):
-        self.source, self.locator = source, locator
+    def __init__(self, source: str, locator: KeyLocator, folder: Path | None = None):
+        self.source, self.locator, self.folder = source, locator, folder
 
     def error(self, path: tuple, message: str) -> ConfigError:
         key = _dotted(path)
@@ -463,9 +463,16 @@ def _check_scene_value(ctx: _Ctx, path: tuple, key: str, value) -> None:
     if key in ("spacing", "dt", "mu", "inclusion_xy"):
         _limit(ctx, path, f"scene.{key}", value)
     elif key == "organ":
+        from surgsim_envs.geometry.loaders import SURFACE_SUFFIXES, TET_SUFFIXES
         from surgsim_envs.geometry.organs import ORGANS
 
-        _check_registered(ctx, path, value, ["block", *ORGANS], "organ")
+        if isinstance(value, str) and Path(value).suffix.lower() in SURFACE_SUFFIXES + TET_SUFFIXES:
+            _check_file(ctx, path, value, ctx.folder, "organ mesh")   # a user's organ: a mesh file (data)
+        else:
+            known = ["block", *ORGANS]
+            if value is not None and value not in known:
+                raise ctx.error(path, f"unknown organ {value!r}; choose one of {', '.join(known)}, or name a mesh "
+                                      f"file ({', '.join(SURFACE_SUFFIXES + TET_SUFFIXES)}) next to the scenario")
     elif key == "model":
         from surgsim_envs.tissue import registry
 
@@ -534,7 +541,7 @@ def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = No
     from surgsim_envs.scenarios.phases import build_phase, check_phase_order
     from surgsim_envs.scenarios.scoring import CRITERIA
 
-    ctx = _Ctx(source, KeyLocator(text))
+    ctx = _Ctx(source, KeyLocator(text), folder)
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: a scenario must be a TOML document (a table), got {type(data).__name__}")
     if _nesting_depth(data) > MAX_NESTING:
