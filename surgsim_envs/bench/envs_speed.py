@@ -37,7 +37,7 @@ def add_arguments(parser) -> None:
 def _actions(space, n, rng, palpation):
     a = rng.uniform(-1, 1, (n, *space.shape)).astype(np.float32)
     if palpation:
-        a[..., 3] = -1.0
+        a[..., -1] = -1.0                  # the last component is "report": keep the episode going
     return a
 
 
