@@ -338,19 +338,7 @@ class PalpationEnv(SurgSimEnv):
         speed = float(np.linalg.norm(pos - self.prev_tip)) / self.control_dt
         self.prev_tip = pos.copy()
         if k > 0.0 and speed <= c.sample_max_speed:
-            self.samples_xy.append(pos[:2].copy())
-            self.samples_k.append(k)
-            cell = map_cell(pos[:2], int(c.map_cells), c.map_half_width)
-            if self.cell_k[cell] == 0.0:
-                rt["coverage"] += c.cell_reward
-            self.cell_k[cell] = max(self.cell_k[cell], k)
-            self.estimate = stiffness_weighted_estimate(np.array(self.samples_xy), np.array(self.samples_k))
-            med = float(np.median(self.samples_k))
-            self.contrast_seen = float(max(self.samples_k)) / med if med > 0 else 1.0
-            err = localisation_error(self.estimate, self.inclusion["centre"][:2])
-            phi = 1.0 - min(err / c.localisation_scale, 1.0)
-            rt["shaping"] += c.shaping_weight * (phi - self.phi)
-            self.phi = phi
+            self._record_sample(pos[:2].copy(), k, rt)
         # a press site counts only when it gives a quasi-static stiffness sample (dragging a pressed tip
         # across the slab measures drag, not stiffness, and must not pay)
         if (depth >= c.press_min_depth and speed <= c.sample_max_speed
@@ -369,6 +357,25 @@ class PalpationEnv(SurgSimEnv):
             terms.update(t)
         reward, terms["reward_terms"] = reward_from_terms(rt)
         return reward, terminated, terms
+
+    def _record_sample(self, xy: np.ndarray, k: float, rt: dict[str, float]) -> None:
+        """Add a quasi-static stiffness sample ``k`` (N/m) at ``xy`` (m): the map cell (coverage
+        reward if new), the stiffness-weighted estimate, the contrast seen, and the potential-based
+        shaping on the estimate's error (reward terms accumulate in ``rt``)."""
+        c = self.config
+        self.samples_xy.append(xy)
+        self.samples_k.append(k)
+        cell = map_cell(xy, int(c.map_cells), c.map_half_width)
+        if self.cell_k[cell] == 0.0:
+            rt["coverage"] += c.cell_reward
+        self.cell_k[cell] = max(self.cell_k[cell], k)
+        self.estimate = stiffness_weighted_estimate(np.array(self.samples_xy), np.array(self.samples_k))
+        med = float(np.median(self.samples_k))
+        self.contrast_seen = float(max(self.samples_k)) / med if med > 0 else 1.0
+        err = localisation_error(self.estimate, self.inclusion["centre"][:2])
+        phi = 1.0 - min(err / c.localisation_scale, 1.0)
+        rt["shaping"] += c.shaping_weight * (phi - self.phi)
+        self.phi = phi
 
     def _finish(self, pos) -> tuple[float, dict[str, Any]]:
         c = self.config

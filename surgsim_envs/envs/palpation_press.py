@@ -39,7 +39,7 @@ from gymnasium import spaces
 
 from surgsim_envs.envs.base import ObsTerm, check_positive, reward_from_terms
 from surgsim_envs.envs.palpation import (PalpationConfig, PalpationEnv, damage_penalty, indentation_depth,
-                                        localisation_error, map_cell, stiffness_map, stiffness_weighted_estimate)
+                                        stiffness_map)
 from surgsim_envs.errors import ConfigError
 
 
@@ -195,22 +195,10 @@ class PalpationPressEnv(PalpationEnv):
         rt["damage"] = damage_penalty(np.array([0.0, 0.0, self.press_peak]), c.damage_force, c.damage_weight)
         if k > 0.0:
             xy = np.array([x, y])
-            self.samples_xy.append(xy)
-            self.samples_k.append(k)
             self.sites.append(xy)
             if k > self.best[2]:
                 self.best = (x, y, k)
-            cell = map_cell(xy, int(c.map_cells), c.map_half_width)
-            if self.cell_k[cell] == 0.0:
-                rt["coverage"] += c.cell_reward
-            self.cell_k[cell] = max(self.cell_k[cell], k)
-            self.estimate = stiffness_weighted_estimate(np.array(self.samples_xy), np.array(self.samples_k))
-            med = float(np.median(self.samples_k))
-            self.contrast_seen = float(max(self.samples_k)) / med if med > 0 else 1.0
-            err = localisation_error(self.estimate, self.inclusion["centre"][:2])
-            phi = 1.0 - min(err / c.localisation_scale, 1.0)
-            rt["shaping"] += c.shaping_weight * (phi - self.phi)
-            self.phi = phi
+            self._record_sample(xy, k, rt)
         terms.update({"press_force_z_N": fz, "stiffness_estimate_N_per_m": k,
                       "estimate_xy_m": None if self.estimate is None else self.estimate.tolist()})
         reward, terms["reward_terms"] = reward_from_terms(rt)
