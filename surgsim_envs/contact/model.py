@@ -362,6 +362,30 @@ def _attribute_increment(touched, integrated, forces, stiffness, node_tool_k, po
             tool_torque[t, 2] -= rx * gy - ry * gx
 
 
+@njit(cache=True, nogil=True)
+def contact_kernel_prepared(positions, velocities, gpos, gmat, gvel, tool_com, state):
+    """:meth:`ContactModel.compute_prepared` from compiled code: ``state`` is
+    :meth:`ContactModel.kernel_state`. Returns the kernel's status (0 = OK; else call
+    ``ContactModel._raise_kernel_error``). Same kernel, same result, and the positions and tool
+    centres are kept for :meth:`ContactModel.attribute_increment` as compute_prepared keeps them."""
+    (cand, s_nodes, s_w, touched, kind, tool, size, mu, k_n, c_n, k_t, anchor_local, anchor_on, forces,
+     stiffness, node_tool_k, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv, tool_fn, tool_ft, tool_ftv,
+     contacts, slipping, penetration, last0, last1, err, com_copy, pos_copy) = state
+    _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel,
+                    tool_com, mu, k_n, c_n, k_t, anchor_local, anchor_on, forces, stiffness, node_tool_k,
+                    tool_force, tool_torque, geom_fn, geom_ft, geom_ftv, tool_fn, tool_ft, tool_ftv, contacts,
+                    slipping, penetration, last0, last1, err)
+    if err[0] != 0:
+        return err[0]
+    for t in range(tool_com.shape[0]):
+        for j in range(3):
+            com_copy[t, j] = tool_com[t, j]
+    for i in range(positions.shape[0]):
+        for j in range(3):
+            pos_copy[i, j] = positions[i, j]
+    return 0
+
+
 def _array(value, shape, dtype, name, unit):
     arr = np.ascontiguousarray(value, dtype=dtype)
     if arr.shape != shape:
@@ -628,6 +652,22 @@ class ContactModel:
         np.copyto(self._com, tool_com)
         np.copyto(self._pos, positions)
         return r
+
+    def kernel_state(self) -> tuple:
+        """The arguments of the contact kernel after :meth:`prepare`, for a compiled caller that
+        runs :func:`contact_kernel_prepared` itself (the scene's compiled substeps): a tuple of the
+        model's own arrays and the prepared constants, in :func:`contact_kernel_prepared` order.
+        Valid until the next :meth:`prepare` (or a compute() with another geom count)."""
+        if self._prepared is None:
+            raise ConfigError("kernel_state() needs prepare(shape_kind, shape_tool, shape_size, dt) first")
+        kind, tool, size, k_n, c_n, k_t = self._prepared
+        r, rep = self.result, self.report
+        return (self.candidate_nodes, self.sample_nodes, self.sample_weights, self._touched, kind, tool, size,
+                self.tool_friction, k_n, c_n, k_t, self._anchor_local, self._anchor_on, r.forces, r.stiffness,
+                self.node_tool_stiffness, r.tool_force, r.tool_torque, r.geom_normal_force,
+                r.geom_tangential_force, self._geom_ftv, rep.normal_force, rep.tangential_force, self._tool_ftv,
+                rep.contacts, rep.slipping, rep.penetration, self._last[0], self._last[1], self._err,
+                self._com, self._pos)
 
     def attribute_increment_prepared(self, integrated_forces) -> None:
         """:meth:`attribute_increment` without the argument check (``integrated_forces`` a

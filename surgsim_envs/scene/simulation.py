@@ -109,11 +109,16 @@ class Simulation:
     dt: physics step in s (default the scene config's, 1 ms), validated range
         :data:`~surgsim_envs.scene.config.DT_RANGE`; substeps: physics steps per :meth:`step`.
     seed: seeds :attr:`rng` (the physics itself is deterministic).
+    compiled_substeps: run the substeps of a step in one compiled call when a loop is registered
+        for the scene's (contact, tissue, integrator) (:mod:`surgsim_envs.scene.compiled_substeps`;
+        same physics bit for bit); False, or no registered loop: the generic loop. The attribute
+        :attr:`compiled_substeps` may be switched at any time.
 
     Raises ConfigError if a tissue starts inside a tool (initial penetration).
     """
 
-    def __init__(self, scene: Scene, *, dt: float | None = None, substeps: int | None = None, seed: int | None = None):
+    def __init__(self, scene: Scene, *, dt: float | None = None, substeps: int | None = None, seed: int | None = None,
+                 compiled_substeps: bool = True):
         if not isinstance(scene, Scene):
             raise ConfigError(f"Simulation needs a Scene from surgsim_envs.scene.build_scene(...), got {type(scene).__name__}")
         cfg = scene.config
@@ -155,6 +160,9 @@ class Simulation:
         for contact in self.contacts.values():   # validated once here; the step loop uses compute_prepared
             contact.prepare(self._shape_kind, self._shape_tool, self._shape_size, self.dt)
         self._has_tools = bool(len(self._geom_ids))
+        self.compiled_substeps = bool(compiled_substeps)
+        self._runner = None
+        self._runner_key = None
         self.steps = 0
         self.reset()
         self._check_initial_penetration()
@@ -291,7 +299,50 @@ class Simulation:
         """One physics step in the documented order (module docstring)."""
         self._physics_steps(1)
 
-    def _physics_steps(self, count: int) -> None:
+    def step_with_controls(self, actuators, values) -> None:
+        """``len(values)`` physics steps; before the k-th, ``d.ctrl[actuators] = values[k]`` (then the
+        rate limiter, as for any step). ``actuators`` (A,) actuator ids, ``values`` (K, A) controls
+        in the actuators' units: a control schedule computed ahead (e.g. a pull force as a function
+        of time) runs in one compiled call instead of one :meth:`physics_step` per substep."""
+        ids = np.ascontiguousarray(actuators, dtype=np.int64).reshape(-1)
+        vals = np.ascontiguousarray(values, dtype=np.float64)
+        if vals.ndim != 2 or vals.shape[1] != len(ids):
+            raise ConfigError(f"values must have shape (steps, {len(ids)}) for {len(ids)} actuator(s), got {vals.shape}")
+        if len(ids) and (ids.min() < 0 or ids.max() >= self.model.nu):
+            raise ConfigError(f"actuator ids must lie in [0, {self.model.nu}), got {ids.tolist()}")
+        if not np.all(np.isfinite(vals)):
+            raise ConfigError("control values contain NaN/inf; give finite numbers")
+        self._physics_steps(len(vals), ids, vals)
+
+    def _compiled_runner(self):
+        """The compiled loop for the current scene state, or None (generic loop)."""
+        if not self.compiled_substeps:
+            return None
+        from surgsim_envs.scene.compiled_substeps import compiled_substeps_for, key_of
+
+        key = key_of(self)
+        if key != self._runner_key:
+            self._runner_key = key
+            self._runner = compiled_substeps_for(self) if key is not None else None
+        return self._runner
+
+    def _physics_steps(self, count: int, ctrl_ids=None, ctrl_values=None) -> None:
+        runner = self._compiled_runner() if count > 0 else None
+        if runner is not None:
+            if ctrl_ids is None:
+                runner.run(count)
+            else:
+                runner.run(count, ctrl_ids, ctrl_values)
+            return
+        if ctrl_ids is None:
+            self._generic_steps(count)
+            return
+        ctrl = self._views["ctrl"]
+        for k in range(count):
+            ctrl[ctrl_ids] = ctrl_values[k]
+            self._generic_steps(1)
+
+    def _generic_steps(self, count: int) -> None:
         """``count`` physics steps, each in the documented order (module docstring), with a handful
         of Python calls per step (measured: docs/benchmarks.md "Env step"): every array the loop
         touches is bound once outside it (cached MjData views, the contact buffers), the contact

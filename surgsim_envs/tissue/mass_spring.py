@@ -330,6 +330,26 @@ class MassSpringModel(TissueModel):
                 self.integrated_external_forces[free] -= (dt * kc[free])[:, None] * self.velocities[free]
         self._pending_dt = dt
 
+    def symplectic_kernel_state(self, dt: float) -> tuple:
+        """The arguments of :func:`surgsim_envs.tissue.msd_kernels.symplectic_step` for steps of
+        ``dt`` s from the current state, for a compiled caller that steps the model itself (the
+        scene's compiled substeps, registered for integrator "symplectic"): ``(positions,
+        velocities, inv_mass, b0, gravity, fixed, si, sj, L0, K1, K2, kMg_first, decay_first, kMg,
+        decay, s, dl, f_buf, tets, V0, kv)``. The Maxwell-branch coefficients of the first step
+        span the interval since the last commit (as :meth:`step` uses them), those of the others
+        span ``dt``. The arrays are the model's own; valid until the next reset(), material change or
+        static_solve() (which replace them)."""
+        kMg0, decay0 = self._branch_coeffs(self._pending_dt)
+        kMg, decay = self._branch_coeffs(float(dt))
+        return (self.positions, self.velocities, self.inv_mass, self.b0, self.gravity, self.fixed, self.si, self.sj,
+                self.rest_lengths, self.K1, self.K2, kMg0, decay0, kMg, decay, self._s, self._dl, self._f,
+                self._vtets, self.volume_rest, self.volume_kv)
+
+    def committed_symplectic_steps(self, dt: float) -> None:
+        """Bookkeeping after a compiled caller advanced the model with :meth:`symplectic_kernel_state`
+        (at least one step of ``dt``): the branches are now committed at an interval of ``dt``."""
+        self._pending_dt = float(dt)
+
     def _allocate_implicit_buffers(self) -> None:
         n, ne = self.n_nodes, self.n_springs
         self._coef_a = np.zeros(ne)

@@ -1,0 +1,82 @@
+"""Compiled physics substeps: a registry of numba loops that run a whole control step (every
+physics substep of it) in one call, MuJoCo's ``mj_step1``/``mj_step2`` included.
+
+Each substep is the documented order (:mod:`surgsim_envs.scene.simulation`): controls ->
+``mj_step1`` -> gather tool geoms -> contact -> tissue integration -> fixed nodes -> the guard's
+per-step checks -> reaction wrench into ``xfrc_applied`` -> ``mj_step2``. The generic loop does
+that with a few Python calls per substep; a registered loop does it without returning to Python,
+except every ``StabilityGuard.check_every`` tissue steps, when the loop hands back so that the
+guard's costlier checks (inverted elements, energy) run in Python exactly as in
+``TissueModel.step`` (before the reaction is applied and ``mj_step2`` runs), and when a check
+fails, so that the error raised is the same error with the same message.
+
+Registration is keyed by (contact model class, tissue model class, integrator) with exact
+classes: a subclass, another integrator, another guard class, several tissues, or a scene
+without tools keep the generic loop. The physics is the same operations in the same order, so
+results are bit-for-bit those of the generic loop (tests/test_compiled_substeps.py).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from surgsim_envs.tissue.guard import StabilityGuard
+
+#: statuses a compiled loop returns with the substep index it stopped at
+DONE, CONTACT_ERROR, NON_FINITE_INPUT, GUARD_FAILED, COSTLY_CHECK = 0, 1, 2, 3, 4
+
+_REGISTRY: dict[tuple[type, type, str], Callable] = {}
+
+
+def register_compiled_substeps(contact_cls: type, tissue_cls: type, integrator: str, factory: Callable) -> None:
+    """Offer ``factory(sim, tissue, contact, step_functions) -> runner`` for scenes whose only
+    tissue is exactly ``tissue_cls`` stepping with ``integrator`` against exactly ``contact_cls``.
+    The runner has ``run(count, ctrl_ids, ctrl_values)`` (see :class:`CompiledRunner`)."""
+    _REGISTRY[(contact_cls, tissue_cls, str(integrator))] = factory
+
+
+def registered() -> list[tuple[str, str, str]]:
+    """(contact class, tissue class, integrator) names of the registered compiled loops."""
+    return [(c.__name__, t.__name__, i) for (c, t, i) in _REGISTRY]
+
+
+def key_of(sim) -> tuple | None:
+    """The registry key of ``sim``'s scene, or None if no compiled loop can apply (not exactly one
+    tissue, no tool geoms, a guard that is not exactly :class:`StabilityGuard`)."""
+    if len(sim._pairs) != 1 or not sim._has_tools:
+        return None
+    tissue, contact = sim._pairs[0]
+    if type(tissue.guard) is not StabilityGuard:
+        return None
+    return (type(contact), type(tissue), str(tissue.integrator))
+
+
+def compiled_substeps_for(sim):
+    """A runner of the compiled loop registered for ``sim``'s scene, or None (generic loop)."""
+    key = key_of(sim)
+    factory = _REGISTRY.get(key) if key is not None else None
+    if factory is None:
+        return None
+    from surgsim_envs.scene.mujoco_native import step_functions
+
+    try:
+        fns = step_functions()
+    except OSError:
+        return None
+    tissue, contact = sim._pairs[0]
+    runner = factory(sim, tissue, contact, fns)
+    runner.key = key
+    return runner
+
+
+NO_IDS = np.zeros(0, dtype=np.int64)
+NO_VALUES = np.zeros((0, 0))
+
+
+def _register_builtin() -> None:
+    from surgsim_envs.scene import substeps_mass_spring  # noqa: F401  (registers itself)
+
+
+_register_builtin()

@@ -1,0 +1,161 @@
+"""Compiled substeps for the tasks' default pairing: :class:`ContactModel` against
+:class:`MassSpringModel` with its symplectic integrator (registered in
+:mod:`surgsim_envs.scene.compiled_substeps`).
+
+One numba call runs the substeps of a control step; per substep, in the generic loop's order and
+with the same kernels (so the result is bit-for-bit the generic loop's):
+
+1. scheduled controls (``ctrl_ids``/``ctrl_values``, e.g. Slippage's jaw and pull), then the rate
+   limiter while a tool target moves;
+2. ``mj_step1``; the tool geoms' poses and velocities (``_gather_geoms``);
+3. contact (``contact_kernel_prepared``: ``ContactModel.compute_prepared``'s kernel);
+4. tissue: refuse non-finite contact input (hand back, Python raises ``NonFiniteInputError``), the
+   symplectic kernel, fixed nodes, time and step count, the guard's cheap checks (non-finite
+   state, runaway speed: hand back, Python raises ``TissueUnstableError``) and, every
+   ``check_every`` steps, hand back for the costly ones;
+5. the reaction wrench into ``xfrc_applied``; ``mj_step2``; the rows zeroed again.
+
+The symplectic integrator integrates exactly the contact forces given, so the increment that
+``ContactModel.attribute_increment`` would add is zero and is not computed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from surgsim_envs.contact.model import ContactModel, contact_kernel_prepared
+from surgsim_envs.scene.compiled_substeps import (COSTLY_CHECK, CONTACT_ERROR, DONE, GUARD_FAILED, NO_IDS,
+                                                  NO_VALUES, NON_FINITE_INPUT, register_compiled_substeps)
+from surgsim_envs.scene.mujoco_native import call_model_data, model_data_addresses
+from surgsim_envs.scene.simulation import _add_wrench, _gather_geoms, _rate_limit, _write_rows, _zero_rows
+from surgsim_envs.tissue.guard import first_non_finite, max_speed_squared
+from surgsim_envs.tissue.mass_spring import MassSpringModel
+from surgsim_envs.tissue.msd_kernels import symplectic_step
+
+
+@njit(cache=True)
+def run_substeps(k, count, resume, native, controls, ctrl_ids, ctrl_values, gather, reaction, contact, tissue,
+                 fixed_idx, fixed_targets, integrated, max_speed2, check_every, clock, counts):
+    """Substeps ``k .. count-1`` (see the module docstring). ``resume``: substep ``k``'s tissue step
+    is done (after a costly guard check in Python): continue with its reaction and ``mj_step2``.
+    counts: [tissue steps, simulation steps, tissue steps taken in this batch]; clock: [tissue time].
+    Returns (status, substep index)."""
+    step1, step2, m_ptr, d_ptr = native
+    ctrl, goal, rate, moving, dt = controls
+    xfrc, bodies, wrench = reaction
+    gpos, gmat, gvel, tcom = gather[9], gather[10], gather[11], gather[12]
+    (pos, vel, inv_mass, b0, gravity, fixed, si, sj, L0, K1, K2, kMg0, decay0, kMg, decay, s_state, dl_state, f_buf,
+     tets, V0, kv) = tissue
+    forces, stiffness, tool_force, tool_torque = contact[13], contact[14], contact[16], contact[17]
+    while k < count:
+        if not resume:
+            for j in range(ctrl_ids.shape[0]):
+                ctrl[ctrl_ids[j]] = ctrl_values[k, j]
+            if moving[0]:
+                moving[0] = _rate_limit(ctrl, goal, rate, dt)
+            call_model_data(step1, m_ptr, d_ptr)
+            _gather_geoms(*gather)
+            if contact_kernel_prepared(pos, vel, gpos, gmat, gvel, tcom, contact) != 0:
+                return CONTACT_ERROR, k
+            if first_non_finite(forces) >= 0 or first_non_finite(stiffness) >= 0:
+                return NON_FINITE_INPUT, k
+            for i in range(forces.shape[0]):
+                for j in range(3):
+                    integrated[i, j] = forces[i, j]
+            if counts[2] == 0:
+                symplectic_step(pos, vel, inv_mass, b0, forces, gravity, fixed, dt, si, sj, L0, K1, K2, kMg0, decay0,
+                                s_state, dl_state, f_buf, tets, V0, kv)
+            else:
+                symplectic_step(pos, vel, inv_mass, b0, forces, gravity, fixed, dt, si, sj, L0, K1, K2, kMg, decay,
+                                s_state, dl_state, f_buf, tets, V0, kv)
+            counts[2] += 1
+            for q in range(fixed_idx.shape[0]):
+                i = fixed_idx[q]
+                for j in range(3):
+                    pos[i, j] = fixed_targets[i, j]
+                    vel[i, j] = 0.0
+            clock[0] += dt
+            counts[0] += 1
+            v2 = max_speed_squared(pos, vel)
+            if not np.isfinite(v2) or v2 > max_speed2:
+                return GUARD_FAILED, k
+            if counts[0] % check_every == 0:
+                return COSTLY_CHECK, k
+        resume = False
+        for t in range(wrench.shape[0]):
+            for j in range(6):
+                wrench[t, j] = 0.0
+        _add_wrench(wrench, tool_force, tool_torque)
+        _write_rows(xfrc, bodies, wrench)
+        call_model_data(step2, m_ptr, d_ptr)
+        _zero_rows(xfrc, bodies)
+        counts[1] += 1
+        k += 1
+    return DONE, k
+
+
+class MassSpringSymplecticRunner:
+    """Runs :func:`run_substeps` for one :class:`Simulation` and does the Python side: binds the
+    current arrays (tissue arrays are replaced by reset()), mirrors the counters back into the
+    model and the simulation, and turns the hand-backs into the generic loop's checks and errors."""
+
+    def __init__(self, sim, tissue, contact, fns):
+        self.sim, self.tissue, self.contact = sim, tissue, contact
+        self._fns = fns
+        self._clock = np.zeros(1)
+        self._counts = np.zeros(3, dtype=np.int64)
+        self._moving = np.zeros(1, dtype=np.bool_)
+
+    def run(self, count: int, ctrl_ids=NO_IDS, ctrl_values=NO_VALUES) -> None:
+        sim, tissue, contact = self.sim, self.tissue, self.contact
+        guard = tissue.guard
+        dt = sim.dt
+        m_ptr, d_ptr = model_data_addresses(sim.model, sim.data)
+        native = (self._fns[0], self._fns[1], m_ptr, d_ptr)
+        moving = self._moving
+        moving[0] = sim._moving
+        controls = (sim._views["ctrl"], sim._goal, sim._rate, moving, dt)
+        reaction = (sim._views["xfrc_applied"], sim._bodies, sim._wrench)
+        state = tissue.symplectic_kernel_state(dt)
+        cstate = contact.kernel_state()
+        clock, counts = self._clock, self._counts
+        clock[0] = tissue.time
+        counts[0], counts[1], counts[2] = tissue.steps, sim.steps, 0
+        max_speed2 = float(guard.max_speed) ** 2
+        k, resume = 0, False
+        try:
+            while True:
+                status, k = run_substeps(k, count, resume, native, controls, ctrl_ids, ctrl_values, sim._gather_args,
+                                         reaction, cstate, state, tissue._fixed_idx, tissue.fixed_targets,
+                                         tissue.integrated_external_forces, max_speed2, guard.check_every, clock, counts)
+                self._sync(dt)
+                if status == DONE:
+                    return
+                if status == COSTLY_CHECK:
+                    guard.check(tissue, dt)
+                    resume = True
+                    continue
+                if status == CONTACT_ERROR:
+                    contact._raise_kernel_error(*cstate[4:7])
+                if status == NON_FINITE_INPUT:
+                    guard.check_inputs(tissue, contact.result.forces, contact.result.stiffness)
+                if status == GUARD_FAILED:
+                    guard.check(tissue, dt)
+                raise RuntimeError(f"compiled substeps stopped with status {status} at substep {k} "
+                                   "without an error from the Python check (please report)")
+        finally:
+            self._sync(dt)
+
+    def _sync(self, dt: float) -> None:
+        tissue, sim = self.tissue, self.sim
+        tissue.time = float(self._clock[0])
+        tissue.steps = int(self._counts[0])
+        sim.steps = int(self._counts[1])
+        sim._moving = bool(self._moving[0])
+        if self._counts[2]:
+            tissue._last_dt = dt
+            tissue.committed_symplectic_steps(dt)
+
+
+register_compiled_substeps(ContactModel, MassSpringModel, "symplectic", MassSpringSymplecticRunner)
