@@ -137,12 +137,21 @@ class SlippageEnv(GraspSceneEnv):
         return (action_value + 1.0) / 2.0 * (g.open_radius - g.min_radius)
 
     def _run(self, steps: int, jaw_goal: float, pull: callable) -> None:
-        d, sim = self.sim.data, self.sim
-        lim = self.config.closing_speed * sim.dt
-        for _ in range(steps):
-            d.ctrl[self._jaw_act] += float(np.clip(jaw_goal - d.ctrl[self._jaw_act], -lim, lim))
-            d.ctrl[self._pull_act] = pull()
-            sim.physics_step()
+        """``steps`` physics steps; before each, the jaw control moves towards ``jaw_goal`` by at most
+        ``closing_speed * dt`` and the pull motor gets ``pull(t)`` (t the simulation time before the
+        step). Both schedules are computed ahead and run in one :meth:`Simulation.step_with_controls`."""
+        sim = self.sim
+        dt = sim.dt
+        lim = self.config.closing_speed * dt
+        values = np.empty((steps, 2))
+        jaw = float(sim.data.ctrl[self._jaw_act])
+        t = float(sim.data.time)
+        for k in range(steps):
+            jaw += min(max(jaw_goal - jaw, -lim), lim)
+            values[k, 0] = jaw
+            values[k, 1] = pull(t)
+            t += dt                                   # as mj_step2 advances d.time
+        sim.step_with_controls([self._jaw_act, self._pull_act], values)
 
     def _randomise(self, options: dict[str, Any]) -> None:
         c, rng = self.config, self.np_random
@@ -151,7 +160,7 @@ class SlippageEnv(GraspSceneEnv):
         self.amplitude = sample(rng, options.get("pull_amplitude", c.pull_amplitude), "pull_amplitude", 0.0, 10.0)
         self.frequency = sample(rng, options.get("pull_frequency", c.pull_frequency), "pull_frequency", 0.0, 50.0)
         self.phase = float(rng.uniform(0.0, 2.0 * math.pi))
-        self._run(int(round(c.settle_time / self.sim.dt)), self._closure_ctrl(c.initial_closure), lambda: 0.0)
+        self._run(int(round(c.settle_time / self.sim.dt)), self._closure_ctrl(c.initial_closure), lambda t: 0.0)
         pos = self.sim.tool_position(self.tool_name)
         nodes = contact_nodes(self.sim)
         if len(nodes) == 0:
@@ -162,14 +171,15 @@ class SlippageEnv(GraspSceneEnv):
         self.jaw_goal = self._closure_ctrl(c.initial_closure)
         self.pull = 0.0
 
-    def _pull_now(self) -> float:
-        self.pull = min(self.config.max_pull, pull_force(self.sim.time - self.t0, self.rate, self.amplitude,
+    def _pull_at(self, t: float) -> float:
+        """N, the pull motor's control at simulation time ``t`` s (kept as ``self.pull``)."""
+        self.pull = min(self.config.max_pull, pull_force(t - self.t0, self.rate, self.amplitude,
                                                          self.frequency, self.phase))
         return self.pull
 
     def _apply_action(self, a: np.ndarray) -> None:
         self.jaw_goal = self._closure_ctrl(float(a[0]))
-        self._run(self.substeps, self.jaw_goal, self._pull_now)
+        self._run(self.substeps, self.jaw_goal, self._pull_at)
 
     def _observe(self) -> np.ndarray:
         pos, fn, ft, rep = self._readings()

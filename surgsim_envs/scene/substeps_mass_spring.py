@@ -31,16 +31,45 @@ from surgsim_envs.scene.mujoco_native import call_model_data, model_data_address
 from surgsim_envs.scene.simulation import _add_wrench, _gather_geoms, _rate_limit, _write_rows, _zero_rows
 from surgsim_envs.tissue.guard import first_non_finite, max_speed_squared
 from surgsim_envs.tissue.mass_spring import MassSpringModel
-from surgsim_envs.tissue.msd_kernels import symplectic_step
+from surgsim_envs.tissue.msd_kernels import elastic_energy, symplectic_step, volume_energy
+
+
+@njit(cache=True)
+def _costly_check(pos, vel, masses, tissue, kM, energy, good_pos, good_vel, clock, snap):
+    """The guard's every-``check_every`` checks for this model (it has no elements that can invert):
+    False if the kinetic energy exceeds ``energy_factor * (energy_ref + energy_floor)`` (then
+    nothing is updated: Python repeats the check and raises); else raise ``energy_ref`` to the
+    total energy and snapshot the state as the last good one. energy: [ref, factor, floor]."""
+    ke = 0.0
+    for i in range(vel.shape[0]):
+        ke += masses[i] * (vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1] + vel[i, 2] * vel[i, 2])
+    ke *= 0.5
+    if ke > energy[1] * (energy[0] + energy[2]):
+        return False
+    (_, _, _, _, _, _, si, sj, L0, K1, K2, _, _, kMg, decay, s_state, dl_state, _, tets, V0, kv) = tissue
+    total = ke + (elastic_energy(pos, si, sj, L0, K1, K2, kM, kMg, decay, s_state, dl_state)
+                  + volume_energy(pos, tets, V0, kv))
+    if total > energy[0]:
+        energy[0] = total
+    for i in range(pos.shape[0]):
+        for j in range(3):
+            good_pos[i, j] = pos[i, j]
+            good_vel[i, j] = vel[i, j]
+    clock[1] = clock[0]
+    snap[0] = True
+    return True
 
 
 @njit(cache=True)
 def run_substeps(k, count, resume, native, controls, ctrl_ids, ctrl_values, gather, reaction, contact, tissue,
-                 fixed_idx, fixed_targets, integrated, max_speed2, check_every, clock, counts):
+                 fixed_idx, fixed_targets, integrated, max_speed2, check_every, clock, counts, guard):
     """Substeps ``k .. count-1`` (see the module docstring). ``resume``: substep ``k``'s tissue step
     is done (after a costly guard check in Python): continue with its reaction and ``mj_step2``.
-    counts: [tissue steps, simulation steps, tissue steps taken in this batch]; clock: [tissue time].
+    counts: [tissue steps, simulation steps, tissue steps taken in this batch]; clock: [tissue time,
+    time of the last good state]. guard: (in_kernel, masses, kM, energy, good_pos, good_vel, snap):
+    with ``in_kernel`` the costly checks run here (:func:`_costly_check`), else they are handed back.
     Returns (status, substep index)."""
+    costly_here, masses, kM, energy, good_pos, good_vel, snap = guard
     step1, step2, m_ptr, d_ptr = native
     ctrl, goal, rate, moving, dt = controls
     xfrc, bodies, wrench = reaction
@@ -81,7 +110,10 @@ def run_substeps(k, count, resume, native, controls, ctrl_ids, ctrl_values, gath
             if not np.isfinite(v2) or v2 > max_speed2:
                 return GUARD_FAILED, k
             if counts[0] % check_every == 0:
-                return COSTLY_CHECK, k
+                if not costly_here:
+                    return COSTLY_CHECK, k
+                if not _costly_check(pos, vel, masses, tissue, kM, energy, good_pos, good_vel, clock, snap):
+                    return GUARD_FAILED, k
         resume = False
         for t in range(wrench.shape[0]):
             for j in range(6):
@@ -97,15 +129,33 @@ def run_substeps(k, count, resume, native, controls, ctrl_ids, ctrl_values, gath
 
 class MassSpringSymplecticRunner:
     """Runs :func:`run_substeps` for one :class:`Simulation` and does the Python side: binds the
-    current arrays (tissue arrays are replaced by reset()), mirrors the counters back into the
-    model and the simulation, and turns the hand-backs into the generic loop's checks and errors."""
+    current arrays (tissue arrays are replaced by reset()), mirrors the counters and the guard's
+    state back into the model, the guard and the simulation, and turns the hand-backs into the
+    generic loop's checks and errors (the Python check is repeated on the same state, so the error
+    and its message are the ones ``TissueModel.step`` raises)."""
 
     def __init__(self, sim, tissue, contact, fns):
         self.sim, self.tissue, self.contact = sim, tissue, contact
         self._fns = fns
-        self._clock = np.zeros(1)
+        self._clock = np.zeros(2)
         self._counts = np.zeros(3, dtype=np.int64)
         self._moving = np.zeros(1, dtype=np.bool_)
+        self._energy = np.zeros(3)
+        self._snap = np.zeros(1, dtype=np.bool_)
+        self._scratch = None
+        self._contact_state = (None, None)
+
+    def _guard_arrays(self):
+        guard, tissue = self.tissue.guard, self.tissue
+        e = self._energy
+        e[0], e[1], e[2] = guard._energy_ref, guard.energy_factor, guard.energy_floor
+        self._snap[0] = False
+        good = guard._good_pos
+        if good is not None and good.shape == tissue.positions.shape:
+            return (True, tissue.masses, tissue.kM, e, good, guard._good_vel, self._snap)
+        if self._scratch is None or self._scratch[0].shape != tissue.positions.shape:
+            self._scratch = (np.zeros_like(tissue.positions), np.zeros_like(tissue.positions))
+        return (True, tissue.masses, tissue.kM, e, self._scratch[0], self._scratch[1], self._snap)
 
     def run(self, count: int, ctrl_ids=NO_IDS, ctrl_values=NO_VALUES) -> None:
         sim, tissue, contact = self.sim, self.tissue, self.contact
@@ -118,7 +168,9 @@ class MassSpringSymplecticRunner:
         controls = (sim._views["ctrl"], sim._goal, sim._rate, moving, dt)
         reaction = (sim._views["xfrc_applied"], sim._bodies, sim._wrench)
         state = tissue.symplectic_kernel_state(dt)
-        cstate = contact.kernel_state()
+        if self._contact_state[0] is not contact._prepared:      # rebuilt only after a new prepare()
+            self._contact_state = (contact._prepared, contact.kernel_state())
+        cstate = self._contact_state[1]
         clock, counts = self._clock, self._counts
         clock[0] = tissue.time
         counts[0], counts[1], counts[2] = tissue.steps, sim.steps, 0
@@ -126,22 +178,22 @@ class MassSpringSymplecticRunner:
         k, resume = 0, False
         try:
             while True:
+                gstate = self._guard_arrays()
                 status, k = run_substeps(k, count, resume, native, controls, ctrl_ids, ctrl_values, sim._gather_args,
                                          reaction, cstate, state, tissue._fixed_idx, tissue.fixed_targets,
-                                         tissue.integrated_external_forces, max_speed2, guard.check_every, clock, counts)
+                                         tissue.integrated_external_forces, max_speed2, guard.check_every, clock,
+                                         counts, gstate)
                 self._sync(dt)
                 if status == DONE:
                     return
-                if status == COSTLY_CHECK:
-                    guard.check(tissue, dt)
+                if status in (COSTLY_CHECK, GUARD_FAILED):
+                    guard.check(tissue, dt)    # raises the generic loop's error; else (a rounding tie) go on
                     resume = True
                     continue
                 if status == CONTACT_ERROR:
                     contact._raise_kernel_error(*cstate[4:7])
                 if status == NON_FINITE_INPUT:
                     guard.check_inputs(tissue, contact.result.forces, contact.result.stiffness)
-                if status == GUARD_FAILED:
-                    guard.check(tissue, dt)
                 raise RuntimeError(f"compiled substeps stopped with status {status} at substep {k} "
                                    "without an error from the Python check (please report)")
         finally:
@@ -149,10 +201,18 @@ class MassSpringSymplecticRunner:
 
     def _sync(self, dt: float) -> None:
         tissue, sim = self.tissue, self.sim
+        guard = tissue.guard
         tissue.time = float(self._clock[0])
         tissue.steps = int(self._counts[0])
         sim.steps = int(self._counts[1])
         sim._moving = bool(self._moving[0])
+        guard._energy_ref = float(self._energy[0])
+        if self._snap[0]:
+            self._snap[0] = False
+            guard._good_time = float(self._clock[1])
+            if guard._good_pos is None or guard._good_pos.shape != tissue.positions.shape:
+                guard._good_pos, guard._good_vel = self._scratch
+                self._scratch = None
         if self._counts[2]:
             tissue._last_dt = dt
             tissue.committed_symplectic_steps(dt)
