@@ -1,0 +1,141 @@
+"""The compiled substeps (scene/compiled_substeps.py, issue 18 speed) give exactly what the generic
+per-substep loop gives: the same tissue state, contact forces, tool wrenches and MuJoCo state after
+many substeps, bit for bit; and the same errors with the same messages when the guard or the input
+check fails. Models, integrators or guards without a registered loop keep the generic loop."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import surgsim_envs  # noqa: F401  (registers the tasks)
+from surgsim_envs.errors import ConfigError, NonFiniteInputError, TissueUnstableError
+from surgsim_envs.scene.compiled_substeps import key_of, registered
+from surgsim_envs.tissue.guard import StabilityGuard
+from surgsim_envs.tissue.mass_spring import MassSpringModel
+
+
+def _pair(task):
+    """Two envs of ``task`` in the same state: the first steps compiled, the second generically."""
+    envs = [gym.make(task), gym.make(task)]
+    for e in envs:
+        e.reset(seed=3)
+    envs[1].unwrapped.sim.compiled_substeps = False
+    return envs
+
+
+def _actions(env, n, seed=0):
+    a = np.random.default_rng(seed).uniform(-1, 1, (n, *env.action_space.shape)).astype(np.float32)
+    if "Palpation" in env.spec.id:
+        a[:, 2] = np.linspace(-1, 0.8, n)     # press progressively deeper: contact is certain
+        a[:, -1] = -1.0                       # never report: the episode keeps going
+    return a
+
+
+def _assert_same(s0, s1):
+    t0, t1 = s0.tissue(), s1.tissue()
+    c0, c1 = next(iter(s0.contacts.values())).result, next(iter(s1.contacts.values())).result
+    pairs = [(t0.positions, t1.positions), (t0.velocities, t1.velocities),
+             (t0.integrated_external_forces, t1.integrated_external_forces), (c0.forces, c1.forces),
+             (c0.stiffness, c1.stiffness), (c0.tool_force, c1.tool_force), (c0.tool_torque, c1.tool_torque),
+             (s0.data.qpos, s1.data.qpos), (s0.data.qvel, s1.data.qvel), (s0.data.ctrl, s1.data.ctrl),
+             (s0.data.xfrc_applied, s1.data.xfrc_applied)]
+    for x, y in pairs:
+        np.testing.assert_array_equal(x, y)
+    assert (t0.time, t0.steps, s0.steps, s0.time) == (t1.time, t1.steps, s1.steps, s1.time)
+    g0, g1 = t0.guard, t1.guard
+    np.testing.assert_array_equal(g0._good_pos, g1._good_pos)
+    assert g0._good_time == g1._good_time
+    # the energy reference is summed in another order in the kernel: equal to rounding
+    assert g0._energy_ref == pytest.approx(g1._energy_ref, rel=1e-12, abs=0.0)
+
+
+@pytest.mark.parametrize("task", ["SurgSim/Palpation-v0", "SurgSim/Slippage-v0"])
+def test_compiled_substeps_match_the_generic_loop_bit_for_bit(task):
+    envs = _pair(task)
+    s0, s1 = (e.unwrapped.sim for e in envs)
+    assert s0._compiled_runner() is not None, "the task's default tissue should have a compiled loop"
+    assert s1._compiled_runner() is None
+    touched = 0
+    for a in _actions(envs[0], 25):
+        outs = [e.step(a) for e in envs]
+        np.testing.assert_array_equal(outs[0][0], outs[1][0])
+        assert outs[0][1] == outs[1][1]
+        _assert_same(s0, s1)
+        touched += int(next(iter(s0.contacts.values())).report.contacts.sum())
+    assert touched > 0, "no contact in the run: the comparison would be vacuous"
+
+
+def test_the_guard_raises_the_same_error_in_both_loops():
+    """Runaway speed (cheap check, every step) and kinetic-energy blow-up (costly check, every
+    check_every steps, run inside the kernel) give the generic loop's error and message."""
+    for setting in ({"max_speed": 1e-4}, {"energy_factor": 1e-9, "energy_floor": 1e-9}):
+        envs = _pair("SurgSim/Palpation-v0")
+        msgs = []
+        for e in envs:
+            tissue = e.unwrapped.sim.tissue()
+            for k, v in setting.items():
+                setattr(tissue.guard, k, v)
+            with pytest.raises(TissueUnstableError) as info:
+                for a in _actions(e, 30):
+                    e.step(a)
+            msgs.append(str(info.value))
+        assert msgs[0] == msgs[1]
+        _assert_same(*(e.unwrapped.sim for e in envs))
+
+
+def test_non_finite_contact_input_is_refused_with_the_same_message():
+    envs = _pair("SurgSim/Palpation-v0")
+    msgs = []
+    for e in envs:
+        sim = e.unwrapped.sim
+        next(iter(sim.contacts.values())).tool_friction[:] = np.nan   # friction NaN -> contact force NaN
+        with pytest.raises(NonFiniteInputError) as info:
+            for a in _actions(e, 30):
+                e.step(a)
+        msgs.append(str(info.value))
+    assert msgs[0] == msgs[1] and "node" in msgs[0]
+    _assert_same(*(e.unwrapped.sim for e in envs))
+
+
+def test_models_without_a_registered_loop_keep_the_generic_loop():
+    assert ("ContactModel", "MassSpringModel", "symplectic") in registered()
+    env = gym.make("SurgSim/Palpation-v0")
+    env.reset(seed=0)
+    sim = env.unwrapped.sim
+    tissue = sim.tissue()
+    assert key_of(sim) is not None and sim._compiled_runner() is not None
+
+    class StricterGuard(StabilityGuard):
+        pass
+
+    tissue.guard = StricterGuard()
+    assert key_of(sim) is None and sim._compiled_runner() is None
+    tissue.guard = StabilityGuard()
+    tissue.integrator = "implicit"
+    assert sim._compiled_runner() is None
+    tissue.integrator = "symplectic"
+
+    class Calibrated(MassSpringModel):
+        pass
+
+    tissue.__class__ = Calibrated
+    assert sim._compiled_runner() is None
+    tissue.__class__ = MassSpringModel
+    assert sim._compiled_runner() is not None
+
+
+def test_step_with_controls_checks_its_schedule():
+    env = gym.make("SurgSim/Grasp-v0")
+    env.reset(seed=0)
+    sim = env.unwrapped.sim
+    with pytest.raises(ConfigError, match="shape"):
+        sim.step_with_controls([0, 1], np.zeros((3, 1)))
+    with pytest.raises(ConfigError, match="actuator ids"):
+        sim.step_with_controls([sim.model.nu], np.zeros((3, 1)))
+    with pytest.raises(ConfigError, match="NaN"):
+        sim.step_with_controls([0], np.full((3, 1), np.nan))
+    steps = sim.steps
+    sim.step_with_controls([0], np.full((4, 1), 0.001))
+    assert sim.steps == steps + 4 and sim.data.ctrl[0] == 0.001
