@@ -29,6 +29,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per figure; median reported (default 3)")
     parser.add_argument("--workers", type=int, default=2, help="async vector env size (0 to skip; default 2)")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    parser.add_argument("--compiled-vs-generic", action="store_true",
+                        help="also time, alternately in this process, env steps and physics substeps with the "
+                             "compiled substeps (scene/compiled_substeps.py) and with the generic per-substep loop")
+    parser.add_argument("--async-baseline", action="store_true",
+                        help="also time gym's AsyncVectorEnv with a trivial env and with envs that spin for this "
+                             "task's measured env-step time (the pipe round-trip against ours)")
     parser.add_argument("--checked-loop", action="store_true",
                         help="also time, alternately in this process, the physics loop through the checked public "
                              "calls (ContactModel.compute + TissueModel.step per substep) against the prepared one")
@@ -41,7 +47,8 @@ def _actions(space, n, rng, palpation):
     return a
 
 
-def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = False) -> dict:
+def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = False,
+                compiled_vs: bool = False) -> dict:
     """Median env steps/s of one env in this process, plus its timing settings."""
     import gymnasium as gym
 
@@ -73,6 +80,9 @@ def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = Fals
            "reset_ms": reset_ms, "physics_steps_per_s": statistics.median(rates) * u.substeps,
            "substep_us": substep_us, "tissue_step_us": tissue_us, "overhead_ratio": substep_us / tissue_us,
            "mj_step1_us": step1_us, "mj_step1_with_visual_flex_us": step1_flex_us}
+    out["compiled_substeps"] = u.sim._compiled_runner() is not None
+    if compiled_vs:
+        out.update(compiled_vs_generic(env, repeats, rng, pal, steps))
     if checked_loop and u.sim._has_tools:
         checked, prepared = checked_vs_prepared(env, repeats, rng, pal)
         out.update(checked_loop_substep_us=checked, prepared_loop_substep_us=prepared,
@@ -164,6 +174,114 @@ def checked_vs_prepared(env, repeats: int, rng, palpation: bool, n: int = 200) -
     return statistics.median(times[0]), statistics.median(times[1])
 
 
+def compiled_vs_generic(env, repeats: int, rng, palpation: bool, steps: int, n: int = 300) -> dict:
+    """Median wall time of an env step (``steps // 4`` random actions from a reset) and of one
+    physics substep (``n`` substeps from the state the actions left), with the compiled substeps
+    and with the generic loop, alternately in this process (same load)."""
+    u = env.unwrapped
+    sim = u.sim
+    env_us = {True: [], False: []}
+    sub_us = {True: [], False: []}
+    k = max(1, steps // 4)
+    try:
+        for r in range(repeats):
+            for compiled in (True, False):
+                sim.compiled_substeps = compiled
+                env.reset(seed=r)
+                acts = _actions(env.action_space, k, rng, palpation)
+                taken = 0
+                t0 = time.perf_counter()
+                for a in acts:
+                    _, _, term, trunc, _ = env.step(a)
+                    taken += 1
+                    if term or trunc:
+                        break
+                env_us[compiled].append((time.perf_counter() - t0) / taken * 1e6)
+                t0 = time.perf_counter()
+                sim._physics_steps(n)
+                sub_us[compiled].append((time.perf_counter() - t0) / n * 1e6)
+    finally:
+        sim.compiled_substeps = True
+    med = statistics.median
+    return {"compiled_env_step_us": med(env_us[True]), "generic_env_step_us": med(env_us[False]),
+            "compiled_substep_us": med(sub_us[True]), "generic_substep_us": med(sub_us[False]),
+            "generic_over_compiled_env_step": med(env_us[False]) / med(env_us[True]),
+            "generic_over_compiled_substep": med(sub_us[False]) / med(sub_us[True])}
+
+
+class SpinEnv:
+    """A trivial Gymnasium env whose step busy-waits ``step_us`` microseconds (0: returns at once),
+    with a 20-float observation: the async baseline (pipe round-trip and process scheduling only)."""
+
+    def __new__(cls, step_us: float = 0.0):
+        import gymnasium as gym
+        from gymnasium import spaces
+
+        class _Spin(gym.Env):
+            observation_space = spaces.Box(-1.0, 1.0, (20,), np.float32)
+            action_space = spaces.Box(-1.0, 1.0, (4,), np.float32)
+
+            def reset(self, *, seed=None, options=None):
+                super().reset(seed=seed)
+                return np.zeros(20, np.float32), {}
+
+            def step(self, action):
+                end = time.perf_counter() + step_us * 1e-6
+                while time.perf_counter() < end:
+                    pass
+                return np.zeros(20, np.float32), 0.0, False, False, {}
+
+        return _Spin()
+
+
+def _spin_env(step_us: float):
+    return SpinEnv(step_us)
+
+
+def async_baseline(workers: int, steps: int, repeats: int, step_us: float) -> dict:
+    """Steps/s of one SpinEnv(step_us) in this process and of ``workers`` of them in gym's
+    AsyncVectorEnv, and the async round-trip overhead per vector step (us) with step_us = 0."""
+    import functools
+
+    from gymnasium.vector import AsyncVectorEnv
+
+    def rate_single(us):
+        env = SpinEnv(us)
+        env.reset(seed=0)
+        a = np.zeros(4, np.float32)
+        rates = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            for _ in range(steps):
+                env.step(a)
+            rates.append(steps / (time.perf_counter() - t0))
+        return statistics.median(rates)
+
+    def rate_async(us):
+        vec = AsyncVectorEnv([functools.partial(_spin_env, us)] * workers)
+        try:
+            vec.reset(seed=0)
+            a = np.zeros((workers, 4), np.float32)
+            for _ in range(10):
+                vec.step(a)
+            rates = []
+            n = max(1, steps // workers)
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                for _ in range(n):
+                    vec.step(a)
+                rates.append(n * workers / (time.perf_counter() - t0))
+        finally:
+            vec.close()
+        return statistics.median(rates)
+
+    trivial = rate_async(0.0)
+    single, multi = rate_single(step_us), rate_async(step_us)
+    return {"async_trivial_steps_per_s": trivial, "async_roundtrip_us": workers / trivial * 1e6,
+            "spin_step_us": step_us, "spin_single_steps_per_s": single, "spin_async_steps_per_s": multi,
+            "spin_async_speedup": multi / single}
+
+
 def visual_flex_cost(sim, repeats: int, n: int = 500) -> tuple[float, float]:
     """``(us, us)``: median ``mj_step1`` of the physics model (no flex) and of the render twin (the
     same model plus the tissue surface flexes, as every physics step paid before the twin),
@@ -226,11 +344,14 @@ def run(args) -> int:
         raise ConfigError(f"unknown task(s) {unknown}; known: {list(TASKS)}")
     rows = []
     for t in tasks:
-        row = single_rate(t, args.steps, args.repeats, getattr(args, "checked_loop", False))
+        row = single_rate(t, args.steps, args.repeats, getattr(args, "checked_loop", False),
+                          getattr(args, "compiled_vs_generic", False))
         if args.workers:
             row["async_workers"] = args.workers
             row["async_steps_per_s"] = async_rate(t, args.workers, args.steps, args.repeats)
             row["async_speedup"] = row["async_steps_per_s"] / row["steps_per_s"]
+            if getattr(args, "async_baseline", False):
+                row.update(async_baseline(args.workers, args.steps, args.repeats, 1e6 / row["steps_per_s"]))
         rows.append(row)
     if args.json:
         print(json.dumps({"envs": rows}, indent=2))

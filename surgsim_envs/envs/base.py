@@ -327,6 +327,7 @@ class SurgSimEnv(gym.Env):
         self.steps = 0
         self.peak_force = 0.0
         self.episode_return = 0.0
+        self._readings_key = None          # tasks may cache their readings per physics state
         self._randomise(options)
         obs = self._observe()
         info = self._info({})
@@ -363,6 +364,7 @@ class SurgSimEnv(gym.Env):
     def _unstable_step(self, exc: TissueUnstableError):
         """End the episode after a tissue divergence (``on_unstable="terminate"``)."""
         self.sim.reset()  # finite state for the last observation; reset() re-randomises as usual
+        self._readings_key = None
         obs = self._observe()
         info = self._info({"unstable": True, "unstable_reason": str(exc), "success": False, "is_success": False})
         return obs, 0.0, True, False, info

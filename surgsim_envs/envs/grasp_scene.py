@@ -113,11 +113,17 @@ class GraspSceneEnv(SurgSimEnv):
         self.was_grasped = False
 
     def _readings(self):
-        """(wrist position (3,) m, per-jaw normal (3,) N, per-jaw tangential (3,) N, contact report)."""
+        """(wrist position (3,) m, per-jaw normal (3,) N, per-jaw tangential (3,) N, contact report),
+        read once per physics state (``_evaluate`` and ``_observe`` of a step share them; do not
+        modify them)."""
         sim = self.sim
-        jaws = sim.jaw_forces(self.tool_name)
-        rep = sim.contact_report()[self.tool_name]
-        return sim.tool_position(self.tool_name), jaws["normal"], jaws["tangential"], rep
+        key = (sim, sim.steps, sim.time, self.steps)
+        if getattr(self, "_readings_key", None) != key:
+            jaws = sim.jaw_forces(self.tool_name)
+            rep = sim.contact_report()[self.tool_name]
+            self._readings_value = (sim.tool_position(self.tool_name), jaws["normal"], jaws["tangential"], rep)
+            self._readings_key = key
+        return self._readings_value
 
     def _metrics(self) -> dict[str, Any]:
         return {"organ": self.organ, "mu": self.mu, "young_scale": self.young_scale,

@@ -199,6 +199,12 @@ def stiffness_map(cell_max_k: np.ndarray) -> np.ndarray:
     return k / top if top > 0 else np.zeros_like(k)
 
 
+def _normalised(k: np.ndarray) -> np.ndarray:
+    """:func:`stiffness_map` of the env's own per-cell array (finite, >= 0 by construction): no checks."""
+    top = k.max() if k.size else 0.0
+    return k / top if top > 0 else np.zeros_like(k)
+
+
 def localisation_error(guess_xy: np.ndarray, true_xy: np.ndarray) -> float:
     """m, planar distance from the guess to the inclusion centre."""
     return float(np.hypot(*(np.asarray(guess_xy, dtype=float) - np.asarray(true_xy, dtype=float))))
@@ -313,17 +319,22 @@ class PalpationEnv(SurgSimEnv):
         self.sim.step()
 
     def _readings(self):
-        pos = self.sim.tool_position("probe")
-        force = self.sim.tool_force("probe")
-        depth = indentation_depth(pos[2], self.surface_z, self.config.tip_radius)
-        return pos, force, depth
+        """(probe position (3,) m, force on the probe (3,) N, indentation depth m), read once per
+        physics state (``_evaluate`` and ``_observe`` of a step share them; do not modify them)."""
+        key = (self.sim, self.sim.steps, self.sim.time, self.steps)
+        if getattr(self, "_readings_key", None) != key:
+            pos = self.sim.tool_position("probe")
+            force = self.sim.tool_force("probe")
+            self._readings_value = (pos, force, indentation_depth(pos[2], self.surface_z, self.config.tip_radius))
+            self._readings_key = key
+        return self._readings_value
 
     def _observe(self) -> np.ndarray:
         pos, force, depth = self._readings()
         frac = self.steps / self.max_episode_steps
         est = self.estimate if self.estimate is not None else pos[:2]
         return np.array([*pos, *force, depth, self.best[0], self.best[1], self.best[2], frac, est[0], est[1],
-                         self.contrast_seen, *stiffness_map(self.cell_k)], dtype=np.float32)
+                         self.contrast_seen, *_normalised(self.cell_k)], dtype=np.float32)
 
     def _evaluate(self, a: np.ndarray):
         c = self.config

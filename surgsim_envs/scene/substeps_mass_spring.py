@@ -176,6 +176,7 @@ class MassSpringSymplecticRunner:
         counts[0], counts[1], counts[2] = tissue.steps, sim.steps, 0
         max_speed2 = float(guard.max_speed) ** 2
         k, resume = 0, False
+        done = False
         try:
             while True:
                 gstate = self._guard_arrays()
@@ -185,6 +186,7 @@ class MassSpringSymplecticRunner:
                                          counts, gstate)
                 self._sync(dt)
                 if status == DONE:
+                    done = True
                     return
                 if status in (COSTLY_CHECK, GUARD_FAILED):
                     guard.check(tissue, dt)    # raises the generic loop's error; else (a rounding tie) go on
@@ -197,7 +199,8 @@ class MassSpringSymplecticRunner:
                 raise RuntimeError(f"compiled substeps stopped with status {status} at substep {k} "
                                    "without an error from the Python check (please report)")
         finally:
-            self._sync(dt)
+            if not done:        # an error (or an interrupt) left the loop: counters as far as they got
+                self._sync(dt)
 
     def _sync(self, dt: float) -> None:
         tissue, sim = self.tissue, self.sim
