@@ -14,6 +14,12 @@ One physics step (DESIGN.md "One physics step"), in exactly this order:
 Tools and tissue therefore see the same force over the same interval: action equals reaction
 and total linear momentum is conserved when nothing else acts (tests/test_momentum.py).
 No MuJoCo callbacks are used (never ``set_mjcb_passive``); tissue nodes are not MuJoCo dofs.
+
+When a compiled loop is registered for the scene's (contact model, tissue model, integrator)
+(:mod:`surgsim_envs.scene.compiled_substeps`; built in: ContactModel + MassSpringModel
+"symplectic", the tasks' default), all substeps of a step run in one numba call, MuJoCo's C
+``mj_step1``/``mj_step2`` included, in exactly this order and bit-for-bit the same result; every
+other scene runs the generic loop below (``Simulation(..., compiled_substeps=False)`` forces it).
 Units: m, s, kg, N, rad.
 """
 
