@@ -374,15 +374,26 @@ class PalpationEnv(SurgSimEnv):
         reward if new), the stiffness-weighted estimate, the contrast seen, and the potential-based
         shaping on the estimate's error (reward terms accumulate in ``rt``)."""
         c = self.config
+        if not self.samples_k or getattr(self, "_sample_buf", None) is None:
+            self._sample_buf = [np.empty((64, 2)), np.empty(64), -np.inf]   # a new episode's samples
         self.samples_xy.append(xy)
         self.samples_k.append(k)
+        # the samples also go into growing arrays, so the estimate does not rebuild them from the lists
+        n = len(self.samples_k)
+        buf = self._sample_buf
+        if n > len(buf[1]):
+            buf[0] = np.concatenate([buf[0], np.empty_like(buf[0])])
+            buf[1] = np.concatenate([buf[1], np.empty_like(buf[1])])
+        buf[0][n - 1] = xy
+        buf[1][n - 1] = k
+        buf[2] = max(buf[2], float(k))
         cell = map_cell(xy, int(c.map_cells), c.map_half_width)
         if self.cell_k[cell] == 0.0:
             rt["coverage"] += c.cell_reward
         self.cell_k[cell] = max(self.cell_k[cell], k)
-        self.estimate = stiffness_weighted_estimate(np.array(self.samples_xy), np.array(self.samples_k))
-        med = float(np.median(self.samples_k))
-        self.contrast_seen = float(max(self.samples_k)) / med if med > 0 else 1.0
+        self.estimate = stiffness_weighted_estimate(buf[0][:n], buf[1][:n])
+        med = float(np.median(buf[1][:n]))
+        self.contrast_seen = buf[2] / med if med > 0 else 1.0
         err = localisation_error(self.estimate, self.inclusion["centre"][:2])
         phi = 1.0 - min(err / c.localisation_scale, 1.0)
         rt["shaping"] += c.shaping_weight * (phi - self.phi)
