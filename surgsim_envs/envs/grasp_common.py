@@ -49,7 +49,7 @@ def organ_key(organ):
 
 def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: float, resolution=None,
                            error_tolerance: float = 0.1, step_budget_us: float = 5_000.0, model: str = "mass_spring",
-                           integrator: str = "symplectic", max_young_scale: float = 1.0):
+                           integrator: str = "symplectic", max_young_scale: float = 1.0, tissue_subcycles: int = 1):
     """A Simulation of the grasp scene for ``organ``: "spleen" or "liver_lobe", a closed mesh file
     (lattice spacing :data:`MESH_SPACING`) or a Volume (:func:`check_grasp_organ`).
 
@@ -59,6 +59,7 @@ def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: 
     integrator: asked for (if the model has it); an explicit one that is not stable at ``dt`` over
     the whole stiffness randomisation (Young's modulus up to ``max_young_scale``) is replaced by
     the model's "auto" (:func:`surgsim_envs.envs.base.integrator_for_range`).
+    tissue_subcycles: tissue + contact steps of ``dt`` per MuJoCo step (see :class:`Simulation`).
     """
     from surgsim_envs.envs.base import integrator_for_range, tissue_options
     from surgsim_envs.scene import Simulation, grasp_config, grasp_scene
@@ -71,12 +72,12 @@ def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: 
     t.options = tissue_options(model, integrator)
     cfg.tool("grasper").closing_speed = float(closing_speed)
     cfg.dt = float(dt)
-    sim = Simulation(grasp_scene(cfg), dt=dt, substeps=substeps)
+    sim = Simulation(grasp_scene(cfg), dt=dt, substeps=substeps, tissue_subcycles=tissue_subcycles)
     switch = integrator_for_range(sim.tissue(), dt, max_young_scale)
     if switch is None:
         return sim
     t.options = {**t.options, "integrator": switch}
-    return Simulation(grasp_scene(cfg), dt=dt, substeps=substeps)
+    return Simulation(grasp_scene(cfg), dt=dt, substeps=substeps, tissue_subcycles=tissue_subcycles)
 
 
 def jaws_in_contact(normal: np.ndarray, threshold: float) -> int:

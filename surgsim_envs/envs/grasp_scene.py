@@ -17,6 +17,7 @@ import numpy as np
 
 from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_on_unstable,
                                    check_positive, check_range, check_task_resolution, require_capabilities, sample)
+from surgsim_envs.errors import ConfigError
 from surgsim_envs.envs.grasp_common import SlipTracker, build_grasp_simulation, check_grasp_organ, organ_key
 
 
@@ -26,6 +27,7 @@ class GraspSceneConfig:
 
     control_hz: float = 50.0
     dt: float = 4e-4                   # s; squeezed, strain-stiffened tissue needs < 0.5 ms
+    tissue_subcycles: int = 1          # tissue + contact steps of dt per MuJoCo step (1: one each; see Simulation)
     episode_seconds: float = 3.0
     organ: Any = "spleen"              # "spleen", "liver_lobe", a closed mesh file (STL/OBJ/PLY/VTK) or a Volume
     model: str = "mass_spring"         # any registered tissue model with the "forces" capability
@@ -48,6 +50,11 @@ class GraspSceneConfig:
         check_control_rate(self, what)
         check_task_resolution(self, what)
         check_on_unstable(self.on_unstable, what)
+        n = self.tissue_subcycles
+        substeps = max(1, int(round(1.0 / self.control_hz / self.dt)))
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 100 or substeps % n:
+            raise ConfigError(f"{what}.tissue_subcycles={n!r} must be an integer in [1, 100] that divides the "
+                              f"{substeps} physics steps of a control step")
         check_grasp_organ(self.organ, f"{what}.organ")
         check_range(self.mu, "mu", 0.0, 2.0)
         check_range(self.young_scale, "young_scale", 0.5, 1.25)
@@ -76,7 +83,8 @@ class GraspSceneEnv(SurgSimEnv):
             self._sims[key] = build_grasp_simulation(organ, c.dt, self.substeps, c.closing_speed, c.resolution,
                                                        c.error_tolerance, c.step_budget_us, model=c.model,
                                                        integrator=c.integrator,
-                                                       max_young_scale=check_range(c.young_scale, "young_scale")[1])
+                                                       max_young_scale=check_range(c.young_scale, "young_scale")[1],
+                                                       tissue_subcycles=c.tissue_subcycles)
             self.sim = self._sims[key]
             self._select_tool()
             self._on_new_simulation(self.sim)

@@ -141,7 +141,9 @@ class SlippageEnv(GraspSceneEnv):
         ``closing_speed * dt`` and the pull motor gets ``pull(t)`` (t the simulation time before the
         step). Both schedules are computed ahead and run in one :meth:`Simulation.step_with_controls`."""
         sim = self.sim
-        dt = sim.dt
+        n = sim.tissue_subcycles          # controls change once per MuJoCo step of n physics steps
+        dt = sim.dt * n
+        steps = -(-steps // n)
         lim = self.config.closing_speed * dt
         values = np.empty((steps, 2))
         jaw = float(sim.data.ctrl[self._jaw_act])

@@ -102,6 +102,14 @@ def _add_wrench(wrench, force, torque):
 
 
 @njit(cache=True)
+def _advance_geoms(gpos, gpos0, gvel, s):
+    """``gpos = gpos0 + s * (linear velocity of each geom origin)`` (s in seconds)."""
+    for k in range(gpos.shape[0]):
+        for j in range(3):
+            gpos[k, j] = gpos0[k, j] + s * gvel[k, 3 + j]
+
+
+@njit(cache=True)
 def _zero_rows(xfrc, bodies):
     for k in range(bodies.shape[0]):
         for j in range(6):
@@ -119,12 +127,18 @@ class Simulation:
         for the scene's (contact, tissue, integrator) (:mod:`surgsim_envs.scene.compiled_substeps`;
         same physics bit for bit); False, or no registered loop: the generic loop. The attribute
         :attr:`compiled_substeps` may be switched at any time.
+    tissue_subcycles: n >= 1. With n > 1 MuJoCo steps the tools with ``n * dt`` while tissue and
+        contact step ``n`` times with ``dt`` inside each MuJoCo step (:meth:`_subcycled_steps`):
+        the tool geoms move along their velocity at the start of the MuJoCo step, and the tools get
+        the time average of the ``n`` reactions, so the impulse they receive equals the impulse the
+        tissue received (momentum conserved). Step counts stay in physics steps of ``dt`` and must
+        be multiples of n. Default 1 (off): the documented one-to-one loop.
 
     Raises ConfigError if a tissue starts inside a tool (initial penetration).
     """
 
     def __init__(self, scene: Scene, *, dt: float | None = None, substeps: int | None = None, seed: int | None = None,
-                 compiled_substeps: bool = True):
+                 compiled_substeps: bool = True, tissue_subcycles: int = 1):
         if not isinstance(scene, Scene):
             raise ConfigError(f"Simulation needs a Scene from surgsim_envs.scene.build_scene(...), got {type(scene).__name__}")
         cfg = scene.config
@@ -132,8 +146,13 @@ class Simulation:
         self.dt = float(cfg.dt if dt is None else dt)
         self.substeps = cfg.substeps if substeps is None else substeps
         validate_step(self.dt, self.substeps)
+        if isinstance(tissue_subcycles, bool) or not isinstance(tissue_subcycles, (int, np.integer)) \
+                or not 1 <= tissue_subcycles <= 100:
+            raise ConfigError(f"tissue_subcycles must be an integer in [1, 100] (tissue steps per MuJoCo step), "
+                              f"got {tissue_subcycles!r}")
+        self.tissue_subcycles = int(tissue_subcycles)
         self.model = scene.model
-        self.model.opt.timestep = self.dt
+        self.model.opt.timestep = self.dt * self.tissue_subcycles
         self.data = mujoco.MjData(self.model)
         # cached views of the MjData arrays the step loop touches (an attribute access builds a new view)
         self._views = {k: getattr(self.data, k) for k in ("geom_xpos", "geom_xmat", "cvel", "subtree_com", "xipos",
@@ -293,10 +312,12 @@ class Simulation:
         self._physics_steps(int(n) * self.substeps)
 
     def run(self, duration: float) -> None:
-        """Advance by ``duration`` seconds (rounded to whole physics steps)."""
+        """Advance by ``duration`` seconds (rounded to whole MuJoCo steps of ``tissue_subcycles``
+        physics steps)."""
         if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration >= 0):
             raise ConfigError(f"duration must be a non-negative number of seconds, got {duration!r}")
-        self._physics_steps(int(round(duration / self.dt)))
+        n = self.tissue_subcycles
+        self._physics_steps(int(round(duration / (self.dt * n))) * n)
 
     def _gather(self) -> None:
         _gather_geoms(*self._gather_args)
@@ -306,10 +327,11 @@ class Simulation:
         self._physics_steps(1)
 
     def step_with_controls(self, actuators, values) -> None:
-        """``len(values)`` physics steps; before the k-th, ``d.ctrl[actuators] = values[k]`` (then the
-        rate limiter, as for any step). ``actuators`` (A,) actuator ids, ``values`` (K, A) controls
-        in the actuators' units: a control schedule computed ahead (e.g. a pull force as a function
-        of time) runs in one compiled call instead of one :meth:`physics_step` per substep."""
+        """``len(values)`` MuJoCo steps (each ``tissue_subcycles`` physics steps); before the k-th,
+        ``d.ctrl[actuators] = values[k]`` (then the rate limiter, as for any step). ``actuators``
+        (A,) actuator ids, ``values`` (K, A) controls in the actuators' units: a control schedule
+        computed ahead (e.g. a pull force as a function of time) runs in one compiled call instead
+        of one :meth:`physics_step` per substep."""
         ids = np.ascontiguousarray(actuators, dtype=np.int64).reshape(-1)
         vals = np.ascontiguousarray(values, dtype=np.float64)
         if vals.ndim != 2 or vals.shape[1] != len(ids):
@@ -318,7 +340,7 @@ class Simulation:
             raise ConfigError(f"actuator ids must lie in [0, {self.model.nu}), got {ids.tolist()}")
         if not np.all(np.isfinite(vals)):
             raise ConfigError("control values contain NaN/inf; give finite numbers")
-        self._physics_steps(len(vals), ids, vals)
+        self._physics_steps(len(vals) * self.tissue_subcycles, ids, vals)
 
     def _compiled_runner(self):
         """The compiled loop for the current scene state, or None (generic loop)."""
@@ -333,12 +355,20 @@ class Simulation:
         return self._runner
 
     def _physics_steps(self, count: int, ctrl_ids=None, ctrl_values=None) -> None:
+        n = self.tissue_subcycles
+        if count % n:
+            raise ConfigError(f"with tissue_subcycles={n} the simulation advances in whole MuJoCo steps of {n} "
+                              f"physics steps; {count} is not a multiple of {n} (choose substeps / durations "
+                              f"that are)")
         runner = self._compiled_runner() if count > 0 else None
         if runner is not None:
             if ctrl_ids is None:
                 runner.run(count)
             else:
                 runner.run(count, ctrl_ids, ctrl_values)
+            return
+        if n > 1:
+            self._subcycled_steps(count // n, ctrl_ids, ctrl_values)
             return
         if ctrl_ids is None:
             self._generic_steps(count)
@@ -347,6 +377,48 @@ class Simulation:
         for k in range(count):
             ctrl[ctrl_ids] = ctrl_values[k]
             self._generic_steps(1)
+
+    def _subcycled_steps(self, rigid_steps: int, ctrl_ids=None, ctrl_values=None) -> None:
+        """``rigid_steps`` MuJoCo steps of ``n * dt``, each with n tissue + contact steps of ``dt``
+        (the generic form of the compiled loop's sub-cycling; see ``tissue_subcycles``). Inside the
+        MuJoCo step the tool geoms translate with their velocity at its start (orientation and the
+        torque reference point held); the reaction written is the mean of the n reactions."""
+        m, d, h, n = self.model, self.data, self.dt, self.tissue_subcycles
+        big = h * n
+        v = self._views
+        ctrl, xfrc = v["ctrl"], v["xfrc_applied"]
+        gpos, gmat, gvel, tcom = self._gpos, self._gmat, self._gvel, self._tcom
+        bodies, w, pairs = self._bodies, self._wrench, self._pairs
+        gpos0 = np.empty_like(gpos)
+        for k in range(rigid_steps):
+            if ctrl_ids is not None:
+                ctrl[ctrl_ids] = ctrl_values[k]
+            if self._moving:
+                self._moving = _rate_limit(ctrl, self._goal, self._rate, big)
+            mujoco.mj_step1(m, d)
+            if not self._has_tools:
+                for tissue in self.tissues.values():
+                    for _ in range(n):
+                        tissue.step(h)
+                mujoco.mj_step2(m, d)
+                self.steps += n
+                continue
+            _gather_geoms(*self._gather_args)
+            np.copyto(gpos0, gpos)
+            w[:] = 0.0
+            for j in range(n):
+                if j:
+                    _advance_geoms(gpos, gpos0, gvel, j * h)
+                for tissue, contact in pairs:
+                    res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
+                    tissue.step_prevalidated(h, res.forces, res.stiffness)
+                    contact.attribute_increment_prepared(tissue.integrated_external_forces)
+                    _add_wrench(w, res.tool_force, res.tool_torque)
+            w /= n
+            _write_rows(xfrc, bodies, w)
+            mujoco.mj_step2(m, d)
+            _zero_rows(xfrc, bodies)
+            self.steps += n
 
     def _generic_steps(self, count: int) -> None:
         """``count`` physics steps, each in the documented order (module docstring), with a handful

@@ -28,7 +28,8 @@ from surgsim_envs.contact.model import ContactModel, contact_kernel_prepared
 from surgsim_envs.scene.compiled_substeps import (COSTLY_CHECK, CONTACT_ERROR, DONE, GUARD_FAILED, NO_IDS,
                                                   NO_VALUES, NON_FINITE_INPUT, register_compiled_substeps)
 from surgsim_envs.scene.mujoco_native import call_model_data, model_data_addresses
-from surgsim_envs.scene.simulation import _add_wrench, _gather_geoms, _rate_limit, _write_rows, _zero_rows
+from surgsim_envs.scene.simulation import (_add_wrench, _advance_geoms, _gather_geoms, _rate_limit, _write_rows,
+                                           _zero_rows)
 from surgsim_envs.tissue.guard import first_non_finite, max_speed_squared
 from surgsim_envs.tissue.mass_spring import MassSpringModel
 from surgsim_envs.tissue.msd_kernels import elastic_energy, symplectic_step, volume_energy
@@ -61,70 +62,87 @@ def _costly_check(pos, vel, masses, tissue, kM, energy, good_pos, good_vel, cloc
 
 
 @njit(cache=True)
-def run_substeps(k, count, resume, native, controls, ctrl_ids, ctrl_values, gather, reaction, contact, tissue,
-                 fixed_idx, fixed_targets, integrated, max_speed2, check_every, clock, counts, guard):
-    """Substeps ``k .. count-1`` (see the module docstring). ``resume``: substep ``k``'s tissue step
-    is done (after a costly guard check in Python): continue with its reaction and ``mj_step2``.
-    counts: [tissue steps, simulation steps, tissue steps taken in this batch]; clock: [tissue time,
-    time of the last good state]. guard: (in_kernel, masses, kM, energy, good_pos, good_vel, snap):
-    with ``in_kernel`` the costly checks run here (:func:`_costly_check`), else they are handed back.
-    Returns (status, substep index)."""
-    costly_here, masses, kM, energy, good_pos, good_vel, snap = guard
+def run_substeps(k, j, count, resume, native, controls, ctrl_ids, ctrl_values, gather, reaction, contact, tissue,
+                 fixed_idx, fixed_targets, integrated, max_speed2, check_every, clock, counts, guard, sub):
+    """``count`` physics steps as MuJoCo steps ``k .. count/n - 1`` of ``n`` tissue steps each (see the
+    module docstring; n = 1 is the documented one-to-one loop), starting at tissue step ``j`` of
+    MuJoCo step ``k``. ``resume``: that tissue step is done (after a check in Python): continue
+    with its reaction. counts: [tissue steps, simulation steps, tissue steps taken in this batch];
+    clock: [tissue time, time of the last good state]. guard: (in_kernel, masses, kM, energy,
+    good_pos, good_vel, snap): with ``in_kernel`` the costly checks run here (:func:`_costly_check`),
+    else they are handed back. sub: (n, n * dt, gpos0 buffer): sub-cycling (``tissue_subcycles``).
+    Returns (status, MuJoCo step index, tissue step index within it)."""
     step1, step2, m_ptr, d_ptr = native
     ctrl, goal, rate, moving, dt = controls
     xfrc, bodies, wrench = reaction
+    n, big_dt, gpos0 = sub
     gpos, gmat, gvel, tcom = gather[9], gather[10], gather[11], gather[12]
     (pos, vel, inv_mass, b0, gravity, fixed, si, sj, L0, K1, K2, kMg0, decay0, kMg, decay, s_state, dl_state, f_buf,
      tets, V0, kv) = tissue
     forces, stiffness, tool_force, tool_torque = contact[13], contact[14], contact[16], contact[17]
-    while k < count:
-        if not resume:
-            for j in range(ctrl_ids.shape[0]):
-                ctrl[ctrl_ids[j]] = ctrl_values[k, j]
+    costly_here, masses, kM, energy, good_pos, good_vel, snap = guard
+    rigid = count // n
+    while k < rigid:
+        if j == 0 and not resume:
+            for q in range(ctrl_ids.shape[0]):
+                ctrl[ctrl_ids[q]] = ctrl_values[k, q]
             if moving[0]:
-                moving[0] = _rate_limit(ctrl, goal, rate, dt)
+                moving[0] = _rate_limit(ctrl, goal, rate, big_dt)
             call_model_data(step1, m_ptr, d_ptr)
             _gather_geoms(*gather)
-            if contact_kernel_prepared(pos, vel, gpos, gmat, gvel, tcom, contact) != 0:
-                return CONTACT_ERROR, k
-            if first_non_finite(forces) >= 0 or first_non_finite(stiffness) >= 0:
-                return NON_FINITE_INPUT, k
-            for i in range(forces.shape[0]):
-                for j in range(3):
-                    integrated[i, j] = forces[i, j]
-            if counts[2] == 0:
-                symplectic_step(pos, vel, inv_mass, b0, forces, gravity, fixed, dt, si, sj, L0, K1, K2, kMg0, decay0,
-                                s_state, dl_state, f_buf, tets, V0, kv)
-            else:
-                symplectic_step(pos, vel, inv_mass, b0, forces, gravity, fixed, dt, si, sj, L0, K1, K2, kMg, decay,
-                                s_state, dl_state, f_buf, tets, V0, kv)
-            counts[2] += 1
-            for q in range(fixed_idx.shape[0]):
-                i = fixed_idx[q]
-                for j in range(3):
-                    pos[i, j] = fixed_targets[i, j]
-                    vel[i, j] = 0.0
-            clock[0] += dt
-            counts[0] += 1
-            v2 = max_speed_squared(pos, vel)
-            if not np.isfinite(v2) or v2 > max_speed2:
-                return GUARD_FAILED, k
-            if counts[0] % check_every == 0:
-                if not costly_here:
-                    return COSTLY_CHECK, k
-                if not _costly_check(pos, vel, masses, tissue, kM, energy, good_pos, good_vel, clock, snap):
-                    return GUARD_FAILED, k
-        resume = False
-        for t in range(wrench.shape[0]):
-            for j in range(6):
-                wrench[t, j] = 0.0
-        _add_wrench(wrench, tool_force, tool_torque)
+            for g in range(gpos.shape[0]):
+                for q in range(3):
+                    gpos0[g, q] = gpos[g, q]
+            for t in range(wrench.shape[0]):
+                for q in range(6):
+                    wrench[t, q] = 0.0
+        while j < n:
+            if not resume:
+                if j > 0:
+                    _advance_geoms(gpos, gpos0, gvel, j * dt)
+                if contact_kernel_prepared(pos, vel, gpos, gmat, gvel, tcom, contact) != 0:
+                    return CONTACT_ERROR, k, j
+                if first_non_finite(forces) >= 0 or first_non_finite(stiffness) >= 0:
+                    return NON_FINITE_INPUT, k, j
+                for i in range(forces.shape[0]):
+                    for q in range(3):
+                        integrated[i, q] = forces[i, q]
+                if counts[2] == 0:
+                    symplectic_step(pos, vel, inv_mass, b0, forces, gravity, fixed, dt, si, sj, L0, K1, K2, kMg0,
+                                    decay0, s_state, dl_state, f_buf, tets, V0, kv)
+                else:
+                    symplectic_step(pos, vel, inv_mass, b0, forces, gravity, fixed, dt, si, sj, L0, K1, K2, kMg,
+                                    decay, s_state, dl_state, f_buf, tets, V0, kv)
+                counts[2] += 1
+                for q in range(fixed_idx.shape[0]):
+                    i = fixed_idx[q]
+                    for c in range(3):
+                        pos[i, c] = fixed_targets[i, c]
+                        vel[i, c] = 0.0
+                clock[0] += dt
+                counts[0] += 1
+                v2 = max_speed_squared(pos, vel)
+                if not np.isfinite(v2) or v2 > max_speed2:
+                    return GUARD_FAILED, k, j
+                if counts[0] % check_every == 0:
+                    if not costly_here:
+                        return COSTLY_CHECK, k, j
+                    if not _costly_check(pos, vel, masses, tissue, kM, energy, good_pos, good_vel, clock, snap):
+                        return GUARD_FAILED, k, j
+            resume = False
+            _add_wrench(wrench, tool_force, tool_torque)
+            j += 1
+        if n > 1:
+            for t in range(wrench.shape[0]):
+                for q in range(6):
+                    wrench[t, q] /= n
         _write_rows(xfrc, bodies, wrench)
         call_model_data(step2, m_ptr, d_ptr)
         _zero_rows(xfrc, bodies)
-        counts[1] += 1
+        counts[1] += n
         k += 1
-    return DONE, k
+        j = 0
+    return DONE, k, 0
 
 
 class MassSpringSymplecticRunner:
@@ -144,6 +162,7 @@ class MassSpringSymplecticRunner:
         self._snap = np.zeros(1, dtype=np.bool_)
         self._scratch = None
         self._contact_state = (None, None)
+        self._gpos0 = None
 
     def _guard_arrays(self):
         guard, tissue = self.tissue.guard, self.tissue
@@ -175,15 +194,19 @@ class MassSpringSymplecticRunner:
         clock[0] = tissue.time
         counts[0], counts[1], counts[2] = tissue.steps, sim.steps, 0
         max_speed2 = float(guard.max_speed) ** 2
-        k, resume = 0, False
+        k, j, resume = 0, 0, False
         done = False
+        n = sim.tissue_subcycles
+        if self._gpos0 is None or self._gpos0.shape != sim._gpos.shape:
+            self._gpos0 = np.empty_like(sim._gpos)
+        sub = (n, dt * n, self._gpos0)
         try:
             while True:
                 gstate = self._guard_arrays()
-                status, k = run_substeps(k, count, resume, native, controls, ctrl_ids, ctrl_values, sim._gather_args,
-                                         reaction, cstate, state, tissue._fixed_idx, tissue.fixed_targets,
-                                         tissue.integrated_external_forces, max_speed2, guard.check_every, clock,
-                                         counts, gstate)
+                status, k, j = run_substeps(k, j, count, resume, native, controls, ctrl_ids, ctrl_values,
+                                            sim._gather_args, reaction, cstate, state, tissue._fixed_idx,
+                                            tissue.fixed_targets, tissue.integrated_external_forces, max_speed2,
+                                            guard.check_every, clock, counts, gstate, sub)
                 self._sync(dt)
                 if status == DONE:
                     done = True
@@ -196,7 +219,7 @@ class MassSpringSymplecticRunner:
                     contact._raise_kernel_error(*cstate[4:7])
                 if status == NON_FINITE_INPUT:
                     guard.check_inputs(tissue, contact.result.forces, contact.result.stiffness)
-                raise RuntimeError(f"compiled substeps stopped with status {status} at substep {k} "
+                raise RuntimeError(f"compiled substeps stopped with status {status} at step {k}.{j} "
                                    "without an error from the Python check (please report)")
         finally:
             if not done:        # an error (or an interrupt) left the loop: counters as far as they got
