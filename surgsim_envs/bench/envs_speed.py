@@ -155,7 +155,8 @@ def _checked_physics_step(sim) -> None:
 
 def checked_vs_prepared(env, repeats: int, rng, palpation: bool, n: int = 200) -> tuple[float, float]:
     """``(checked_us, prepared_us)``: median wall time of one physics substep through the checked
-    public calls and through ``Simulation``'s prepared loop, alternately from the same env state."""
+    public calls and through ``Simulation``'s prepared generic loop (compiled substeps off),
+    alternately from the same env state."""
     u = env.unwrapped
     sim = u.sim
     times = ([], [])
@@ -164,13 +165,17 @@ def checked_vs_prepared(env, repeats: int, rng, palpation: bool, n: int = 200) -
             env.reset(seed=r)
             for a in _actions(env.action_space, 5, rng, palpation):
                 env.step(a)
-            t0 = time.perf_counter()
-            if k == 0:
-                for _ in range(n):
-                    _checked_physics_step(sim)
-            else:
-                sim._physics_steps(n)
-            times[k].append((time.perf_counter() - t0) / n * 1e6)
+            compiled, sim.compiled_substeps = sim.compiled_substeps, False   # the prepared generic loop
+            try:
+                t0 = time.perf_counter()
+                if k == 0:
+                    for _ in range(n):
+                        _checked_physics_step(sim)
+                else:
+                    sim._physics_steps(n)
+                times[k].append((time.perf_counter() - t0) / n * 1e6)
+            finally:
+                sim.compiled_substeps = compiled
     return statistics.median(times[0]), statistics.median(times[1])
 
 
