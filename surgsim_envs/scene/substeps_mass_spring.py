@@ -15,6 +15,9 @@ with the same kernels (so the result is bit-for-bit the generic loop's):
    ``check_every`` steps, hand back for the costly ones;
 5. the reaction wrench into ``xfrc_applied``; ``mj_step2``; the rows zeroed again.
 
+The loop releases the GIL (``nogil``), as the bindings' ``mj_step`` does, so a haptic servo thread
+keeps running during a control step.
+
 The symplectic integrator integrates exactly the contact forces given, so the increment that
 ``ContactModel.attribute_increment`` would add is zero and is not computed.
 """
@@ -61,7 +64,7 @@ def _costly_check(pos, vel, masses, tissue, kM, energy, good_pos, good_vel, cloc
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def run_substeps(k, j, count, resume, native, controls, ctrl_ids, ctrl_values, gather, reaction, contact, tissue,
                  fixed_idx, fixed_targets, integrated, max_speed2, check_every, clock, counts, guard, sub):
     """``count`` physics steps as MuJoCo steps ``k .. count/n - 1`` of ``n`` tissue steps each (see the
