@@ -1,0 +1,109 @@
+"""The servo in its own process (haptics/servo_process.py) and the real-time helpers.
+
+Behaviour only (forces, records, errors); the servo's timing is measured by
+``surgsim bench haptics-flood --servo process`` (docs/benchmarks.md), never asserted here."""
+
+import functools
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from surgsim_envs.errors import ConfigError
+from surgsim_envs.haptics import ServoConfig, SpringWallPhysics, UdpHapticClient
+from surgsim_envs.haptics.realtime import raise_thread_priority, wait_until
+from surgsim_envs.haptics.servo_process import ProcessServoLoop, SeqLockRecord, ServoProcessError
+from surgsim_envs.haptics.udp_bridge import UdpDevice
+
+
+def test_seqlock_record_round_trip_and_sequence():
+    rec = SeqLockRecord(3)
+    assert rec.read() == (0, [0.0, 0.0, 0.0])  # never written
+    rec.write([1.0, -2.5, 3e-9])
+    rec.write([4.0, 5.0, 6.0])
+    seq, vals = rec.read()
+    assert seq == 4 and vals == [4.0, 5.0, 6.0]  # two writes, each +2: even = consistent
+
+
+def test_seqlock_reader_never_sees_a_torn_record():
+    rec = SeqLockRecord(8)
+    stop = threading.Event()
+
+    def writer():
+        k = 0.0
+        while not stop.is_set():
+            k += 1.0
+            rec.write([k] * 8)
+
+    th = threading.Thread(target=writer)
+    th.start()
+    try:
+        for _ in range(20000):
+            _, vals = rec.read()
+            assert len(set(vals)) == 1  # all eight from one write
+    finally:
+        stop.set()
+        th.join()
+
+
+def test_spin_s_is_checked_against_the_period():
+    with pytest.raises(ConfigError, match="spin_s"):
+        ServoConfig(spin_s=-1e-4)
+    with pytest.raises(ConfigError, match=r"period=0\.001"):
+        ServoConfig(spin_s=1e-3)
+
+
+def test_priority_helpers():
+    assert raise_thread_priority(False) == "default"
+    got = []
+    th = threading.Thread(target=lambda: got.append(raise_thread_priority(True)))  # a throwaway thread
+    th.start()
+    th.join()
+    assert got[0] in ("SCHED_FIFO", "nice -10", "default")
+    deadline = time.perf_counter() + 2e-3
+    assert wait_until(deadline, 5e-4) >= deadline
+
+
+def test_process_servo_renders_the_spring_wall_force_over_udp():
+    # proxy 2 mm into a wall (k_wall 500 N/m behind a 2000 N/m coupling): at rest the hand feels
+    # the series stiffness 400 N/m x 2 mm = 0.8 N upward
+    phys = SpringWallPhysics(start_position=(0.0, 0.0, 0.005))
+    loop = ProcessServoLoop(functools.partial(UdpDevice, port=0), phys, ServoConfig(max_force_rate=1e4))
+    loop.start()
+    forces = []
+    try:
+        assert loop.device_address is not None
+        with UdpHapticClient(tuple(loop.device_address)) as client:
+            t0 = time.perf_counter()
+            while time.perf_counter() - t0 < 1.5:
+                client.send_pose(time.perf_counter() - t0, (0.0, 0.0, -0.002))
+                forces += client.receive_forces(timeout=0.005)
+    finally:
+        stats = loop.stop()
+    np.testing.assert_allclose(phys.proxy, (0.0, 0.0, -0.002))  # the physics got the servo's target
+    assert phys.steps > 100 and stats.physics_updates == phys.steps
+    assert stats.ticks > 100 and loop.device_stats["accepted"] > 50 and loop.device_stats["malformed"] == 0
+    assert forces, "no force packet came back"
+    assert forces[-1].force[2] == pytest.approx(0.8, rel=0.03)
+    assert abs(forces[-1].force[0]) < 1e-9 and abs(forces[-1].force[1]) < 1e-9
+
+
+def _broken_device():
+    raise ConfigError("no such device: test")
+
+
+def test_a_failing_device_factory_is_reported_with_its_message():
+    loop = ProcessServoLoop(_broken_device, SpringWallPhysics())
+    with pytest.raises(ServoProcessError, match="no such device: test"):
+        loop.start()
+    assert not loop.running
+
+
+def test_process_servo_rejects_bad_arguments():
+    with pytest.raises(ConfigError, match="device_factory"):
+        ProcessServoLoop("udp:5555", SpringWallPhysics())
+    with pytest.raises(ConfigError, match="not a haptic physics"):
+        ProcessServoLoop(functools.partial(UdpDevice, port=0), object())
+    with pytest.raises(ConfigError, match="not running"):
+        ProcessServoLoop(functools.partial(UdpDevice, port=0), SpringWallPhysics()).stop()
