@@ -89,6 +89,31 @@ def test_process_servo_renders_the_spring_wall_force_over_udp():
     assert abs(forces[-1].force[0]) < 1e-9 and abs(forces[-1].force[1]) < 1e-9
 
 
+def test_run_realtime_calls_on_frame_and_stops_when_it_returns_false():
+    calls = []
+
+    def frame(loop):
+        calls.append(loop.running)
+        return len(calls) < 3
+
+    loop = ProcessServoLoop(functools.partial(UdpDevice, port=0), SpringWallPhysics())
+    stats = loop.run_realtime(30.0, on_frame=frame, frame_period=0.01)
+    assert calls == [True, True, True] and not loop.running
+    assert stats.duration_s < 20.0 and stats.physics_updates == 0  # no pose came: the physics never stepped
+
+
+def test_force_log_at_capacity_keeps_the_newest_rows_in_order():
+    from surgsim_envs.haptics.recording import ForceLog
+
+    log = ForceLog(max_rows=5)
+    for i in range(12):
+        log.append(i * 1e-3, (i, 0.0, -i), saturated=i % 2 == 0)
+    assert len(log) == 5
+    np.testing.assert_allclose(log.times, [0.007, 0.008, 0.009, 0.010, 0.011])
+    np.testing.assert_allclose(log.forces[:, 0], [7, 8, 9, 10, 11])
+    np.testing.assert_array_equal(log.saturated, [False, True, False, True, False])
+
+
 def _broken_device():
     raise ConfigError("no such device: test")
 

@@ -268,16 +268,24 @@ class ProcessServoLoop:
             raise self._error
         return self.stats
 
-    def run_realtime(self, duration: float) -> ServoStats:
-        """Run for ``duration`` s of wall clock; returns the statistics."""
+    def run_realtime(self, duration: float, on_frame=None, frame_period: float = 1 / 30) -> ServoStats:
+        """Run for ``duration`` s of wall clock, calling ``on_frame(loop)`` every ``frame_period``
+        s from this thread as :meth:`ServoLoop.run_realtime` does (hold ``loop.physics_lock``
+        while touching the physics; returning False stops early); returns the statistics."""
         if not (math.isfinite(duration) and duration > 0):
             raise ConfigError(f"duration must be > 0 s, got {duration!r}")
+        if not (math.isfinite(frame_period) and frame_period > 0):
+            raise ConfigError(f"frame_period must be > 0 s, got {frame_period!r}")
         self.start()
         try:
-            end = time.perf_counter() + duration
+            start = time.perf_counter()
+            end = start + duration
+            k = 0
             while time.perf_counter() < end and not self._stop_physics.is_set():
-                time.sleep(min(0.05, max(0.0, end - time.perf_counter())))
+                if on_frame is not None and on_frame(self) is False:
+                    break
+                k = max(k + 1, int((time.perf_counter() - start) / frame_period) + 1)
+                time.sleep(max(0.0, min(start + k * frame_period, end) - time.perf_counter()))
         finally:
             stats = self.stop()
         return stats
-
