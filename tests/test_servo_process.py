@@ -87,6 +87,9 @@ def test_process_servo_renders_the_spring_wall_force_over_udp():
     assert forces, "no force packet came back"
     assert forces[-1].force[2] == pytest.approx(0.8, rel=0.03)
     assert abs(forces[-1].force[0]) < 1e-9 and abs(forces[-1].force[1]) < 1e-9
+    log = loop.force_log  # the child's log of what it rendered, shipped back at stop
+    assert len(log) == stats.ticks + 1 and np.all(log.forces[-1] == 0.0)  # + the zero force at stop
+    assert log.forces[-2][2] == pytest.approx(0.8, rel=0.03)
 
 
 def test_run_realtime_calls_on_frame_and_stops_when_it_returns_false():
@@ -123,6 +126,18 @@ def test_a_failing_device_factory_is_reported_with_its_message():
     with pytest.raises(ServoProcessError, match="no such device: test"):
         loop.start()
     assert not loop.running
+
+
+def test_teleop_servo_process_needs_a_udp_device():
+    import argparse
+
+    from surgsim_envs.haptics import teleop
+
+    parser = argparse.ArgumentParser()
+    teleop.add_arguments(parser)
+    args = parser.parse_args(["palpation", "--device", "scripted", "--servo", "process", "--headless"])
+    with pytest.raises(ConfigError, match="--servo process needs a network device"):
+        teleop.run(args)
 
 
 def test_process_servo_rejects_bad_arguments():

@@ -36,6 +36,7 @@ import numpy as np
 from surgsim_envs.errors import ConfigError, SurgSimError
 from surgsim_envs.haptics.protocol import check_physics
 from surgsim_envs.haptics.realtime import raise_thread_priority, wait_until
+from surgsim_envs.haptics.recording import ForceLog
 from surgsim_envs.haptics.servo import ServoConfig, ServoLoop, ServoStats
 
 TARGET_SIZE = 9  # valid, x, y, z, qw, qx, qy, qz, grip
@@ -133,7 +134,8 @@ def _servo_main(device_factory, config: ServoConfig, go, target: SeqLockRecord, 
             loop._finish_stats(physics_time=elapsed)
             device.send_force(np.zeros(3), elapsed)
             dstats = asdict(device.stats) if is_dataclass(getattr(device, "stats", None)) else {}
-            conn.send(("stats", loop.stats.as_dict(), dstats))
+            log = device.force_log
+            conn.send(("stats", loop.stats.as_dict(), dstats, (log.times, log.forces, log.saturated)))
         finally:
             device.close()
     except BaseException:  # noqa: BLE001 - reported to the parent, which raises it
@@ -146,7 +148,8 @@ class ProcessServoLoop:
     ``start()`` / ``stop()`` or ``run_realtime(duration)``; after ``start()``
     :attr:`device_address` is the device's bound address (None for devices without one); after
     ``stop()`` :attr:`stats` is the servo's :class:`ServoStats` (physics counts from this
-    process) and :attr:`device_stats` the device's statistics as a dict."""
+    process), :attr:`device_stats` the device's statistics as a dict and :attr:`force_log` the
+    forces the device rendered (a :class:`ForceLog`)."""
 
     def __init__(self, device_factory, physics, config: ServoConfig | None = None, start_timeout: float = 60.0):
         if not callable(device_factory):
@@ -161,6 +164,7 @@ class ProcessServoLoop:
         self.physics_lock = threading.RLock()
         self.stats = ServoStats(rate_hz=self.config.rate_hz)
         self.device_stats: dict = {}
+        self.force_log = ForceLog()
         self.device_address = None
         self._proc = None
         self._thread: threading.Thread | None = None
@@ -260,6 +264,9 @@ class ProcessServoLoop:
             raise ServoProcessError(f"the servo process failed:\n{msg[1]}")
         self.stats = ServoStats(**msg[1])
         self.device_stats = msg[2]
+        self.force_log = ForceLog(max_rows=max(1, len(msg[3][0])))
+        for t, f, sat in zip(*msg[3]):
+            self.force_log.append(t, f, bool(sat))
         elapsed = time.perf_counter() - self._start
         self.stats.physics_updates = self._physics_updates
         self.stats.physics_steps = self._physics_steps
