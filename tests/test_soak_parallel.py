@@ -4,7 +4,6 @@ checkpoints and resuming. Tiny step counts: the long soak is a benchmark, not a 
 from __future__ import annotations
 
 import json
-import math
 
 import gymnasium as gym
 import numpy as np

@@ -220,7 +220,7 @@ class ProcessServoLoop:
             self._stop_physics.set()
 
     def _physics_thread(self) -> None:
-        ph, start, seen, prev = self.physics, self._start, 0, None
+        ph, start = self.physics, self._start
         while not self._stop_physics.is_set():
             seq, t = self._target.read()
             if seq == 0 or t[0] != 1.0:  # no pose yet
