@@ -10,7 +10,15 @@ import numpy as np
 import pytest
 
 from surgsim_envs.bench.soak import soak
-from surgsim_envs.bench.soak_parallel import load_state, merge_rows, run_parallel, segment_seed, split_steps
+from surgsim_envs.bench.soak_parallel import (
+    load_state,
+    markdown_table,
+    merge_rows,
+    run_parallel,
+    segment_seed,
+    split_steps,
+    write_json,
+)
 from surgsim_envs.errors import ConfigError
 
 from test_soak import _Faulty
@@ -60,6 +68,20 @@ def test_merge_sums_the_counts_of_real_segments_exactly():
     assert total["max_peak_force_N"] == 0.5  # the 1 kN steps are out of bounds, not a peak
     assert total["rss_growth_mb_max"] == max(r["rss_growth_mb"] for r in rows)
     assert len(total["rss_end_mb"]) == 3
+
+
+def test_docs_table_from_an_out_file(tmp_path):
+    if "SurgSimTest/Faulty-v0" not in gym.registry:
+        gym.register("SurgSimTest/Faulty-v0", entry_point=_Faulty, disable_env_checker=True)
+    rows = [soak("SurgSimTest/Faulty-v0", n, seed=segment_seed(0, k)) for k, n in enumerate((60, 40))]
+    out = tmp_path / "soak.json"
+    write_json(out, {"tasks": {"SurgSimTest/Faulty-v0": {"segments": rows}}})
+    table = markdown_table(load_state(out))
+    expect = [_faulty_counts(60), _faulty_counts(40)]
+    row = table.splitlines()[2].split(" | ")
+    assert row[0] == "| SurgSimTest/Faulty-v0" and row[1] == "100" and row[2] == "2"
+    assert row[4] == str(sum(e["nan"] for e in expect)) and row[5] == str(sum(e["exceptions"] for e in expect))
+    assert row[8] == str(sum(e["force_out_of_bounds"] for e in expect))
 
 
 def test_checkpoints_report_the_counts_so_far():

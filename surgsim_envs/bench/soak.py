@@ -208,6 +208,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None,
                         help="JSON file of every segment and the merged counts, kept up to date (checkpoints)")
     parser.add_argument("--resume", action="store_true", help="continue the soak in --out: run only the missing steps")
+    parser.add_argument("--table", default=None, metavar="FILE.json",
+                        help="print the docs/benchmarks.md table of a soak --out file and exit (runs nothing)")
     parser.add_argument("--checkpoint-every", type=int, default=10_000,
                         help="steps between a worker's checkpoints of its counts; default 10000")
 
@@ -217,6 +219,13 @@ def run(args) -> int:
 
     import surgsim_envs.envs  # noqa: F401
 
+    if args.table is not None:
+        from surgsim_envs.bench.soak_parallel import load_state, markdown_table
+
+        if not os.path.isfile(args.table):
+            raise ConfigError(f"--table {args.table}: no such file; give the --out JSON of a soak")
+        print(markdown_table(load_state(args.table)))
+        return 0
     if args.sample_every < 1:
         raise ConfigError(f"--sample-every must be >= 1, got {args.sample_every}")
     tasks = sorted(k for k in gym.registry if k.startswith("SurgSim/")) if args.task == "all" else [args.task]

@@ -242,3 +242,18 @@ def _save(out: Path, state: dict, steps: int) -> None:
     state["cpus"] = os.cpu_count()
     state["saved_utc"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     write_json(out, state)
+
+
+def markdown_table(state: dict) -> str:
+    """The docs/benchmarks.md soak table from an ``--out`` file's content (its merged rows)."""
+    lines = ["| task | steps | segments | episodes | NaN | exceptions | unstable | obs out of space | "
+             "force out of bounds | max peak force | RSS growth (worst worker) | RSS slope (worst worker) | complete |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for task, entry in sorted(state.get("tasks", {}).items()):
+        t = entry.get("total") or merge_rows(task, [_nan_back(r) for r in entry["segments"]], 0)
+        growth = "-" if t["rss_growth_mb_max"] is None else f"{t['rss_growth_mb_max']:+.2f} MB"
+        slope = "-" if t["rss_slope_mb_per_100k_max"] is None else f"{t['rss_slope_mb_per_100k_max']:.2f} MB / 100k steps"
+        lines.append(f"| {task} | {t['steps']:,} | {t['segments']} | {t['episodes']:,} | {t['nan']} | {t['exceptions']} | "
+                     f"{t['unstable']} | {t['obs_out_of_space']} | {t['force_out_of_bounds']} | "
+                     f"{t['max_peak_force_N']:.2f} N | {growth} | {slope} | {'yes' if t['complete'] else 'no'} |")
+    return "\n".join(lines)
