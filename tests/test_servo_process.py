@@ -140,6 +140,23 @@ def test_teleop_servo_process_needs_a_udp_device():
         teleop.run(args)
 
 
+def test_a_script_without_a_main_guard_gets_a_clear_error(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    script = tmp_path / "no_guard.py"
+    script.write_text("import functools\n"
+                      "from surgsim_envs.haptics import SpringWallPhysics\n"
+                      "from surgsim_envs.haptics.servo_process import ProcessServoLoop\n"
+                      "from surgsim_envs.haptics.udp_bridge import UdpDevice\n"
+                      "ProcessServoLoop(functools.partial(UdpDevice, port=0), SpringWallPhysics()).run_realtime(1.0)\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, env=env)
+    assert res.returncode != 0
+    assert "ServoProcessError" in res.stderr and "if __name__ == '__main__':" in res.stderr
+
+
 def test_process_servo_rejects_bad_arguments():
     with pytest.raises(ConfigError, match="device_factory"):
         ProcessServoLoop("udp:5555", SpringWallPhysics())

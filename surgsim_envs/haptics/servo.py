@@ -121,6 +121,7 @@ class ServoStats:
     period_median_ms: float = float("nan")
     period_p99_ms: float = float("nan")
     period_max_ms: float = float("nan")
+    period_max_at_s: float = float("nan")  # when the longest period ended, s after the first tick
     overruns: int = 0
     rejected_poses: int = 0
     workspace_clamped: int = 0
@@ -408,5 +409,6 @@ class ServoLoop:
             st.period_median_ms = float(np.median(p))
             st.period_p99_ms = float(np.percentile(p, 99))
             st.period_max_ms = float(np.max(p))
+            st.period_max_at_s = float(np.sum(p[:int(np.argmax(p)) + 1]) * 1e-3)
             st.overruns = int(np.sum(p > 2e3 * self.config.period))
         st.physics_rate_hz = st.physics_updates / physics_time if physics_time > 0 else float("nan")

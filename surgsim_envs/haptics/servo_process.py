@@ -194,7 +194,7 @@ class ProcessServoLoop:
         if not self._conn.poll(self.start_timeout):
             self._kill()
             raise ServoProcessError(f"the servo process did not start within {self.start_timeout} s")
-        msg = self._conn.recv()
+        msg = self._receive()
         if msg[0] == "error":
             self._kill()
             raise ServoProcessError(f"the servo process failed to start:\n{msg[1]}")
@@ -205,6 +205,15 @@ class ProcessServoLoop:
         self._error = None
         self._thread = threading.Thread(target=self._guard, name="haptic-physics", daemon=True)
         self._thread.start()
+
+    def _receive(self) -> tuple:
+        try:
+            return self._conn.recv()
+        except (EOFError, OSError):  # the child died without a word
+            self._proc.join(timeout=5.0)
+            return ("error", f"the servo process exited with code {self._proc.exitcode} without reporting; a "
+                             "script that starts it must guard its code with `if __name__ == '__main__':` "
+                             "(the child is spawned and imports the script)")
 
     def _kill(self) -> None:
         if self._proc is not None:
@@ -253,7 +262,7 @@ class ProcessServoLoop:
         if self._thread is not None:
             self._thread.join(timeout=5.0)
             self._thread = None
-        msg = self._conn.recv() if self._conn.poll(10.0) else ("error", "no statistics within 10 s of stop")
+        msg = self._receive() if self._conn.poll(10.0) else ("error", "no statistics within 10 s of stop")
         self._proc.join(timeout=5.0)
         if self._proc.is_alive():
             self._proc.kill()
