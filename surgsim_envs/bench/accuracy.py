@@ -188,7 +188,7 @@ def plot(rows: list[dict], path: str) -> None:
     ax.set_title("Sphere indentation of a bonded 30 mm liver slab\n(labels: mm spacing under the sphere; "
                  "cN: trilinear flex with N cells per axis; circled: Pareto front)", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, loc="upper right")
+    ax.legend(fontsize=7, loc="best")  # the peers sit top right
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
