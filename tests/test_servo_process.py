@@ -157,6 +157,46 @@ def test_a_script_without_a_main_guard_gets_a_clear_error(tmp_path):
     assert "ServoProcessError" in res.stderr and "if __name__ == '__main__':" in res.stderr
 
 
+def test_the_servo_process_stops_when_its_parent_is_killed(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    script = tmp_path / "parent.py"
+    script.write_text("import functools, sys, time\n"
+                      "from surgsim_envs.haptics import SpringWallPhysics\n"
+                      "from surgsim_envs.haptics.servo_process import ProcessServoLoop\n"
+                      "from surgsim_envs.haptics.udp_bridge import UdpDevice\n"
+                      "if __name__ == '__main__':\n"
+                      "    loop = ProcessServoLoop(functools.partial(UdpDevice, port=0), SpringWallPhysics())\n"
+                      "    loop.start()\n"
+                      "    print(loop._proc.pid, flush=True)\n"
+                      "    time.sleep(60)\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        child = int(parent.stdout.readline())
+        os.kill(parent.pid, signal.SIGKILL)  # no cleanup runs in the parent
+        parent.wait(timeout=10)
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:
+            try:
+                os.kill(child, 0)
+            except ProcessLookupError:
+                break
+            with open(f"/proc/{child}/stat") as fh:
+                if fh.read().split()[2] == "Z":  # exited, waiting to be reaped by init
+                    break
+            time.sleep(0.05)
+        else:
+            os.kill(child, signal.SIGKILL)
+            pytest.fail("the servo process outlived its killed parent by 10 s")
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+
+
 def test_process_servo_rejects_bad_arguments():
     with pytest.raises(ConfigError, match="device_factory"):
         ProcessServoLoop("udp:5555", SpringWallPhysics())

@@ -19,7 +19,8 @@ Both clocks are ``time.perf_counter`` (``CLOCK_MONOTONIC``, the same in every pr
 from one start instant. The device is built in the child by ``device_factory`` (a picklable
 callable, e.g. ``functools.partial(UdpDevice, port=0)``); its bound address and its ``stats``
 come back through a pipe. The child asks for real-time scheduling like the threaded loop
-(:mod:`surgsim_envs.haptics.realtime`). Use it for live devices whose servo must keep 1 kHz
+(:mod:`surgsim_envs.haptics.realtime`); it stops by itself within ~0.3 s if the parent process
+dies (even by SIGKILL), sending zero force. Use it for live devices whose servo must keep 1 kHz
 whatever the physics does; simulated-clock runs stay with :class:`ServoLoop`.
 """
 
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing as mp
+import os
 import threading
 import time
 from dataclasses import asdict, is_dataclass
@@ -103,11 +105,14 @@ def _servo_main(device_factory, config: ServoConfig, go, target: SeqLockRecord, 
             while math.isnan(go.value) and not stop.value:  # spawning took ~1 s: the clock starts now
                 time.sleep(1e-3)
             start = go.value
+            parent = os.getppid()
             scheduling = raise_thread_priority(config.realtime_priority)
             h, spin = config.period, config.spin_s
             periods: list[float] = []
             last, seen, i = None, 0, 0
             while not stop.value:
+                if i % 256 == 0 and os.getppid() != parent:  # the parent died (killed): stop, do not linger
+                    break
                 deadline = start + i * h
                 now = time.perf_counter()
                 if deadline > now:
@@ -139,7 +144,10 @@ def _servo_main(device_factory, config: ServoConfig, go, target: SeqLockRecord, 
         finally:
             device.close()
     except BaseException:  # noqa: BLE001 - reported to the parent, which raises it
-        conn.send(("error", traceback.format_exc()))
+        try:
+            conn.send(("error", traceback.format_exc()))
+        except OSError:  # the parent is gone
+            pass
 
 
 class ProcessServoLoop:
