@@ -26,6 +26,13 @@ def test_seqlock_record_round_trip_and_sequence():
     assert seq == 4 and vals == [4.0, 5.0, 6.0]  # two writes, each +2: even = consistent
 
 
+def test_seqlock_reader_gives_up_on_a_writer_that_died_mid_write():
+    rec = SeqLockRecord(2)
+    rec.write([1.0, 2.0])
+    rec.buf[0] += 1.0  # a writer killed between its two counter increments
+    assert rec.read(tries=50) == (None, None)
+
+
 def test_seqlock_reader_never_sees_a_torn_record():
     rec = SeqLockRecord(8)
     stop = threading.Event()

@@ -63,16 +63,19 @@ class SeqLockRecord:
         b[1:self.size + 1] = values
         b[0] += 1.0  # even: consistent
 
-    def read(self) -> tuple[int, list]:
-        """``(sequence, values)``; sequence 0 means never written."""
+    def read(self, tries: int = 1000) -> tuple[int | None, list | None]:
+        """``(sequence, values)``; sequence 0 means never written. ``(None, None)`` when no
+        consistent copy was had in ``tries`` attempts (a writer preempted mid-write, or killed
+        mid-write: the record then stays odd for ever, and a reader must not wait for it)."""
         b = self.buf
-        while True:
+        for _ in range(tries):
             s0 = b[0]
             if int(s0) % 2 == 0:
                 vals = b[1:self.size + 1]
                 if b[0] == s0:
                     return int(s0), vals
             time.sleep(0)
+        return None, None
 
 
 class _NoPhysics:
@@ -123,7 +126,7 @@ def _servo_main(device_factory, config: ServoConfig, go, target: SeqLockRecord, 
                     periods.append(now - last)
                 last = now
                 seq, s = sample.read()
-                if seq != seen:
+                if seq is not None and seq != seen:  # None: the physics is mid-write (or dead); keep the last
                     seen = seq
                     loop.extrapolator.update(s[0], s[1:4], s[4:7], None if math.isnan(s[7]) else s[7])
                     loop.stats.physics_updates += 1
@@ -240,7 +243,7 @@ class ProcessServoLoop:
         ph, start = self.physics, self._start
         while not self._stop_physics.is_set():
             seq, t = self._target.read()
-            if seq == 0 or t[0] != 1.0:  # no pose yet
+            if not seq or t[0] != 1.0:  # no pose yet (or the servo is mid-write / gone)
                 time.sleep(self.config.period)
                 continue
             ahead = (ph.time - self._phys_time0) - (time.perf_counter() - start)
