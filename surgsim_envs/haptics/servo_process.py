@@ -308,7 +308,7 @@ class ProcessServoLoop:
             start = time.perf_counter()
             end = start + duration
             k = 0
-            while time.perf_counter() < end and not self._stop_physics.is_set():
+            while time.perf_counter() < end and not self._stop_physics.is_set() and self._proc.is_alive():
                 if on_frame is not None and on_frame(self) is False:
                     break
                 k = max(k + 1, int((time.perf_counter() - start) / frame_period) + 1)
