@@ -169,7 +169,7 @@ def plot(rows: list[dict], path: str) -> None:
         if not sub:
             continue
         style = "s--" if sub[0].get("baseline") else "o-"
-        name = f"{m} (MuJoCo baseline)" if sub[0].get("baseline") else f"{m} / {integ}"
+        name = f"{m} ({sub[0].get('peer', 'MuJoCo')} baseline)" if sub[0].get("baseline") else f"{m} / {integ}"
         ax.plot([r["us_per_ms"] for r in sub], [max(r["error"], 1e-4) for r in sub], style, label=name, ms=5)
         for r in sub:
             ax.annotate(r.get("label", f"{r['spacing'] * 1e3:g}"), (r["us_per_ms"], max(r["error"], 1e-4)),
@@ -188,7 +188,7 @@ def plot(rows: list[dict], path: str) -> None:
     ax.set_title("Sphere indentation of a bonded 30 mm liver slab\n(labels: mm spacing under the sphere; "
                  "cN: trilinear flex with N cells per axis; circled: Pareto front)", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, loc="upper right")
+    ax.legend(fontsize=7, loc="best")  # the peers sit top right
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -210,6 +210,9 @@ def run(args: argparse.Namespace) -> int:
         tri = models is None or "mujoco_flex_trilinear" in models
         rows += flex_sweep((QUICK_FLEX_SPACINGS if args.quick else FLEX_SPACINGS) if full else (),
                            (QUICK_FLEX_CELLCOUNTS if args.quick else FLEX_CELLCOUNTS) if tri else ())
+        from surgsim_envs.bench import pybullet_peer  # PyBullet's FEM and mass-spring soft bodies (issue 16)
+
+        rows += pybullet_peer.peer_sweep(pybullet_peer.QUICK_SPACINGS if args.quick else pybullet_peer.SPACINGS, models)
     os.makedirs(args.out, exist_ok=True)
     table = {"scene": "indent", "radius": RADIUS, "thickness": THICKNESS, "material": MATERIAL,
              "reference": "dimitriadis bonded", "rows": rows}

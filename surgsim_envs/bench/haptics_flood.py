@@ -92,18 +92,33 @@ def _physics(scene: bool, fake_work: float):
     return phys, {"physics": "fake_spring_wall", "fake_work_s": fake_work}, np.zeros(3)
 
 
+def _free_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def _one_run(duration: float, flooders: int, pose_hz: float, scene: bool, fake_work: float, max_drain: int,
-             max_poll_s: float, flood_rate: float = 0.0) -> dict:
+             max_poll_s: float, flood_rate: float = 0.0, spin_s: float = 2e-4, priority: bool = True,
+             servo: str = "thread") -> dict:
+    import functools
+
     from surgsim_envs.haptics import DeviceLimits, DeviceMapping, ServoConfig, ServoLoop
+    from surgsim_envs.haptics.servo_process import ProcessServoLoop
     from surgsim_envs.haptics.udp_bridge import UdpDevice
 
     ctx = mp.get_context("spawn")
     phys, info, home = _physics(scene, fake_work)
-    dev = UdpDevice(port=0, limits=DeviceLimits(max_force=10.0), max_drain=max_drain, max_poll_s=max_poll_s)
+    make_dev = functools.partial(UdpDevice, port=_free_port(), limits=DeviceLimits(max_force=10.0),
+                                 max_drain=max_drain, max_poll_s=max_poll_s)
+    config = ServoConfig(mapping=DeviceMapping(origin=tuple(home)), spin_s=spin_s, realtime_priority=priority)
+    dev = make_dev()  # the thread servo's device; the process servo builds its own in the child
     stop = ctx.Event()
     procs = []
-    with dev:
-        addr = dev.address
+    addr = ("127.0.0.1", make_dev.keywords["port"])
+    with dev if servo == "thread" else _nothing():
         pose_sent = ctx.Value("q", 0)
         flood_sent = [ctx.Value("q", 0) for _ in range(flooders)]
         ready = [ctx.Event() for _ in range(1 + flooders)]
@@ -117,11 +132,20 @@ def _one_run(duration: float, flooders: int, pose_hz: float, scene: bool, fake_w
                 if not ev.wait(timeout=60.0):
                     raise ConfigError("a pose/flood child process did not start within 60 s")
             time.sleep(0.5)  # the flood builds up
-            flood0 = dev.stats.received
-            f0 = sum(v.value for v in flood_sent)
-            loop = ServoLoop(dev, phys, ServoConfig(mapping=DeviceMapping(origin=tuple(home))))
-            t0 = time.perf_counter()
-            stats = loop.run_realtime(duration, frame_period=0.05)
+            if servo == "thread":
+                flood0 = dev.stats.received
+                loop = ServoLoop(dev, phys, config)
+                t0 = time.perf_counter()
+                f0 = sum(v.value for v in flood_sent)
+                stats = loop.run_realtime(duration, frame_period=0.05)
+            else:
+                flood0 = 0
+                loop = ProcessServoLoop(make_dev, phys, config)
+                loop.start()  # spawning the servo process takes ~1 s; the run is timed from its start
+                t0 = time.perf_counter()
+                f0 = sum(v.value for v in flood_sent)
+                time.sleep(duration)
+                stats = loop.stop()
             wall = time.perf_counter() - t0
             f1 = sum(v.value for v in flood_sent)
         finally:
@@ -130,15 +154,26 @@ def _one_run(duration: float, flooders: int, pose_hz: float, scene: bool, fake_w
                 p.join(timeout=5.0)
                 if p.is_alive():
                     p.terminate()
-        bridge = dev.stats
+        from surgsim_envs.haptics.udp_bridge import BridgeStats
+
+        bridge = dev.stats if servo == "thread" else BridgeStats(**loop.device_stats)
     return {
         "flooders": flooders, "period_median_ms": stats.period_median_ms, "period_p99_ms": stats.period_p99_ms,
         "period_max_ms": stats.period_max_ms, "overruns": stats.overruns, "ticks": stats.ticks, "wall_s": wall,
         "poses_sent": int(pose_sent.value), "poses_accepted": bridge.accepted, "datagrams_received": bridge.received,
         "received_during_run": bridge.received - flood0, "malformed": bridge.malformed,
         "polls_truncated": bridge.polls_truncated, "flood_datagrams_sent_during_run": int(f1 - f0),
-        "flood_rate_per_s": (f1 - f0) / wall if flooders else 0.0, "max_force_n": stats.max_force_n, **info,
+        "flood_rate_per_s": (f1 - f0) / wall if flooders else 0.0, "max_force_n": stats.max_force_n,
+        "scheduling": stats.scheduling, "spin_s": spin_s, "servo": servo, **info,
     }
+
+
+class _nothing:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
 
 
 def poll_cost(max_drain: int, max_poll_s: float, polls: int = 300, queue: int = 200) -> dict:
@@ -172,14 +207,18 @@ def poll_cost(max_drain: int, max_poll_s: float, polls: int = 300, queue: int = 
 
 
 def run_bench(duration: float = 5.0, flooders: int = 1, pose_hz: float = 1000.0, scene: bool = False,
-              fake_work: float = 3e-4, max_drain: int = 32, max_poll_s: float = 2e-4, flood_rate: float = 0.0) -> dict:
+              fake_work: float = 3e-4, max_drain: int = 32, max_poll_s: float = 2e-4, flood_rate: float = 0.0,
+              spin_s: float = 2e-4, priority: bool = True, servo: str = "thread") -> dict:
     """A quiet run, then a flooded one; returns both rows and the machine load."""
+    if servo not in ("thread", "process"):
+        raise ConfigError(f"--servo must be 'thread' or 'process', got {servo!r}")
     if not (duration > 0 and flooders >= 1 and pose_hz > 0):
         raise ConfigError(f"--duration, --flooders and --pose-hz must be > 0, got {duration}, {flooders}, {pose_hz}")
     costs = [poll_cost(max_drain, max_poll_s), poll_cost(256, 1.0)]  # this build's bound vs the old one
-    quiet = _one_run(duration, 0, pose_hz, scene, fake_work, max_drain, max_poll_s)
-    flooded = _one_run(duration, flooders, pose_hz, scene, fake_work, max_drain, max_poll_s, flood_rate)
+    quiet = _one_run(duration, 0, pose_hz, scene, fake_work, max_drain, max_poll_s, 0.0, spin_s, priority, servo)
+    flooded = _one_run(duration, flooders, pose_hz, scene, fake_work, max_drain, max_poll_s, flood_rate, spin_s, priority, servo)
     return {"poll_cost": costs, "quiet": quiet, "flooded": flooded, "max_drain": max_drain, "max_poll_s": max_poll_s,
+            "p99_flooded_over_quiet": flooded["period_p99_ms"] / quiet["period_p99_ms"],
             "flood_rate_limit_per_s": flood_rate,
             "load_avg": list(os.getloadavg()), "cpus": os.cpu_count()}
 
@@ -194,12 +233,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-poll-s", type=float, default=2e-4, help="s spent reading per servo tick at most")
     parser.add_argument("--flood-rate", type=float, default=0.0,
                         help="datagrams/s per flooder (0 = as fast as it can; default 0)")
+    parser.add_argument("--spin-s", type=float, default=2e-4,
+                        help="s before each servo deadline spent polling the clock instead of sleeping; default 2e-4")
+    parser.add_argument("--no-priority", action="store_true",
+                        help="do not ask for SCHED_FIFO / nice -10 for the servo thread (the old behaviour)")
+    parser.add_argument("--servo", choices=("thread", "process"), default="thread",
+                        help="servo in a thread of this process (ServoLoop) or in its own process (ProcessServoLoop)")
     parser.add_argument("--json", action="store_true", help="print the JSON rows")
 
 
 def run(args) -> int:
     res = run_bench(args.duration, args.flooders, args.pose_hz, args.scene, args.fake_work, args.max_drain,
-                    args.max_poll_s, args.flood_rate)
+                    args.max_poll_s, args.flood_rate, args.spin_s, not args.no_priority,
+                    args.servo)
     if args.json:
         print(json.dumps(res, indent=2))
         return 0
@@ -212,6 +258,7 @@ def run(args) -> int:
         print(f"{name:<8} period median {r['period_median_ms']:.3f} ms, p99 {r['period_p99_ms']:.3f} ms, "
               f"max {r['period_max_ms']:.2f} ms, overruns {r['overruns']}; poses {r['poses_accepted']}/"
               f"{r['poses_sent']} accepted; flood {r['flood_rate_per_s']:.0f} datagrams/s sent, "
-              f"{r['malformed']} malformed read, {r['polls_truncated']} polls truncated")
+              f"{r['malformed']} malformed read, {r['polls_truncated']} polls truncated; servo {r['scheduling']}")
+    print(f"p99 flooded / quiet = {res['p99_flooded_over_quiet']:.2f}")
     print(f"load average {res['load_avg'][0]:.2f} on {res['cpus']} cores")
     return 0

@@ -71,8 +71,13 @@ class _Counts:
 
 
 def soak(task: str, steps: int, seed: int = 0, force_bound: float = FORCE_BOUND_N, max_seconds: float = math.inf,
-         sample_every: int = 1000, progress: bool = False, env_kwargs: dict | None = None) -> dict:
-    """Run ``steps`` random-action steps of ``task``; returns the JSON row (module docstring)."""
+         sample_every: int = 1000, progress: bool = False, env_kwargs: dict | None = None,
+         checkpoint=None, checkpoint_every: int = 10_000, counter=None) -> dict:
+    """Run ``steps`` random-action steps of ``task``; returns the JSON row (module docstring).
+
+    ``checkpoint(row)`` (optional) is called with the row so far every ``checkpoint_every``
+    steps (an interrupted run keeps what it counted, see :mod:`.soak_parallel`); ``counter``
+    (optional, a shared ``multiprocessing.Value``) is advanced by the steps run, every 100."""
     import gymnasium as gym
 
     import surgsim_envs.envs  # noqa: F401  (registers the SurgSim tasks)
@@ -105,6 +110,7 @@ def soak(task: str, steps: int, seed: int = 0, force_bound: float = FORCE_BOUND_
         bar = tqdm(total=steps, unit="step", mininterval=1.0, desc=task, file=sys.stderr)
     wall0 = time.perf_counter()
     need_reset = True
+    reported = 0
     try:
         while c.steps < steps and time.perf_counter() - wall0 < max_seconds:
             if need_reset:
@@ -150,12 +156,26 @@ def soak(task: str, steps: int, seed: int = 0, force_bound: float = FORCE_BOUND_
                 c.unstable += 1
             if c.steps % sample_every == 0 and not math.isnan(rss0):
                 samples.append((c.steps, rss_mb()))
+            if counter is not None and c.steps % 100 == 0:
+                with counter.get_lock():
+                    counter.value += c.steps - reported
+                reported = c.steps
+            if checkpoint is not None and c.steps % checkpoint_every == 0:
+                checkpoint(_row(task, steps, seed, force_bound, c, samples, rss0, time.perf_counter() - wall0))
             need_reset = bool(terminated or truncated)
     finally:
         if bar is not None:
             bar.close()
         env.close()
-    wall = time.perf_counter() - wall0
+    if counter is not None:
+        with counter.get_lock():
+            counter.value += c.steps - reported
+    return _row(task, steps, seed, force_bound, c, samples, rss0, time.perf_counter() - wall0)
+
+
+def _row(task: str, steps: int, seed: int, force_bound: float, c: _Counts, samples: list, rss0: float,
+         wall: float) -> dict:
+    """The JSON row of one soak (or of its part so far)."""
     rss1 = rss_mb()
     slope = math.nan
     if len(samples) >= 3:
@@ -164,8 +184,8 @@ def soak(task: str, steps: int, seed: int = 0, force_bound: float = FORCE_BOUND_
     return {
         "task": task, "steps": c.steps, "steps_requested": steps, "episodes": c.episodes, "seed": seed,
         "stopped_by_time": c.steps < steps, "wall_s": wall, "steps_per_s": c.steps / wall if wall > 0 else math.nan,
-        "nan": c.nan, "exceptions": sum(c.exceptions.values()), "exception_types": c.exceptions,
-        "exception_messages": c.first_messages, "unstable": c.unstable, "obs_out_of_space": c.obs_out_of_space,
+        "nan": c.nan, "exceptions": sum(c.exceptions.values()), "exception_types": dict(c.exceptions),
+        "exception_messages": dict(c.first_messages), "unstable": c.unstable, "obs_out_of_space": c.obs_out_of_space,
         "force_out_of_bounds": c.force_out_of_bounds, "force_bound_N": force_bound,
         "max_peak_force_N": c.max_peak_force, "rss_start_mb": rss0, "rss_end_mb": rss1,
         "rss_growth_mb": rss1 - rss0 if not math.isnan(rss0) else math.nan, "rss_slope_mb_per_100k": slope,
@@ -183,6 +203,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sample-every", type=int, default=1000, help="steps between RSS samples; default 1000")
     parser.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--workers", type=int, default=1,
+                        help="processes per task, steps split across them, distinct seeds (see soak_parallel); default 1")
+    parser.add_argument("--out", default=None,
+                        help="JSON file of every segment and the merged counts, kept up to date (checkpoints)")
+    parser.add_argument("--resume", action="store_true", help="continue the soak in --out: run only the missing steps")
+    parser.add_argument("--table", default=None, metavar="FILE.json",
+                        help="print the docs/benchmarks.md table of a soak --out file and exit (runs nothing)")
+    parser.add_argument("--checkpoint-every", type=int, default=10_000,
+                        help="steps between a worker's checkpoints of its counts; default 10000")
 
 
 def run(args) -> int:
@@ -190,14 +219,37 @@ def run(args) -> int:
 
     import surgsim_envs.envs  # noqa: F401
 
+    if args.table is not None:
+        from surgsim_envs.bench.soak_parallel import load_state, markdown_table
+
+        if not os.path.isfile(args.table):
+            raise ConfigError(f"--table {args.table}: no such file; give the --out JSON of a soak")
+        print(markdown_table(load_state(args.table)))
+        return 0
     if args.sample_every < 1:
         raise ConfigError(f"--sample-every must be >= 1, got {args.sample_every}")
     tasks = sorted(k for k in gym.registry if k.startswith("SurgSim/")) if args.task == "all" else [args.task]
-    rows = [soak(t, args.steps, args.seed, args.force_bound, args.max_seconds, args.sample_every,
-                 progress=not args.quiet and not args.json) for t in tasks]
+    for t in tasks:
+        if t not in gym.registry:
+            raise ConfigError(f"unknown task {t!r}; choose one of {sorted(k for k in gym.registry if k.startswith('SurgSim/'))} or 'all'")
+    if args.workers != 1 or args.out is not None or args.resume:
+        from surgsim_envs.bench.soak_parallel import run_parallel
+
+        if args.out is None:
+            raise ConfigError("--workers > 1 and --resume need --out FILE.json (where the counts are kept)")
+        rows = run_parallel(tasks, args.steps, args.seed, args.workers, args.out, args.resume, args.force_bound,
+                            args.max_seconds, args.sample_every, args.checkpoint_every,
+                            progress=not args.quiet and not args.json)
+        for r in rows:  # the table's columns
+            r["steps_per_s"] = r["steps"] / r["cpu_s_sum"] * min(args.workers, r["segments"]) if r["cpu_s_sum"] else math.nan
+            r["rss_growth_mb"] = r["rss_growth_mb_max"] if r["rss_growth_mb_max"] is not None else math.nan
+    else:
+        rows = [soak(t, args.steps, args.seed, args.force_bound, args.max_seconds, args.sample_every,
+                     progress=not args.quiet and not args.json) for t in tasks]
     if args.json:  # strict JSON: NaN (e.g. no RSS baseline in a run of one episode) becomes null
-        print(json.dumps([{k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()}
-                          for r in rows], indent=2))
+        from surgsim_envs.bench.soak_parallel import _clean
+
+        print(json.dumps([_clean(r) for r in rows], indent=2))
     else:
         print(f"{'task':<22} {'steps':>9} {'episodes':>8} {'steps/s':>8} {'NaN':>4} {'exc':>4} {'unstable':>8} "
               f"{'obs OOB':>7} {'force OOB':>9} {'RSS growth MB':>13}")

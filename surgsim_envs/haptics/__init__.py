@@ -19,11 +19,12 @@ from surgsim_envs.haptics.recording import ForceLog
 from surgsim_envs.haptics.replay import ReplayDevice, load_poses, save_poses
 from surgsim_envs.haptics.scripted import ScriptedDevice, TrajectorySpec, press_spec
 from surgsim_envs.haptics.servo import DeviceMapping, ServoConfig, ServoLoop, ServoStats
+from surgsim_envs.haptics.servo_process import ProcessServoLoop
 from surgsim_envs.haptics.udp_bridge import UdpDevice, UdpHapticClient
 
 __all__ = [
     "DeviceLimits", "DeviceState", "HapticDevice", "ForceExtrapolator", "HoldExtrapolator", "LinearExtrapolator",
     "StiffnessExtrapolator", "linear_step_bound", "make_extrapolator", "SpringWallPhysics", "KeyboardDevice",
     "HapticPhysics", "ForceLog", "ReplayDevice", "load_poses", "save_poses", "ScriptedDevice", "TrajectorySpec",
-    "press_spec", "DeviceMapping", "ServoConfig", "ServoLoop", "ServoStats", "UdpDevice", "UdpHapticClient",
+    "press_spec", "DeviceMapping", "ServoConfig", "ServoLoop", "ProcessServoLoop", "ServoStats", "UdpDevice", "UdpHapticClient",
 ]

@@ -18,6 +18,7 @@ import csv
 import math
 import threading
 import time
+from collections import deque
 from pathlib import Path
 from typing import Callable
 
@@ -39,9 +40,11 @@ class ForceLog:
         if int(max_rows) < 1:
             raise ConfigError(f"ForceLog max_rows must be >= 1, got {max_rows!r}")
         self.max_rows = int(max_rows)
-        self._t: list[float] = []
-        self._f: list[tuple[float, float, float]] = []
-        self._s: list[bool] = []
+        # deques with maxlen drop the oldest row in O(1): a list's del [:1] at capacity moved the
+        # whole log every servo tick (36 ms per append at 3.6 M rows, after one hour at 1 kHz)
+        self._t: deque = deque(maxlen=self.max_rows)
+        self._f: deque = deque(maxlen=self.max_rows)
+        self._s: deque = deque(maxlen=self.max_rows)
         self._lock = threading.Lock()
 
     def append(self, t: float, force, saturated: bool = False) -> None:
@@ -51,9 +54,6 @@ class ForceLog:
             self._t.append(float(t))
             self._f.append((float(f[0]), float(f[1]), float(f[2])))
             self._s.append(bool(saturated))
-            if len(self._t) > self.max_rows:
-                drop = len(self._t) - self.max_rows
-                del self._t[:drop], self._f[:drop], self._s[:drop]
 
     def __len__(self) -> int:
         return len(self._t)

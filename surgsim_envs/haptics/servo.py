@@ -22,7 +22,10 @@ steps it and hands the new ``coupling_force()`` to the extrapolator. The two sid
   deadlines, ``time.sleep``) and a physics thread that steps as fast as it can but never ahead of
   the wall clock. Python's GIL switch interval is lowered to 0.2 ms while they run (restored on
   stop) so the servo thread is not starved by the physics thread. Anything else touching the
-  physics (a viewer, a renderer) must hold :attr:`ServoLoop.physics_lock`.
+  physics (a viewer, a renderer) must hold :attr:`ServoLoop.physics_lock`. The servo thread
+  asks for real-time scheduling (``SCHED_FIFO``, else ``nice -10``; ``ServoStats.scheduling``
+  says what it got) and sleeps to ``spin_s`` (0.2 ms) before each deadline, then polls the
+  clock: see :mod:`surgsim_envs.haptics.realtime`.
 
 Both report a :class:`ServoStats` (period median/p99, rejected poses, saturations...).
 """
@@ -42,6 +45,7 @@ from surgsim_envs.haptics.device import DeviceState, HapticDevice
 from surgsim_envs.haptics.extrapolation import ForceExtrapolator, make_extrapolator
 from surgsim_envs.haptics.protocol import check_physics
 from surgsim_envs.haptics.quaternion import unit_quaternion
+from surgsim_envs.haptics.realtime import raise_thread_priority, wait_until
 
 
 @dataclass
@@ -74,13 +78,18 @@ class DeviceMapping:
 class ServoConfig:
     """Servo settings. ``rate_hz`` servo rate (Hz); ``physics_rate_hz`` physics update rate in
     simulated-clock runs (Hz, ``None`` = every tick); ``max_force_rate`` N/s safety clamp on the
-    change of the rendered force; ``extrapolation`` ``hold|linear|stiffness``."""
+    change of the rendered force; ``extrapolation`` ``hold|linear|stiffness``. Threaded runs
+    only: ``spin_s`` s before each tick's deadline are spent polling the clock instead of
+    sleeping (0 = sleep only); ``realtime_priority`` asks for SCHED_FIFO (else nice -10) for
+    the servo thread (see :mod:`surgsim_envs.haptics.realtime`)."""
 
     rate_hz: float = 1000.0
     physics_rate_hz: float | None = None
     max_force_rate: float = 1000.0
     extrapolation: str = "linear"
     mapping: DeviceMapping = field(default_factory=DeviceMapping)
+    spin_s: float = 2e-4
+    realtime_priority: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.rate_hz) and 10.0 <= self.rate_hz <= 20000.0):
@@ -92,6 +101,8 @@ class ServoConfig:
         if not (math.isfinite(self.max_force_rate) and self.max_force_rate > 0):
             raise ConfigError(f"max_force_rate must be a positive rate in N/s, got {self.max_force_rate!r}")
         make_extrapolator(self.extrapolation)  # validates the name
+        if not (isinstance(self.spin_s, (int, float)) and math.isfinite(self.spin_s) and 0 <= self.spin_s < self.period):
+            raise ConfigError(f"spin_s must be in [0, period={self.period:g}) s (e.g. 2e-4), got {self.spin_s!r}")
 
     @property
     def period(self) -> float:
@@ -110,6 +121,7 @@ class ServoStats:
     period_median_ms: float = float("nan")
     period_p99_ms: float = float("nan")
     period_max_ms: float = float("nan")
+    period_max_at_s: float = float("nan")  # when the longest period ended, s after the first tick
     overruns: int = 0
     rejected_poses: int = 0
     workspace_clamped: int = 0
@@ -120,6 +132,7 @@ class ServoStats:
     physics_rate_hz: float = float("nan")
     max_force_n: float = 0.0
     simulated_clock: bool = True
+    scheduling: str = "default"
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -130,7 +143,7 @@ class ServoStats:
         return (
             f"servo: {self.ticks} ticks in {self.duration_s:.2f} s ({clock}), target {self.rate_hz:.0f} Hz; "
             f"period median {self.period_median_ms:.3f} ms, p99 {self.period_p99_ms:.3f} ms, max {self.period_max_ms:.3f} ms, "
-            f"overruns (>2 periods) {self.overruns}\n"
+            f"overruns (>2 periods) {self.overruns}; servo thread scheduling {self.scheduling}\n"
             f"physics: {self.physics_updates} updates, {self.physics_steps} steps, {self.physics_rate_hz:.1f} updates/s\n"
             f"safety: rejected poses {self.rejected_poses}, workspace clamps {self.workspace_clamped}, "
             f"saturated {self.saturated}, force-rate limited {self.rate_limited}; max force {self.max_force_n:.3f} N"
@@ -313,7 +326,8 @@ class ServoLoop:
             self._stop.set()
 
     def _servo_thread(self) -> None:
-        h = self.config.period
+        self.stats.scheduling = raise_thread_priority(self.config.realtime_priority)
+        h, spin = self.config.period, self.config.spin_s
         start = self._wall_start
         last = None
         i = 0
@@ -321,8 +335,7 @@ class ServoLoop:
             deadline = start + i * h
             now = time.perf_counter()
             if deadline > now:
-                time.sleep(deadline - now)
-                now = time.perf_counter()
+                now = wait_until(deadline, spin)
             elif now - deadline > 5 * h:  # far behind: skip missed ticks rather than bursting
                 i = int((now - start) / h)
             if last is not None:
@@ -396,5 +409,6 @@ class ServoLoop:
             st.period_median_ms = float(np.median(p))
             st.period_p99_ms = float(np.percentile(p, 99))
             st.period_max_ms = float(np.max(p))
+            st.period_max_at_s = float(np.sum(p[:int(np.argmax(p)) + 1]) * 1e-3)
             st.overruns = int(np.sum(p > 2e3 * self.config.period))
         st.physics_rate_hz = st.physics_updates / physics_time if physics_time > 0 else float("nan")

@@ -48,6 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fps", type=float, default=25.0, help="video/viewer frames per second")
     parser.add_argument("--size", type=int, nargs=2, default=(480, 360), metavar=("W", "H"), help="video size, pixels")
     parser.add_argument("--camera", default="overview", help="camera name for the video")
+    parser.add_argument("--servo", choices=("thread", "process"), default="thread",
+                        help="thread: the servo in this process; process: in its own process with real-time "
+                             "priority (udp devices only; p99 <= 1.2 ms under load, docs/haptics.md)")
 
 
 def parse_device(spec: str) -> tuple[str, str | int | None]:
@@ -113,6 +116,10 @@ def run(args) -> int:
     from surgsim_envs.haptics.servo import DeviceMapping, ServoConfig, ServoLoop
 
     kind, arg = parse_device(args.device)
+    servo = getattr(args, "servo", "thread")
+    if servo == "process" and kind != "udp":
+        raise ConfigError(f"--servo process needs a network device (--device udp:PORT): the servo process owns "
+                          f"the device; got --device {args.device}. Use --servo thread for it.")
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ConfigError(f"--duration must be > 0 s, got {args.duration}")
     if not args.headless and not os.environ.get("DISPLAY") and sys.platform.startswith("linux"):
@@ -130,6 +137,8 @@ def run(args) -> int:
     print(f"building the {args.task} scene ...", flush=True)
     physics = scene_adapter.make_haptic_simulation(args.task, spacing=args.spacing, model=args.model)
     limits = DeviceLimits(max_force=args.max_force)
+    if servo == "process":
+        return _run_process_servo(args, arg, physics, limits)
     device = make_device(kind, arg, args, physics, limits)
     duration = args.duration
     if duration is None:
@@ -156,6 +165,38 @@ def run(args) -> int:
         out = Path(args.out)
         device.force_log.to_csv(out / "force_log.csv")
         (out / "stats.json").write_text(json.dumps({"task": args.task, "device": args.device, **stats.as_dict()}, indent=2))
+        print(f"wrote {out / f'teleop_{args.task}.mp4'}, {out / 'force_log.csv'}, {out / 'stats.json'}")
+    return 0
+
+
+def _config(args, physics):
+    from surgsim_envs.haptics.servo import DeviceMapping, ServoConfig
+
+    return ServoConfig(rate_hz=args.rate, max_force_rate=args.max_force_rate, extrapolation=args.extrapolation,
+                       mapping=DeviceMapping(origin=tuple(physics.home_position)))
+
+
+def _run_process_servo(args, port, physics, limits) -> int:
+    """``--servo process``: the UDP device and the 1 kHz servo in a child process
+    (:class:`~surgsim_envs.haptics.servo_process.ProcessServoLoop`), the scene in this one."""
+    import functools
+
+    from surgsim_envs.haptics.servo_process import ProcessServoLoop
+    from surgsim_envs.haptics.udp_bridge import UdpDevice
+
+    duration = args.duration if args.duration is not None else (10.0 if args.headless else math.inf)
+    loop = ProcessServoLoop(functools.partial(UdpDevice, port=int(port), limits=limits), physics,
+                            _config(args, physics))
+    print(f"listening for pose packets on udp://127.0.0.1:{port} (servo process)", flush=True)
+    stats = _run_headless(loop, physics, args, duration) if args.headless else \
+        _run_viewer(loop, physics, None, "udp", duration)
+    print(stats.summary())
+    print(f"bridge: {loop.device_stats}")
+    if args.headless:
+        out = Path(args.out)
+        loop.force_log.to_csv(out / "force_log.csv")
+        (out / "stats.json").write_text(json.dumps({"task": args.task, "device": args.device, "servo": "process",
+                                                    **stats.as_dict(), "bridge": loop.device_stats}, indent=2))
         print(f"wrote {out / f'teleop_{args.task}.mp4'}, {out / 'force_log.csv'}, {out / 'stats.json'}")
     return 0
 
