@@ -98,6 +98,7 @@ def _servo_main(device_factory, config: ServoConfig, go, target: SeqLockRecord, 
     """Build the device, report ready, wait for the parent's start instant ``go``, run the ticks."""
     import traceback
 
+    parent = mp.parent_process().pid  # the spawning process (os.getppid() would race with its death)
     try:
         device = device_factory()
         device.connect()
@@ -106,9 +107,10 @@ def _servo_main(device_factory, config: ServoConfig, go, target: SeqLockRecord, 
             address = getattr(device, "address", None) if hasattr(type(device), "address") else None
             conn.send(("ready", address))
             while math.isnan(go.value) and not stop.value:  # spawning took ~1 s: the clock starts now
+                if os.getppid() != parent:
+                    return
                 time.sleep(1e-3)
             start = go.value
-            parent = os.getppid()
             scheduling = raise_thread_priority(config.realtime_priority)
             h, spin = config.period, config.spin_s
             periods: list[float] = []
