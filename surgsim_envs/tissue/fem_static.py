@@ -39,6 +39,7 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue.compliance import DEFAULT_CACHE_MB, CondensedCompliance
 from surgsim_envs.tissue.fem import TetFEMModel
+from surgsim_envs.tissue.guard import StabilityGuard
 
 
 class QuasiStaticFEMModel(TetFEMModel):
@@ -78,6 +79,11 @@ class QuasiStaticFEMModel(TetFEMModel):
             raise ConfigError(f"fem_static: cache_mb must be a positive number of megabytes, got {cache_mb!r}")
         self.cache_mb = float(cache_mb)
         self._comp: CondensedCompliance | None = None
+        if base_kwargs.get("guard") is None:
+            # a linear solve with a factorised SPD stiffness cannot diverge: an inverted element means
+            # the load is beyond small strain (an accuracy limit, see inverted_elements()), not an
+            # instability, so the guard checks only non-finite states and speeds
+            base_kwargs["guard"] = StabilityGuard(check_inversion=False)
         super().__init__(volume, material, integrator=integrator, corotational=False, formulation=formulation,
                          **base_kwargs)
         n = self.n_nodes
