@@ -172,3 +172,19 @@ def test_indentation_within_five_percent_of_dimitriadis_held_out():
 def test_indentation_within_five_percent_of_dimitriadis_held_out_slow(case):
     err = _dimitriadis_error(case)
     assert err.mean() < 0.05, err
+
+
+def test_precomputed_surface_columns_give_the_same_step():
+    lazy, bottom = _block()
+    vol = lazy.volume
+    pre = registry.get("fem_static")(vol, ELASTIC, fixed=bottom, precompute="surface")
+    comp = pre.compliance()
+    assert comp.columns_computed == int(np.count_nonzero(~bottom[vol.surface_nodes]))
+    f = np.zeros((vol.n_nodes, 3))
+    f[np.argmax(vol.nodes[:, 2]), :] = (0.001, 0.0, -0.01)
+    lazy.step(1e-3, f)
+    pre.step(1e-3, f)
+    assert comp.columns_computed == int(np.count_nonzero(~bottom[vol.surface_nodes]))   # nothing new
+    assert np.allclose(pre.positions, lazy.positions, rtol=0, atol=1e-15)
+    with pytest.raises(ConfigError, match="precompute="):
+        registry.get("fem_static")(vol, ELASTIC, fixed=bottom, precompute="all")

@@ -53,6 +53,9 @@ class QuasiStaticFEMModel(TetFEMModel):
         planes) in addition to the fixed nodes.
     cache_mb: memory (MB) for cached compliance columns (72 x N bytes per loaded node; least
         recently used evicted beyond it).
+    precompute: None (columns on first contact, default), ``"surface"`` (every free surface node,
+        at build) or node indices: back-substitute those columns at build so that no step pays
+        for a first contact (:meth:`precompute`).
     """
 
     name: ClassVar[str] = "fem_static"
@@ -65,8 +68,8 @@ class QuasiStaticFEMModel(TetFEMModel):
     material_fields = ("young", "poisson", "density")
 
     def __init__(self, volume, material="liver", *, formulation: str = "anp", fixed_dofs=None,
-                 cache_mb: float = DEFAULT_CACHE_MB, integrator: str | None = None, corotational: bool = False,
-                 **base_kwargs):
+                 cache_mb: float = DEFAULT_CACHE_MB, precompute=None, integrator: str | None = None,
+                 corotational: bool = False, **base_kwargs):
         if corotational:
             raise ConfigError("fem_static is small-strain only (corotational=False): its factorised stiffness and "
                               "cached compliance are valid for one K; use model 'fem' for large rotations")
@@ -97,6 +100,12 @@ class QuasiStaticFEMModel(TetFEMModel):
         self._u0 = np.zeros(3 * n)             # response to Dirichlet targets and gravity (m)
         self._u0_stale = True
         self.last_loaded = 0
+        if isinstance(precompute, str):
+            if precompute != "surface":
+                raise ConfigError(f"fem_static: precompute={precompute!r}; use None, 'surface' or node indices")
+            precompute = self.surface_nodes[~self.fixed[self.surface_nodes]]
+        if precompute is not None:
+            self.precompute(precompute)
 
     # ------------------------------------------------------------------------------------------
     # Material: the long-term (relaxed) elastic body; factorisation dropped on change
@@ -141,6 +150,9 @@ class QuasiStaticFEMModel(TetFEMModel):
         can touch), so that the first contact there costs no solve."""
         idx = self._as_indices(nodes, "precompute nodes")
         comp = self.compliance()
+        if len(idx) > comp.capacity:
+            raise ConfigError(f"fem_static: precomputing {len(idx)} nodes needs cache_mb >= "
+                              f"{72.0 * self.n_nodes * len(idx) / 1e6:.0f} (now {self.cache_mb:g})")
         for chunk in np.array_split(idx, max(1, math.ceil(len(idx) / 64))):
             comp.slots(chunk)
 
