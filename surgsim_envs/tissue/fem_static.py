@@ -33,13 +33,37 @@ import math
 from typing import ClassVar
 
 import numpy as np
-import scipy.linalg as sla
+from numba import njit
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue.compliance import DEFAULT_CACHE_MB, CondensedCompliance
 from surgsim_envs.tissue.fem import TetFEMModel
 from surgsim_envs.tissue.guard import StabilityGuard
+
+
+@njit(cache=True, nogil=True)
+def find_loaded(forces, kc, held, out):
+    """Write into ``out`` the free nodes with a non-zero force (N,3) or contact stiffness (N,);
+    return their count."""
+    m = 0
+    for i in range(forces.shape[0]):
+        if held[i]:
+            continue
+        if kc[i] > 0.0 or forces[i, 0] != 0.0 or forces[i, 1] != 0.0 or forces[i, 2] != 0.0:
+            out[m] = i
+            m += 1
+    return m
+
+
+@njit(cache=True, nogil=True)
+def commit_positions(u, rest, positions, velocities, dt):
+    """positions = rest + u (u (3N,) m), velocities = finite difference over ``dt`` s, in place."""
+    for i in range(rest.shape[0]):
+        for j in range(3):
+            x = rest[i, j] + u[3 * i + j]
+            velocities[i, j] = (x - positions[i, j]) / dt
+            positions[i, j] = x
 
 
 class QuasiStaticFEMModel(TetFEMModel):
@@ -86,7 +110,8 @@ class QuasiStaticFEMModel(TetFEMModel):
             # a linear solve with a factorised SPD stiffness cannot diverge: an inverted element means
             # the load is beyond small strain (an accuracy limit, see inverted_elements()), not an
             # instability, so the guard checks only non-finite states and speeds
-            base_kwargs["guard"] = StabilityGuard(check_inversion=False)
+            # (and its energy check, which evaluates the elastic energy, runs every 100 steps)
+            base_kwargs["guard"] = StabilityGuard(check_inversion=False, check_every=100)
         super().__init__(volume, material, integrator=integrator, corotational=False, formulation=formulation,
                          **base_kwargs)
         n = self.n_nodes
@@ -97,9 +122,12 @@ class QuasiStaticFEMModel(TetFEMModel):
                 raise ConfigError(f"fem_static: fixed_dofs must be an ({n}, 3) bool array (True = dof held at its "
                                   f"rest coordinate), got dtype {fd.dtype} shape {fd.shape}")
             self.fixed_dofs = fd.copy()
+        self.fixed_dofs.setflags(write=False)      # set at build: the factorisation depends on it
         self._u0 = np.zeros(3 * n)             # response to Dirichlet targets and gravity (m)
         self._u0_stale = True
         self.last_loaded = 0
+        self._loaded_buf = np.zeros(n, dtype=np.int64)
+        self._zero_kc = np.zeros(n)
         if isinstance(precompute, str):
             if precompute != "surface":
                 raise ConfigError(f"fem_static: precompute={precompute!r}; use None, 'surface' or node indices")
@@ -119,10 +147,12 @@ class QuasiStaticFEMModel(TetFEMModel):
             self._k_rest = self._assemble_stiffness(None)
             self._visco = False
         self._comp = None
+        self._comp_version = -1
         self._u0_stale = True
 
     def _on_fixed_changed(self) -> None:
         self._u0_stale = True                 # the factorisation is rebuilt if the fixed dofs changed
+        self._fixed_version = getattr(self, "_fixed_version", 0) + 1
 
     def critical_dt(self, method: str = "spectral") -> float:
         """No explicit integrator: unconditionally stable (inf)."""
@@ -136,7 +166,11 @@ class QuasiStaticFEMModel(TetFEMModel):
 
     def compliance(self) -> CondensedCompliance:
         """The factorised stiffness with its column cache (rebuilt when the material or the fixed dofs change)."""
+        version = getattr(self, "_fixed_version", 0)
+        if self._comp is not None and self._comp_version == version:
+            return self._comp
         free = self._free_mask()
+        self._comp_version = version
         if self._comp is None or not np.array_equal(self._comp.free, free):
             if free.all():
                 raise ConfigError("fem_static needs fixed nodes (a free body has rigid modes): pass fixed=... or "
@@ -181,10 +215,9 @@ class QuasiStaticFEMModel(TetFEMModel):
             kc = np.asarray(stiffness, dtype=np.float64)
             if kc.shape != (n,) or np.any(kc < 0):
                 raise ConfigError(f"fem_static: stiffness must be (N,) >= 0 N/m, got shape {kc.shape}")
-            loaded = np.flatnonzero(((kc > 0) | np.any(forces != 0.0, axis=1)) & ~held)
         else:
             kc = None
-            loaded = np.flatnonzero(np.any(forces != 0.0, axis=1) & ~held)
+        loaded = self._loaded_buf[:find_loaded(forces, self._zero_kc if kc is None else kc, held, self._loaded_buf)]
         x_prev = self.positions
         u = u0.copy()
         self.last_loaded = len(loaded)
@@ -197,17 +230,13 @@ class QuasiStaticFEMModel(TetFEMModel):
             if kc is not None:
                 k_a = np.repeat(kc[loaded], 3)
                 rhs = u0[dofs] + w @ (f_a + k_a * un_a)
-                u_a = sla.solve(np.eye(len(dofs)) + w * k_a[None, :], rhs, check_finite=False)
+                u_a = np.linalg.solve(np.eye(len(dofs)) + w * k_a[None, :], rhs)
                 g = f_a - k_a * (u_a - un_a)
             else:
                 g = f_a
             comp.response(slots, g.reshape(-1, 3), u)
             self.integrated_external_forces[loaded] = g.reshape(-1, 3)
-        x = u.reshape(-1, 3)
-        x += self.rest_positions
-        np.subtract(x, x_prev, out=self.velocities)
-        self.velocities /= dt
-        np.copyto(self.positions, x)
+        commit_positions(u, self.rest_positions, self.positions, self.velocities, dt)
         self.external_forces = forces
 
     def internal_forces(self) -> np.ndarray:
