@@ -188,3 +188,24 @@ def test_precomputed_surface_columns_give_the_same_step():
     assert np.allclose(pre.positions, lazy.positions, rtol=0, atol=1e-15)
     with pytest.raises(ConfigError, match="precompute="):
         registry.get("fem_static")(vol, ELASTIC, fixed=bottom, precompute="all")
+
+
+@pytest.mark.slow
+def test_own_step_reproduces_exact_contact_and_dimitriadis_held_out():
+    """Through the model's own step (condensed penalty contact, vertical tractions as in the linear
+    theory), stepped to rest: within 2 % of the chart's exact contact solve and 5 % of Dimitriadis."""
+    from surgsim_envs.bench.stepped_indent import stepped_indent
+
+    young, nu, radius, thick = FAST_CASE
+    mat = {"young": young, "poisson": nu, "relax_fraction": 0.0}
+    dv = dimitriadis_valid_depth(radius, thick)
+    spacing = math.sqrt(radius * dv) / 2.5
+    own = stepped_indent("fem_static", mat, indenter_radius=radius, depth=dv, thickness=thick, spacing=spacing,
+                         n_depths=6, contact="vertical")
+    exact = mt.indent("fem_static", mat, indenter_radius=radius, depth=dv, thickness=thick, spacing=spacing,
+                      n_depths=6, time_steps=0)
+    assert np.allclose(own.depth, exact.depth)
+    assert np.abs(own.force / exact.force - 1.0).max() < 0.02
+    sel = own.depth >= 0.25 * dv - 1e-12
+    ref = dimitriadis_force(own.depth[sel], radius, young, nu, thick, bonded=True)
+    assert np.abs(own.force[sel] / ref - 1.0).mean() < 0.05

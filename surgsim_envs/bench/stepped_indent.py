@@ -37,7 +37,7 @@ class SteppedIndent:
 def stepped_indent(model="fem_static", material="liver", *, indenter_radius: float = 0.005, depth: float = 0.0015,
                    thickness: float = 0.03, spacing: float | None = None, n_depths: int = 6,
                    contact_stiffness: float | None = None, max_steps: int = 20000, tol: float = 1e-6,
-                   dt: float = 1e-3) -> SteppedIndent:
+                   dt: float = 1e-3, contact: str = "scene") -> SteppedIndent:
     """Press a sphere (``indenter_radius`` m) to ``depth`` (m) in ``n_depths`` increments into a
     bonded slab (``thickness`` m, width 4 x thickness) through ``model``'s own step (a registered
     model with ``quasi_static``, ``implicit_contact`` and a ``fixed_dofs`` option).
@@ -47,11 +47,16 @@ def stepped_indent(model="fem_static", material="liver", *, indenter_radius: flo
         the surface nodes slide to rest over hundreds of steps (faster for a softer penalty). A depth
         has converged when no node moves more than ``tol`` x depth in a step; ConfigError after
         ``max_steps``.
+    contact: ``"scene"`` (the scenes' :class:`ContactModel`: penalty along the sphere's normal) or
+        ``"vertical"`` (penalty along z on the gap to the sphere's lower surface: tractions normal
+        to the undeformed surface, the linear theory's frictionless contact and the chart's rule).
     """
     from surgsim_envs.bench.indent_mesh import graded_slab
     from surgsim_envs.bench.material import model_class
     from surgsim_envs.contact import SPHERE, ContactModel, ContactParams
 
+    if contact not in ("scene", "vertical"):
+        raise ConfigError(f"contact={contact!r}; use 'scene' (ContactModel, sphere normals) or 'vertical'")
     cls = model_class(model)
     for cap in ("quasi_static", "implicit_contact"):
         cls.require(cap, task="stepped indentation (surgsim_envs.bench.stepped_indent)")
@@ -82,9 +87,20 @@ def stepped_indent(model="fem_static", material="liver", *, indenter_radius: flo
     force, pen, steps = np.zeros(n_depths), np.zeros(n_depths), np.zeros(n_depths, dtype=int)
     for i, d in enumerate(depths):
         centre = np.array([[0.0, 0.0, R - d]])
+        r_top = np.hypot(X[top, 0], X[top, 1])
+        z_sphere = np.where(r_top < R, (R - d) - np.sqrt(np.maximum(R * R - r_top ** 2, 0.0)), np.inf)
         for s in range(1, max_steps + 1):
-            res = cm.compute(tissue.positions, tissue.velocities, kind, tool, size, centre, mat9, vel, com, dt)
-            tissue.step(dt, res.forces, res.stiffness)
+            if contact == "scene":
+                res = cm.compute(tissue.positions, tissue.velocities, kind, tool, size, centre, mat9, vel, com, dt)
+                forces, stiff = res.forces, res.stiffness
+            else:
+                gap = tissue.positions[top, 2] - z_sphere          # > 0: the node is inside the sphere
+                on = gap > 0
+                forces = np.zeros_like(tissue.positions)
+                stiff = np.zeros(tissue.n_nodes)
+                forces[top[on], 2] = -k * gap[on]
+                stiff[top[on]] = k
+            tissue.step(dt, forces, stiff)
             move = float(np.abs(tissue.velocities).max()) * dt
             if s > 1 and move <= tol * d:
                 break
