@@ -234,3 +234,26 @@ def test_palpation_presses_with_fem_static():
     assert tissue.name == "fem_static" and tissue.compliance().columns_computed > 0
     assert max(forces) > 0.01 and max(stiff) > 0.0       # pressed 6 mm into liver: tens of mN at least
     env.close()
+
+
+def test_divergence_from_explicit_contact_damping_names_the_cause():
+    """Contact damping acts on the finite-difference velocity (explicitly): c_n / dt far above the
+    tissue's nodal stiffness makes the quasi-static iteration diverge; the error says what to change."""
+    from surgsim_envs.contact import SPHERE, ContactModel, ContactParams
+    from surgsim_envs.errors import TissueUnstableError
+
+    args = (np.array([SPHERE]), np.array([0]), np.array([[0.01, 0.0, 0.0]]), np.array([[0.0, 0.0, 0.028]]),
+            np.eye(3).reshape(1, 9), np.zeros((1, 6)), np.zeros((1, 3)))
+
+    def press(damping):
+        model, _ = _block(material={**ELASTIC, "young": 500.0})
+        top = np.flatnonzero(np.isclose(model.rest_positions[:, 2], 0.02))
+        cm = ContactModel(model.n_nodes, top, [0.0], ContactParams(stiffness=200.0, damping=damping))
+        for _ in range(200):
+            res = cm.compute(model.positions, model.velocities, *args, 1e-3)
+            model.step(1e-3, res.forces, res.stiffness)
+        return model
+
+    assert press(0.0).integrated_external_forces[:, 2].sum() < 0.0    # without damping: pressed, at rest
+    with pytest.raises(TissueUnstableError, match="lower the contact damping"):
+        press(5.0)

@@ -35,7 +35,7 @@ from typing import ClassVar
 import numpy as np
 from numba import njit
 
-from surgsim_envs.errors import ConfigError
+from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue.compliance import DEFAULT_CACHE_MB, CondensedCompliance
 from surgsim_envs.tissue.fem import TetFEMModel
@@ -238,6 +238,18 @@ class QuasiStaticFEMModel(TetFEMModel):
             self.integrated_external_forces[loaded] = g.reshape(-1, 3)
         commit_positions(u, self.rest_positions, self.positions, self.velocities, dt)
         self.external_forces = forces
+
+    def _step_body(self, dt: float, forces: np.ndarray, stiffness) -> None:
+        try:
+            super()._step_body(dt, forces, stiffness)
+        except TissueUnstableError as exc:
+            # the equilibrium solve cannot diverge; only forces computed from the finite-difference
+            # velocity (explicit contact damping) can drive it: say so instead of "reduce dt"
+            raise TissueUnstableError(exc.model, exc.dt, exc.critical_dt, exc.reason + (
+                "; fem_static is quasi-static (no dt limit): a divergence comes from explicit forces "
+                "that depend on its finite-difference velocities, such as contact damping: lower the "
+                "contact damping (ContactParams.damping / ContactConfig.damping, e.g. <= 0.1 N s/m) "
+                "or raise dt")) from None
 
     def internal_forces(self) -> np.ndarray:
         """(N,3) N elastic nodal forces -K u (no inertia, no viscous term: quasi-static)."""
