@@ -279,7 +279,6 @@ class QuasiStaticFEMModel(TetFEMModel):
 
     def describe(self) -> dict:
         out = super().describe()
-        comp = self._comp
-        out.update(cache_mb=self.cache_mb, cached_columns=0 if comp is None else int(np.count_nonzero(comp.node_in >= 0)),
-                   fixed_dofs=int(self.fixed_dofs.sum()))
+        cached = 0 if self._comp is None else int(np.count_nonzero(self._comp.node_in >= 0))
+        out.update(cache_mb=self.cache_mb, cached_columns=cached, fixed_dofs=int(self.fixed_dofs.sum()))
         return out
