@@ -53,6 +53,8 @@ QUICK_FLEX_CELLCOUNTS = (1, 2, 4)
 FLEX_COLLISION_SPACING = 0.004               # m, the trilinear flex's (collision) mesh under the sphere
 #: compute per simulated millisecond at which a model runs in real time (us); drawn on the chart
 REAL_TIME_US_PER_MS = 1000.0
+#: force error an "accurate" model must reach (issue 16: <= 5 % at real time); drawn on the chart
+TARGET_ERROR = 0.05
 
 
 def force_error(depth, force, ref_force, valid_depth: float) -> float:
@@ -181,6 +183,7 @@ def plot(rows: list[dict], path: str) -> None:
         ax.plot([r["us_per_ms"] for r in front], [max(r["error"], 1e-4) for r in front], "o", mfc="none",
                 mec="k", ms=10, mew=1.2)
     ax.axvline(REAL_TIME_US_PER_MS, color="tab:red", ls=":", lw=1.5, label="real time (1,000 us per simulated ms)")
+    ax.axhline(TARGET_ERROR, color="tab:green", ls=":", lw=1.5, label=f"{TARGET_ERROR:.0%} force error")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("cost: us of compute per simulated ms")

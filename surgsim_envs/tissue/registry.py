@@ -25,6 +25,7 @@ BUILTIN_MODELS: dict[str, str] = {
     "mass_spring_calibrated": "surgsim_envs.tissue.calibrated_mass_spring:CalibratedMassSpringModel",
     "neo_hookean": "surgsim_envs.tissue.neo_hookean:NeoHookeanModel",
     "layered": "surgsim_envs.tissue.layered:LayeredModel",
+    "fem_static": "surgsim_envs.tissue.fem_static:QuasiStaticFEMModel",
 }
 
 _registry: dict[str, Any] = {}

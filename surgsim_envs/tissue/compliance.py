@@ -1,0 +1,157 @@
+"""Condensed compliance of a linear elastic body: a sparse factorisation of the stiffness on the
+free dofs, and compliance columns of the nodes that are loaded, computed on first use and cached.
+
+The precomputed-compliance idea of SOFA's ``PrecomputedConstraintCorrection`` /
+``LinearSolverConstraintCorrection``: for a linear body ``K u = f`` with Dirichlet dofs removed,
+the displacement caused by forces on a few nodes A is ``u = C_A f_A`` where the columns
+``C_A = K_ff^-1 P_A^T`` (3N x 3|A|) come from back-substitutions of one factorisation. A contact
+problem then only needs the small block ``W_AA = P_A C_A`` (m/N), and the full displacement is
+one (3N x 3|A|) product instead of a sparse solve. Columns are kept up to a memory budget and
+evicted least recently used.
+
+Units: stiffness N/m, compliance m/N, displacements m, forces N. numpy/scipy + numba only.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from numba import njit
+
+from surgsim_envs.errors import ConfigError
+
+#: default memory for cached compliance columns (MB); each node costs 72 x n_nodes bytes
+DEFAULT_CACHE_MB = 256.0
+
+
+@njit(cache=True, nogil=True)
+def gather_block(cols, slots, nodes, out):
+    """``out`` (3m,3m) = W_AA: rows = dofs of ``nodes``, columns = their cached ``cols[slots]``
+    ((capacity, 3N, 3) compliance columns, m/N)."""
+    m = nodes.shape[0]
+    for b in range(m):
+        s = slots[b]
+        for a in range(m):
+            r = 3 * nodes[a]
+            for i in range(3):
+                for j in range(3):
+                    out[3 * a + i, 3 * b + j] = cols[s, r + i, j]
+
+
+@njit(cache=True, nogil=True)
+def add_response(cols, slots, g, out):
+    """``out`` (3N,) += sum_b cols[slots[b]] @ g[b] (m): the displacement of nodal forces g (m,3) N."""
+    n3 = out.shape[0]
+    for b in range(slots.shape[0]):
+        s = slots[b]
+        g0, g1, g2 = g[b, 0], g[b, 1], g[b, 2]
+        if g0 == 0.0 and g1 == 0.0 and g2 == 0.0:
+            continue
+        for d in range(n3):
+            out[d] += cols[s, d, 0] * g0 + cols[s, d, 1] * g1 + cols[s, d, 2] * g2
+
+
+class CondensedCompliance:
+    """Factorised stiffness ``K`` (3N x 3N, N/m, dof = 3 node + axis) on the dofs where ``free``
+    ((3N,) bool) is True, with lazily cached compliance columns of loaded nodes.
+
+    cache_mb: memory for cached columns (MB); the least recently used are evicted beyond it.
+    """
+
+    def __init__(self, stiffness: sp.spmatrix, free: np.ndarray, *, cache_mb: float = DEFAULT_CACHE_MB):
+        k = sp.csr_matrix(stiffness)
+        n3 = k.shape[0]
+        free = np.asarray(free, dtype=bool).reshape(-1)
+        if k.shape != (n3, n3) or n3 % 3 or free.shape != (n3,):
+            raise ConfigError(f"condensed compliance needs a square 3N x 3N stiffness and a (3N,) free mask, got "
+                              f"{k.shape} and {free.shape}")
+        if not free.any():
+            raise ConfigError("condensed compliance: every dof is fixed; nothing can move")
+        if not (isinstance(cache_mb, (int, float)) and math.isfinite(cache_mb) and cache_mb > 0):
+            raise ConfigError(f"cache_mb must be a positive number of megabytes, got {cache_mb!r}")
+        self.n_nodes = n3 // 3
+        self.free = free
+        self.free_index = np.flatnonzero(free)
+        kff = k[free][:, free].tocsc()
+        try:   # K is symmetric: a symmetric ordering keeps the fill of the ANP matrix lower (measured 2x faster)
+            self.lu = spla.splu(kff, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+        except RuntimeError as exc:
+            raise ConfigError(f"condensed compliance: the stiffness on the free dofs is singular ({exc}); fix "
+                              "enough nodes to hold the body (a fixed base)") from None
+        self.capacity = max(1, int(cache_mb * 1e6 // (72.0 * self.n_nodes)))
+        self.cols = np.zeros((0, n3, 3))
+        self.slot_of = -np.ones(self.n_nodes, dtype=np.int64)
+        self.node_in = np.zeros(0, dtype=np.int64)
+        self.last_used = np.zeros(0, dtype=np.int64)
+        self.tick = 0
+        self.columns_computed = 0
+
+    # ------------------------------------------------------------------------------------------
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Full solve: displacement (3N,) or (3N,k) m for forces ``rhs`` (3N,) or (3N,k) N (zero on fixed dofs)."""
+        rhs = np.asarray(rhs, dtype=np.float64)
+        out = np.zeros(rhs.shape)
+        sol = self.lu.solve(np.ascontiguousarray(rhs[self.free_index]))
+        if not np.all(np.isfinite(sol)):
+            raise ConfigError("condensed compliance: the factorised stiffness gave a non-finite solution (singular)")
+        out[self.free_index] = sol
+        return out
+
+    def _grow(self, need: int) -> None:
+        size = min(self.capacity, max(need, 2 * len(self.node_in), 16))
+        extra = size - len(self.node_in)
+        if extra <= 0:
+            return
+        self.cols = np.concatenate([self.cols, np.zeros((extra, 3 * self.n_nodes, 3))])
+        self.node_in = np.concatenate([self.node_in, -np.ones(extra, dtype=np.int64)])
+        self.last_used = np.concatenate([self.last_used, np.zeros(extra, dtype=np.int64)])
+
+    def slots(self, nodes: np.ndarray) -> np.ndarray:
+        """Cache slots of ``nodes`` ((m,) int), computing missing columns in one multi-rhs solve."""
+        nodes = np.asarray(nodes, dtype=np.int64)
+        self.tick += 1
+        if len(nodes) > self.capacity:
+            raise ConfigError(f"condensed compliance: {len(nodes)} loaded nodes exceed the column cache "
+                              f"({self.capacity} nodes); raise cache_mb")
+        missing = nodes[self.slot_of[nodes] < 0]
+        if len(missing):
+            if len(self.node_in) < self.capacity:
+                self._grow(int(np.count_nonzero(self.node_in >= 0)) + len(missing))
+            empty = np.flatnonzero(self.node_in < 0)
+            if len(empty) < len(missing):        # evict the least recently used, never one of ``nodes``
+                busy = self.slot_of[nodes]
+                busy = busy[busy >= 0]
+                order = np.argsort(self.last_used, kind="stable")
+                order = order[~np.isin(order, busy) & (self.node_in[order] >= 0)]
+                drop = order[:len(missing) - len(empty)]
+                self.slot_of[self.node_in[drop]] = -1
+                self.node_in[drop] = -1
+                empty = np.flatnonzero(self.node_in < 0)
+            use = empty[:len(missing)]
+            rhs = np.zeros((3 * self.n_nodes, 3 * len(missing)))
+            for j in range(3):
+                rhs[3 * missing + j, 3 * np.arange(len(missing)) + j] = 1.0
+            sol = self.solve(rhs)                          # (3N, 3m): response to unit forces
+            self.cols[use] = sol.reshape(3 * self.n_nodes, len(missing), 3).transpose(1, 0, 2)
+            self.node_in[use] = missing
+            self.slot_of[missing] = use
+            self.columns_computed += len(missing)
+        s = self.slot_of[nodes]
+        self.last_used[s] = self.tick
+        return s
+
+    def block(self, nodes: np.ndarray, slots: np.ndarray | None = None) -> np.ndarray:
+        """W_AA (3m,3m) m/N: displacement of the dofs of ``nodes`` per unit force on them."""
+        nodes = np.asarray(nodes, dtype=np.int64)
+        s = self.slots(nodes) if slots is None else slots
+        out = np.empty((3 * len(nodes), 3 * len(nodes)))
+        gather_block(self.cols, s, nodes, out)
+        return out
+
+    def response(self, slots: np.ndarray, forces: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """``out`` (3N,) += displacement (m) of ``forces`` (m,3) N on the nodes cached at ``slots``."""
+        add_response(self.cols, np.asarray(slots, dtype=np.int64), np.ascontiguousarray(forces, dtype=np.float64), out)
+        return out
