@@ -48,9 +48,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fps", type=float, default=25.0, help="video/viewer frames per second")
     parser.add_argument("--size", type=int, nargs=2, default=(480, 360), metavar=("W", "H"), help="video size, pixels")
     parser.add_argument("--camera", default="overview", help="camera name for the video")
-    parser.add_argument("--servo", choices=("thread", "process"), default="thread",
-                        help="thread: the servo in this process; process: in its own process with real-time "
-                             "priority (udp devices only; p99 <= 1.2 ms under load, docs/haptics.md)")
+    parser.add_argument("--servo", choices=("auto", "thread", "process"), default="auto",
+                        help="auto (default): process for udp devices, thread otherwise; thread: the servo in "
+                             "this process; process: in its own process with real-time priority (udp devices "
+                             "only; p99 <= 1.2 ms with its port flooded, docs/haptics.md)")
 
 
 def parse_device(spec: str) -> tuple[str, str | int | None]:
@@ -116,7 +117,9 @@ def run(args) -> int:
     from surgsim_envs.haptics.servo import DeviceMapping, ServoConfig, ServoLoop
 
     kind, arg = parse_device(args.device)
-    servo = getattr(args, "servo", "thread")
+    servo = getattr(args, "servo", "auto")
+    if servo == "auto":  # the servo owns a network device in its own process: no shared GIL (docs/haptics.md)
+        servo = "process" if kind == "udp" else "thread"
     if servo == "process" and kind != "udp":
         raise ConfigError(f"--servo process needs a network device (--device udp:PORT): the servo process owns "
                           f"the device; got --device {args.device}. Use --servo thread for it.")
