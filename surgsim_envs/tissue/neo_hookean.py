@@ -210,6 +210,24 @@ class NeoHookeanModel(TissueModel):
         travel = float(np.max(np.linalg.norm(goal - start[self.fixed], axis=1), initial=0.0))
         edge = float(np.min(self.tet_volume)) ** (1.0 / 3.0)
         steps = increments or max(1, int(math.ceil(travel / (2.0 * edge))))
+        # by default a failed load path is retried with 2x, 4x, 8x the increments (large strain
+        # between bonded plates); an explicit ``increments`` is used as given
+        for attempt in range(1 if increments else 4):
+            ok, x, total, k, its = self._load_path(start, goal, F, steps)
+            if ok:
+                break
+            failed = f"load step {k}/{steps} ({its} iterations)"
+            steps *= 2
+        if not ok:
+            raise HyperelasticSolveError(f"neo_hookean: Newton did not converge at {failed}; use more "
+                                         "increments or a finer mesh")
+        self.last_newton_iterations = total
+        self.positions = x
+        self.velocities = np.zeros_like(x)
+        return x.copy()
+
+    def _load_path(self, start, goal, F, steps):
+        """Solve ``steps`` equal load increments from ``start``: (ok, x, total iterations, step, its)."""
         x = start
         total = 0
         for k in range(1, steps + 1):
@@ -219,12 +237,8 @@ class NeoHookeanModel(TissueModel):
             ok, x, its = self._newton(x, s * F)
             total += its
             if not ok:
-                raise HyperelasticSolveError(f"neo_hookean: Newton did not converge at load step {k}/{steps} "
-                                             f"({its} iterations); use more increments or a finer mesh")
-        self.last_newton_iterations = total
-        self.positions = x
-        self.velocities = np.zeros_like(x)
-        return x.copy()
+                return False, x, total, k, its
+        return True, x, total, steps, 0
 
     # ------------------------------------------------------------------------------------------
     def _advance(self, dt: float, forces: np.ndarray, stiffness) -> None:

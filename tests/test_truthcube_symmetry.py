@@ -1,0 +1,126 @@
+"""Truth-cube error budget: the symmetry floor of the measurement and each model's own part."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from surgsim_envs.bench import truthcube_symmetry as ts
+from surgsim_envs.errors import ConfigError
+
+REPO = Path(__file__).resolve().parents[1]
+L = 0.08
+
+
+def _grid(n=7, spacing=0.01):
+    a = (np.arange(n) - (n - 1) / 2) * spacing
+    return np.stack(np.meshgrid(a, a, a, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+def _affine(rest, strain):
+    u = np.zeros_like(rest)
+    u[:, 2] = -strain * (rest[:, 2] + L / 2)
+    return u
+
+
+def test_uniform_compression_is_invariant_and_a_plate_shift_is_all_floor():
+    rest = _grid()
+    u = _affine(rest, 0.1)
+    assert np.allclose(ts.symmetric_part(u, rest, 0.1 * L), u, atol=1e-15)
+    # a lateral shift of the moving plate (simple shear in y) breaks every mirror: all of it is floor
+    shear = np.zeros_like(rest)
+    shear[:, 1] = 0.002 * (rest[:, 2] + L / 2) / L
+    b = ts.error_budget(rest + u, rest + u + shear, rest, 0.1 * L)
+    assert b["model"] < 1e-12 and b["model_asymmetry"] < 1e-12
+    assert b["floor"] == pytest.approx(ts.rms(shear), rel=1e-12)
+    # a wrong bulge is symmetric: all of it is the model's
+    bulge = np.zeros_like(rest)
+    bulge[:, :2] = 0.05 * rest[:, :2]
+    b = ts.error_budget(rest + u + bulge, rest + u, rest, 0.1 * L)
+    assert b["floor"] < 1e-12
+    assert b["model"] == pytest.approx(ts.rms(bulge), rel=1e-12)
+
+
+def test_budget_is_pythagorean_for_a_symmetric_prediction():
+    rng = np.random.default_rng(3)
+    rest = _grid() + rng.normal(0, 5e-4, (343, 3))      # irregular beads as in the cube
+    measured = rest + _affine(rest, 0.125) + rng.normal(0, 1e-3, (343, 3))
+    pred = rest + ts.symmetric_part(_affine(rest, 0.125) + rng.normal(0, 1e-3, (343, 3)), rest, 0.125 * L)
+    b = ts.error_budget(pred, measured, rest, 0.125 * L)
+    assert b["model_asymmetry"] < 1e-12
+    assert b["total"] ** 2 == pytest.approx(b["floor"] ** 2 + b["model"] ** 2, rel=1e-10)
+
+
+def test_asymmetric_bead_set_and_bad_input_are_rejected():
+    rest = _grid()
+    with pytest.raises(ConfigError, match="not symmetric"):
+        ts.partner_indices(rest + [0.004, 0.0, 0.0])
+    with pytest.raises(ConfigError, match="shaped like rest"):
+        ts.symmetric_part(np.zeros((5, 3)), rest, 0.01)
+    with pytest.raises(ConfigError, match="travel"):
+        ts.symmetric_part(np.zeros_like(rest), rest, float("nan"))
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("truthcube_script", REPO / "scripts" / "truthcube.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def cube(shared_data):
+    tc = _script()
+    rest, measured = tc.load_truthcube(shared_data / "truthcube" / "uniaxial_positions.csv")
+    return tc, rest, measured
+
+
+def test_measured_floor_exceeds_the_issue_target_at_large_strain(cube):
+    """The measured field breaks the experiment's symmetry by more than 1.2 mm RMS at 12.5 and
+    18.25 % (mostly a lateral shift of the moving-plate side in y): no model with the stated
+    bonded plates can reach the issue's 1.2 mm there. Mirrors alone already give > 1.2 mm."""
+    tc, rest, measured = cube
+    for strain in (0.125, 0.1825):
+        u = measured[strain] - rest
+        floor = ts.rms(u - ts.symmetric_part(u, rest, strain * tc.CUBE))
+        assert floor > 1.2e-3, (strain, floor)
+        # only the x and y mirrors (maps 0..7 with no swap and no z flip): still above 1.2 mm
+        idx = ts.partner_indices(rest)
+        maps = ts.symmetry_maps()
+        mirror = [k for k, g in enumerate(maps) if g[2, 2] > 0 and g[0, 1] == 0]
+        sym = sum(u[idx[k]] @ maps[k].T for k in mirror) / len(mirror)
+        assert ts.rms(u - sym) > 1.2e-3
+    # the floor grows with strain and is smaller than the plate travel by an order of magnitude
+    floors = [ts.rms(measured[s] - rest - ts.symmetric_part(measured[s] - rest, rest, s * tc.CUBE)) for s in tc.STRAINS]
+    assert floors[0] < floors[1] < floors[2] < 0.02 * tc.CUBE
+
+
+def test_bonded_fem_prediction_is_symmetric_and_its_model_part_beats_affine(cube):
+    """Fast representative: linear ANP FEM (bonded plates) predicts a field with the experiment's
+    symmetry (its asymmetric part, from the tet pattern and bead irregularity, is < 0.1 mm) and its
+    own error is a fraction of the affine (no bulge) prediction's."""
+    tc, rest, measured = cube
+    model, vol, bottom, top = tc.cube_model("fem", 0.01, corotational=False, formulation="anp")
+    for strain in (0.05, 0.125):
+        model.reset()
+        pred = tc.predict_beads(vol, tc.compress(model, bottom, top, strain), rest)
+        b = ts.error_budget(pred, measured[strain], rest, strain * tc.CUBE)
+        aff = ts.error_budget(tc.affine_prediction(rest, strain), measured[strain], rest, strain * tc.CUBE)
+        assert b["model_asymmetry"] < 1e-4, b
+        assert b["model"] < 0.5 * aff["model"], (b, aff)
+        assert b["total"] ** 2 == pytest.approx(b["floor"] ** 2 + b["model"] ** 2, rel=0.05)
+
+
+@pytest.mark.slow
+def test_neo_hookean_is_within_a_tenth_of_a_millimetre_of_the_floor(cube):
+    """neo_hookean (10 mm mesh, the paper's E = 15.3 kPa, nu = 0.499; nothing fitted to the beads):
+    its own error is < 0.5 mm at 12.5 and 18.25 %, and its total is within 0.1 mm of the floor."""
+    tc, rest, measured = cube
+    model, vol, bottom, top = tc.cube_model("neo_hookean", 0.01)
+    for strain in (0.125, 0.1825):
+        model.reset()
+        pred = tc.predict_beads(vol, tc.compress(model, bottom, top, strain), rest)
+        b = ts.error_budget(pred, measured[strain], rest, strain * tc.CUBE)
+        assert b["model"] < 0.5e-3, b
+        assert b["total"] < b["floor"] + 0.1e-3, b
