@@ -37,7 +37,7 @@ MODELS = (
 def held_out_error(strains, stress, curve, lo=FIT_MAX) -> float:
     """RMS of (simulated - measured) over the simulated strains > lo, relative to the largest |measured|."""
     s = np.asarray(strains)
-    meas = np.interp(s, 1.0 - curve.stretch[::-1], curve.stress[::-1])
+    meas = np.interp(s, 1.0 - curve.stretch, curve.stress)
     sel = (s > lo) & np.isfinite(stress)
     if sel.sum() < (s > lo).sum():
         return float("nan")
@@ -74,7 +74,7 @@ def main(argv=None) -> int:
     print(f"| model | law fitted on strain <= {FIT_MAX} (Pa) | plates | fit RMS | held-out RMS closed form | "
           "held-out RMS simulated | stress at 0.6 sim / closed / measured (kPa) | solve s |")
     print("|---|---|---|---|---|---|---|---|")
-    meas06 = float(np.interp(0.6, 1.0 - curve.stretch[::-1], curve.stress[::-1]))
+    meas06 = float(np.interp(0.6, 1.0 - curve.stretch, curve.stress))
     for r in rows:
         params = ", ".join(f"{k} {v:.3g}" for k, v in r["params"].items())
         held = "fails" if not np.isfinite(r["held_out"]) else f"{r['held_out']:.3f}"
