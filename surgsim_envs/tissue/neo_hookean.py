@@ -125,7 +125,9 @@ class NeoHookeanModel(TissueModel):
     def _forces(self, x) -> np.ndarray:
         """Internal elastic forces (N,3) N at x."""
         F = self._deformation(x)
-        cof = np.linalg.det(F)[:, None, None] * np.transpose(np.linalg.inv(F), (0, 2, 1))
+        # cof F = J F^-T from cross products of F's columns: defined for degenerate (J = 0) tets too
+        cof = np.stack([np.cross(F[:, :, 1], F[:, :, 2]), np.cross(F[:, :, 2], F[:, :, 0]),
+                        np.cross(F[:, :, 0], F[:, :, 1])], axis=2)
         C = np.einsum("tki,tkj->tij", F, F)
         i1 = np.einsum("tii->t", C)
         FC = np.einsum("tik,tkj->tij", F, C)
