@@ -6,7 +6,7 @@ measured curve; the model that implements it is then compressed in the simulator
 and compared with the measurement on the held-out strains > 0.30 (RMS relative to the largest
 measured stress there).
 
-    python scripts/compression_sim.py [--phantom EF10_50T_A1] [--spacing 0.0075] [--figure PNG] [--json OUT]
+    python scripts/compression_sim.py [--phantom EF10_50T_A1] [--spacing 0.01] [--models LABEL ...] [--figure PNG] [--json OUT]
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "tissue_mechanics" / "ecoflex_phantom_compression"
-STRAINS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6)
+STRAINS = (0.05, 0.15, 0.3, 0.45, 0.6)
 FIT_MAX = 0.30
 #: (label, law fitted, registered model, model options from the fit's parameters)
 MODELS = (
@@ -47,9 +47,10 @@ def held_out_error(strains, stress, curve, lo=FIT_MAX) -> float:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--phantom", default="EF10_50T_A1")
-    ap.add_argument("--spacing", type=float, default=0.0075)
+    ap.add_argument("--spacing", type=float, default=0.01)
     ap.add_argument("--figure", type=Path, default=None)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--models", nargs="*", default=None, help="labels to run (default: all of MODELS)")
     args = ap.parse_args(argv)
     from tqdm import tqdm
 
@@ -58,7 +59,8 @@ def main(argv=None) -> int:
 
     curve = hf.load_phantom(DATA / f"{args.phantom}.csv")
     rows = []
-    jobs = [(m, plates) for m in MODELS for plates in cs.PLATES]
+    models = [m for m in MODELS if args.models is None or m[0] in args.models]
+    jobs = [(m, plates) for m in models for plates in cs.PLATES]
     for (label, law, model, opts), plates in tqdm(jobs, desc="compression", file=sys.stderr):
         fit = hf.fit(curve, law, max_strain=FIT_MAX)
         closed = fit.stress(1.0 - np.asarray(STRAINS))
@@ -86,21 +88,21 @@ def main(argv=None) -> int:
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     if args.figure:
-        plot(rows, curve, args.figure)
+        plot(rows, curve, args.figure, models)
     return 0
 
 
-def plot(rows, curve, path) -> None:
+def plot(rows, curve, path, models=MODELS) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), sharey=True)
-    colors = plt.cm.tab10(np.arange(len(MODELS)))
+    colors = plt.cm.tab10(np.arange(len(models)))
     for ax, plates in zip(axes, ("frictionless", "bonded")):
         ax.plot(1.0 - curve.stretch, -curve.stress / 1e3, "k-", lw=2, label=f"measured {curve.name}")
-        for c, (label, *_rest) in zip(colors, MODELS):
+        for c, (label, *_rest) in zip(colors, models):
             r = next(r for r in rows if r["label"] == label and r["plates"] == plates)
             s = np.asarray(r["strains"])
             ax.plot(s, -np.asarray(r["stress"]) / 1e3, "o-", color=c, label=f"{label} (simulated)")
