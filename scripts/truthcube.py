@@ -151,7 +151,8 @@ def table(rows) -> str:
     sep = "|---" * (len(STRAINS) + 2) + "|"
     lines = [head, sep]
     for label, res in rows:
-        cells = " | ".join(f"{res[s][0] * 1e3:.2f} ({res[s][2] * 1e3:.2f})" for s in STRAINS)
+        floor = label.startswith("symmetry floor")
+        cells = " | ".join(f"{res[s][0] * 1e3:.2f}" + ("" if floor else f" ({res[s][2] * 1e3:.2f})") for s in STRAINS)
         total = sum(res[s][1] for s in STRAINS)
         lines.append(f"| {label} | {cells} | {total:.2f} |")
     return "\n".join(lines)
