@@ -55,7 +55,6 @@ def nominal_stress(model, bottom, top, strain: float, plates: str = "frictionles
         raise ConfigError(f"strain={strain!r} must lie in [0, 1) (engineering compressive strain)")
     X = model.rest_positions
     z0 = float(X[:, 2].min())
-    height = float(np.ptp(X[:, 2]))
     lam = 1.0 - strain
     lateral = lam ** -0.5 if plates == "frictionless" else 1.0
     centre = X[:, :2].mean(axis=0)
