@@ -161,3 +161,22 @@ def test_the_floor_is_the_moving_plates_sideways_travel_held_out(cube):
         before = tc.rms(stated[s][keep], measured[s][keep])
         after = tc.rms(shifted[s][keep], measured[s][keep])
         assert after < 0.7 * before, (s, before, after)
+
+
+@pytest.mark.slow
+def test_neo_hookean_with_the_estimated_plate_travel_meets_1p2_mm_on_held_out_beads(cube):
+    """The issue's 1.2 mm, on beads the boundary condition never saw: the plate's sideways travel is
+    estimated from the 49 beads next to it (2 numbers per strain), neo_hookean (E, nu from the data
+    README) is scored on the other 294 (measured 0.43 / 0.58 / 0.93 mm; stated plates 0.86 / 1.16 / 1.40)."""
+    spec = importlib.util.spec_from_file_location("truthcube_variants", REPO / "scripts" / "truthcube_variants.py")
+    tv = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tv)
+    tc, rest, measured = cube
+    shift, layer = tv.plate_shift_from_top_layer(rest, measured)
+    model, vol, bottom, top = tc.cube_model("neo_hookean", 0.01)
+    for s in (0.125, 0.1825):
+        model.reset()
+        model.set_fixed(bottom)
+        model.set_fixed(top, model.rest_positions[top] + [shift[s][0], shift[s][1], -s * tc.CUBE])
+        pred = tc.predict_beads(vol, model.static_solve(), rest)
+        assert tc.rms(pred[~layer], measured[s][~layer]) < 1.2e-3
