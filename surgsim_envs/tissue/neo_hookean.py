@@ -125,7 +125,9 @@ class NeoHookeanModel(TissueModel):
     def _forces(self, x) -> np.ndarray:
         """Internal elastic forces (N,3) N at x."""
         F = self._deformation(x)
-        cof = np.linalg.det(F)[:, None, None] * np.transpose(np.linalg.inv(F), (0, 2, 1))
+        # cof F = J F^-T from cross products of F's columns: defined for degenerate (J = 0) tets too
+        cof = np.stack([np.cross(F[:, :, 1], F[:, :, 2]), np.cross(F[:, :, 2], F[:, :, 0]),
+                        np.cross(F[:, :, 0], F[:, :, 1])], axis=2)
         C = np.einsum("tki,tkj->tij", F, F)
         i1 = np.einsum("tii->t", C)
         FC = np.einsum("tik,tkj->tij", F, C)
@@ -210,6 +212,24 @@ class NeoHookeanModel(TissueModel):
         travel = float(np.max(np.linalg.norm(goal - start[self.fixed], axis=1), initial=0.0))
         edge = float(np.min(self.tet_volume)) ** (1.0 / 3.0)
         steps = increments or max(1, int(math.ceil(travel / (2.0 * edge))))
+        # by default a failed load path is retried with 2x, 4x, 8x the increments (large strain
+        # between bonded plates); an explicit ``increments`` is used as given
+        for attempt in range(1 if increments else 4):
+            ok, x, total, k, its = self._load_path(start, goal, F, steps)
+            if ok:
+                break
+            failed = f"load step {k}/{steps} ({its} iterations)"
+            steps *= 2
+        if not ok:
+            raise HyperelasticSolveError(f"neo_hookean: Newton did not converge at {failed}; use more "
+                                         "increments or a finer mesh")
+        self.last_newton_iterations = total
+        self.positions = x
+        self.velocities = np.zeros_like(x)
+        return x.copy()
+
+    def _load_path(self, start, goal, F, steps):
+        """Solve ``steps`` equal load increments from ``start``: (ok, x, total iterations, step, its)."""
         x = start
         total = 0
         for k in range(1, steps + 1):
@@ -219,12 +239,8 @@ class NeoHookeanModel(TissueModel):
             ok, x, its = self._newton(x, s * F)
             total += its
             if not ok:
-                raise HyperelasticSolveError(f"neo_hookean: Newton did not converge at load step {k}/{steps} "
-                                             f"({its} iterations); use more increments or a finer mesh")
-        self.last_newton_iterations = total
-        self.positions = x
-        self.velocities = np.zeros_like(x)
-        return x.copy()
+                return False, x, total, k, its
+        return True, x, total, steps, 0
 
     # ------------------------------------------------------------------------------------------
     def _advance(self, dt: float, forces: np.ndarray, stiffness) -> None:
