@@ -41,6 +41,20 @@ def test_interface_points_lie_on_their_sheets(wall):
     assert np.all(wall.node_material[wall.node_interface == 1] == fascia)
 
 
+def test_box_wall_stays_inside_its_boundary_and_bottom_face_is_flat():
+    """Lattice rows along the box's own faces (rays that miss the boundary) are kept inside it: the
+    whole bottom face (nodes without a -z neighbour) lies on z = 0, every node inside the box."""
+    vol = abdominal_wall_volume(0.004, size=(0.08, 0.08))
+    bottom = vol.face_nodes(4)
+    assert bottom.sum() == 21 * 21
+    np.testing.assert_allclose(vol.nodes[bottom, 2], 0.0, atol=1e-12)
+    lo, hi = vol.nodes.min(axis=0), vol.nodes.max(axis=0)
+    np.testing.assert_allclose(lo, [-0.04, -0.04, 0.0], atol=1e-12)
+    np.testing.assert_allclose(hi, [0.04, 0.04, 0.029], atol=1e-12)
+    with pytest.raises(ConfigError, match="direction"):
+        vol.face_nodes(6)
+
+
 def test_springs_follow_paper_rules(wall):
     """Homogeneous springs take their material; a spring from an interface point to another
     material takes that material (definition 2 and section 2.3)."""
@@ -120,7 +134,7 @@ def test_thigh_bone_is_rigid():
 def _pressed(vol, depth, radius=0.006):
     from surgsim_envs.contact.kinematic_probe import KinematicProbe
 
-    bottom = vol.nodes[:, 2] <= vol.nodes[:, 2].min() + 1e-9
+    bottom = vol.face_nodes(4)  # no node below: the whole bottom face
     model = make("layered", vol, fixed=bottom)
     top = np.flatnonzero(vol.neighbours[:, 5] < 0)
     probe = KinematicProbe(model, top, radius)

@@ -42,7 +42,7 @@ def run_bench(spacing=0.002, steps=300, depth=0.004, speed=0.01, max_updates=200
 
     t0 = time.perf_counter()
     vol = abdominal_wall_volume(spacing, size=(0.12, 0.12))
-    bottom = vol.nodes[:, 2] <= vol.nodes[:, 2].min() + 1e-9
+    bottom = vol.face_nodes(4)  # no node below: the whole bottom face
     model = LayeredModel(vol, fixed=bottom, max_updates=int(max_updates))
     build_s = time.perf_counter() - t0
     top = np.flatnonzero(vol.neighbours[:, 5] < 0)
