@@ -176,6 +176,80 @@ def test_upper_layers_deform_more_and_never_interpenetrate(wall):
     assert np.count_nonzero(model.push > 0) > 0          # extreme springs carry accumulated force
 
 
+def test_active_set_static_solve_is_an_equilibrium_with_rigid_extreme_springs(wall):
+    """A press to 60 % of the wall's thickness puts springs at their extreme length. The all-node
+    active-set solve satisfies the conditions of eqs. 2.5/2.8 with rigid springs: no spring shorter
+    than its extreme length, forces passed on only by springs AT that length and only
+    compressive, and every free node in equilibrium (springs + accumulated forces = 0)."""
+    model, probe = _pressed(wall, 0.004)
+    thickness = wall.nodes[:, 2].max()
+    probe.move_to((0.0, 0.0, thickness + 0.006 - 0.6 * thickness))
+    model.static_solve(method="direct")
+    assert model.unconverged == 0
+    assert np.count_nonzero(model.push > 0) > 0
+    assert np.all(model.push >= 0)
+    f = probe.force()[2]
+    x = model.positions
+    for a in range(3):
+        j = model.nbr[:, 2 * a + 1]
+        ok = np.flatnonzero(j >= 0)
+        lmin = model.lmin[ok, 2 * a + 1]
+        gap = x[j[ok], a] - x[ok, a] - lmin
+        assert gap.min() > -1e-3 * lmin.max()            # rigid links: penetration < 0.1 % of lmin
+        rigid = model.push[ok, 2 * a + 1] > 0
+        assert np.all(np.abs(gap[rigid]) < 1e-3 * lmin.max())
+    free = ~model.fixed
+    residual = np.abs(model.internal_forces()[free]).max()
+    assert f > 0.1 and residual < 1e-6 * f
+
+
+def test_prefactored_solver_tracks_the_all_node_force_while_the_probe_moves(wall):
+    """A probe pressed 3 mm and slid 12 mm in 0.4 mm steps (contact nodes join and leave): the per-step
+    solver's force equals the all-node static solution at every pose (exact for the linear springs)."""
+    import copy
+
+    model, probe = _pressed(wall, 0.003)
+    model.solver = "prefactored"
+    model.static_solve()
+    z = wall.nodes[probe.candidates, 2].max()
+    seen = set(probe.nodes.tolist())
+    for k in range(30):
+        probe.move_to((-0.006 + 0.0004 * (k + 1), 0.0, z + 0.006 - 0.003))
+        seen |= set(probe.nodes.tolist())
+        model.step(1e-3)
+        ref = copy.deepcopy(model)
+        ref.static_solve()
+        f, f_ref = probe.force()[2], ref.contact_force(probe.nodes)[2]
+        assert f_ref > 0
+        assert abs(f / f_ref - 1) < 1e-6, (k, f, f_ref)
+    assert len(seen - set(probe.nodes.tolist())) >= 2          # the contact set did change
+
+
+def test_prefactored_falls_back_at_extreme_lengths(wall):
+    """Pressed to 60 % of the thickness (rigid springs), the prefactored step hands over to the
+    active-set solve: same force as the all-node solution, no interpenetration."""
+    import copy
+
+    model, probe = _pressed(wall, 0.002)
+    model.solver = "prefactored"
+    model.step(1e-3)
+    thickness = wall.nodes[:, 2].max()
+    probe.move_to((0.0, 0.0, thickness + 0.006 - 0.6 * thickness))
+    model.step(1e-3)
+    assert model.prefactored_fallbacks >= 1
+    ref = copy.deepcopy(model)
+    ref.static_solve()
+    assert abs(probe.force()[2] / ref.contact_force(probe.nodes)[2] - 1) < 1e-6
+    assert model.interpenetrations() == 0
+
+
+def test_solver_option_is_checked(wall):
+    with pytest.raises(ConfigError, match="solver"):
+        LayeredModel(wall, solver="cg")
+    with pytest.raises(ConfigError, match="block_radius"):
+        LayeredModel(wall, block_radius=0.0)
+
+
 @pytest.mark.slow
 def test_force_accumulation_against_bone_rises_sharply():
     """Fig. 2.16: once the soft layers over the femur reach their extreme length the probe force

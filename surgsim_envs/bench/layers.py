@@ -27,9 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--depth", type=float, default=0.004, help="press depth, m")
     p.add_argument("--speed", type=float, default=0.01, help="probe speed along x, m/s")
     p.add_argument("--max-updates", type=int, default=20000, help="node updates per step (budget)")
-    p.add_argument("--solver", choices=("prefactored", "block", "local"), default="prefactored",
+    p.add_argument("--solver", choices=("prefactored", "local"), default="prefactored",
                    help="per-step solver: prefactored (all-node springs factorised once, contact by reactions), "
-                        "block (direct solve of the nodes near the probe, the rest held) or local (work list)")
+                        "or local (the work-list local iteration)")
     p.add_argument("--block-radius", type=float, default=0.015, help="half-width (m) of the nodes solved / written each step around the probe")
     p.add_argument("--samples", type=int, default=3, help="steps compared with the all-node solution")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
@@ -78,7 +78,6 @@ def run_bench(spacing=0.002, steps=300, depth=0.004, speed=0.01, max_updates=200
             "build_s": build_s, "static_solve_s": static_s,
             "ms_per_step_median": 1e3 * float(np.median(times)), "ms_per_step_p90": 1e3 * float(np.percentile(times, 90)),
             "active_nodes_median": float(np.median(active)),
-            "block_rebuilds": int(getattr(model, "block_rebuilds", 0)),
             "fallbacks": int(getattr(model, "prefactored_fallbacks", 0)), "ms_per_step_max": 1e3 * float(np.max(times)), "force_N_median": float(np.median(forces)),
             "force_vs_all_node": cmp, "max_force_error": max((c["error"] for c in cmp), default=float("nan")),
             "load": os.getloadavg(), "cpus": os.cpu_count()}

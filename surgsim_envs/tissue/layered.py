@@ -45,8 +45,8 @@ X_TOL = 1e-7
 #: default over-relaxation of the local solve (projected SOR; 1.0 is the paper's plain iteration)
 OMEGA = 1.8
 #: per-step solvers (class docstring)
-SOLVERS = ("local", "block", "prefactored")
-#: default half-width (m) of the block the "block" solver solves around the load
+SOLVERS = ("local", "prefactored")
+#: default half-width (m) of the region the "prefactored" solver writes around the contact each step
 BLOCK_RADIUS = 0.015
 #: default node updates per step (bounds the step time; what is left continues next step)
 MAX_UPDATES = 2_000_000
@@ -69,10 +69,7 @@ class LayeredModel(TissueModel):
     f_tol: N, force threshold of the active set; x_tol: m, displacement threshold.
     max_updates: node updates per step (the work left over continues in the next step).
     omega: over-relaxation in [1, 2) of each local move (1 = the paper's plain iteration).
-    solver: "local" (the work-list local iteration each step) or "block" (each step solves the
-        nodes within ``block_radius`` m of the load directly, rigid links included, the rest held:
-        :mod:`surgsim_envs.tissue.layered_block`; the factorisation is kept while the load stays
-        inside the block and the Dirichlet nodes do not change); "prefactored" (the springs of all
+    solver: "local" (the work-list local iteration each step) or "prefactored" (the springs of all
         nodes factorised once, contact nodes by their reactions: the exact all-node solution with
         the nodes within ``block_radius`` m of the contact written each step; falls back to the
         all-node active-set solve when a spring reaches its extreme length or loads are forces).
@@ -124,7 +121,6 @@ class LayeredModel(TissueModel):
         self.f_tol, self.x_tol, self.max_updates = float(f_tol), float(x_tol), int(max_updates)
         self.omega = float(omega)
         self.solver, self.block_radius = solver, float(block_radius)
-        self._block = None
         n = self.n_nodes
         self.nbr = np.ascontiguousarray(volume.neighbours, dtype=np.int32)
         X = self.rest_positions
@@ -203,7 +199,6 @@ class LayeredModel(TissueModel):
         kk[i_idx, d_idx] *= factor
         self.kk = np.ascontiguousarray(kk)
         self._lap_cache = None
-        self._block = None
         self._prefactored = None
         self._seed_all = True
 
@@ -238,9 +233,8 @@ class LayeredModel(TissueModel):
         self._update_springs()
 
     def __getstate__(self):
-        """Copies and pickles drop the block solver's factorisation (rebuilt on the next step)."""
+        """Copies and pickles drop the prefactored solver's factorisation (rebuilt on the next step)."""
         state = self.__dict__.copy()
-        state["_block"] = None
         state["_prefactored"] = None
         return state
 
@@ -262,7 +256,6 @@ class LayeredModel(TissueModel):
         self._n_loaded = 0
         self._moved_fixed = np.zeros(0, dtype=np.int64)
         self._seed_all = False
-        self._block_seeds = None
         self.integrated_external_forces = np.zeros((n, 3))
         self._zero_kc = np.zeros(n)
         self.last_updates = 0
@@ -324,61 +317,6 @@ class LayeredModel(TissueModel):
         self.external_forces = ext
         return True
 
-    def _block_solve(self, ext: np.ndarray, kc: np.ndarray, dt: float | None) -> bool:
-        """The "block" solver's step (class docstring); False if there is no load to centre on."""
-        from surgsim_envs.tissue.layered_block import BlockSolver
-
-        if self._seed_all:  # materials changed: every node re-solves once
-            self._seed_all = False
-            self.static_solve(ext, kc)
-            return True
-        seeds = np.union1d(self._moved_fixed, np.flatnonzero((kc > 0) | np.any(ext != 0.0, axis=1)))
-        if getattr(self, "_block_seeds", None) is None or len(seeds):
-            self._block_seeds = seeds
-        seeds = self._block_seeds
-        if len(seeds) == 0:
-            return False
-        idx = self.volume.lattice_index
-        c_lo, c_hi = idx[seeds].min(axis=0), idx[seeds].max(axis=0)
-        r = int(math.ceil(self.block_radius / self.volume.spacing))
-        blk = self._block
-        fixed_now = None
-        if blk is not None:
-            b_lo, b_hi, solver, fixed_in = blk
-            inside = np.all(c_lo - b_lo >= r) and np.all(b_hi - c_hi >= r)
-            fixed_now = self.fixed[solver.block_all].tobytes() if inside else None
-            if not inside or fixed_now != fixed_in:
-                blk = None
-        if blk is None:
-            m = max(2, r // 2)  # hysteresis: the load may wander m cells before the block moves
-            b_lo, b_hi = c_lo - r - m, c_hi + r + m
-            in_box = np.all((idx >= b_lo) & (idx <= b_hi), axis=1)
-            solver = BlockSolver(self, np.flatnonzero(in_box & ~self.fixed))
-            solver.block_all = np.flatnonzero(in_box)
-            self.block_rebuilds = getattr(self, "block_rebuilds", 0) + 1
-            blk = self._block = (b_lo, b_hi, solver, self.fixed[solver.block_all].tobytes())
-        solver = blk[2]
-        fixed = np.flatnonzero(self.fixed)
-        self.positions[fixed] = self.fixed_targets[fixed]
-        xs = self.positions.copy()
-        prev_touched = self._touched[:self._n_touched].copy()
-        self.velocities[prev_touched] = 0.0
-        settled = solver.solve(ext, kc, xs)
-        b = solver.block
-        self._touched[:len(b)] = b
-        self._n_touched = len(b)
-        self.last_updates, self.last_sweeps, self.last_active = len(b), solver.last_iterations, len(b)
-        self.unconverged = 0 if settled else len(b)
-        if dt is not None and dt > 0:
-            self.velocities[b] = (self.positions[b] - xs[b]) / dt
-        self.integrated_external_forces[:] = 0.0
-        ld = np.flatnonzero((kc > 0) | np.any(ext != 0.0, axis=1))
-        self.integrated_external_forces[ld] = ext[ld] + kc[ld, None] * (xs[ld] - self.positions[ld])
-        self._moved_fixed = np.zeros(0, dtype=np.int64)
-        self._n_queue = 0
-        self.external_forces = ext
-        return True
-
     def solve(self, forces=None, stiffness=None, *, dt: float | None = None, all_nodes: bool = False,
               max_updates: int | None = None) -> int:
         """Relax to the local static equilibrium under ``forces`` (N,3) N with implicit contact
@@ -389,8 +327,6 @@ class LayeredModel(TissueModel):
         kc = self._zero_kc if stiffness is None else np.ascontiguousarray(stiffness, dtype=np.float64)
         if kc.shape != (n,) or np.any(kc < 0):
             raise ConfigError(f"layered: stiffness must be (N,) >= 0 N/m, got shape {kc.shape}")
-        if self.solver == "block" and not all_nodes and self._block_solve(ext, kc, dt):
-            return self.last_updates
         if self.solver == "prefactored" and not all_nodes and self._prefactored_solve(ext, kc, dt):
             return self.last_updates
         step_id = self.steps
