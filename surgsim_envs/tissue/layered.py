@@ -71,8 +71,9 @@ class LayeredModel(TissueModel):
     omega: over-relaxation in [1, 2) of each local move (1 = the paper's plain iteration).
     solver: "local" (the work-list local iteration each step) or "prefactored" (the springs of all
         nodes factorised once, contact nodes by their reactions: the exact all-node solution with
-        the nodes within ``block_radius`` m of the contact written each step; falls back to the
-        all-node active-set solve when a spring reaches its extreme length or loads are forces).
+        the nodes within ``block_radius`` m of the contact written each step, springs at their
+        extreme length as rigid links with their own reactions; steps with external forces use the
+        local iteration).
     **base_kwargs: fixed, gravity (ignored: quasi-static without body load), guard.
     """
 
@@ -288,7 +289,7 @@ class LayeredModel(TissueModel):
 
     def _prefactored_solve(self, ext: np.ndarray, kc: np.ndarray, dt: float | None) -> bool:
         """The "prefactored" solver's step (class docstring); False if it does not apply."""
-        from surgsim_envs.tissue.layered_block import PrefactoredContact, extreme_length_violated
+        from surgsim_envs.tissue.layered_block import PrefactoredContact
 
         if self._seed_all or np.any(kc > 0) or np.any(ext != 0.0):
             return False
@@ -298,13 +299,11 @@ class LayeredModel(TissueModel):
         prev_touched = self._touched[:self._n_touched].copy()
         self.velocities[prev_touched] = 0.0
         xs = self.positions.copy() if dt is not None and dt > 0 else None
-        nodes = pc.solve()
-        if extreme_length_violated(self, nodes):  # a rigid spring: the active-set all-node solve
+        nodes, settled = pc.solve()
+        if not settled:  # the rigid links did not settle: the active-set all-node solve
             self.prefactored_fallbacks = getattr(self, "prefactored_fallbacks", 0) + 1
             self.static_solve(ext, kc)
             nodes = np.flatnonzero(~self.fixed)
-        else:
-            self.push[nodes] = 0.0
         self._touched[:len(nodes)] = nodes
         self._n_touched = len(nodes)
         self.last_updates, self.last_sweeps, self.last_active = len(nodes), 1, len(nodes)

@@ -163,9 +163,11 @@ class PrefactoredContact:
     ``g_c = A^-1 e_c`` (one solve the first time c is held, then cached) and ``v0`` the response to
     the anchors (Dirichlet nodes held at their rest positions when it was built); the held displacements give ``G_CC lambda = t_C - v0_C`` (|C| x |C|, the x, y, z
     components share it). Exact for the linear springs (eq. 2.8); nodes within ``radius`` m of the
-    contact are written each step (the far field every ``refresh`` steps). It does not apply when
-    there are external forces, implicit contact stiffness, or a spring at its extreme length; the
-    caller then falls back to :class:`BlockSolver`.
+    contact are written each step (the far field every ``refresh`` steps). A spring of that region
+    at its extreme length becomes a rigid link with its own reaction (a column ``g_j - g_i`` of its
+    axis), found by the same active-set iteration as :class:`BlockSolver` and warm-started from the
+    previous step's links; the link reactions are the accumulated pushes. It does not apply with
+    external forces or implicit contact stiffness (the caller uses the local iteration then).
     """
 
     def __init__(self, model, radius: float, refresh: int = 50):
@@ -220,36 +222,106 @@ class PrefactoredContact:
         lo, hi = idx[contact].min(axis=0), idx[contact].max(axis=0)
         r = int(np.ceil(self.radius / m.volume.spacing))
         reg = self._region
-        if reg is None or np.any(lo - reg[0] < r // 2) or np.any(reg[1] - hi < r // 2):
+        if reg is None or np.any((lo - reg[0])[:2] < r // 2) or np.any((reg[1] - hi)[:2] < r // 2):
             b_lo, b_hi = lo - r, hi + r
+            b_lo[2], b_hi[2] = idx[:, 2].min(), idx[:, 2].max()   # whole columns: a press loads the full depth
             nodes = np.flatnonzero(np.all((idx >= b_lo) & (idx <= b_hi), axis=1) & ~self.anchor)
             reg = self._region = (b_lo, b_hi, nodes, self.local[nodes])
             self._gr = None
         return reg
 
-    def solve(self) -> np.ndarray:
-        """Write the equilibrium positions; returns the nodes written (region or all)."""
+    def solve(self) -> tuple[np.ndarray, bool]:
+        """Write the equilibrium positions, rigid links included; returns (nodes written, settled)."""
         m = self.model
         contact = np.flatnonzero(m.fixed & ~self.anchor)
         x, rest = m.positions, m.rest_positions
         self._steps += 1
-        slots = self._slots(contact)
-        lam = np.zeros((0, 3))
-        if len(contact):
-            lc = self.local[contact]
-            t = m.fixed_targets[contact] - rest[contact]
-            lam = np.linalg.solve(self.G[lc][:, slots], t - self.v0[lc])
-        if self._steps % self.refresh == 0 or len(contact) == 0:
+        if len(contact) == 0:
             nodes = self.free
-            x[nodes] = rest[nodes] + self.v0 + self.G[:, slots] @ lam
+            x[nodes] = rest[nodes] + self.v0
+            self.links = [np.zeros((0, 2), dtype=np.int64) for _ in range(3)]
+            self.last_region = len(nodes)
+            return nodes, True
+        full = self._steps % self.refresh == 0
+        if full:
+            nodes, rows = self.free, np.arange(len(self.free))
         else:
             _, _, nodes, rows = self._region_nodes(contact)
-            if self._gr is None or self._gr.shape[1] < len(self.slot):
-                self._gr = self.G[rows, :len(self.slot)].copy()
-            x[nodes] = rest[nodes] + self.v0[rows] + self._gr[:, slots] @ lam
-        x[contact] = m.fixed_targets[contact]
+        in_region = np.zeros(m.n_nodes, dtype=bool)
+        in_region[nodes] = True
+        in_region[contact] = True
+        links = getattr(self, "links", None) or [np.zeros((0, 2), dtype=np.int64) for _ in range(3)]
+        t_all = m.fixed_targets[contact] - rest[contact]
+        settled = False
+        for it in range(MAX_ACTIVE_SET_ITERS):
+            changed = False
+            new_links = []
+            for a in range(3):
+                lk = links[a]
+                lk = lk[~self.anchor[lk[:, 0]] | ~self.anchor[lk[:, 1]]] if len(lk) else lk
+                ends = np.concatenate([contact, lk[:, 0], lk[:, 1]]) if len(lk) else contact
+                ends = ends[~self.anchor[ends]]
+                uniq = np.unique(ends)
+                slots = self._slots(uniq)
+                pos = {int(c): q for q, c in enumerate(uniq.tolist())}
+                nc, nl = len(contact), len(lk)
+                # constraint rows as combinations of the unique nodes' displacements
+                E = np.zeros((nc + nl, len(uniq)))
+                E[np.arange(nc), [pos[int(c)] for c in contact]] = 1.0
+                for q, (i, j) in enumerate(lk.tolist()):
+                    if not self.anchor[j]:
+                        E[nc + q, pos[j]] += 1.0
+                    if not self.anchor[i]:
+                        E[nc + q, pos[i]] -= 1.0
+                lu_rows = self.local[uniq]
+                guu = self.G[lu_rows][:, slots]                 # (U, U): u at uniq from unit loads at uniq
+                v0u = self.v0[lu_rows, a]
+                rhs = np.concatenate([t_all[:, a], -(rest[lk[:, 1], a] - rest[lk[:, 0], a]
+                                                     - m.lmin[lk[:, 0], 2 * a + 1])]) if nl else t_all[:, a].copy()
+                M = E @ guu @ E.T
+                lam = np.linalg.solve(M, rhs - E @ v0u)
+                w = E.T @ lam                                   # load on each unique node
+                if full:
+                    gcols = self.G[:, slots]
+                else:
+                    if self._gr is None or self._gr.shape[1] < len(self.slot):
+                        self._gr = self.G[rows, :len(self.slot)].copy()
+                    gcols = self._gr[:, slots]
+                x[nodes, a] = rest[nodes, a] + self.v0[rows, a] + gcols @ w
+                x[contact, a] = m.fixed_targets[contact, a]
+                mu = lam[nc:]
+                keep = lk[mu > 0.0] if nl else lk
+                # springs of the region shorter than their extreme length join as rigid links
+                j = m.nbr[nodes, 2 * a + 1]
+                ok = (j >= 0)
+                ok[ok] = in_region[j[ok]]
+                ii, jj = nodes[ok], j[ok].astype(np.int64)
+                gap = x[jj, a] - x[ii, a] - m.lmin[ii, 2 * a + 1]
+                viol = gap < -1e-9 * m.lmin[ii, 2 * a + 1]
+                add = np.stack([ii[viol], jj[viol]], axis=1)
+                nl_new = np.unique(np.concatenate([keep, add]), axis=0) if len(add) else keep
+                n = m.n_nodes
+                if not np.array_equal(np.sort(nl_new[:, 0] * n + nl_new[:, 1]), np.sort(lk[:, 0] * n + lk[:, 1])):
+                    changed = True
+                new_links.append(nl_new.astype(np.int64))
+                if a == 0:
+                    self._last_push = []
+                self._last_push.append((lk, mu))
+            links = new_links
+            if not changed:
+                settled = True
+                break
+        self.links = links
+        m.push[nodes] = 0.0
+        m.push[contact] = 0.0
+        for a, (lk, mu) in enumerate(self._last_push):
+            if len(lk):
+                f = np.maximum(mu, 0.0)
+                m.push[lk[:, 0], 2 * a + 1] = f
+                m.push[lk[:, 1], 2 * a] = f
         self.last_region = len(nodes)
-        return nodes
+        self.last_iterations = it + 1
+        return nodes, settled
 
 
 def extreme_length_violated(model, nodes: np.ndarray) -> bool:
