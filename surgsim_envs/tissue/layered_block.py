@@ -29,6 +29,8 @@ import scipy.sparse.linalg as spla
 
 #: stiffness of a rigid (extreme-length) link relative to the largest spring constant
 RIGID_FACTOR = 1e4
+#: relative squeeze of a rigid link past its extreme length that means no feasible state exists
+INFEASIBLE = 0.05
 #: active-set iterations before giving up (the model then reports them as unconverged)
 MAX_ACTIVE_SET_ITERS = 40
 
@@ -139,6 +141,18 @@ class BlockSolver:
             if not changed:
                 settled = True
                 break
+        for a in range(3):  # a link squeezed well past its extreme length: the press is infeasible
+            i, j, lmin = self._pairs[a]
+            act = active[a]
+            if act.any():
+                over = (x[i[act], a] + lmin[act] - x[j[act], a]) / lmin[act]
+                if over.max() > INFEASIBLE:
+                    from surgsim_envs.errors import ConfigError
+
+                    raise ConfigError(
+                        f"layered: springs fully compressed from the contact to a fixed node (a rigid link "
+                        f"squeezed {over.max():.0%} past its extreme length); the press is deeper than the "
+                        f"tissue can give (at most {1 - model.max_compression:.0%} of it remains): reduce the depth")
         # forces passed on by the rigid links (eq. 2.5), as the local iteration stores them
         push = model.push
         push[blk] = 0.0
