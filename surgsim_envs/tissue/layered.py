@@ -257,6 +257,7 @@ class LayeredModel(TissueModel):
         self._n_loaded = 0
         self._moved_fixed = np.zeros(0, dtype=np.int64)
         self._seed_all = False
+        self._ief_nonzero = False
         self.integrated_external_forces = np.zeros((n, 3))
         self._zero_kc = np.zeros(n)
         self.last_updates = 0
@@ -298,19 +299,20 @@ class LayeredModel(TissueModel):
             pc = self._prefactored = PrefactoredContact(self, self.block_radius)
         prev_touched = self._touched[:self._n_touched].copy()
         self.velocities[prev_touched] = 0.0
-        xs = self.positions.copy() if dt is not None and dt > 0 else None
         nodes, settled = pc.solve()
         if not settled:  # the rigid links did not settle: the active-set all-node solve
             self.prefactored_fallbacks = getattr(self, "prefactored_fallbacks", 0) + 1
             self.static_solve(ext, kc)
             nodes = np.flatnonzero(~self.fixed)
+        elif dt is not None and dt > 0:  # finite-difference velocities of the nodes written
+            self.velocities[nodes] = (self.positions[nodes] - pc.before) / dt
         self._touched[:len(nodes)] = nodes
         self._n_touched = len(nodes)
         self.last_updates, self.last_sweeps, self.last_active = len(nodes), 1, len(nodes)
         self.unconverged = 0
-        if xs is not None:
-            self.velocities[nodes] = (self.positions[nodes] - xs[nodes]) / dt
-        self.integrated_external_forces[:] = 0.0
+        if self._ief_nonzero:  # no external load on this path
+            self.integrated_external_forces[:] = 0.0
+            self._ief_nonzero = False
         self._moved_fixed = np.zeros(0, dtype=np.int64)
         self._n_queue = 0
         self.external_forces = ext
@@ -361,6 +363,7 @@ class LayeredModel(TissueModel):
         touched = self._touched[:n_touched]
         if dt is not None and dt > 0:
             self.velocities[touched] = (self.positions[touched] - self._xs[touched]) / dt
+        self._ief_nonzero = True
         # external force actually integrated: g + kc (xs - x) on loaded nodes
         prev_loaded = self._loaded_prev[:n_prev]
         self.integrated_external_forces[prev_loaded] = 0.0

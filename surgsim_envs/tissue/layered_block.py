@@ -252,6 +252,7 @@ class PrefactoredContact:
         self._steps += 1
         if len(contact) == 0:
             nodes = self.free
+            self.before = x[nodes].copy()
             x[nodes] = rest[nodes] + self.v0
             self.links = [np.zeros((0, 2), dtype=np.int64) for _ in range(3)]
             self.last_region = len(nodes)
@@ -261,6 +262,7 @@ class PrefactoredContact:
             nodes, rows = self.free, np.arange(len(self.free))
         else:
             _, _, nodes, rows = self._region_nodes(contact)
+        self.before = x[nodes].copy()
         in_region = np.zeros(m.n_nodes, dtype=bool)
         in_region[nodes] = True
         in_region[contact] = True
