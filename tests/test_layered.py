@@ -392,3 +392,17 @@ def test_homogeneous_block_matches_fem_and_boussinesq():
         forces[name] = press_linear(K, vol.nodes, bottom, top, (0, 0), a, [0.001], 0.06)[0]
     assert abs(forces["layered"] / forces["fem"] - 1) < 0.10
     assert abs(forces["layered"] / (2 * a_eff * E * 0.001 / (1 - nu ** 2)) - 1) < 0.25
+
+
+@pytest.mark.slow
+def test_layered_wall_against_fem_on_the_bonded_wall():
+    """The layered abdominal wall against FEM (same lattice tets, same layer materials, whole bottom
+    face bonded), flat punch 10 mm pressed 0.5-2 mm at dd 4 mm: linear in depth in both, the layered
+    wall stiffer by the documented 22 % (scalar springs: the thin skin acts as a membrane), not the
+    2.8x of a wall hanging from two edge rows. The 10 % target is not met (docs/models/layered.md)."""
+    from surgsim_envs.bench.layers_accuracy import compare
+
+    res = compare(0.004)
+    ratio = np.asarray(res["layered"]) / np.asarray(res["fem"])
+    np.testing.assert_allclose(ratio, ratio[0], rtol=1e-6)
+    assert 1.1 < ratio[0] < 1.35
