@@ -70,13 +70,13 @@ def compare(spacing: float, patch=PATCH, radius: float = RADIUS, depths=DEPTHS, 
     from surgsim_envs.tissue.layered import LayeredModel
 
     vol = abdominal_wall_volume(spacing, size=patch, **layers)
-    bottom = vol.nodes[:, 2] <= vol.nodes[:, 2].min() + 1e-9
+    bottom = vol.face_nodes(4)  # no node below: the whole bottom face
     top = np.flatnonzero(vol.neighbours[:, 5] < 0)
     top_z = float(vol.nodes[top, 2].max())
     lay = LayeredModel(vol, fixed=bottom)
     regions = {k: vol.material_table[m] for k, m in enumerate(vol.layer_names)}
     fem = TetFEMModel(vol, regions[0], region_materials=regions, fixed=bottom, corotational=False)
     f_lay = press_linear(lay.stiffness_matrix(), vol.nodes, bottom, top, (0.0, 0.0), radius, depths, top_z)
-    f_fem = press_linear(fem.stiffness_matrix, vol.nodes, bottom, top, (0.0, 0.0), radius, depths, top_z)
+    f_fem = press_linear(fem.stiffness_matrix(), vol.nodes, bottom, top, (0.0, 0.0), radius, depths, top_z)
     return {"spacing": spacing, "nodes": int(vol.n_nodes), "depth": list(depths), "layered": f_lay.tolist(),
             "fem": f_fem.tolist(), "error": float(np.mean(np.abs(f_lay / f_fem - 1.0)))}

@@ -25,7 +25,7 @@ def wall_model(spacing: float = 0.004, **kwargs) -> tuple[LayeredModel, np.ndarr
     """(model with the bottom bonded, top-surface node indices) of an abdominal wall patch."""
     opts = {**WALL, **kwargs}
     vol = abdominal_wall_volume(spacing, **opts)
-    bottom = vol.nodes[:, 2] <= vol.nodes[:, 2].min() + 1e-9
+    bottom = vol.face_nodes(4)  # no node below: the whole bottom face
     model = LayeredModel(vol, fixed=bottom)
     top = np.flatnonzero(vol.neighbours[:, 5] < 0)
     return model, top

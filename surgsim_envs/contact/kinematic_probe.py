@@ -2,7 +2,7 @@
 
 The paper-001 way of pressing tissue with a position-controlled haptic tool: the contact mass points
 are the surface nodes under the sphere; each is held (Dirichlet) where the sphere's lower surface
-passes over its rest position, and the tool force is the sum of their spring forces (eq. 2.4-2.5,
+passes over its rest position (a node joins only once the sphere reaches its current position), and the tool force is the sum of their spring forces (eq. 2.4-2.5,
 ``model.contact_force(nodes)``). Works with any model that has ``set_fixed``/``release``. Units m.
 """
 
@@ -57,6 +57,12 @@ class KinematicProbe:
     def move_to(self, centre) -> np.ndarray:
         """Place the probe; pins the covered nodes, frees the ones it left. Returns the contact nodes."""
         nodes, targets = sphere_contact(self.model.rest_positions, self.candidates, centre, self.radius, self.axis)
+        # a node not yet held joins only if the sphere reaches its CURRENT position: one the deformed
+        # surface already carried below the sphere is not touched (pinning it would pull it up)
+        new = ~np.isin(nodes, self.nodes)
+        below = self.model.positions[nodes, self.axis] < targets[:, self.axis]
+        keep = ~(new & below)
+        nodes, targets = nodes[keep], targets[keep]
         left = np.setdiff1d(self.nodes, nodes)
         left = left[~self._base_fixed[left]]
         if len(left):

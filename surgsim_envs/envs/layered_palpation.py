@@ -59,7 +59,7 @@ class LayeredPalpationEnv(gym.Env):
         if key not in _VOLUMES:
             _VOLUMES[key] = abdominal_wall_volume(cfg.spacing, size=cfg.size)
         vol = _VOLUMES[key]
-        bottom = vol.nodes[:, 2] <= vol.nodes[:, 2].min() + 1e-9
+        bottom = vol.face_nodes(4)  # no node below: the whole bottom face
         self.tissue = make("layered", vol, fixed=bottom)
         self.tissue.require("quasi_static", task="SurgSim/LayeredPalpation-v0") if hasattr(self.tissue, "require") \
             else None

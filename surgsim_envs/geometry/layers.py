@@ -131,6 +131,13 @@ class LayeredVolume(Volume):
     def translated(self, offset) -> "LayeredVolume":
         return self.with_nodes(self.nodes + np.asarray(offset, dtype=float))
 
+    def face_nodes(self, direction: int) -> np.ndarray:
+        """(N,) bool: nodes with no neighbour in NBB ``direction`` (0..5 = -x, +x, -y, +y, -z, +z),
+        i.e. on that face of the lattice (``face_nodes(4)``: the bottom, to bond; ``face_nodes(5)``: the top)."""
+        if direction not in range(6):
+            raise ConfigError(f"face_nodes: direction must be 0..5 (-x, +x, -y, +y, -z, +z), got {direction!r}")
+        return self.neighbours[:, direction] < 0
+
     @property
     def rigid_nodes(self) -> np.ndarray:
         """Indices of nodes of a rigid material (bone)."""
@@ -388,6 +395,9 @@ def layered_volume(layer_set: LayerSet, spacing: float, *, min_quality: float = 
             for axis in axes:
                 _snap_axis(mesh.triangles, axis, origin, h, counts, index, lookup, disp, snapped, on_iface,
                            tag, movable_b if tag == -2 else ~movable_b)
+    # a ray along the boundary's own face (the lattice's outermost line, shifted outward by the jitter)
+    # misses it: keep those nodes inside the boundary's bounding box (else a box's edge rows stick out)
+    disp = np.clip(rest + disp, lo, hi) - rest
     disp, _ = guard_snaps(rest, disp, tets, min_quality=min_quality)
     intact = np.linalg.norm(disp, axis=1) > 0
     on_iface[~intact] = -1

@@ -44,6 +44,10 @@ F_TOL = 1e-6
 X_TOL = 1e-7
 #: default over-relaxation of the local solve (projected SOR; 1.0 is the paper's plain iteration)
 OMEGA = 1.8
+#: per-step solvers (class docstring)
+SOLVERS = ("local", "prefactored")
+#: default half-width (m) of the region the "prefactored" solver writes around the contact each step
+BLOCK_RADIUS = 0.015
 #: default node updates per step (bounds the step time; what is left continues next step)
 MAX_UPDATES = 2_000_000
 
@@ -65,6 +69,11 @@ class LayeredModel(TissueModel):
     f_tol: N, force threshold of the active set; x_tol: m, displacement threshold.
     max_updates: node updates per step (the work left over continues in the next step).
     omega: over-relaxation in [1, 2) of each local move (1 = the paper's plain iteration).
+    solver: "local" (the work-list local iteration each step) or "prefactored" (the springs of all
+        nodes factorised once, contact nodes by their reactions: the exact all-node solution with
+        the nodes within ``block_radius`` m of the contact written each step, springs at their
+        extreme length as rigid links with their own reactions; steps with external forces use the
+        local iteration).
     **base_kwargs: fixed, gravity (ignored: quasi-static without body load), guard.
     """
 
@@ -76,7 +85,8 @@ class LayeredModel(TissueModel):
     capabilities: ClassVar[frozenset] = frozenset({"forces", "implicit_contact", "quasi_static", "static_solve"})
 
     def __init__(self, volume, material=None, *, max_compression: float = MAX_COMPRESSION, f_tol: float = F_TOL,
-                 x_tol: float = X_TOL, max_updates: int = MAX_UPDATES, omega: float = OMEGA, region_materials=None, **base_kwargs):
+                 x_tol: float = X_TOL, max_updates: int = MAX_UPDATES, omega: float = OMEGA, solver: str = "local",
+                 block_radius: float = BLOCK_RADIUS, region_materials=None, **base_kwargs):
         if not isinstance(volume, LayeredVolume):  # a plain lattice volume: one material per region label
             from surgsim_envs.geometry.volume import Volume
             from surgsim_envs.materials import get_material
@@ -96,6 +106,10 @@ class LayeredModel(TissueModel):
                 raise ConfigError(f"layered: {key} must be > 0, got {val!r}")
         if not (isinstance(omega, (int, float)) and 1.0 <= omega < 2.0):
             raise ConfigError(f"layered: omega must be in [1, 2) (1 = plain local static iteration), got {omega!r}")
+        if solver not in SOLVERS:
+            raise ConfigError(f"layered: solver must be one of {SOLVERS}, got {solver!r}")
+        if not (isinstance(block_radius, (int, float)) and math.isfinite(block_radius) and block_radius > 0):
+            raise ConfigError(f"layered: block_radius must be a length > 0 m, got {block_radius!r}")
         if not (isinstance(max_updates, (int, np.integer)) and max_updates >= 1):
             raise ConfigError(f"layered: max_updates must be a positive integer, got {max_updates!r}")
         if region_materials is None:
@@ -107,6 +121,7 @@ class LayeredModel(TissueModel):
         self.max_compression = float(max_compression)
         self.f_tol, self.x_tol, self.max_updates = float(f_tol), float(x_tol), int(max_updates)
         self.omega = float(omega)
+        self.solver, self.block_radius = solver, float(block_radius)
         n = self.n_nodes
         self.nbr = np.ascontiguousarray(volume.neighbours, dtype=np.int32)
         X = self.rest_positions
@@ -184,6 +199,8 @@ class LayeredModel(TissueModel):
         kk = self.kk_build.copy()
         kk[i_idx, d_idx] *= factor
         self.kk = np.ascontiguousarray(kk)
+        self._lap_cache = None
+        self._prefactored = None
         self._seed_all = True
 
     def scale_material(self, name: str = "young", factor=1.0, mask=None) -> None:
@@ -216,6 +233,12 @@ class LayeredModel(TissueModel):
         self.fields[name] = v.copy()
         self._update_springs()
 
+    def __getstate__(self):
+        """Copies and pickles drop the prefactored solver's factorisation (rebuilt on the next step)."""
+        state = self.__dict__.copy()
+        state["_prefactored"] = None
+        return state
+
     # ------------------------------------------------------------------------------------------
     def _alloc(self) -> None:
         n = self.n_nodes
@@ -234,6 +257,7 @@ class LayeredModel(TissueModel):
         self._n_loaded = 0
         self._moved_fixed = np.zeros(0, dtype=np.int64)
         self._seed_all = False
+        self._ief_nonzero = False
         self.integrated_external_forces = np.zeros((n, 3))
         self._zero_kc = np.zeros(n)
         self.last_updates = 0
@@ -264,6 +288,36 @@ class LayeredModel(TissueModel):
     def _advance(self, dt: float, forces: np.ndarray, stiffness: np.ndarray | None) -> None:
         self.solve(forces, stiffness, dt=dt)
 
+    def _prefactored_solve(self, ext: np.ndarray, kc: np.ndarray, dt: float | None) -> bool:
+        """The "prefactored" solver's step (class docstring); False if it does not apply."""
+        from surgsim_envs.tissue.layered_block import PrefactoredContact
+
+        if self._seed_all or np.any(kc > 0) or np.any(ext != 0.0):
+            return False
+        pc = getattr(self, "_prefactored", None)
+        if pc is None or not pc.valid():
+            pc = self._prefactored = PrefactoredContact(self, self.block_radius)
+        prev_touched = self._touched[:self._n_touched].copy()
+        self.velocities[prev_touched] = 0.0
+        nodes, settled = pc.solve()
+        if not settled:  # the rigid links did not settle: the active-set all-node solve
+            self.prefactored_fallbacks = getattr(self, "prefactored_fallbacks", 0) + 1
+            self.static_solve(ext, kc)
+            nodes = np.flatnonzero(~self.fixed)
+        elif dt is not None and dt > 0:  # finite-difference velocities of the nodes written
+            self.velocities[nodes] = (self.positions[nodes] - pc.before) / dt
+        self._touched[:len(nodes)] = nodes
+        self._n_touched = len(nodes)
+        self.last_updates, self.last_sweeps, self.last_active = len(nodes), 1, len(nodes)
+        self.unconverged = 0
+        if self._ief_nonzero:  # no external load on this path
+            self.integrated_external_forces[:] = 0.0
+            self._ief_nonzero = False
+        self._moved_fixed = np.zeros(0, dtype=np.int64)
+        self._n_queue = 0
+        self.external_forces = ext
+        return True
+
     def solve(self, forces=None, stiffness=None, *, dt: float | None = None, all_nodes: bool = False,
               max_updates: int | None = None) -> int:
         """Relax to the local static equilibrium under ``forces`` (N,3) N with implicit contact
@@ -274,6 +328,8 @@ class LayeredModel(TissueModel):
         kc = self._zero_kc if stiffness is None else np.ascontiguousarray(stiffness, dtype=np.float64)
         if kc.shape != (n,) or np.any(kc < 0):
             raise ConfigError(f"layered: stiffness must be (N,) >= 0 N/m, got shape {kc.shape}")
+        if self.solver == "prefactored" and not all_nodes and self._prefactored_solve(ext, kc, dt):
+            return self.last_updates
         step_id = self.steps
         self._qid += 1
         qid = self._qid
@@ -307,6 +363,7 @@ class LayeredModel(TissueModel):
         touched = self._touched[:n_touched]
         if dt is not None and dt > 0:
             self.velocities[touched] = (self.positions[touched] - self._xs[touched]) / dt
+        self._ief_nonzero = True
         # external force actually integrated: g + kc (xs - x) on loaded nodes
         prev_loaded = self._loaded_prev[:n_prev]
         self.integrated_external_forces[prev_loaded] = 0.0
@@ -322,11 +379,12 @@ class LayeredModel(TissueModel):
         """Equilibrium positions (N,3) m under ``forces`` (N,3) N (and implicit ``stiffness`` (N,) N/m)
         with every free node active: the all-node solution.
 
-        method "direct": a sparse direct solve of the springs' linear system (eq. 2.8 for all nodes at
-        once), then the constrained local iteration from there to enforce the NBB / extreme lengths
-        and accumulate the forces (it stops at once where no constraint is active); "local": the
-        local iteration alone from the current state (slow for large volumes). At most
-        ``max_sweeps`` x N node updates; ``self.unconverged`` counts the nodes still active after.
+        method "direct": the springs' linear system (eq. 2.8 for all nodes at once) solved by sparse
+        LU, springs at their extreme length held as rigid links by an active-set iteration, their
+        forces stored as the accumulated pushes (:mod:`surgsim_envs.tissue.layered_block`);
+        ``self.unconverged`` is N if the active set did not settle, else 0. "local": the local
+        iteration alone from the current state (slow for large volumes: at most ``max_sweeps`` x N
+        node updates; ``self.unconverged`` counts the nodes still active after).
         """
         if method not in ("direct", "local"):
             raise ConfigError(f"layered: static_solve method must be 'direct' or 'local', got {method!r}")
@@ -334,30 +392,31 @@ class LayeredModel(TissueModel):
         ext = self.external_forces if forces is None else np.ascontiguousarray(forces, dtype=np.float64)
         kc = self._zero_kc if stiffness is None else np.ascontiguousarray(stiffness, dtype=np.float64)
         if method == "direct":
-            import scipy.sparse as sp
-            import scipy.sparse.linalg as spla
+            from surgsim_envs.tissue.layered_block import BlockSolver
 
-            i_idx, d_idx = np.nonzero(self.nbr >= 0)
-            j = self.nbr[i_idx, d_idx]
-            k = self.kk[i_idx, d_idx]
-            lap = (sp.coo_matrix((-k, (i_idx, j)), shape=(n, n)).tocsr()
-                   + sp.diags(self.kk.sum(axis=1) + kc)).tocsr()
-            free = np.flatnonzero(~self.fixed)
             fixed = np.flatnonzero(self.fixed)
-            x = self.positions.copy()
-            x[fixed] = self.fixed_targets[fixed]
-            u_fixed = x[fixed] - self.rest_positions[fixed]
-            rhs = ext[free] + kc[free, None] * (self.positions[free] - self.rest_positions[free])
-            rhs = rhs - lap[free][:, fixed] @ u_fixed
-            lu = spla.splu(lap[free][:, free].tocsc())
-            u = lu.solve(np.ascontiguousarray(rhs))
-            self.positions[free] = self.rest_positions[free] + u
+            self.positions[fixed] = self.fixed_targets[fixed]
             self.push[:] = 0.0
-            # the direct solution may violate the NBB; clamp it back inside before the local iteration
-            self._clamp_into_nbb()
+            solver = BlockSolver(self, np.flatnonzero(~self.fixed))
+            settled = solver.solve(ext, kc, self.positions.copy())
+            self.unconverged = 0 if settled else n
+            self.last_active_set_iterations = solver.last_iterations
+            self._n_queue = 0
+            self._moved_fixed = np.zeros(0, dtype=np.int64)
+            self.external_forces = ext
+            return self.positions.copy()
         self.solve(ext, kc, all_nodes=True, max_updates=int(max_sweeps) * n)
         self._n_queue = 0  # a static solve leaves no work for the next step
         return self.positions.copy()
+
+    def _laplacian(self):
+        """Scalar spring stiffness diag(sum K) - K (N x N, N/m), cached until the springs change."""
+        lap = getattr(self, "_lap_cache", None)
+        if lap is None:
+            from surgsim_envs.tissue.layered_block import laplacian
+
+            lap = self._lap_cache = laplacian(self.nbr, self.kk)
+        return lap
 
     def _clamp_into_nbb(self) -> None:
         """Move nodes that left their neighbouring bounding box back to its edge (in place)."""
