@@ -51,8 +51,12 @@ def parse(argv=None):
     p.add_argument("--net-arch", default="64,64", help="hidden layer sizes, comma separated")
     p.add_argument("--learning-rate", type=float, default=3e-4)
     p.add_argument("--resume", default=None, help="continue training the model.zip + vecnormalize.pkl in this folder "
-                   "(same task and algo; SAC starts with an empty replay buffer)")
+                   "(same task and algo; SAC also reloads replay_buffer.pkl when the folder has one, else starts with an "
+                   "empty buffer; --train-freq and --gradient-steps apply to the resumed SAC)")
     p.add_argument("--train-freq", type=int, default=1, help="SAC: one gradient step every N env steps (CPU budget)")
+    p.add_argument("--gradient-steps", type=int, default=1,
+                   help="SAC: gradient steps per update (updates every --train-freq env steps); slow envs such as "
+                   "PalpationPress-v0 (~0.1 s per press) afford several")
     p.add_argument("--target-success", type=float, default=0.8,
                    help="report the wall time when the success rate of the last 20 training episodes first reaches this")
     p.add_argument("--stop-at-target", action="store_true",
@@ -62,6 +66,8 @@ def parse(argv=None):
     args = p.parse_args(argv)
     if args.max_wall is not None and not args.max_wall > 0:
         p.error(f"--max-wall must be a positive number of seconds, got {args.max_wall}")
+    if args.gradient_steps <= 0 or args.train_freq <= 0:
+        p.error("--gradient-steps and --train-freq must be positive")
     if args.steps <= 0 or args.n_envs <= 0 or args.eval_episodes <= 0:
         p.error("--steps, --n-envs and --eval-episodes must be positive")
     if not 0.0 < args.gamma <= 1.0:
@@ -134,6 +140,14 @@ def main(argv=None) -> int:
     steps_per_episode = gym.spec(args.task).max_episode_steps or 1000
     if args.resume:
         model = getattr(sb3, args.algo.upper()).load(str(Path(args.resume) / "model.zip"), env=venv, device="cpu")
+        if args.algo == "sac":
+            from stable_baselines3.common.type_aliases import TrainFreq, TrainFrequencyUnit
+
+            model.train_freq = TrainFreq(args.train_freq, TrainFrequencyUnit.STEP)
+            model.gradient_steps = args.gradient_steps
+            buffer = Path(args.resume) / "replay_buffer.pkl"
+            if buffer.is_file():
+                model.load_replay_buffer(str(buffer))
     elif args.algo == "ppo":
         n_steps = 512 if steps_per_episode > 100 else 128
         model = sb3.PPO("MlpPolicy", venv, seed=args.seed, n_steps=n_steps, batch_size=min(256, n_steps * args.n_envs),
@@ -142,7 +156,8 @@ def main(argv=None) -> int:
     else:
         model = sb3.SAC("MlpPolicy", venv, seed=args.seed, verbose=0, device="cpu",
                          learning_starts=min(1000, max(100, args.steps // 10)), gamma=args.gamma,
-                         learning_rate=args.learning_rate, policy_kwargs={"net_arch": arch}, train_freq=args.train_freq)
+                         learning_rate=args.learning_rate, policy_kwargs={"net_arch": arch}, train_freq=args.train_freq,
+                         gradient_steps=args.gradient_steps)
 
     import time
 
@@ -180,6 +195,8 @@ def main(argv=None) -> int:
     model.learn(total_timesteps=args.steps, callback=Progress(), reset_num_timesteps=not args.resume)
     model.save(out / "model.zip")
     venv.save(str(out / "vecnormalize.pkl"))
+    if args.algo == "sac":
+        model.save_replay_buffer(str(out / "replay_buffer.pkl"))    # --resume continues with it
     venv.training = False
     venv.norm_reward = False
 
@@ -196,7 +213,9 @@ def main(argv=None) -> int:
     space = gym.make(args.task).action_space
     space.seed(args.seed)
     result = {"task": args.task, "algo": args.algo, "steps": args.steps, "n_envs": args.n_envs, "seed": args.seed,
-              "gamma": args.gamma, "net_arch": arch, "learning_rate": args.learning_rate,
+              "gamma": args.gamma, "net_arch": arch, "resumed_from": args.resume,
+              "train_freq": args.train_freq if args.algo == "sac" else None,
+              "gradient_steps": args.gradient_steps if args.algo == "sac" else None, "learning_rate": args.learning_rate,
               "train_wall_s": round(train_wall, 1), "training_episodes": len(curve),
               "trained_steps": int(model.num_timesteps), "stopped_early": stopped[0],
               "load_average_1_5_15_min": {"start": [round(v, 2) for v in load_start],
