@@ -181,6 +181,8 @@ def main(argv=None) -> int:
                 if ep:
                     curve.append((self.num_timesteps, float(ep["r"]), bool(info.get("success", False)),
                                   time.perf_counter() - t0))
+                    self.bar.set_postfix(success_last20=f"{np.mean([c[2] for c in curve[-20:]]):.2f}",
+                                         episodes=len(curve), refresh=False)
             if args.stop_at_target and len(curve) >= 20 and np.mean([c[2] for c in curve[-20:]]) >= args.target_success:
                 stopped[0] = "target reached"
                 return False
