@@ -23,6 +23,11 @@ def parse(argv=None):
     p.add_argument("--policy", default="shipped", help="a .npz file or 'shipped' (the task's shipped policy)")
     p.add_argument("--seeds", default="10001:10021", help="reset seeds START:STOP (stop exclusive)")
     p.add_argument("--modes", default="deterministic,stochastic", help="comma separated: deterministic, stochastic")
+    p.add_argument("--noise-scales", default=None,
+                   help="stochastic mode: comma separated temperatures (sd x scale) to compare, e.g. 0.5,1 "
+                   "(choose on validation seeds, report on others); default: the file's")
+    p.add_argument("--save", default=None, help="write the policy in stochastic mode with the single --noise-scales "
+                   "value to this .npz")
     p.add_argument("--no-random", action="store_true", help="skip the random-policy baseline")
     args = p.parse_args(argv)
     try:
@@ -80,8 +85,16 @@ def main(argv=None) -> int:
     try:
         path = shipped_path(args.task) if args.policy == "shipped" else args.policy
         out = {"task": args.task, "policy": str(path), "seeds": [args.seed_range.start, args.seed_range.stop - 1]}
+        scales = [None] if not args.noise_scales else [float(v) for v in args.noise_scales.split(",")]
         for mode in [m.strip() for m in args.modes.split(",") if m.strip()]:
-            out[mode] = evaluate(args.task, NpzPolicy.load(path, mode=mode), args.seed_range)
+            for scale in (scales if mode == "stochastic" else [None]):
+                key = mode if scale is None else f"{mode}_x{scale:g}"
+                out[key] = evaluate(args.task, NpzPolicy.load(path, mode=mode, noise_scale=scale), args.seed_range)
+        if args.save:
+            if len(scales) != 1 or scales[0] is None:
+                raise ConfigError("--save needs exactly one --noise-scales value")
+            NpzPolicy.load(path, mode="stochastic", noise_scale=scales[0]).save(args.save)
+            out["saved"] = args.save
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

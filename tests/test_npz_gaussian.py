@@ -105,3 +105,15 @@ def test_sampler_stream_is_not_the_env_stream_of_the_same_seed():
     noise = p.rng.standard_normal(64)
     assert not np.allclose(noise, np.random.default_rng(10001).standard_normal(64))
     assert abs(np.corrcoef(noise, np.random.default_rng(10001).standard_normal(64))[0, 1]) < 0.5
+
+
+def test_noise_scale_is_a_temperature_on_the_sd_and_is_saved(tmp_path):
+    p = NpzPolicy([W0, W1], [B0, B1], activation="tanh", log_std=np.array([-1.0, -2.0]), mode="stochastic",
+                  noise_scale=0.5)
+    a = np.stack([p(OBS) for _ in range(N)]).astype(float)
+    assert np.allclose(a.std(0), 0.5 * np.exp([-1.0, -2.0]), rtol=0.05)
+    assert NpzPolicy.load(p.save(tmp_path / "t.npz")).noise_scale == 0.5
+    assert NpzPolicy.load(tmp_path / "t.npz", noise_scale=0.0)(OBS).tolist() == \
+        NpzPolicy.load(tmp_path / "t.npz", mode="deterministic")(OBS).tolist()
+    with pytest.raises(ConfigError, match="noise_scale=-1 must be"):
+        NpzPolicy([W0, W1], [B0, B1], log_std=np.zeros(2), noise_scale=-1)

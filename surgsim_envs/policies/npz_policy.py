@@ -28,6 +28,8 @@ key                 shape / type                 meaning
 ``log_std_min/max`` scalars (optional, -20, 2)   (``h_{L-1}`` = the input of the last layer)
 ``mode``            str (optional)               ``deterministic`` (default) | ``stochastic``: how the
                                                  policy acts unless the caller overrides it
+``noise_scale``     scalar (optional, 1)         stochastic mode: sd = ``noise_scale * exp(log_std)``
+                                                 (a temperature chosen on validation seeds)
 ==================  ===========================  =================================================
 
 Stochastic actions (issue 15): with a Gaussian head, ``mode = stochastic`` samples the
@@ -73,7 +75,8 @@ class NpzPolicy:
                  obs_mean=None, obs_std=None, obs_clip: float = np.inf, action_scale=None, action_bias=None,
                  action_low=None, action_high=None, obs_keys=None, action_keys=None, action_sizes=None,
                  log_std=None, log_std_W=None, log_std_b=None, log_std_min: float = -20.0,
-                 log_std_max: float = 2.0, mode: str = "deterministic", seed: int | None = 0,
+                 log_std_max: float = 2.0, mode: str = "deterministic", noise_scale: float = 1.0,
+                 seed: int | None = 0,
                  source: str = "<npz policy>"):
         self.source = source
         if not (isinstance(weights, (list, tuple)) and isinstance(biases, (list, tuple))):
@@ -120,6 +123,9 @@ class NpzPolicy:
                                 "outputs exactly")
             self.action_sizes = [int(s) for s in sizes]
         self._init_gaussian(log_std, log_std_W, log_std_b, log_std_min, log_std_max, mode)
+        self.noise_scale = float(noise_scale)
+        if not (np.isfinite(self.noise_scale) and self.noise_scale >= 0):
+            raise self._bad(f"noise_scale={noise_scale!r} must be a finite number >= 0")
         self.reset(seed)
 
     def _init_gaussian(self, log_std, log_std_W, log_std_b, log_std_min, log_std_max, mode) -> None:
@@ -227,7 +233,7 @@ class NpzPolicy:
                 log_std = self.log_std
             else:
                 log_std = np.clip(h @ self.log_std_W + self.log_std_b, self.log_std_min, self.log_std_max)
-            mean = mean + np.exp(log_std) * self.rng.standard_normal(mean.shape)
+            mean = mean + self.noise_scale * np.exp(log_std) * self.rng.standard_normal(mean.shape)
         return np.tanh(mean) if self.output_activation == "tanh" else mean
 
     def __call__(self, obs):
@@ -265,7 +271,7 @@ class NpzPolicy:
             d["log_std_W"], d["log_std_b"] = self.log_std_W, self.log_std_b
         if self.has_gaussian:
             d["log_std_min"], d["log_std_max"] = np.array(self.log_std_min), np.array(self.log_std_max)
-        d["mode"] = np.array(self.mode)
+        d["mode"], d["noise_scale"] = np.array(self.mode), np.array(self.noise_scale)
         return d
 
     def save(self, path) -> Path:
@@ -275,9 +281,9 @@ class NpzPolicy:
         return p if p.suffix == ".npz" else p.with_name(p.name + ".npz")
 
     @classmethod
-    def load(cls, path, mode: str | None = None, seed: int | None = 0) -> "NpzPolicy":
-        """Read and validate a ``.npz`` policy (no pickles: loading runs no code); ``mode``
-        overrides the file's ``mode``; ``seed`` seeds the action sampler."""
+    def load(cls, path, mode: str | None = None, seed: int | None = 0, noise_scale: float | None = None) -> "NpzPolicy":
+        """Read and validate a ``.npz`` policy (no pickles: loading runs no code); ``mode`` and
+        ``noise_scale`` override the file's; ``seed`` seeds the action sampler."""
         p = Path(path)
         if not p.is_file():
             raise ConfigError(f"policy file {str(p)!r} not found")
@@ -314,7 +320,9 @@ class NpzPolicy:
                        log_std=opt("log_std"), log_std_W=opt("log_std_W"), log_std_b=opt("log_std_b"),
                        log_std_min=float(data["log_std_min"]) if "log_std_min" in data else -20.0,
                        log_std_max=float(data["log_std_max"]) if "log_std_max" in data else 2.0,
-                       mode=mode or opt("mode", str) or "deterministic", seed=seed, source=str(p))
+                       mode=mode or opt("mode", str) or "deterministic",
+                       noise_scale=noise_scale if noise_scale is not None else
+                       (float(data["noise_scale"]) if "noise_scale" in data else 1.0), seed=seed, source=str(p))
         except (TypeError, ValueError) as exc:
             if isinstance(exc, ConfigError):
                 raise
