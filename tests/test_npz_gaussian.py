@@ -117,3 +117,25 @@ def test_noise_scale_is_a_temperature_on_the_sd_and_is_saved(tmp_path):
         NpzPolicy.load(tmp_path / "t.npz", mode="deterministic")(OBS).tolist()
     with pytest.raises(ConfigError, match="noise_scale=-1 must be"):
         NpzPolicy([W0, W1], [B0, B1], log_std=np.zeros(2), noise_scale=-1)
+
+
+def test_scenario_rollout_reseeds_a_stochastic_policy_per_episode(tmp_path):
+    """`surgsim run` with a stochastic .npz: each episode's sampler is reseeded with the episode's
+    reset seed (scenario seed + episode), so episode 1 of a seed-5 run (reset seed 6) repeats
+    episode 0 of a seed-6 run press for press (a sampler seeded once per run would not)."""
+    from surgsim_envs.policies import load_shipped
+    from surgsim_envs.scenarios.rollout import run_rollout
+    from surgsim_envs.scenarios.schema import loads_scenario
+
+    load_shipped("SurgSim/PalpationPress-v0").save(tmp_path / "press.npz")
+    assert NpzPolicy.load(tmp_path / "press.npz").mode == "stochastic"
+
+    def presses(seed):
+        text = (f'[scenario]\nname = "reseed"\ntask = "SurgSim/PalpationPress-v0"\nseed = {seed}\n'
+                '[policy]\nfile = "press.npz"\nepisodes = 2\nmax_steps = 2\n')
+        return run_rollout(loads_scenario(text, folder=tmp_path)).recording.position
+
+    five, six = presses(5), presses(6)
+    assert five.shape == (4, 3)
+    assert np.array_equal(five[2:], six[:2])
+    assert not np.allclose(five[:2], six[:2])
