@@ -45,14 +45,29 @@ def parse(argv=None):
                    help="a diverging tissue ends the episode (info['unstable']) instead of killing the run")
     p.add_argument("--export-npz", default=None, help="also write the policy as a numpy .npz MLP here "
                    "(surgsim_envs.policies.npz_policy; evaluated too)")
+    p.add_argument("--export-mode", choices=["deterministic", "stochastic"], default="deterministic",
+                   help="how the exported .npz acts by default (it holds the Gaussian head either way; both "
+                   "modes are evaluated)")
     p.add_argument("--net-arch", default="64,64", help="hidden layer sizes, comma separated")
     p.add_argument("--learning-rate", type=float, default=3e-4)
     p.add_argument("--resume", default=None, help="continue training the model.zip + vecnormalize.pkl in this folder "
-                   "(same task and algo; SAC starts with an empty replay buffer)")
+                   "(same task and algo; SAC also reloads replay_buffer.pkl when the folder has one, else starts with an "
+                   "empty buffer; --train-freq and --gradient-steps apply to the resumed SAC)")
     p.add_argument("--train-freq", type=int, default=1, help="SAC: one gradient step every N env steps (CPU budget)")
+    p.add_argument("--gradient-steps", type=int, default=1,
+                   help="SAC: gradient steps per update (updates every --train-freq env steps); slow envs such as "
+                   "PalpationPress-v0 (~0.1 s per press) afford several")
     p.add_argument("--target-success", type=float, default=0.8,
                    help="report the wall time when the success rate of the last 20 training episodes first reaches this")
+    p.add_argument("--stop-at-target", action="store_true",
+                   help="end training once --target-success is reached (then save, export and evaluate)")
+    p.add_argument("--max-wall", type=float, default=None,
+                   help="wall-time budget in s: training ends after it (then save, export and evaluate)")
     args = p.parse_args(argv)
+    if args.max_wall is not None and not args.max_wall > 0:
+        p.error(f"--max-wall must be a positive number of seconds, got {args.max_wall}")
+    if args.gradient_steps <= 0 or args.train_freq <= 0:
+        p.error("--gradient-steps and --train-freq must be positive")
     if args.steps <= 0 or args.n_envs <= 0 or args.eval_episodes <= 0:
         p.error("--steps, --n-envs and --eval-episodes must be positive")
     if not 0.0 < args.gamma <= 1.0:
@@ -63,12 +78,15 @@ def parse(argv=None):
 def evaluate(policy, task, episodes, seed, env_kwargs=None):
     """Mean return, success rate and unstable episodes of ``policy(obs) -> action`` over ``episodes``
     (reset seeds ``seed + 10000 + k``: training resets use ``seed .. seed + n_envs - 1`` and then the
-    env's own generator, so these are seeds it never trained on)."""
+    env's own generator, so these are seeds it never trained on). A policy with ``reset(seed)`` (a
+    stochastic ``.npz`` policy's sampler) is reseeded with each episode's seed."""
     import gymnasium as gym
 
     env = gym.make(task, **(env_kwargs or {}))
     returns, success, unstable = [], [], 0
     for k in range(episodes):
+        if hasattr(policy, "reset"):
+            policy.reset(seed + 10_000 + k)
         obs, info = env.reset(seed=seed + 10_000 + k)
         total = 0.0
         while True:
@@ -122,6 +140,14 @@ def main(argv=None) -> int:
     steps_per_episode = gym.spec(args.task).max_episode_steps or 1000
     if args.resume:
         model = getattr(sb3, args.algo.upper()).load(str(Path(args.resume) / "model.zip"), env=venv, device="cpu")
+        if args.algo == "sac":
+            from stable_baselines3.common.type_aliases import TrainFreq, TrainFrequencyUnit
+
+            model.train_freq = TrainFreq(args.train_freq, TrainFrequencyUnit.STEP)
+            model.gradient_steps = args.gradient_steps
+            buffer = Path(args.resume) / "replay_buffer.pkl"
+            if buffer.is_file():
+                model.load_replay_buffer(str(buffer))
     elif args.algo == "ppo":
         n_steps = 512 if steps_per_episode > 100 else 128
         model = sb3.PPO("MlpPolicy", venv, seed=args.seed, n_steps=n_steps, batch_size=min(256, n_steps * args.n_envs),
@@ -130,12 +156,17 @@ def main(argv=None) -> int:
     else:
         model = sb3.SAC("MlpPolicy", venv, seed=args.seed, verbose=0, device="cpu",
                          learning_starts=min(1000, max(100, args.steps // 10)), gamma=args.gamma,
-                         learning_rate=args.learning_rate, policy_kwargs={"net_arch": arch}, train_freq=args.train_freq)
+                         learning_rate=args.learning_rate, policy_kwargs={"net_arch": arch}, train_freq=args.train_freq,
+                         gradient_steps=args.gradient_steps)
 
     import time
 
+    import os
+
+    load_start = os.getloadavg()
     curve = []
     unstable = [0]
+    stopped = [None]
     t0 = time.perf_counter()
 
     class Progress(BaseCallback):
@@ -150,6 +181,14 @@ def main(argv=None) -> int:
                 if ep:
                     curve.append((self.num_timesteps, float(ep["r"]), bool(info.get("success", False)),
                                   time.perf_counter() - t0))
+                    self.bar.set_postfix(success_last20=f"{np.mean([c[2] for c in curve[-20:]]):.2f}",
+                                         episodes=len(curve), refresh=False)
+            if args.stop_at_target and len(curve) >= 20 and np.mean([c[2] for c in curve[-20:]]) >= args.target_success:
+                stopped[0] = "target reached"
+                return False
+            if args.max_wall is not None and time.perf_counter() - t0 > args.max_wall:
+                stopped[0] = "max wall"
+                return False
             return True
 
         def _on_training_end(self):
@@ -158,6 +197,8 @@ def main(argv=None) -> int:
     model.learn(total_timesteps=args.steps, callback=Progress(), reset_num_timesteps=not args.resume)
     model.save(out / "model.zip")
     venv.save(str(out / "vecnormalize.pkl"))
+    if args.algo == "sac":
+        model.save_replay_buffer(str(out / "replay_buffer.pkl"))    # --resume continues with it
     venv.training = False
     venv.norm_reward = False
 
@@ -174,8 +215,13 @@ def main(argv=None) -> int:
     space = gym.make(args.task).action_space
     space.seed(args.seed)
     result = {"task": args.task, "algo": args.algo, "steps": args.steps, "n_envs": args.n_envs, "seed": args.seed,
-              "gamma": args.gamma, "net_arch": arch, "learning_rate": args.learning_rate,
+              "gamma": args.gamma, "net_arch": arch, "resumed_from": args.resume,
+              "train_freq": args.train_freq if args.algo == "sac" else None,
+              "gradient_steps": args.gradient_steps if args.algo == "sac" else None, "learning_rate": args.learning_rate,
               "train_wall_s": round(train_wall, 1), "training_episodes": len(curve),
+              "trained_steps": int(model.num_timesteps), "stopped_early": stopped[0],
+              "load_average_1_5_15_min": {"start": [round(v, 2) for v in load_start],
+                                          "end": [round(v, 2) for v in os.getloadavg()]},
               f"first_reached_{args.target_success:g}_success_last20": reach,
               "unstable_training_episodes": unstable[0],
               "eval_seeds": [args.seed + 10_000, args.seed + 10_000 + args.eval_episodes - 1],
@@ -184,7 +230,7 @@ def main(argv=None) -> int:
     if args.export_npz:
         from surgsim_envs.policies.export_sb3 import check_export, sb3_to_npz
 
-        npz = sb3_to_npz(model, venv, source=args.export_npz)
+        npz = sb3_to_npz(model, venv, source=args.export_npz, mode=args.export_mode)
         sample_env = gym.make(args.task, **env_kwargs)
         obs_samples = [sample_env.reset(seed=args.seed + 20_000 + k)[0] for k in range(4)]
         o = obs_samples[-1]
@@ -193,7 +239,11 @@ def main(argv=None) -> int:
             obs_samples.append(o)
         result["npz_max_action_difference"] = check_export(model, npz, np.array(obs_samples), venv)
         path = npz.save(args.export_npz)
-        result["npz"] = {"path": str(path), "eval": evaluate(npz, args.task, args.eval_episodes, args.seed, env_kwargs)}
+        result["npz"] = {"path": str(path), "mode": args.export_mode}
+        for mode in ("deterministic", "stochastic"):
+            result["npz"][f"eval_{mode}"] = evaluate(npz.with_mode(mode), args.task, args.eval_episodes, args.seed,
+                                                     env_kwargs)
+        npz.with_mode(args.export_mode)
     with open(out / "curve.json", "w") as fh:
         json.dump([list(c) for c in curve], fh)
     with open(out / "eval.json", "w") as fh:
@@ -215,6 +265,9 @@ def main(argv=None) -> int:
     ax.axhline(result["random"]["mean_return"], color="grey", ls="--", label="random policy")
     ax2.axhline(result["random"]["success_rate"], color="grey", ls="--", label="random (eval seeds)")
     ax2.axhline(result["trained"]["success_rate"], color="C2", ls=":", label="trained, deterministic (eval seeds)")
+    if "npz" in result:
+        ax2.axhline(result["npz"]["eval_stochastic"]["success_rate"], color="C3", ls="-.",
+                    label="trained, stochastic .npz (eval seeds)")
     ax.set_xlabel("environment steps")
     ax.set_ylabel("episode return")
     ax2.set_xlabel("environment steps")

@@ -1,10 +1,14 @@
-"""Shipped .npz policies (issue 15): load without torch and beat random on held-out seeds,
-reaching their documented success (docs/training.md)."""
+"""Shipped .npz policies (issue 15): every task has one, it loads without torch, and it beats a
+uniform random policy on held-out seeds, reaching its documented success (docs/training.md).
+
+The default run evaluates one policy (PalpationPress-v0, a few seconds); the others run with
+``-m slow`` (each episode of a 150-600 step task costs seconds of physics)."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
+from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
@@ -15,17 +19,33 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.policies import SHIPPED, load_shipped, shipped_path, shipped_tasks
 from surgsim_envs.scenarios.policies import load_policy
 
-#: task -> (held-out reset seeds, least successes of the shipped policy on them, env keywords).
-#: The seeds are the first 8 of the documented evaluation (docs/training.md; never used in
-#: training: training resets are seeded 0/1, then the envs' own generators). Documented: 5/20 = 25 %
-#: on seeds 10001-10020 against random 1/20; measured here 2/8 against random 1/8. This is BELOW
-#: the issue's 70 % target (docs/training.md says why); the test pins what ships.
+
+@dataclass(frozen=True)
+class HeldOut:
+    """Held-out reset seeds (the first few of the documented evaluation; never used in training:
+    training resets are seeded with the run's seed, then the envs' own generators), the least
+    successes the shipped policy reaches on them (measured here, see each entry) and whether the
+    comparison with random is on success count or on mean return."""
+
+    seeds: range
+    least_successes: int
+    compare: str = "success"        # "success" | "return"
+    slow: bool = True
+
+
 HELD_OUT = {
-    "SurgSim/PalpationPress-v0": (range(10_001, 10_009), 2, {}),
+    # stochastic (the file's mode, noise_scale 0.75), sampler reseeded per episode with the reset
+    # seed: 3/4 here (10001-10010: 9/10; documented 31/40 on 10001-10040), random 0/4
+    "SurgSim/PalpationPress-v0": HeldOut(range(10_001, 10_005), 3, slow=False),
+    "SurgSim/Grasp-v0": HeldOut(range(10_000, 10_004), 4),
+    "SurgSim/Slippage-v0": HeldOut(range(10_000, 10_004), 3),
+    "SurgSim/Palpation-v0": HeldOut(range(10_000, 10_003), 0, compare="return"),
 }
 
 
 def rollout(env, policy, seed):
+    if hasattr(policy, "reset"):
+        policy.reset(seed)
     obs, _ = env.reset(seed=seed)
     total = 0.0
     while True:
@@ -38,6 +58,7 @@ def rollout(env, policy, seed):
 def test_every_shipped_policy_is_present_and_evaluated_here():
     assert shipped_tasks() == list(SHIPPED)
     assert set(HELD_OUT) == set(SHIPPED)
+    assert {"SurgSim/Palpation-v0", "SurgSim/Grasp-v0", "SurgSim/Slippage-v0", "SurgSim/PalpationPress-v0"} <= set(SHIPPED)
 
 
 def test_shipped_policies_load_without_torch():
@@ -55,16 +76,23 @@ def test_unknown_task_names_the_shipped_ones():
         load_policy("shipped:SurgSim/NoSuchTask-v0")
 
 
-@pytest.mark.parametrize("task", sorted(HELD_OUT))
+def _params():
+    return [pytest.param(t, marks=[pytest.mark.slow] if h.slow else []) for t, h in sorted(HELD_OUT.items())]
+
+
+@pytest.mark.parametrize("task", _params())
 def test_shipped_policy_beats_random_on_held_out_seeds(task):
-    seeds, least, kwargs = HELD_OUT[task]
-    env = gym.make(task, **kwargs)
+    spec = HELD_OUT[task]
+    env = gym.make(task)
     policy = load_shipped(task)
     assert policy.obs_size == env.observation_space.shape[0] and policy.action_size == env.action_space.shape[0]
-    trained = [rollout(env, policy, s) for s in seeds]
+    trained = [rollout(env, policy, s) for s in spec.seeds]
     env.action_space.seed(0)
-    rand = [rollout(env, lambda o: env.action_space.sample(), s) for s in seeds]
+    rand = [rollout(env, lambda o: env.action_space.sample(), s) for s in spec.seeds]
     env.close()
-    assert sum(ok for ok, _ in trained) >= least
-    assert sum(ok for ok, _ in trained) > sum(ok for ok, _ in rand)
     assert all(np.isfinite(r) for _, r in trained)
+    assert sum(ok for ok, _ in trained) >= spec.least_successes
+    if spec.compare == "success":
+        assert sum(ok for ok, _ in trained) > sum(ok for ok, _ in rand)
+    else:
+        assert np.mean([r for _, r in trained]) > np.mean([r for _, r in rand])

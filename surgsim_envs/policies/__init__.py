@@ -24,6 +24,9 @@ POLICY_DIR = Path(__file__).resolve().parent
 #: task id -> shipped policy file in this folder
 SHIPPED = {
     "SurgSim/PalpationPress-v0": "palpation_press_v0.npz",
+    "SurgSim/Grasp-v0": "grasp_v0.npz",
+    "SurgSim/Slippage-v0": "slippage_v0.npz",
+    "SurgSim/Palpation-v0": "palpation_v0.npz",
 }
 
 
@@ -39,11 +42,13 @@ def shipped_path(task: str) -> Path:
     return POLICY_DIR / SHIPPED[task]
 
 
-def load_shipped(task: str):
-    """The shipped :class:`~surgsim_envs.policies.npz_policy.NpzPolicy` of ``task``."""
+def load_shipped(task: str, mode: str | None = None, seed: int | None = 0):
+    """The shipped :class:`~surgsim_envs.policies.npz_policy.NpzPolicy` of ``task``, acting in the
+    file's recorded ``mode`` (PalpationPress-v0: stochastic) unless ``mode`` is given; ``seed``
+    seeds its action sampler (``policy.reset(seed)`` reseeds it per episode)."""
     from surgsim_envs.policies.npz_policy import NpzPolicy
 
-    return NpzPolicy.load(shipped_path(task))
+    return NpzPolicy.load(shipped_path(task), mode=mode, seed=seed)
 
 
 __all__ = ["POLICY_DIR", "SHIPPED", "shipped_tasks", "shipped_path", "load_shipped"]

@@ -45,10 +45,11 @@ def _linear_stack(modules) -> tuple[list, list, str]:
     return weights, biases, (acts.pop() if acts else "tanh")
 
 
-def sb3_to_npz(model, vecnormalize=None, source: str = "<sb3 export>") -> NpzPolicy:
-    """:class:`NpzPolicy` with the deterministic actions of SB3 ``model`` (PPO/A2C or SAC with an
-    MLP policy on a Box observation and Box action space); ``vecnormalize`` the training
-    ``VecNormalize`` (or None)."""
+def sb3_to_npz(model, vecnormalize=None, source: str = "<sb3 export>", mode: str = "deterministic") -> NpzPolicy:
+    """:class:`NpzPolicy` with the actions of SB3 ``model`` (PPO/A2C or SAC with an MLP policy on a
+    Box observation and Box action space); ``vecnormalize`` the training ``VecNormalize`` (or
+    None). The Gaussian head is exported too (PPO's ``log_std`` parameter, SAC's ``log_std``
+    layer and its clip); ``mode`` records how the policy acts by default."""
     policy = model.policy
     space = model.action_space
     low, high = np.asarray(space.low, dtype=np.float64), np.asarray(space.high, dtype=np.float64)
@@ -58,13 +59,17 @@ def sb3_to_npz(model, vecnormalize=None, source: str = "<sb3 export>") -> NpzPol
             raise ConfigError(f"cannot export {type(policy.action_dist).__name__}: only Gaussian (Box) actions")
         w, b, act = _linear_stack(policy.mlp_extractor.policy_net)
         hw, hb, _ = _linear_stack([policy.action_net])
-        kw = dict(action_low=low, action_high=high, output_activation="identity")
+        kw = dict(action_low=low, action_high=high, output_activation="identity",
+                  log_std=policy.log_std.detach().cpu().numpy().astype(np.float64))
     elif hasattr(policy, "actor") and hasattr(policy.actor, "mu"):                     # SAC / TD3-like
         if getattr(policy.actor, "use_sde", False):
             raise ConfigError("cannot export a gSDE SAC actor; train with use_sde=False")
         w, b, act = _linear_stack(policy.actor.latent_pi)
         hw, hb, _ = _linear_stack([policy.actor.mu])
-        kw = dict(action_scale=(high - low) / 2.0, action_bias=(high + low) / 2.0, action_low=low,
+        sw, sb, _ = _linear_stack([policy.actor.log_std])
+        from stable_baselines3.sac.policies import LOG_STD_MAX, LOG_STD_MIN
+
+        kw = dict(log_std_W=sw[0], log_std_b=sb[0], log_std_min=LOG_STD_MIN, log_std_max=LOG_STD_MAX,action_scale=(high - low) / 2.0, action_bias=(high + low) / 2.0, action_low=low,
                   action_high=high, output_activation="tanh")
     else:
         raise ConfigError(f"cannot export policy {type(policy).__name__}; PPO/A2C and SAC MLP policies are supported")
@@ -73,7 +78,7 @@ def sb3_to_npz(model, vecnormalize=None, source: str = "<sb3 export>") -> NpzPol
         kw.update(obs_mean=np.asarray(rms.mean, dtype=np.float64),
                   obs_std=np.sqrt(np.asarray(rms.var, dtype=np.float64) + vecnormalize.epsilon),
                   obs_clip=float(vecnormalize.clip_obs))
-    return NpzPolicy(w + hw, b + hb, activation=act, source=source, **kw)
+    return NpzPolicy(w + hw, b + hb, activation=act, source=source, mode=mode, **kw)
 
 
 def check_export(model, npz: NpzPolicy, observations, vecnormalize=None, atol: float = 1e-4) -> float:
@@ -82,7 +87,12 @@ def check_export(model, npz: NpzPolicy, observations, vecnormalize=None, atol: f
     obs = np.asarray(observations, dtype=np.float32)
     sb3_in = vecnormalize.normalize_obs(obs) if vecnormalize is not None else obs
     ref, _ = model.predict(sb3_in, deterministic=True)
-    ours = np.stack([npz(o) for o in obs])
+    mode = npz.mode
+    npz.with_mode("deterministic")
+    try:
+        ours = np.stack([npz(o) for o in obs])
+    finally:
+        npz.with_mode(mode)
     err = float(np.max(np.abs(ours - ref)))
     if not err <= atol:
         raise ConfigError(f"exported policy differs from SB3 by {err:.3g} > {atol:g}; the export is wrong")

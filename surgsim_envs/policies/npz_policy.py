@@ -22,7 +22,21 @@ key                 shape / type                 meaning
 ``obs_keys``        (k,) str (optional)          dict observations: concatenate these keys (flattened)
 ``action_keys``     (m,) str (optional)          dict actions: split the action into these keys ...
 ``action_sizes``    (m,) int (optional)          ... of these sizes (size 1 gives a scalar)
+``log_std``         (n_L,) (optional)            Gaussian head, state-independent (SB3 PPO): log sd of ``h_L``
+``log_std_W``       (n_{L-1}, n_L) (optional)    Gaussian head, state-dependent (SB3 SAC): log sd =
+``log_std_b``       (n_L,) (optional)            ``clip(h_{L-1} @ log_std_W + log_std_b, log_std_min, log_std_max)``
+``log_std_min/max`` scalars (optional, -20, 2)   (``h_{L-1}`` = the input of the last layer)
+``mode``            str (optional)               ``deterministic`` (default) | ``stochastic``: how the
+                                                 policy acts unless the caller overrides it
+``noise_scale``     scalar (optional, 1)         stochastic mode: sd = ``noise_scale * exp(log_std)``
+                                                 (a temperature chosen on validation seeds)
 ==================  ===========================  =================================================
+
+Stochastic actions (issue 15): with a Gaussian head, ``mode = stochastic`` samples the
+pre-activation output ``h_L ~ N(mean, exp(log_std)^2)`` (then the output activation, e.g. SAC's
+tanh squashing, scaling and clipping, exactly as the deterministic path) from a numpy
+``Generator``: :meth:`NpzPolicy.reset` ``(seed)`` reseeds it (stream ``(seed, SAMPLER_STREAM)``), so an episode's actions are
+reproducible from (policy file, seed, observations). ``deterministic`` uses the mean.
 
 Every array must be finite; std must be > 0; at most :data:`MAX_LAYERS` layers and
 :data:`MAX_PARAMETERS` numbers. A stable-baselines3 MLP policy maps onto it directly (issue 15
@@ -49,6 +63,9 @@ ACTIVATIONS = {
     "elu": lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0.0))),
 }
 OUTPUT_ACTIVATIONS = ("identity", "tanh")
+MODES = ("deterministic", "stochastic")
+#: second word of the sampler's seed sequence: keeps it independent of an env seeded alike
+SAMPLER_STREAM = 0x5EED_AC7
 
 
 class NpzPolicy:
@@ -57,6 +74,9 @@ class NpzPolicy:
     def __init__(self, weights, biases, activation: str = "tanh", output_activation: str = "identity",
                  obs_mean=None, obs_std=None, obs_clip: float = np.inf, action_scale=None, action_bias=None,
                  action_low=None, action_high=None, obs_keys=None, action_keys=None, action_sizes=None,
+                 log_std=None, log_std_W=None, log_std_b=None, log_std_min: float = -20.0,
+                 log_std_max: float = 2.0, mode: str = "deterministic", noise_scale: float = 1.0,
+                 seed: int | None = 0,
                  source: str = "<npz policy>"):
         self.source = source
         if not (isinstance(weights, (list, tuple)) and isinstance(biases, (list, tuple))):
@@ -102,6 +122,55 @@ class NpzPolicy:
                 raise self._bad(f"action_keys {self.action_keys} with sizes {list(sizes)} must split the {n_out} "
                                 "outputs exactly")
             self.action_sizes = [int(s) for s in sizes]
+        self._init_gaussian(log_std, log_std_W, log_std_b, log_std_min, log_std_max, mode)
+        self.noise_scale = float(noise_scale)
+        if not (np.isfinite(self.noise_scale) and self.noise_scale >= 0):
+            raise self._bad(f"noise_scale={noise_scale!r} must be a finite number >= 0")
+        self.reset(seed)
+
+    def _init_gaussian(self, log_std, log_std_W, log_std_b, log_std_min, log_std_max, mode) -> None:
+        n_out = self.action_size
+        self.log_std = None if log_std is None else self._vector(log_std, n_out, 0.0, "log_std")
+        self.log_std_W = self.log_std_b = None
+        if (log_std_W is None) != (log_std_b is None):
+            raise self._bad("log_std_W and log_std_b come together (a state-dependent log sd layer)")
+        if log_std_W is not None:
+            if self.log_std is not None:
+                raise self._bad("give either log_std (constant) or log_std_W/log_std_b (state-dependent), not both")
+            self.log_std_W = self._finite(log_std_W, "log_std_W", ndim=2)
+            self.log_std_b = self._vector(log_std_b, n_out, 0.0, "log_std_b")
+            if self.log_std_W.shape != (self.weights[-1].shape[0], n_out):
+                raise self._bad(f"log_std_W must have shape {(self.weights[-1].shape[0], n_out)} (input of the last "
+                                f"layer, actions), got {self.log_std_W.shape}")
+        self.log_std_min, self.log_std_max = float(log_std_min), float(log_std_max)
+        if not (np.isfinite(self.log_std_min) and np.isfinite(self.log_std_max) and self.log_std_min <= self.log_std_max):
+            raise self._bad(f"log_std_min={log_std_min!r} must be <= log_std_max={log_std_max!r} (finite)")
+        self.mode = self._check_mode(mode)
+
+    @property
+    def has_gaussian(self) -> bool:
+        """True when the file holds a Gaussian head (actions can be sampled)."""
+        return self.log_std is not None or self.log_std_W is not None
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reseed the action sampler (stochastic mode); call at each episode start for
+        reproducible episodes. ``None`` draws fresh entropy. The stream is that of the seed
+        sequence ``(seed, SAMPLER_STREAM)``, not ``default_rng(seed)``: Gymnasium seeds an env's
+        ``np_random`` with ``default_rng(seed)``, and the same seed for the env reset and the
+        policy would make the action noise replay the env's randomisation (the inclusion position)."""
+        self.rng = np.random.default_rng(None if seed is None else [int(seed), SAMPLER_STREAM])
+
+    def with_mode(self, mode: str) -> "NpzPolicy":
+        """This policy acting ``deterministic`` or ``stochastic`` (ConfigError without a Gaussian head)."""
+        self.mode = self._check_mode(mode)
+        return self
+
+    def _check_mode(self, mode: str) -> str:
+        if mode not in MODES:
+            raise self._bad(f"mode {mode!r} unknown; choose one of {list(MODES)}")
+        if mode == "stochastic" and not self.has_gaussian:
+            raise self._bad("mode 'stochastic' needs a Gaussian head (log_std or log_std_W/log_std_b)")
+        return mode
 
     # -- validation helpers -------------------------------------------------------------------
     def _bad(self, msg: str) -> ConfigError:
@@ -156,11 +225,16 @@ class NpzPolicy:
         """The raw network output ``h_L`` for one flat observation (before action scaling)."""
         h = np.clip((x - self.obs_mean) / self.obs_std, -self.obs_clip, self.obs_clip)
         act = ACTIVATIONS[self.activation]
-        last = len(self.weights) - 1
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            h = h @ w + b
-            h = (np.tanh(h) if self.output_activation == "tanh" else h) if i == last else act(h)
-        return h
+        for w, b in zip(self.weights[:-1], self.biases[:-1]):
+            h = act(h @ w + b)
+        mean = h @ self.weights[-1] + self.biases[-1]
+        if self.mode == "stochastic":
+            if self.log_std is not None:
+                log_std = self.log_std
+            else:
+                log_std = np.clip(h @ self.log_std_W + self.log_std_b, self.log_std_min, self.log_std_max)
+            mean = mean + self.noise_scale * np.exp(log_std) * self.rng.standard_normal(mean.shape)
+        return np.tanh(mean) if self.output_activation == "tanh" else mean
 
     def __call__(self, obs):
         x = self._flatten(obs)
@@ -191,6 +265,13 @@ class NpzPolicy:
             d["obs_keys"] = np.array(self.obs_keys)
         if self.action_keys is not None:
             d["action_keys"], d["action_sizes"] = np.array(self.action_keys), np.array(self.action_sizes)
+        if self.log_std is not None:
+            d["log_std"] = self.log_std
+        if self.log_std_W is not None:
+            d["log_std_W"], d["log_std_b"] = self.log_std_W, self.log_std_b
+        if self.has_gaussian:
+            d["log_std_min"], d["log_std_max"] = np.array(self.log_std_min), np.array(self.log_std_max)
+        d["mode"], d["noise_scale"] = np.array(self.mode), np.array(self.noise_scale)
         return d
 
     def save(self, path) -> Path:
@@ -200,8 +281,9 @@ class NpzPolicy:
         return p if p.suffix == ".npz" else p.with_name(p.name + ".npz")
 
     @classmethod
-    def load(cls, path) -> "NpzPolicy":
-        """Read and validate a ``.npz`` policy (no pickles: loading runs no code)."""
+    def load(cls, path, mode: str | None = None, seed: int | None = 0, noise_scale: float | None = None) -> "NpzPolicy":
+        """Read and validate a ``.npz`` policy (no pickles: loading runs no code); ``mode`` and
+        ``noise_scale`` override the file's; ``seed`` seeds the action sampler."""
         p = Path(path)
         if not p.is_file():
             raise ConfigError(f"policy file {str(p)!r} not found")
@@ -234,7 +316,13 @@ class NpzPolicy:
                        obs_mean=opt("obs_mean"), obs_std=opt("obs_std"), obs_clip=obs_clip,
                        action_scale=opt("action_scale"), action_bias=opt("action_bias"),
                        action_low=opt("action_low"), action_high=opt("action_high"), obs_keys=opt("obs_keys"),
-                       action_keys=opt("action_keys"), action_sizes=opt("action_sizes"), source=str(p))
+                       action_keys=opt("action_keys"), action_sizes=opt("action_sizes"),
+                       log_std=opt("log_std"), log_std_W=opt("log_std_W"), log_std_b=opt("log_std_b"),
+                       log_std_min=float(data["log_std_min"]) if "log_std_min" in data else -20.0,
+                       log_std_max=float(data["log_std_max"]) if "log_std_max" in data else 2.0,
+                       mode=mode or opt("mode", str) or "deterministic",
+                       noise_scale=noise_scale if noise_scale is not None else
+                       (float(data["noise_scale"]) if "noise_scale" in data else 1.0), seed=seed, source=str(p))
         except (TypeError, ValueError) as exc:
             if isinstance(exc, ConfigError):
                 raise

@@ -4,7 +4,8 @@ The policy reference (``[policy] file``) is loaded by :func:`~surgsim_envs.scena
 (trust model: data and built-in policies always, code only with ``--allow-code``).
 A callable whose first parameter is named ``env`` is a *factory*: it is called with the
 environment at the start of each episode and must return ``policy(obs) -> action``. Otherwise the
-callable is the policy itself. Each control step records the tool's contact forces (N) and
+callable is the policy itself; a policy with ``reset(seed)`` (a stochastic ``.npz`` policy's
+sampler) is reseeded with the episode's reset seed. Each control step records the tool's contact forces (N) and
 position (m) from the task's simulation; the episode's ``info`` supplies the inclusion estimate
 (``guess_xy_m``) and truth (``inclusion_centre_m``) when the task has them.
 """
@@ -57,6 +58,8 @@ def run_rollout(sc, progress: bool = False):
         for ep in range(spec.episodes):
             obs, info = env.reset(seed=sc.meta.seed + ep)
             policy = _as_policy(ref, env)
+            if callable(getattr(policy, "reset", None)):     # a stochastic .npz policy: reproducible episodes
+                policy.reset(sc.meta.seed + ep)
             sim = getattr(env.unwrapped, "sim", None)
             tool = next(iter(sim.tools)) if sim is not None and sim.tools else None
             start = t_offset
