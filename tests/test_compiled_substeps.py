@@ -51,7 +51,8 @@ def _assert_same(s0, s1):
     assert g0._energy_ref == pytest.approx(g1._energy_ref, rel=1e-12, abs=0.0)
 
 
-@pytest.mark.parametrize("task", ["SurgSim/Palpation-v0", "SurgSim/Slippage-v0"])
+@pytest.mark.parametrize("task", ["SurgSim/Palpation-v0",
+                                  pytest.param("SurgSim/Slippage-v0", marks=pytest.mark.slow)])
 def test_compiled_substeps_match_the_generic_loop_bit_for_bit(task):
     envs = _pair(task)
     s0, s1 = (e.unwrapped.sim for e in envs)

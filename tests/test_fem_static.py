@@ -162,6 +162,7 @@ def _dimitriadis_error(case):
     return np.abs(res.force[sel] / ref[sel] - 1.0)
 
 
+@pytest.mark.slow  # ~25-45 s; the default run keeps the exactness test (condensed = full sparse solve)
 def test_indentation_within_five_percent_of_dimitriadis_held_out():
     err = _dimitriadis_error(FAST_CASE)
     assert err.mean() < 0.05, err

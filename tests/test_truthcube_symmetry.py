@@ -96,6 +96,7 @@ def test_measured_floor_exceeds_the_issue_target_at_large_strain(cube):
     assert floors[0] < floors[1] < floors[2] < 0.02 * tc.CUBE
 
 
+@pytest.mark.slow  # ~20 s of FEM solves; the default run keeps the floor and invariance tests
 def test_bonded_fem_prediction_is_symmetric_and_its_model_part_beats_affine(cube):
     """Fast representative: linear ANP FEM (bonded plates) predicts a field with the experiment's
     symmetry (its asymmetric part, from the tet pattern and bead irregularity, is < 0.1 mm) and its
@@ -126,6 +127,7 @@ def test_neo_hookean_is_within_a_tenth_of_a_millimetre_of_the_floor(cube):
         assert b["total"] < b["floor"] + 0.1e-3, b
 
 
+@pytest.mark.slow
 def test_error_budget_figure_is_written(tmp_path):
     """scripts/truthcube.py --figure: one bar group per strain, floor and target lines, off-scale
     bars clipped with their value (synthetic rows; the real table is in docs/benchmarks.md)."""
