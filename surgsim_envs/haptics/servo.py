@@ -383,24 +383,7 @@ class ServoLoop:
         (viewer sync, video frames; see recording.PacedVideoWriter for a video at its rate). ``on_frame`` must hold
         ``loop.physics_lock`` while it touches the physics (briefly: copy, then render outside);
         returning False stops early."""
-        if not (math.isfinite(duration) and duration > 0):
-            raise ConfigError(f"duration must be > 0 s, got {duration!r}")
-        if not (math.isfinite(frame_period) and frame_period > 0):
-            raise ConfigError(f"frame_period must be > 0 s, got {frame_period!r}")
-        self.start()
-        try:
-            start = time.perf_counter()
-            end = start + duration
-            k = 0
-            while time.perf_counter() < end and not self._stop.is_set():
-                if on_frame is not None and on_frame(self) is False:
-                    break
-                # absolute deadlines: a slow on_frame (rendering) does not stretch the frame period
-                k = max(k + 1, int((time.perf_counter() - start) / frame_period) + 1)
-                time.sleep(max(0.0, min(start + k * frame_period, end) - time.perf_counter()))
-        finally:
-            stats = self.stop()
-        return stats
+        return run_frames(self, duration, on_frame, frame_period, lambda: not self._stop.is_set())
 
     def _finish_stats(self, physics_time: float) -> None:
         st = self.stats
@@ -412,3 +395,27 @@ class ServoLoop:
             st.period_max_at_s = float(np.sum(p[:int(np.argmax(p)) + 1]) * 1e-3)
             st.overruns = int(np.sum(p > 2e3 * self.config.period))
         st.physics_rate_hz = st.physics_updates / physics_time if physics_time > 0 else float("nan")
+
+
+def run_frames(loop, duration: float, on_frame, frame_period: float, running) -> ServoStats:
+    """The body of ``run_realtime`` shared by :class:`ServoLoop` and the process servo: check the
+    arguments, ``loop.start()``, call ``on_frame(loop)`` every ``frame_period`` s on absolute deadlines
+    (a slow on_frame does not stretch the period; late calls are not made up) while ``running()`` and
+    for at most ``duration`` s (False from on_frame stops early), then ``loop.stop()``'s statistics."""
+    if not (math.isfinite(duration) and duration > 0):
+        raise ConfigError(f"duration must be > 0 s, got {duration!r}")
+    if not (math.isfinite(frame_period) and frame_period > 0):
+        raise ConfigError(f"frame_period must be > 0 s, got {frame_period!r}")
+    loop.start()
+    try:
+        start = time.perf_counter()
+        end = start + duration
+        k = 0
+        while time.perf_counter() < end and running():
+            if on_frame is not None and on_frame(loop) is False:
+                break
+            k = max(k + 1, int((time.perf_counter() - start) / frame_period) + 1)
+            time.sleep(max(0.0, min(start + k * frame_period, end) - time.perf_counter()))
+    finally:
+        stats = loop.stop()
+    return stats

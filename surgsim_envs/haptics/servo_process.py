@@ -39,7 +39,7 @@ from surgsim_envs.errors import ConfigError, SurgSimError
 from surgsim_envs.haptics.protocol import check_physics
 from surgsim_envs.haptics.realtime import raise_thread_priority, wait_until
 from surgsim_envs.haptics.recording import ForceLog
-from surgsim_envs.haptics.servo import ServoConfig, ServoLoop, ServoStats
+from surgsim_envs.haptics.servo import ServoConfig, ServoLoop, ServoStats, run_frames
 
 TARGET_SIZE = 9  # valid, x, y, z, qw, qx, qy, qz, grip
 SAMPLE_SIZE = 8  # t_arrival, fx, fy, fz, target x, y, z, stiffness (NaN = none)
@@ -301,20 +301,5 @@ class ProcessServoLoop:
         """Run for ``duration`` s of wall clock, calling ``on_frame(loop)`` every ``frame_period``
         s from this thread as :meth:`ServoLoop.run_realtime` does (hold ``loop.physics_lock``
         while touching the physics; returning False stops early); returns the statistics."""
-        if not (math.isfinite(duration) and duration > 0):
-            raise ConfigError(f"duration must be > 0 s, got {duration!r}")
-        if not (math.isfinite(frame_period) and frame_period > 0):
-            raise ConfigError(f"frame_period must be > 0 s, got {frame_period!r}")
-        self.start()
-        try:
-            start = time.perf_counter()
-            end = start + duration
-            k = 0
-            while time.perf_counter() < end and not self._stop_physics.is_set() and self._proc.is_alive():
-                if on_frame is not None and on_frame(self) is False:
-                    break
-                k = max(k + 1, int((time.perf_counter() - start) / frame_period) + 1)
-                time.sleep(max(0.0, min(start + k * frame_period, end) - time.perf_counter()))
-        finally:
-            stats = self.stop()
-        return stats
+        return run_frames(self, duration, on_frame, frame_period,
+                          lambda: not self._stop_physics.is_set() and self._proc.is_alive())
