@@ -179,10 +179,13 @@ def test_teleop_keyboard_moves_the_probe(xvfb):
 
 
 def test_run_scenario_with_viewer(xvfb, tmp_path):
-    """`surgsim run TASK.toml --viewer` opens the viewer on the tissue and finishes the scenario."""
+    """`surgsim run TASK.toml --viewer` opens the viewer on the tissue, plays the scenario at real
+    time (3.3 s at --duration-scale 0.3: long enough for the screenshot, even on a loaded machine)
+    and finishes it."""
     toml = os.path.join(os.path.dirname(__file__), "..", "tasks", "palpation_find_inclusion.toml")
+    t0 = time.time()
     proc = subprocess.Popen([sys.executable, "-m", "surgsim_envs.cli", "run", toml, "--viewer", "--duration-scale",
-                             "0.1", "--no-video", "--quiet", "--out", str(tmp_path)],
+                             "0.3", "--no-video", "--quiet", "--out", str(tmp_path)],
                             env=xvfb, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         win = _window(xvfb)
@@ -190,9 +193,11 @@ def test_run_scenario_with_viewer(xvfb, tmp_path):
         _xdotool(xvfb, "key", "Tab", "shift+Tab")
         img = _framed(xvfb, timeout=30)
         out, err = proc.communicate(timeout=300)
+        wall = time.time() - t0
     finally:
         proc.kill()
     assert proc.returncode == 0, f"surgsim run --viewer failed ({proc.returncode}):\n{out}\n{err}"
+    assert wall >= 3.3, f"the 3.3 s scenario played in {wall:.1f} s: the viewer must play at real time, not faster"
     assert "Segmentation fault" not in err
     assert "surgsim run: palpation_find_inclusion: score" in out, out
     assert (tmp_path / "report.json").is_file()

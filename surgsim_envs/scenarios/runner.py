@@ -209,6 +209,7 @@ class _Runner:
                  camera: str = "overview", tremor: float = 0.0):
         self.sc, self.sim, self.scale = sc, sim, scale
         self.bar, self.renderer, self.writer, self.viewer, self.camera = bar, renderer, writer, viewer, camera
+        self._wall0 = None   # wall clock at sim time 0 (viewer pacing)
         self.ctx = PhaseContext(sim, SCENE_TOOL[sc.meta.scene], scale=scale)
         self.rec = Recording()
         self.tremor = tremor
@@ -326,7 +327,15 @@ class _Runner:
                 raise KeyboardInterrupt("viewer closed")
             self.sim.sync_visual()
             self.viewer.sync()
-            time.sleep(0.0)
+            # Play at real time (a trainee watches the scenario at the speed it happens), never
+            # faster: a 1 s scenario used to flash past in a fraction of a second.
+            if self._wall0 is None:
+                self._wall0 = time.perf_counter() - self.sim.time
+            ahead = self.sim.time - (time.perf_counter() - self._wall0)
+            if ahead > 0.0:
+                time.sleep(ahead)
+            elif ahead < -0.1:                  # slower than real time: no rush to catch up later
+                self._wall0 = time.perf_counter() - self.sim.time
 
 
 def _parse_policy_action(act, ref: str) -> dict:
