@@ -19,3 +19,15 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"reference data not found at {SHARED_DATA}; set SURGSIM_SHARED_DATA or clone with ../shared beside the repo")
     return SHARED_DATA
+
+
+@pytest.fixture(scope="module")
+def truthcube(shared_data):
+    """(scripts/truthcube.py as a module, rest bead positions (343, 3) m, {strain: measured positions})."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("truthcube_script", REPO / "scripts" / "truthcube.py")
+    tc = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tc)
+    rest, measured = tc.load_truthcube(shared_data / "truthcube" / "uniaxial_positions.csv")
+    return tc, rest, measured

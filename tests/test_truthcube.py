@@ -1,6 +1,5 @@
 """Truth cube (Kerdok et al. 2003): FEM bead displacements against the measured ones."""
 
-import importlib.util
 
 import numpy as np
 import pytest
@@ -10,22 +9,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _script():
-    spec = importlib.util.spec_from_file_location("truthcube_script", REPO / "scripts" / "truthcube.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-@pytest.fixture(scope="module")
-def cube(shared_data):
-    tc = _script()
-    rest, measured = tc.load_truthcube(shared_data / "truthcube" / "uniaxial_positions.csv")
-    return tc, rest, measured
-
-
-def test_data_frame_matches_the_experiment(cube):
-    tc, rest, measured = cube
+def test_data_frame_matches_the_experiment(truthcube):
+    tc, rest, measured = truthcube
     assert rest.shape == (343, 3)
     assert np.all(np.abs(rest) < tc.CUBE / 2)            # beads inside the cube
     for strain, pos in measured.items():
@@ -35,8 +20,8 @@ def test_data_frame_matches_the_experiment(cube):
         assert dz[top].mean() < dz[bottom].mean()           # more near the moving plate
 
 
-def test_fem_beats_affine_prediction_and_error_grows_with_strain(cube):
-    tc, rest, measured = cube
+def test_fem_beats_affine_prediction_and_error_grows_with_strain(truthcube):
+    tc, rest, measured = truthcube
     model, vol, bottom, top = tc.cube_model("fem", 0.01, corotational=True, formulation="anp")
     errors = {}
     for strain in (0.05, 0.1825):
@@ -56,10 +41,10 @@ def test_fem_beats_affine_prediction_and_error_grows_with_strain(cube):
     assert errors[0.05] < 0.05 * tc.CUBE * 0.3          # well below the plate travel (4 mm)
 
 
-def test_mass_spring_static_solve_converges_to_a_stable_equilibrium_under_plate_compression(cube):
+def test_mass_spring_static_solve_converges_to_a_stable_equilibrium_under_plate_compression(truthcube):
     """Load-stepped Newton: the residual vanishes, the solution is a stable (not saddle) equilibrium,
     and below the spring network's buckling strain the bulge beats the affine prediction."""
-    tc, rest, measured = cube
+    tc, rest, measured = truthcube
     model, vol, bottom, top = tc.cube_model("mass_spring", 0.016)
     free = ~np.isin(np.arange(vol.n_nodes), np.concatenate([bottom, top]))
     for strain in (0.125, 0.1825):
@@ -77,8 +62,8 @@ def test_mass_spring_static_solve_converges_to_a_stable_equilibrium_under_plate_
             assert tc.rms(tc.predict_beads(vol, x, rest), measured[strain]) < tc.rms(tc.affine_prediction(rest, strain), measured[strain])
 
 
-def test_mass_spring_static_solve_rejects_bad_tolerances(cube):
-    tc, _, _ = cube
+def test_mass_spring_static_solve_rejects_bad_tolerances(truthcube):
+    tc, _, _ = truthcube
     from surgsim_envs.errors import ConfigError
 
     model, vol, bottom, top = tc.cube_model("mass_spring", 0.02)

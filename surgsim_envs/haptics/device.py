@@ -167,6 +167,10 @@ class HapticDevice(ABC):
     def __exit__(self, *exc) -> None:
         self.close()
 
+    def session_summary(self) -> str | None:
+        """One line on what the device saw during the run (printed by teleop), or None."""
+        return None
+
     def _connect(self) -> None:  # pragma: no cover - trivial default
         pass
 
@@ -208,32 +212,16 @@ class HapticDevice(ABC):
 
 
 # ----------------------------------------------------------------------------------------------
-# One device-spec parser and factory for the CLI, scenarios and teleop
-#: device kinds a spec may name, with the form of their argument
-DEVICE_SPECS = {"scripted": "scripted", "replay": "replay:FILE", "keyboard": "keyboard", "udp": "udp:PORT"}
-
-
+# One device-spec parser and factory for the CLI, scenarios and teleop (kinds: device_kinds.py)
 def parse_device_spec(spec: str) -> tuple[str, str | int | None]:
     """``"scripted"`` / ``"keyboard"`` / ``"replay:FILE"`` / ``"udp:PORT"`` -> ``(kind, argument)``;
     ConfigError naming the spec and the accepted forms otherwise (the file is checked by the
-    factory, relative to its base folder)."""
-    forms = ", ".join(list(DEVICE_SPECS.values())[:-1]) + " or " + list(DEVICE_SPECS.values())[-1]
-    if not isinstance(spec, str):
-        raise ConfigError(f"device spec must be a string ({forms}), got {spec!r}")
-    kind, sep, arg = spec.partition(":")
-    if kind in ("scripted", "keyboard") and not sep:
-        return kind, None
-    if kind == "replay" and arg:
-        return kind, arg
-    if kind == "udp" and arg:
-        try:
-            port = int(arg)
-        except ValueError:
-            port = -1
-        if not 0 < port < 65536:
-            raise ConfigError(f"device {spec!r}: PORT must be an integer in 1..65535, e.g. udp:9870")
-        return kind, port
-    raise ConfigError(f"device {spec!r} not understood; use {forms}")
+    factory, relative to its base folder). The kinds are registered in
+    :mod:`surgsim_envs.haptics.device_kinds`."""
+    from surgsim_envs.haptics.device_kinds import device_kind
+
+    kind, arg = device_kind(spec)
+    return kind.name, arg
 
 
 def make_device(spec: str, *, limits: DeviceLimits | None = None, scripted=None, base_dir=None) -> "HapticDevice":
@@ -242,27 +230,7 @@ def make_device(spec: str, *, limits: DeviceLimits | None = None, scripted=None,
     scripted: a callable returning the device for "scripted" (the caller knows its trajectory:
     teleop's demonstration, a scenario's phase plan); base_dir: folder a relative replay FILE is
     resolved against (a scenario's folder)."""
-    from pathlib import Path
+    from surgsim_envs.haptics.device_kinds import device_kind
 
-    kind, arg = parse_device_spec(spec)
-    limits = limits if limits is not None else DeviceLimits()
-    if kind == "scripted":
-        if scripted is None:
-            raise ConfigError("device 'scripted' needs a trajectory; give scripted=callable returning the device")
-        return scripted()
-    if kind == "replay":
-        from surgsim_envs.haptics.replay import ReplayDevice
-
-        path = Path(arg)
-        if base_dir is not None and not path.is_absolute():
-            path = Path(base_dir) / path
-        if not path.is_file():
-            raise ConfigError(f"device replay:{arg}: file {str(path)!r} not found; give a .csv or .json pose recording")
-        return ReplayDevice(str(path), limits=limits)
-    if kind == "keyboard":
-        from surgsim_envs.haptics.keyboard import KeyboardDevice
-
-        return KeyboardDevice(limits=limits)
-    from surgsim_envs.haptics.udp_bridge import UdpDevice
-
-    return UdpDevice(port=int(arg), limits=limits)
+    kind, arg = device_kind(spec)
+    return kind.build(arg, limits if limits is not None else DeviceLimits(), scripted, base_dir)

@@ -113,6 +113,11 @@ class KeyboardDevice(HapticDevice):
         with self._lock:
             return self._pos.copy()
 
+    def session_summary(self) -> str:
+        x, y, z = self.position
+        return (f"keyboard: {self.keys_handled} keys handled, {self.keys_ignored} ignored; "
+                f"handle at ({x:+.4f}, {y:+.4f}, {z:+.4f}) m from home")
+
     def _read(self, t: float) -> DeviceState:
         with self._lock:
             return DeviceState(time=t, position=self._pos.copy(), quaternion=np.array([1.0, 0.0, 0.0, 0.0]),

@@ -54,14 +54,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "only; p99 <= 1.2 ms with its port flooded, docs/haptics.md)")
 
 
-def parse_device(spec: str) -> tuple[str, str | int | None]:
-    """``"scripted"`` / ``"replay:FILE"`` / ``"keyboard"`` / ``"udp:PORT"`` -> (kind, argument)
-    (:func:`surgsim_envs.haptics.device.parse_device_spec`, the one parser; a replay FILE must exist)."""
-    from surgsim_envs.haptics.device import parse_device_spec
+def parse_device(spec: str):
+    """``"scripted"`` / ``"replay:FILE"`` / ``"keyboard"`` / ``"udp:PORT"`` -> (DeviceKind, argument)
+    (:func:`surgsim_envs.haptics.device_kinds.device_kind`, the one parser; a named file must exist)."""
+    from surgsim_envs.haptics.device_kinds import device_kind
 
-    kind, arg = parse_device_spec(spec)
-    if kind == "replay" and not Path(arg).is_file():
-        raise ConfigError(f"--device replay:{arg}: file not found; give a .csv or .json pose recording")
+    kind, arg = device_kind(spec)
+    if kind.file_arg and not Path(arg).is_file():
+        raise ConfigError(f"--device {spec}: file not found; give a .csv or .json pose recording")
     return kind, arg
 
 
@@ -99,7 +99,7 @@ def _load_script(path: str) -> dict:
     raise ConfigError(f"--script {path}: expected a .json or .toml trajectory spec")
 
 
-def make_device(kind: str, arg, args, physics, limits):
+def make_device(args, physics, limits):
     """Build the device named on the command line (:func:`surgsim_envs.haptics.device.make_device`;
     "scripted" plays ``--script`` or the task's demonstration trajectory)."""
     from surgsim_envs.haptics.device import make_device as make
@@ -119,8 +119,8 @@ def run(args) -> int:
     kind, arg = parse_device(args.device)
     servo = getattr(args, "servo", "auto")
     if servo == "auto":  # the servo owns a network device in its own process: no shared GIL (docs/haptics.md)
-        servo = "process" if kind == "udp" else "thread"
-    if servo == "process" and kind != "udp":
+        servo = "process" if kind.remote else "thread"
+    if servo == "process" and not kind.remote:
         raise ConfigError(f"--servo process needs a network device (--device udp:PORT): the servo process owns "
                           f"the device; got --device {args.device}. Use --servo thread for it.")
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
@@ -130,8 +130,8 @@ def run(args) -> int:
               f"Run headless instead, e.g.: surgsim teleop {args.task} --device {args.device} --headless "
               "--out surgsim-out/teleop --duration 5", file=sys.stderr)
         return 2
-    if kind == "keyboard" and args.headless:
-        raise ConfigError("--device keyboard needs the interactive viewer; drop --headless (and run with a display)")
+    if kind.needs_viewer and args.headless:
+        raise ConfigError(f"--device {args.device} needs the interactive viewer; drop --headless (and run with a display)")
     try:
         from surgsim_envs.haptics import scene_adapter
     except ImportError as exc:
@@ -142,28 +142,26 @@ def run(args) -> int:
     limits = DeviceLimits(max_force=args.max_force)
     if servo == "process":
         return _run_process_servo(args, arg, physics, limits)
-    device = make_device(kind, arg, args, physics, limits)
+    device = make_device(args, physics, limits)
     duration = args.duration
     if duration is None:
-        if kind in ("scripted", "replay"):
+        if kind.finite:
             duration = float(device.duration) + 0.2
         else:  # live devices: until the viewer closes; headless needs a bound
             duration = 10.0 if args.headless else math.inf
     config = ServoConfig(rate_hz=args.rate, max_force_rate=args.max_force_rate, extrapolation=args.extrapolation,
                          mapping=DeviceMapping(origin=tuple(physics.home_position)))
     with device:
-        if kind == "udp":
+        if kind.remote:
             print(f"listening for pose packets on udp://{device.address[0]}:{device.address[1]}", flush=True)
         loop = ServoLoop(device, physics, config)
         if args.headless:
             stats = _run_headless(loop, physics, args, duration)
         else:
-            stats = _run_viewer(loop, physics, device, kind, duration)
+            stats = _run_viewer(loop, physics, device, duration)
     print(stats.summary())
-    if kind == "keyboard":
-        x, y, z = device.position
-        print(f"keyboard: {device.keys_handled} keys handled, {device.keys_ignored} ignored; "
-              f"handle at ({x:+.4f}, {y:+.4f}, {z:+.4f}) m from home", flush=True)
+    if device.session_summary():
+        print(device.session_summary(), flush=True)
     if args.headless:
         out = Path(args.out)
         device.force_log.to_csv(out / "force_log.csv")
@@ -192,7 +190,7 @@ def _run_process_servo(args, port, physics, limits) -> int:
                             _config(args, physics))
     print(f"listening for pose packets on udp://127.0.0.1:{port} (servo process)", flush=True)
     stats = _run_headless(loop, physics, args, duration) if args.headless else \
-        _run_viewer(loop, physics, None, "udp", duration)
+        _run_viewer(loop, physics, None, duration)
     print(stats.summary())
     print(f"bridge: {loop.device_stats}")
     if args.headless:
@@ -242,14 +240,14 @@ def _run_headless(loop, physics, args, duration: float):
     return stats
 
 
-def _run_viewer(loop, physics, device, kind: str, duration: float):  # pragma: no cover - needs a display
+def _run_viewer(loop, physics, device, duration: float):  # pragma: no cover - needs a display
     import mujoco.viewer
 
     from surgsim_envs.scene.display import close_viewer, frame_tissue, require_display
 
     require_display("surgsim teleop (viewer)")   # raises; MuJoCo would exit the process
     sim = physics.sim
-    callback = device.key_callback if kind == "keyboard" else None
+    callback = getattr(device, "key_callback", None)   # devices that read the viewer's keys
     viewer = mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual(), key_callback=callback)
     frame_tissue(viewer, sim)   # free camera on the tissue (the default frames the whole floor)
     try:

@@ -29,6 +29,7 @@ import sys
 from pathlib import Path
 
 from surgsim_envs.errors import ConfigError
+from surgsim_envs.haptics.device_kinds import device_kind
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -81,8 +82,8 @@ def run(args) -> int:
     if args.viewer and not os.environ.get("DISPLAY") and sys.platform.startswith("linux"):
         print("surgsim run: --viewer needs a display ($DISPLAY is not set); run without --viewer", file=sys.stderr)
         return 2
-    if args.device and args.device.startswith("keyboard") and not args.viewer:
-        raise ConfigError("--device keyboard needs --viewer (the keys are read from the viewer window)")
+    if args.device and device_kind(args.device)[0].needs_viewer and not args.viewer:
+        raise ConfigError(f"--device {args.device} needs --viewer (its input is read from the viewer window)")
     from surgsim_envs.scenarios.report import write_report
     from surgsim_envs.scenarios.runner import run_scenario
 

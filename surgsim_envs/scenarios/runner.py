@@ -178,13 +178,11 @@ def make_device(spec: str, script: str, runner: "_Runner", tremor: float, seed: 
     """A connected-to-be HapticDevice from a spec: scripted | replay:FILE | keyboard | udp:PORT
     (:func:`surgsim_envs.haptics.device.make_device`; "scripted" is the scenario's phase plan, or
     ``script``; a replay FILE is resolved in the scenario's folder)."""
-    from surgsim_envs.haptics.device import DeviceLimits, parse_device_spec
+    from surgsim_envs.haptics.device import DeviceLimits
     from surgsim_envs.haptics.device import make_device as make
     from surgsim_envs.scenarios.schema import resolve_data_file
 
     limits = DeviceLimits(max_force=1e6)  # the scenario scores forces; the device only records them
-    kind, arg = parse_device_spec(spec)
-
     def scripted():
         if script:
             from surgsim_envs.haptics.scripted import ScriptedDevice, TrajectorySpec
@@ -196,9 +194,7 @@ def make_device(spec: str, script: str, runner: "_Runner", tremor: float, seed: 
         dev.limits = limits
         return dev
 
-    if kind == "replay":
-        spec = f"replay:{resolve_data_file(arg, runner.sc.folder)}"
-    return make(spec, limits=limits, scripted=scripted)
+    return make(spec, limits=limits, scripted=scripted, base_dir=runner.sc.folder)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -427,15 +427,14 @@ def validate_driver(ctx: _Ctx, path: tuple, driver: str, device: str, policy: st
     if driver not in DRIVERS:
         raise ctx.error(path + ("driver",), f"unknown driver {driver!r}; choose one of {', '.join(DRIVERS)}")
     if driver == "device":
-        kind, _, arg = device.partition(":")
-        if device not in ("scripted", "keyboard") and not (kind in ("replay", "udp") and arg):
-            raise ctx.error(path + ("device",), f"device {device!r} not understood; use scripted, replay:FILE, "
-                                                "keyboard or udp:PORT")
-        if kind == "udp" and not (arg.isdigit() and 0 <= int(arg) <= 65535):
-            raise ctx.error(path + ("device",), f"device {device!r}: PORT must be an integer in [0, 65535], "
-                                                "e.g. udp:9870")
-        if kind == "replay" and check_files:
-            _check_file(ctx, path + ("device",), arg, folder, "replay")
+        from surgsim_envs.haptics.device_kinds import device_kind
+
+        try:
+            kind, arg = device_kind(device)
+        except ConfigError as exc:
+            raise ctx.error(path + ("device",), str(exc)) from None
+        if kind.file_arg and check_files:
+            _check_file(ctx, path + ("device",), arg, folder, kind.name)
     if driver == "policy":
         if not policy:
             raise ctx.error(path + ("policy",), "driver 'policy' needs a policy: a .npz data policy, 'builtin:NAME' "
