@@ -12,7 +12,7 @@ import pytest
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.haptics import ServoConfig, SpringWallPhysics, UdpHapticClient
-from surgsim_envs.haptics.realtime import raise_thread_priority, wait_until
+from surgsim_envs.haptics.realtime import periodic_ticks, raise_thread_priority, wait_until
 from surgsim_envs.haptics.servo_process import ProcessServoLoop, SeqLockRecord, ServoProcessError
 from surgsim_envs.haptics.udp_bridge import UdpDevice
 
@@ -70,6 +70,25 @@ def test_priority_helpers():
     assert got[0] in ("SCHED_FIFO", "nice -10", "default")
     deadline = time.perf_counter() + 2e-3
     assert wait_until(deadline, 5e-4) >= deadline
+
+
+def test_periodic_ticks_keep_the_rate_and_skip_missed_ticks():
+    h = 2e-3
+    start = time.perf_counter()
+    n = [0]
+
+    def stop():
+        n[0] += 1
+        return n[0] > 5
+
+    times = list(periodic_ticks(start, h, 5e-4, stop))
+    assert len(times) == 5
+    assert all(t >= start + i * h for i, t in enumerate(times))        # never early
+    # started 50 periods in the past: no burst of 50 catch-up ticks, the next tick waits its turn
+    late = time.perf_counter() - 50 * h
+    n[0] = 0
+    times = list(periodic_ticks(late, h, 5e-4, stop))
+    assert len(times) == 5 and times[-1] - times[0] >= 3 * h * 0.99
 
 
 def test_process_servo_renders_the_spring_wall_force_over_udp():

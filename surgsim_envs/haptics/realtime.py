@@ -25,6 +25,7 @@ from __future__ import annotations
 import os
 import threading
 import time
+from typing import Iterator
 
 #: SCHED_FIFO priority asked for the servo thread (1-99; low: above every normal thread only)
 FIFO_PRIORITY = 10
@@ -63,3 +64,19 @@ def wait_until(deadline: float, spin_s: float) -> float:
         time.sleep(0)  # releases the GIL for the physics thread
         now = time.perf_counter()
     return now
+
+
+def periodic_ticks(start: float, period: float, spin_s: float, stop) -> "Iterator[float]":
+    """The clock of a fixed-rate loop: yields the wall time (``time.perf_counter``) of tick i at
+    ``start + i * period`` (waiting with :func:`wait_until`) until ``stop()`` is true. More than
+    5 periods behind, it skips the missed ticks instead of bursting through them."""
+    i = 0
+    while not stop():
+        deadline = start + i * period
+        now = time.perf_counter()
+        if deadline > now:
+            now = wait_until(deadline, spin_s)
+        elif now - deadline > 5 * period:
+            i = int((now - start) / period)
+        yield now
+        i += 1

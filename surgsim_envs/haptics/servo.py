@@ -45,7 +45,7 @@ from surgsim_envs.haptics.device import DeviceState, HapticDevice
 from surgsim_envs.haptics.extrapolation import ForceExtrapolator, make_extrapolator
 from surgsim_envs.haptics.protocol import check_physics
 from surgsim_envs.haptics.quaternion import unit_quaternion
-from surgsim_envs.haptics.realtime import raise_thread_priority, wait_until
+from surgsim_envs.haptics.realtime import periodic_ticks, raise_thread_priority
 
 
 @dataclass
@@ -327,22 +327,13 @@ class ServoLoop:
 
     def _servo_thread(self) -> None:
         self.stats.scheduling = raise_thread_priority(self.config.realtime_priority)
-        h, spin = self.config.period, self.config.spin_s
         start = self._wall_start
         last = None
-        i = 0
-        while not self._stop.is_set():
-            deadline = start + i * h
-            now = time.perf_counter()
-            if deadline > now:
-                now = wait_until(deadline, spin)
-            elif now - deadline > 5 * h:  # far behind: skip missed ticks rather than bursting
-                i = int((now - start) / h)
+        for now in periodic_ticks(start, self.config.period, self.config.spin_s, self._stop.is_set):
             if last is not None:
                 self._periods.append(now - last)
             last = now
             self.tick(now - start)
-            i += 1
 
     def _physics_thread(self) -> None:
         start = self._wall_start

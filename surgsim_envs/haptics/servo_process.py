@@ -37,7 +37,7 @@ import numpy as np
 
 from surgsim_envs.errors import ConfigError, SurgSimError
 from surgsim_envs.haptics.protocol import check_physics
-from surgsim_envs.haptics.realtime import raise_thread_priority, wait_until
+from surgsim_envs.haptics.realtime import periodic_ticks, raise_thread_priority
 from surgsim_envs.haptics.recording import ForceLog
 from surgsim_envs.haptics.servo import ServoConfig, ServoLoop, ServoStats, run_frames
 
@@ -112,18 +112,14 @@ def _servo_main(device_factory, config: ServoConfig, go, target: SeqLockRecord, 
                 time.sleep(1e-3)
             start = go.value
             scheduling = raise_thread_priority(config.realtime_priority)
-            h, spin = config.period, config.spin_s
             periods: list[float] = []
-            last, seen, i = None, 0, 0
-            while not stop.value:
-                if i % 256 == 0 and os.getppid() != parent:  # the parent died (killed): stop, do not linger
-                    break
-                deadline = start + i * h
-                now = time.perf_counter()
-                if deadline > now:
-                    now = wait_until(deadline, spin)
-                elif now - deadline > 5 * h:  # far behind: skip missed ticks rather than bursting
-                    i = int((now - start) / h)
+            last, seen, ticks = None, 0, [0]
+
+            def should_stop() -> bool:
+                ticks[0] += 1          # every 256 ticks: has the parent died (killed)? stop, do not linger
+                return bool(stop.value) or (ticks[0] % 256 == 1 and os.getppid() != parent)
+
+            for now in periodic_ticks(start, config.period, config.spin_s, should_stop):
                 if last is not None:
                     periods.append(now - last)
                 last = now
@@ -135,7 +131,6 @@ def _servo_main(device_factory, config: ServoConfig, go, target: SeqLockRecord, 
                 loop.tick(now - start)
                 if loop._target_pos is not None:
                     target.write([1.0, *loop._target_pos, *loop._target_quat, loop._target_grip])
-                i += 1
             elapsed = time.perf_counter() - start
             loop._periods = periods
             loop.stats.simulated_clock = False
