@@ -21,25 +21,34 @@ from numba import njit, prange
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _element_rotation(x, tets, dm_inv, rots, e, max_iter, tol, eps, want_strain):
-    """Polar rotation of tet e (see :func:`update_rotations`); updates rots[e] in place.
-    With ``want_strain`` also writes the corotated strain sym(R^T F) - I into eps[e] (eps (T, 6))."""
+def _edge_gradient(x, tets, dm_inv, e):
+    """The 9 entries (row-major) of Xs Dm^-1 for tet e, Xs = [x_b - x_a, x_c - x_a, x_d - x_a]
+    the edge matrix of positions ``x``: F at the current positions, or the displacement gradient
+    for a displacement field."""
     a, b, c, d = tets[e, 0], tets[e, 1], tets[e, 2], tets[e, 3]
     m00, m01, m02 = dm_inv[e, 0, 0], dm_inv[e, 0, 1], dm_inv[e, 0, 2]
     m10, m11, m12 = dm_inv[e, 1, 0], dm_inv[e, 1, 1], dm_inv[e, 1, 2]
     m20, m21, m22 = dm_inv[e, 2, 0], dm_inv[e, 2, 1], dm_inv[e, 2, 2]
     d1, d2, d3 = x[b, 0] - x[a, 0], x[c, 0] - x[a, 0], x[d, 0] - x[a, 0]
-    f00 = d1 * m00 + d2 * m10 + d3 * m20
-    f01 = d1 * m01 + d2 * m11 + d3 * m21
-    f02 = d1 * m02 + d2 * m12 + d3 * m22
+    g00 = d1 * m00 + d2 * m10 + d3 * m20
+    g01 = d1 * m01 + d2 * m11 + d3 * m21
+    g02 = d1 * m02 + d2 * m12 + d3 * m22
     d1, d2, d3 = x[b, 1] - x[a, 1], x[c, 1] - x[a, 1], x[d, 1] - x[a, 1]
-    f10 = d1 * m00 + d2 * m10 + d3 * m20
-    f11 = d1 * m01 + d2 * m11 + d3 * m21
-    f12 = d1 * m02 + d2 * m12 + d3 * m22
+    g10 = d1 * m00 + d2 * m10 + d3 * m20
+    g11 = d1 * m01 + d2 * m11 + d3 * m21
+    g12 = d1 * m02 + d2 * m12 + d3 * m22
     d1, d2, d3 = x[b, 2] - x[a, 2], x[c, 2] - x[a, 2], x[d, 2] - x[a, 2]
-    f20 = d1 * m00 + d2 * m10 + d3 * m20
-    f21 = d1 * m01 + d2 * m11 + d3 * m21
-    f22 = d1 * m02 + d2 * m12 + d3 * m22
+    g20 = d1 * m00 + d2 * m10 + d3 * m20
+    g21 = d1 * m01 + d2 * m11 + d3 * m21
+    g22 = d1 * m02 + d2 * m12 + d3 * m22
+    return g00, g01, g02, g10, g11, g12, g20, g21, g22
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _element_rotation(x, tets, dm_inv, rots, e, max_iter, tol, eps, want_strain):
+    """Polar rotation of tet e (see :func:`update_rotations`); updates rots[e] in place.
+    With ``want_strain`` also writes the corotated strain sym(R^T F) - I into eps[e] (eps (T, 6))."""
+    f00, f01, f02, f10, f11, f12, f20, f21, f22 = _edge_gradient(x, tets, dm_inv, e)
     r00, r01, r02 = rots[e, 0, 0], rots[e, 0, 1], rots[e, 0, 2]
     r10, r11, r12 = rots[e, 1, 0], rots[e, 1, 1], rots[e, 1, 2]
     r20, r21, r22 = rots[e, 2, 0], rots[e, 2, 1], rots[e, 2, 2]
@@ -159,23 +168,7 @@ def update_rotations(x, tets, dm_inv, rots, max_iter, tol, parallel):
 @njit(cache=True, inline="always", error_model="numpy")
 def _element_strain(y, tets, dm_inv, rots, e, subtract_rest, eps):
     """eps[e] (row of a (T, 6) array) = sym(R^T Ys Dm^-1) [- I], stored as xx, yy, zz, xy, yz, zx (tensor, not engineering)."""
-    a, b, c, d = tets[e, 0], tets[e, 1], tets[e, 2], tets[e, 3]
-    m00, m01, m02 = dm_inv[e, 0, 0], dm_inv[e, 0, 1], dm_inv[e, 0, 2]
-    m10, m11, m12 = dm_inv[e, 1, 0], dm_inv[e, 1, 1], dm_inv[e, 1, 2]
-    m20, m21, m22 = dm_inv[e, 2, 0], dm_inv[e, 2, 1], dm_inv[e, 2, 2]
-    # g = Ys Dm^-1, row by row
-    d1, d2, d3 = y[b, 0] - y[a, 0], y[c, 0] - y[a, 0], y[d, 0] - y[a, 0]
-    g00 = d1 * m00 + d2 * m10 + d3 * m20
-    g01 = d1 * m01 + d2 * m11 + d3 * m21
-    g02 = d1 * m02 + d2 * m12 + d3 * m22
-    d1, d2, d3 = y[b, 1] - y[a, 1], y[c, 1] - y[a, 1], y[d, 1] - y[a, 1]
-    g10 = d1 * m00 + d2 * m10 + d3 * m20
-    g11 = d1 * m01 + d2 * m11 + d3 * m21
-    g12 = d1 * m02 + d2 * m12 + d3 * m22
-    d1, d2, d3 = y[b, 2] - y[a, 2], y[c, 2] - y[a, 2], y[d, 2] - y[a, 2]
-    g20 = d1 * m00 + d2 * m10 + d3 * m20
-    g21 = d1 * m01 + d2 * m11 + d3 * m21
-    g22 = d1 * m02 + d2 * m12 + d3 * m22
+    g00, g01, g02, g10, g11, g12, g20, g21, g22 = _edge_gradient(y, tets, dm_inv, e)   # g = Ys Dm^-1
     r00, r01, r02 = rots[e, 0, 0], rots[e, 0, 1], rots[e, 0, 2]
     r10, r11, r12 = rots[e, 1, 0], rots[e, 1, 1], rots[e, 1, 2]
     r20, r21, r22 = rots[e, 2, 0], rots[e, 2, 1], rots[e, 2, 2]
