@@ -12,14 +12,10 @@ R, H = 0.005, 0.03
 MAT = {"young": 5000.0, "poisson": 0.45, "relax_fraction": 0.0}
 
 
-@pytest.fixture(scope="module")
-def fem_curves():
+def _fem_curves(spacings):
     dv = dimitriadis_valid_depth(R, H)
-    out = {}
-    for spacing in (0.003, 0.0015, 0.001):
-        out[spacing] = mt.indent("fem", MAT, indenter_radius=R, depth=dv, thickness=H, spacing=spacing, n_depths=6,
-                                 time_steps=0)
-    return dv, out
+    return dv, {s: mt.indent("fem", MAT, indenter_radius=R, depth=dv, thickness=H, spacing=s, n_depths=6,
+                             time_steps=0) for s in spacings}
 
 
 def _rel_errors(res, dv):
@@ -28,13 +24,22 @@ def _rel_errors(res, dv):
     return np.abs(res.force[sel] / ref[sel] - 1.0)
 
 
-def test_fem_indentation_matches_dimitriadis_and_converges(fem_curves):
-    dv, curves = fem_curves
-    finest = curves[0.001]
+def test_fem_indentation_matches_dimitriadis_and_converges():
+    # 3 / 2 / 1.5 mm (~15 s): mean error 15 / 5 / 2.5 %, the finest within 3.8 % at every depth
+    # (measured); the 1 mm level is in the slow test below
+    dv, curves = _fem_curves((0.003, 0.002, 0.0015))
+    finest = curves[0.0015]
     assert np.all(np.diff(finest.force) > 0)
-    assert _rel_errors(finest, dv).max() < 0.10
-    errs = [_rel_errors(curves[s], dv).mean() for s in (0.003, 0.0015, 0.001)]
+    assert _rel_errors(finest, dv).max() < 0.06
+    errs = [_rel_errors(curves[s], dv).mean() for s in (0.003, 0.002, 0.0015)]
     assert errs[0] > errs[1] > errs[2], errs
+
+
+@pytest.mark.slow  # ~35 s quiet (85 s loaded): the 1 mm mesh
+def test_fem_indentation_keeps_converging_to_1mm():
+    dv, curves = _fem_curves((0.0015, 0.001))
+    assert _rel_errors(curves[0.001], dv).max() < 0.10
+    assert _rel_errors(curves[0.001], dv).mean() < _rel_errors(curves[0.0015], dv).mean()
 
 
 def test_unbonded_slab_is_softer_than_bonded():

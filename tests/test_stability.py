@@ -9,8 +9,10 @@ from surgsim_envs.errors import TissueUnstableError
 from surgsim_envs.materials import PRESETS
 
 
-# FEM with stiff skin (~35 CG iterations per implicit step) and nearly incompressible silicone take 10-20 s
-_SLOW_PRESETS = {("fem", "silicone"), ("fem", "skin")}
+# FEM with stiff skin (~35 CG iterations per implicit step) and nearly incompressible silicone take
+# 10-20 s, every other FEM preset 10-25 s (quiet): the default run keeps fem-liver (the tasks'
+# organ material) and every mass_spring preset; the rest run with -m slow.
+_SLOW_PRESETS = {("fem", p) for p in PRESETS if p != "liver"}
 
 
 @pytest.mark.parametrize("model,preset", [
@@ -38,7 +40,8 @@ def test_beyond_explicit_limit_guard_raises_and_implicit_has_10x_margin(model):
     assert not row["capped"]
     verdict = guard_verdict(t, 1.2 * row["dt_unstable"], steps=200)
     assert isinstance(verdict, TissueUnstableError)          # a verdict, not NaN
-    assert np.all(np.isfinite(t.positions)) or True
+    assert verdict.model == model and verdict.dt == pytest.approx(1.2 * row["dt_unstable"])
+    assert np.isfinite(verdict.critical_dt) and "integrator='implicit'" in str(verdict)   # names the fix
     assert 0.5 < row["dt_limit"] / row["critical_dt"] < 2.0   # the estimate is in the right place
     implicit = block_model(model, 4000.0, 0.005, "implicit")
     assert guard_verdict(implicit, 10.0 * row["dt_unstable"], steps=100) is None

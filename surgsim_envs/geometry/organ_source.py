@@ -23,6 +23,7 @@ import numpy as np
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.loaders import SURFACE_SUFFIXES, TET_SUFFIXES, load_tet_mesh, unit_scale
 from surgsim_envs.geometry.volume import Volume
+from surgsim_envs.geometry.self_intersection import self_intersections  # noqa: F401 (re-exported)
 
 #: options that go to the lattice filling of a surface file
 LATTICE_OPTIONS = ("snap", "max_snap", "min_quality")
@@ -163,54 +164,3 @@ def check_surface_mesh(mesh, what: str = "surface"):
 
 def _boxes_overlap(a, b) -> bool:
     return bool(np.all(a[0] <= b[1]) and np.all(b[0] <= a[1]))
-
-
-def self_intersections(mesh, max_faces: int = 20_000) -> int:
-    """Number of pairs of non-adjacent triangles of ``mesh`` that cross (edge-triangle test on
-    candidates from a bounding-box sweep); 0 for a clean surface. Skipped (0) above ``max_faces``."""
-    tri = np.asarray(mesh.triangles, dtype=np.float64)
-    faces = np.asarray(mesh.faces)
-    if len(tri) > max_faces:
-        return 0
-    lo, hi = tri.min(axis=1), tri.max(axis=1)
-    tol = 1e-9 * float(np.ptp(mesh.vertices, axis=0).max())
-    order = np.argsort(lo[:, 0])
-    pairs = []
-    for k, i in enumerate(order):
-        for j in order[k + 1:]:
-            if lo[j, 0] > hi[i, 0] + tol:
-                break
-            if np.all(lo[i] <= hi[j] + tol) and np.all(lo[j] <= hi[i] + tol):
-                if not set(faces[i]) & set(faces[j]):
-                    pairs.append((i, j))
-    count = 0
-    for i, j in pairs:
-        if _tri_tri_cross(tri[i], tri[j], tol) or _tri_tri_cross(tri[j], tri[i], tol):
-            count += 1
-    return count
-
-
-def _tri_tri_cross(t1, t2, tol) -> bool:
-    """Whether an edge of t1 passes through the interior of triangle t2."""
-    a, b, c = t2
-    n = np.cross(b - a, c - a)
-    nn = float(np.linalg.norm(n))
-    if nn == 0:
-        return False
-    n = n / nn
-    for p, q in ((t1[0], t1[1]), (t1[1], t1[2]), (t1[2], t1[0])):
-        dp, dq = float(np.dot(p - a, n)), float(np.dot(q - a, n))
-        if (dp > tol and dq > tol) or (dp < -tol and dq < -tol) or abs(dp - dq) <= tol:
-            continue
-        x = p + (q - p) * (dp / (dp - dq))
-        # barycentric inside test (strict, so shared-vertex touching does not count)
-        v0, v1, v2 = c - a, b - a, x - a
-        d00, d01, d02, d11, d12 = v0 @ v0, v0 @ v1, v0 @ v2, v1 @ v1, v1 @ v2
-        den = d00 * d11 - d01 * d01
-        if den == 0:
-            continue
-        u = (d11 * d02 - d01 * d12) / den
-        v = (d00 * d12 - d01 * d02) / den
-        if u > 1e-9 and v > 1e-9 and u + v < 1 - 1e-9:
-            return True
-    return False
