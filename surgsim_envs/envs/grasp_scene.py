@@ -128,7 +128,7 @@ class GraspSceneEnv(SurgSimEnv):
         key = (sim, sim.steps, sim.time, self.steps)
         if getattr(self, "_readings_key", None) != key:
             jaws = sim.jaw_forces(self.tool_name)
-            rep = sim.contact_report()[self.tool_name]
+            rep = sim.tool_contact_report(self.tool_name)
             self._readings_value = (sim.tool_position(self.tool_name), jaws["normal"], jaws["tangential"], rep)
             self._readings_key = key
         return self._readings_value
