@@ -188,12 +188,14 @@ def spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state,
     structure-of-arrays rows; (2) per spring the force over length, f / l, a loop over contiguous
     arrays with no scatter and no Python error checks (``error_model="numpy"``), which the compiler
     vectorises (sqrt, division); (3) scatter +-(f/l) d onto the nodes in spring order, keeping node
-    ``si[e]``'s sum in registers while consecutive springs share it (the lattices sort springs by
-    ``si``, so no store-to-load chain runs through memory; any order gives the same sums). The additions onto every node happen in the same order
-    as in :func:`spring_forces`; the results agree to rounding (fastmath lets the compiler contract
-    and reorder the per-spring arithmetic differently; measured max |difference| ~1e-16 relative to
-    the largest nodal force, docs/benchmarks.md "Env step: third pass"). A spring of length
-    <= 1e-300 m exerts no force (as in :func:`spring_forces`). ~2x faster on the tasks' lattices."""
+    ``si[e]``'s running sum in registers while consecutive springs share it (loaded from and stored to
+    ``f_out`` around each run, so every node receives the same additions in the same order as in
+    :func:`spring_forces`; the lattices sort springs by ``si``, so no store-to-load chain runs through
+    memory; any order gives the same sums). A spring of length <= 1e-300 m exerts no force (as in
+    :func:`spring_forces`). Measured here: bit for bit the forces of :func:`spring_forces` called on
+    its own, and the tasks' trajectories identical to the single-pass kernel's (fastmath lets the
+    compiler contract arithmetic differently in other contexts: tests hold the two to 1e-12
+    relative); ~1.8x faster on the tasks' lattices (docs/benchmarks.md "Env step: third pass")."""
     ne = si.shape[0]
     wx = work[0]
     wy = work[1]
@@ -234,19 +236,19 @@ def spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state,
     if ne == 0:
         return
     cur = si[0]
-    ax = 0.0
-    ay = 0.0
-    az = 0.0
+    ax = f_out[cur, 0]
+    ay = f_out[cur, 1]
+    az = f_out[cur, 2]
     for e in range(ne):
         i = si[e]
         if i != cur:
-            f_out[cur, 0] += ax
-            f_out[cur, 1] += ay
-            f_out[cur, 2] += az
+            f_out[cur, 0] = ax
+            f_out[cur, 1] = ay
+            f_out[cur, 2] = az
             cur = i
-            ax = 0.0
-            ay = 0.0
-            az = 0.0
+            ax = f_out[cur, 0]        # what earlier springs (as their j side) added to it
+            ay = f_out[cur, 1]
+            az = f_out[cur, 2]
         j = sj[e]
         c = wc[e]
         fx = c * wx[e]
@@ -258,9 +260,9 @@ def spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state,
         f_out[j, 0] -= fx
         f_out[j, 1] -= fy
         f_out[j, 2] -= fz
-    f_out[cur, 0] += ax
-    f_out[cur, 1] += ay
-    f_out[cur, 2] += az
+    f_out[cur, 0] = ax
+    f_out[cur, 1] = ay
+    f_out[cur, 2] = az
 
 
 @njit(cache=True, fastmath=True, nogil=True)
