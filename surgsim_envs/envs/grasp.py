@@ -49,6 +49,8 @@ class GraspConfig(GraspSceneConfig):
     """Grasp-v0 settings (SI units): the shared grasp-scene fields (:class:`GraspSceneConfig`) plus
     the task's target and reward. Ranges are (low, high) sampled uniformly per episode."""
 
+    tissue_subcycles: int | str = "auto"   # 2 tissue + contact steps of dt per MuJoCo step at the defaults
+    #                                        (MuJoCo at 0.8 ms; see resolved_subcycles); 1 = one each
     max_step: float = 0.001            # m per control step (5 cm/s at 50 Hz)
     workspace: float = 0.06            # m, wrist target |offset| from home per axis
     target_offset_x: Sequence[float] = (0.012, 0.02)  # m, along the pull direction (out of the organ)
