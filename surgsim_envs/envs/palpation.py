@@ -178,7 +178,13 @@ def stiffness_weighted_estimate(xy: np.ndarray, k: np.ndarray, power: float = 3.
     if len(k) == 0 or len(k) != len(xy):
         raise ConfigError(f"stiffness_weighted_estimate needs n >= 1 samples with matching xy (n, 2) and k (n,), "
                           f"got xy {xy.shape} and k {k.shape}")
-    w = np.clip(k - np.median(k), 0.0, None) ** power
+    return _weighted_estimate(xy, k, np.median(k), power)
+
+
+def _weighted_estimate(xy: np.ndarray, k: np.ndarray, median, power: float = 3.0) -> np.ndarray:
+    """:func:`stiffness_weighted_estimate` of checked (n, 2) / (n,) float arrays with ``median`` =
+    ``np.median(k)`` given (the env computes it once per sample for the estimate and the contrast)."""
+    w = np.clip(k - median, 0.0, None) ** power
     total = float(w.sum())
     if total <= 0.0:
         return xy[int(np.argmax(k))].copy()
@@ -193,8 +199,14 @@ def map_cell(xy: np.ndarray, cells: int, half_width: float) -> int:
     xy = np.asarray(xy, dtype=float).reshape(-1)
     if xy.shape != (2,) or not np.all(np.isfinite(xy)):
         raise ConfigError(f"map_cell needs a finite (x, y) in m, got {xy!r}")
-    ij = np.clip(np.floor((xy + half_width) / (2 * half_width) * cells), 0, cells - 1).astype(int)
-    return int(ij[1] * cells + ij[0])
+    return _cell_of(float(xy[0]), float(xy[1]), int(cells), float(half_width))
+
+
+def _cell_of(x: float, y: float, cells: int, half_width: float) -> int:
+    """:func:`map_cell` of checked finite floats (the same arithmetic, in Python floats)."""
+    i = min(max(math.floor((x + half_width) / (2 * half_width) * cells), 0), cells - 1)
+    j = min(max(math.floor((y + half_width) / (2 * half_width) * cells), 0), cells - 1)
+    return int(j * cells + i)
 
 
 def stiffness_map(cell_max_k: np.ndarray) -> np.ndarray:
@@ -404,13 +416,14 @@ class PalpationEnv(SurgSimEnv):
         buf[0][n - 1] = xy
         buf[1][n - 1] = k
         buf[2] = max(buf[2], float(k))
-        cell = map_cell(xy, int(c.map_cells), c.map_half_width)
+        cell = _cell_of(float(xy[0]), float(xy[1]), int(c.map_cells), float(c.map_half_width))
         if self.cell_k[cell] == 0.0:
             rt["coverage"] += c.cell_reward
         self.cell_k[cell] = max(self.cell_k[cell], k)
         self._map_obs = None
-        self.estimate = stiffness_weighted_estimate(buf[0][:n], buf[1][:n])
-        med = float(np.median(buf[1][:n]))
+        median = np.median(buf[1][:n])           # once for the estimate and the contrast
+        self.estimate = _weighted_estimate(buf[0][:n], buf[1][:n], median)
+        med = float(median)
         self.contrast_seen = buf[2] / med if med > 0 else 1.0
         err = localisation_error(self.estimate, self.inclusion["centre"][:2])
         phi = 1.0 - min(err / c.localisation_scale, 1.0)
