@@ -139,7 +139,7 @@ def test_step_with_controls_checks_its_schedule():
         sim.step_with_controls([0], np.full((3, 1), np.nan))
     steps = sim.steps
     sim.step_with_controls([0], np.full((4, 1), 0.001))
-    assert sim.steps == steps + 4 and sim.data.ctrl[0] == 0.001
+    assert sim.steps == steps + 4 * sim.tissue_subcycles and sim.data.ctrl[0] == 0.001   # 4 MuJoCo steps
 
 
 # ---------------------------------------------------------------------------------------------

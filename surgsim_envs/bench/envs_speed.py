@@ -34,7 +34,9 @@ def add_arguments(parser) -> None:
                              "compiled substeps (scene/compiled_substeps.py) and with the generic per-substep loop")
     parser.add_argument("--async-baseline", action="store_true",
                         help="also time gym's AsyncVectorEnv with a trivial env and with envs that spin for this "
-                             "task's measured env-step time (the pipe round-trip against ours)")
+                             "task's measured env-step time (the pipe round-trip against ours), the same with the "
+                             "task's info dict, the main process's info merge, and our envs wrapped in "
+                             "InfoKeys(keys=('is_success',))")
     parser.add_argument("--checked-loop", action="store_true",
                         help="also time, alternately in this process, the physics loop through the checked public "
                              "calls (ContactModel.compute + TissueModel.step per substep) against the prepared one")
@@ -221,9 +223,12 @@ def compiled_vs_generic(env, repeats: int, rng, palpation: bool, steps: int, n: 
 
 class SpinEnv:
     """A trivial Gymnasium env whose step busy-waits ``step_us`` microseconds (0: returns at once),
-    with a 20-float observation: the async baseline (pipe round-trip and process scheduling only)."""
+    with a 20-float observation: the async baseline (pipe round-trip and process scheduling only).
+    ``info``: the info dict each step returns (a fresh deep copy per step; default empty), e.g. a
+    task's own, to see what sending and merging it costs."""
 
-    def __new__(cls, step_us: float = 0.0):
+    def __new__(cls, step_us: float = 0.0, info: dict | None = None):
+        import copy
         import gymnasium as gym
         from gymnasium import spaces
 
@@ -239,24 +244,56 @@ class SpinEnv:
                 end = time.perf_counter() + step_us * 1e-6
                 while time.perf_counter() < end:
                     pass
-                return np.zeros(20, np.float32), 0.0, False, False, {}
+                return np.zeros(20, np.float32), 0.0, False, False, copy.deepcopy(info) if info else {}
 
         return _Spin()
 
 
-def _spin_env(step_us: float):
-    return SpinEnv(step_us)
+def _spin_env(step_us: float, info: dict | None = None):
+    return SpinEnv(step_us, info)
 
 
-def async_baseline(workers: int, steps: int, repeats: int, step_us: float) -> dict:
+def task_info(env_id: str) -> dict:
+    """The info dict of one random step of task ``env_id`` (what every step sends through the pipe)."""
+    import gymnasium as gym
+
+    env = gym.make(env_id)
+    try:
+        env.reset(seed=0)
+        return env.step(env.action_space.sample())[4]
+    finally:
+        env.close()
+
+
+def info_merge_us(info: dict, workers: int, repeats: int, n: int = 500) -> float:
+    """us the main process of a vector env spends merging ``workers`` step infos like ``info``
+    (Gymnasium's ``VectorEnv._add_info``, run once per env per vector step, serially)."""
+    from gymnasium.vector import SyncVectorEnv
+
+    vec = SyncVectorEnv([SpinEnv] * workers)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(n):
+            merged = {}
+            for k in range(workers):
+                merged = vec._add_info(merged, info, k)
+        times.append((time.perf_counter() - t0) / n * 1e6)
+    vec.close()
+    return statistics.median(times)
+
+
+def async_baseline(workers: int, steps: int, repeats: int, step_us: float, info: dict | None = None) -> dict:
     """Steps/s of one SpinEnv(step_us) in this process and of ``workers`` of them in gym's
-    AsyncVectorEnv, and the async round-trip overhead per vector step (us) with step_us = 0."""
+    AsyncVectorEnv, and the async round-trip overhead per vector step (us) with step_us = 0; with
+    ``info`` (a task's step info) also the async speed-up of spin envs that return it and the
+    main process's time to merge the workers' infos."""
     import functools
 
     from gymnasium.vector import AsyncVectorEnv
 
-    def rate_single(us):
-        env = SpinEnv(us)
+    def rate_single(us, info=None):
+        env = SpinEnv(us, info)
         env.reset(seed=0)
         a = np.zeros(4, np.float32)
         rates = []
@@ -267,8 +304,8 @@ def async_baseline(workers: int, steps: int, repeats: int, step_us: float) -> di
             rates.append(steps / (time.perf_counter() - t0))
         return statistics.median(rates)
 
-    def rate_async(us):
-        vec = AsyncVectorEnv([functools.partial(_spin_env, us)] * workers)
+    def rate_async(us, info=None):
+        vec = AsyncVectorEnv([functools.partial(_spin_env, us, info)] * workers)
         try:
             vec.reset(seed=0)
             a = np.zeros((workers, 4), np.float32)
@@ -287,9 +324,16 @@ def async_baseline(workers: int, steps: int, repeats: int, step_us: float) -> di
 
     trivial = rate_async(0.0)
     single, multi = rate_single(step_us), rate_async(step_us)
-    return {"async_trivial_steps_per_s": trivial, "async_roundtrip_us": workers / trivial * 1e6,
-            "spin_step_us": step_us, "spin_single_steps_per_s": single, "spin_async_steps_per_s": multi,
-            "spin_async_speedup": multi / single}
+    out = {"async_trivial_steps_per_s": trivial, "async_roundtrip_us": workers / trivial * 1e6,
+           "spin_step_us": step_us, "spin_single_steps_per_s": single, "spin_async_steps_per_s": multi,
+           "spin_async_speedup": multi / single}
+    if info:
+        trivial_info = rate_async(0.0, info)
+        single_info, multi_info = rate_single(step_us, info), rate_async(step_us, info)
+        out.update(async_roundtrip_with_info_us=workers / trivial_info * 1e6,
+                   spin_info_async_speedup=multi_info / single_info,
+                   info_merge_us=info_merge_us(info, workers, repeats))
+    return out
 
 
 def visual_flex_cost(sim, repeats: int, n: int = 500) -> tuple[float, float]:
@@ -313,11 +357,17 @@ def visual_flex_cost(sim, repeats: int, n: int = 500) -> tuple[float, float]:
     return statistics.median(times[0]), statistics.median(times[1])
 
 
-def async_rate(env_id: str, workers: int, steps: int, repeats: int) -> float:
-    """Median total env steps/s of an async vector env with ``workers`` processes."""
+def async_rate(env_id: str, workers: int, steps: int, repeats: int, info_keys=None) -> float:
+    """Median total env steps/s of an async vector env with ``workers`` processes; ``info_keys``:
+    wrap each env in :class:`~surgsim_envs.envs.wrappers.InfoKeys` with these keys."""
+    import functools
+
     import gymnasium as gym
 
-    vec = gym.make_vec(env_id, num_envs=workers, vectorization_mode="async")
+    from surgsim_envs.envs.wrappers import InfoKeys
+
+    wrappers = None if info_keys is None else [functools.partial(InfoKeys, keys=tuple(info_keys))]
+    vec = gym.make_vec(env_id, num_envs=workers, vectorization_mode="async", wrappers=wrappers)
     rng = np.random.default_rng(0)
     pal = "Palpation" in env_id
     try:
@@ -361,7 +411,11 @@ def run(args) -> int:
             row["async_steps_per_s"] = async_rate(t, args.workers, args.steps, args.repeats)
             row["async_speedup"] = row["async_steps_per_s"] / row["steps_per_s"]
             if getattr(args, "async_baseline", False):
-                row.update(async_baseline(args.workers, args.steps, args.repeats, 1e6 / row["steps_per_s"]))
+                row.update(async_baseline(args.workers, args.steps, args.repeats, 1e6 / row["steps_per_s"],
+                                          task_info(t)))
+                row["async_info_keys_steps_per_s"] = async_rate(t, args.workers, args.steps, args.repeats,
+                                                                info_keys=("is_success",))
+                row["async_info_keys_speedup"] = row["async_info_keys_steps_per_s"] / row["steps_per_s"]
         rows.append(row)
     if args.json:
         print(json.dumps({"envs": rows}, indent=2))

@@ -300,6 +300,12 @@ class SurgSimEnv(gym.Env):
 
         Raises ConfigError (a ValueError) on a wrong shape or non-finite entries.
         """
+        if type(action) is np.ndarray and action.dtype.kind == "f" and action.shape == self.action_space.shape:
+            a = action.astype(np.float64)          # a copy: the caller's array is never modified
+            if np.isfinite(a).all():               # fast path of the checks below (same result)
+                np.minimum(a, 1.0, out=a)
+                np.maximum(a, -1.0, out=a)
+                return a
         raw = np.asarray(action)
         if raw.dtype.kind not in "iuf":
             raise ConfigError(f"action must be real numbers (float or int) with shape {self.action_space.shape} in "

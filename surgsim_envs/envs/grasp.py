@@ -31,6 +31,7 @@ the task's model (mass-spring, symplectic) meeting ``error_tolerance`` and ``ste
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -48,6 +49,8 @@ class GraspConfig(GraspSceneConfig):
     """Grasp-v0 settings (SI units): the shared grasp-scene fields (:class:`GraspSceneConfig`) plus
     the task's target and reward. Ranges are (low, high) sampled uniformly per episode."""
 
+    tissue_subcycles: int | str = "auto"   # 2 tissue + contact steps of dt per MuJoCo step at the defaults
+    #                                        (MuJoCo at 0.8 ms; see resolved_subcycles); 1 = one each
     max_step: float = 0.001            # m per control step (5 cm/s at 50 Hz)
     workspace: float = 0.06            # m, wrist target |offset| from home per axis
     target_offset_x: Sequence[float] = (0.012, 0.02)  # m, along the pull direction (out of the organ)
@@ -102,21 +105,31 @@ class GraspEnv(GraspSceneEnv):
         self.best_dist = self.goal_dist0
 
     def _clip_target(self, pos: np.ndarray) -> np.ndarray:
-        local = np.clip(self.frame.T @ (pos - self.home), -self.config.workspace, self.config.workspace)
+        w = self.config.workspace
+        local = self.frame.T @ (pos - self.home)
+        np.minimum(local, w, out=local)            # = np.clip(local, -w, w), without its wrapper
+        np.maximum(local, -w, out=local)
         return self.home + self.frame @ local
 
     def _apply_action(self, a: np.ndarray) -> None:
         c, g = self.config, self.gcfg
         self.target = self._clip_target(self.target + a[:3] * c.max_step)
         self.sim.set_tool_target(self.tool_name, self.target)
-        radius = g.open_radius - (a[3] + 1.0) / 2.0 * (g.open_radius - g.min_radius)
-        self.sim.set_jaw_opening(self.tool_name, float(np.clip(radius, g.min_radius, g.open_radius)))
+        radius = g.open_radius - (float(a[3]) + 1.0) / 2.0 * (g.open_radius - g.min_radius)
+        self.sim.set_jaw_opening(self.tool_name, min(max(radius, g.min_radius), g.open_radius))
         self.sim.step()
 
     def _observe(self) -> np.ndarray:
         pos, fn, ft, rep = self._readings()
-        return np.array([*pos, *(self.goal - pos), self.sim.jaw_opening(self.tool_name), *fn, *ft,
-                         rep["slipping"], rep["contacts"]], dtype=np.float32)
+        obs = np.empty(15, dtype=np.float32)
+        obs[0:3] = pos
+        obs[3:6] = self.goal - pos
+        obs[6] = self.tool.jaw_opening(self.sim)
+        obs[7:10] = fn
+        obs[10:13] = ft
+        obs[13] = rep["slipping"]
+        obs[14] = rep["contacts"]
+        return obs
 
     def _update_grasp(self, pos, fn) -> bool:
         c = self.config
@@ -133,7 +146,8 @@ class GraspEnv(GraspSceneEnv):
         c = self.config
         pos, fn, ft, rep = self._readings()
         grasped = self._update_grasp(pos, fn)
-        dist = float(np.linalg.norm(self.goal - pos))
+        d = self.goal - pos
+        dist = math.sqrt(d.dot(d))                 # = np.linalg.norm(d) (its own formula), without the wrapper
         rt = {"excess_force": excess_force_penalty(fn, c.damage_force, c.force_weight),
               "contact": contact_reward(fn, c.hold_force, c.contact_weight), "progress": 0.0, "slip": 0.0,
               "drop": 0.0, "success": 0.0}

@@ -27,7 +27,8 @@ class GraspSceneConfig:
 
     control_hz: float = 50.0
     dt: float = 4e-4                   # s; squeezed, strain-stiffened tissue needs < 0.5 ms
-    tissue_subcycles: int = 1          # tissue + contact steps of dt per MuJoCo step (1: one each; see Simulation)
+    tissue_subcycles: int | str = 1    # tissue + contact steps of dt per MuJoCo step (1: one each; see Simulation;
+    #                                    "auto": resolved_subcycles)
     episode_seconds: float = 3.0
     organ: Any = "spleen"              # "spleen", "liver_lobe", a closed mesh file (STL/OBJ/PLY/VTK) or a Volume
     model: str = "mass_spring"         # any registered tissue model with the "forces" capability
@@ -52,12 +53,28 @@ class GraspSceneConfig:
         check_on_unstable(self.on_unstable, what)
         n = self.tissue_subcycles
         substeps = max(1, int(round(1.0 / self.control_hz / self.dt)))
-        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 100 or substeps % n:
+        if n != "auto" and (isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 100 or substeps % n):
             raise ConfigError(f"{what}.tissue_subcycles={n!r} must be an integer in [1, 100] that divides the "
-                              f"{substeps} physics steps of a control step")
+                              f"{substeps} physics steps of a control step, or 'auto'")
         check_grasp_organ(self.organ, f"{what}.organ")
         check_range(self.mu, "mu", 0.0, 2.0)
         check_range(self.young_scale, "young_scale", 0.5, 1.25)
+
+
+#: s, the longest MuJoCo step the tasks' grasper takes with sub-cycling: its jaw servo (kp 20 kN/m on
+#: 20 g jaws) is stable at 0.8 ms and unstable from 1.6 ms even without tissue (measured,
+#: docs/benchmarks.md "Env step: third pass")
+MAX_SUBCYCLED_RIGID_DT = 8e-4
+
+
+def resolved_subcycles(config) -> int:
+    """``config.tissue_subcycles`` as an integer: "auto" is 2 when 2 divides the physics steps of a
+    control step and the MuJoCo step ``2 dt`` stays within :data:`MAX_SUBCYCLED_RIGID_DT`, else 1."""
+    n = config.tissue_subcycles
+    if n != "auto":
+        return int(n)
+    substeps = max(1, int(round(1.0 / config.control_hz / config.dt)))
+    return 2 if substeps % 2 == 0 and 2 * config.dt <= MAX_SUBCYCLED_RIGID_DT * (1 + 1e-9) else 1
 
 
 class GraspSceneEnv(SurgSimEnv):
@@ -84,7 +101,7 @@ class GraspSceneEnv(SurgSimEnv):
                                                        c.error_tolerance, c.step_budget_us, model=c.model,
                                                        integrator=c.integrator,
                                                        max_young_scale=check_range(c.young_scale, "young_scale")[1],
-                                                       tissue_subcycles=c.tissue_subcycles)
+                                                       tissue_subcycles=resolved_subcycles(c))
             self.sim = self._sims[key]
             self._select_tool()
             self._on_new_simulation(self.sim)
@@ -128,7 +145,7 @@ class GraspSceneEnv(SurgSimEnv):
         key = (sim, sim.steps, sim.time, self.steps)
         if getattr(self, "_readings_key", None) != key:
             jaws = sim.jaw_forces(self.tool_name)
-            rep = sim.contact_report()[self.tool_name]
+            rep = sim.tool_contact_report(self.tool_name)
             self._readings_value = (sim.tool_position(self.tool_name), jaws["normal"], jaws["tangential"], rep)
             self._readings_key = key
         return self._readings_value

@@ -40,6 +40,7 @@ end ``localisation_weight * (1 - min(err / localisation_scale, 1)) + success_bon
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -158,9 +159,16 @@ def is_new_site(xy: np.ndarray, sites: list, spacing: float) -> bool:
     return all(float(np.hypot(*(xy - s))) >= spacing for s in sites)
 
 
+def _norm(v) -> float:
+    """Euclidean norm of a small vector: ``np.linalg.norm``'s own formula, sqrt(v . v), without its
+    wrapper (same result bit for bit)."""
+    v = np.asarray(v, dtype=float).ravel()
+    return math.sqrt(v.dot(v))
+
+
 def damage_penalty(force: np.ndarray, threshold: float, weight: float) -> float:
     """-weight * (|force| - threshold) above the tissue-damage threshold (N), else 0."""
-    return -weight * max(0.0, float(np.linalg.norm(force)) - threshold)
+    return -weight * max(0.0, _norm(force) - threshold)
 
 
 def stiffness_weighted_estimate(xy: np.ndarray, k: np.ndarray, power: float = 3.0) -> np.ndarray:
@@ -170,7 +178,13 @@ def stiffness_weighted_estimate(xy: np.ndarray, k: np.ndarray, power: float = 3.
     if len(k) == 0 or len(k) != len(xy):
         raise ConfigError(f"stiffness_weighted_estimate needs n >= 1 samples with matching xy (n, 2) and k (n,), "
                           f"got xy {xy.shape} and k {k.shape}")
-    w = np.clip(k - np.median(k), 0.0, None) ** power
+    return _weighted_estimate(xy, k, np.median(k), power)
+
+
+def _weighted_estimate(xy: np.ndarray, k: np.ndarray, median, power: float = 3.0) -> np.ndarray:
+    """:func:`stiffness_weighted_estimate` of checked (n, 2) / (n,) float arrays with ``median`` =
+    ``np.median(k)`` given (the env computes it once per sample for the estimate and the contrast)."""
+    w = np.clip(k - median, 0.0, None) ** power
     total = float(w.sum())
     if total <= 0.0:
         return xy[int(np.argmax(k))].copy()
@@ -185,8 +199,14 @@ def map_cell(xy: np.ndarray, cells: int, half_width: float) -> int:
     xy = np.asarray(xy, dtype=float).reshape(-1)
     if xy.shape != (2,) or not np.all(np.isfinite(xy)):
         raise ConfigError(f"map_cell needs a finite (x, y) in m, got {xy!r}")
-    ij = np.clip(np.floor((xy + half_width) / (2 * half_width) * cells), 0, cells - 1).astype(int)
-    return int(ij[1] * cells + ij[0])
+    return _cell_of(float(xy[0]), float(xy[1]), int(cells), float(half_width))
+
+
+def _cell_of(x: float, y: float, cells: int, half_width: float) -> int:
+    """:func:`map_cell` of checked finite floats (the same arithmetic, in Python floats)."""
+    i = min(max(math.floor((x + half_width) / (2 * half_width) * cells), 0), cells - 1)
+    j = min(max(math.floor((y + half_width) / (2 * half_width) * cells), 0), cells - 1)
+    return int(j * cells + i)
 
 
 def stiffness_map(cell_max_k: np.ndarray) -> np.ndarray:
@@ -303,6 +323,7 @@ class PalpationEnv(SurgSimEnv):
         self.estimate = None                     # (2,) m, running stiffness-weighted estimate
         self.contrast_seen = 1.0                 # max / median sampled stiffness
         self.cell_k = np.zeros(self.n_cells)     # N/m, max stiffness sample per map cell (0 = none)
+        self._map_obs = None                     # the map's observation entries (from cell_k), cached
         self.phi = 0.0                           # shaping potential of the running estimate
         self.prev_tip = self.sim.tool_position("probe").copy()
         self.report_held = 0                     # consecutive control steps with report > 0
@@ -311,8 +332,10 @@ class PalpationEnv(SurgSimEnv):
 
     def _apply_action(self, a: np.ndarray) -> None:
         c = self.config
-        xy = np.clip(self.target[:2] + a[:2] * c.max_xy_step, -c.xy_limit, c.xy_limit)
-        press = (a[2] + 1.0) / 2.0
+        xy = self.target[:2] + a[:2] * c.max_xy_step
+        np.minimum(xy, c.xy_limit, out=xy)        # = np.clip(xy, -lim, lim), without its wrapper
+        np.maximum(xy, -c.xy_limit, out=xy)
+        press = (float(a[2]) + 1.0) / 2.0
         z = self.surface_z + c.tip_radius + c.hover - press * (c.hover + c.max_depth)
         self.target = np.array([xy[0], xy[1], z])
         self.sim.set_tool_target("probe", self.target, speed=c.probe_speed)
@@ -333,20 +356,26 @@ class PalpationEnv(SurgSimEnv):
         pos, force, depth = self._readings()
         frac = self.steps / self.max_episode_steps
         est = self.estimate if self.estimate is not None else pos[:2]
-        return np.array([*pos, *force, depth, self.best[0], self.best[1], self.best[2], frac, est[0], est[1],
-                         self.contrast_seen, *_normalised(self.cell_k)], dtype=np.float32)
+        obs = np.empty(14 + self.n_cells, dtype=np.float32)
+        obs[0:3] = pos
+        obs[3:6] = force
+        obs[6:14] = (depth, self.best[0], self.best[1], self.best[2], frac, est[0], est[1], self.contrast_seen)
+        if self._map_obs is None:              # the map changes only when a sample is recorded
+            self._map_obs = _normalised(self.cell_k)
+        obs[14:] = self._map_obs
+        return obs
 
     def _evaluate(self, a: np.ndarray):
         c = self.config
         pos, force, depth = self._readings()
-        fmag = float(np.linalg.norm(force))
+        fmag = _norm(force)
         self.peak_force = max(self.peak_force, fmag)
         rt = {"damage": damage_penalty(force, c.damage_force, c.damage_weight), "coverage": 0.0, "shaping": 0.0,
               "time": -c.time_cost, "press_site": 0.0, "localisation": 0.0}
         k = stiffness_estimate(force[2], depth, c.press_min_depth)
         if k > self.best[2]:
             self.best = (float(pos[0]), float(pos[1]), k)
-        speed = float(np.linalg.norm(pos - self.prev_tip)) / self.control_dt
+        speed = _norm(pos - self.prev_tip) / self.control_dt
         self.prev_tip = pos.copy()
         if k > 0.0 and speed <= c.sample_max_speed:
             self._record_sample(pos[:2].copy(), k, rt)
@@ -387,12 +416,14 @@ class PalpationEnv(SurgSimEnv):
         buf[0][n - 1] = xy
         buf[1][n - 1] = k
         buf[2] = max(buf[2], float(k))
-        cell = map_cell(xy, int(c.map_cells), c.map_half_width)
+        cell = _cell_of(float(xy[0]), float(xy[1]), int(c.map_cells), float(c.map_half_width))
         if self.cell_k[cell] == 0.0:
             rt["coverage"] += c.cell_reward
         self.cell_k[cell] = max(self.cell_k[cell], k)
-        self.estimate = stiffness_weighted_estimate(buf[0][:n], buf[1][:n])
-        med = float(np.median(buf[1][:n]))
+        self._map_obs = None
+        median = np.median(buf[1][:n])           # once for the estimate and the contrast
+        self.estimate = _weighted_estimate(buf[0][:n], buf[1][:n], median)
+        med = float(median)
         self.contrast_seen = buf[2] / med if med > 0 else 1.0
         err = localisation_error(self.estimate, self.inclusion["centre"][:2])
         phi = 1.0 - min(err / c.localisation_scale, 1.0)

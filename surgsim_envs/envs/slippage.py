@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
+from numba import njit
 from gymnasium import spaces
 
 from surgsim_envs.envs.base import ObsTerm, check_positive, check_range, reward_from_terms, sample
@@ -95,6 +96,31 @@ def slip_penalty(slip_now: float, slip_before: float, weight_per_mm: float) -> f
     return -weight_per_mm * max(0.0, slip_now - slip_before) * 1e3
 
 
+@njit(cache=True)
+def _schedule(values, jaw, jaw_goal, lim, t, dt, pulling, rate, amplitude, w, phase, t0, top):
+    """Fill ``values`` (K, 2) with the control schedule of :meth:`SlippageEnv._run`: column 0 the jaw
+    control moving from ``jaw`` towards ``jaw_goal`` by at most ``lim`` per MuJoCo step, column 1
+    (if ``pulling``) the pull ``min(top, pull_force(t - t0, rate, amplitude, f, phase))`` with
+    ``w = 2 pi f``, t advancing by ``dt`` from ``t`` (as mj_step2 advances d.time). The same
+    operations in the same order as the Python loop it replaces (no fastmath; libm's sin), so the
+    schedule is bit for bit the same."""
+    for k in range(values.shape[0]):
+        d = jaw_goal - jaw
+        if d < -lim:
+            d = -lim
+        if d > lim:
+            d = lim
+        jaw += d
+        values[k, 0] = jaw
+        if pulling:
+            tau = t - t0
+            p = rate * tau + amplitude * math.sin(w * tau + phase)
+            if not p > 0.0:                      # as max(0.0, p)
+                p = 0.0
+            values[k, 1] = p if p < top else top
+        t += dt
+
+
 class SlippageEnv(GraspSceneEnv):
     """Slippage-v0 (see module docstring)."""
 
@@ -139,7 +165,8 @@ class SlippageEnv(GraspSceneEnv):
     def _run(self, steps: int, jaw_goal: float, pull: callable) -> None:
         """``steps`` physics steps; before each, the jaw control moves towards ``jaw_goal`` by at most
         ``closing_speed * dt`` and the pull motor gets ``pull(t)`` (t the simulation time before the
-        step). Both schedules are computed ahead and run in one :meth:`Simulation.step_with_controls`."""
+        step; ``pull`` None: the episode's pull, :meth:`_pull_at`). Both schedules are computed ahead
+        (:func:`_schedule`) and run in one :meth:`Simulation.step_with_controls`."""
         sim = self.sim
         n = sim.tissue_subcycles          # controls change once per MuJoCo step of n physics steps
         dt = sim.dt * n
@@ -148,11 +175,18 @@ class SlippageEnv(GraspSceneEnv):
         values = np.empty((steps, 2))
         jaw = float(sim.data.ctrl[self._jaw_act])
         t = float(sim.data.time)
-        for k in range(steps):
-            jaw += min(max(jaw_goal - jaw, -lim), lim)
-            values[k, 0] = jaw
-            values[k, 1] = pull(t)
-            t += dt                                   # as mj_step2 advances d.time
+        if pull is None:            # the episode's pull: schedule and pull in one compiled call
+            w = 2.0 * math.pi * self.frequency     # pull_force evaluates 2.0 * math.pi * frequency * t left to right
+            _schedule(values, jaw, jaw_goal, lim, t, dt, True, self.rate, self.amplitude, w, self.phase, self.t0,
+                      float(self.config.max_pull))
+            if steps:
+                self.pull = float(values[-1, 1])
+        else:
+            _schedule(values, jaw, jaw_goal, lim, t, dt, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            t_k = t
+            for k in range(steps):
+                values[k, 1] = pull(t_k)
+                t_k += dt
         sim.step_with_controls([self._jaw_act, self._pull_act], values)
 
     def _randomise(self, options: dict[str, Any]) -> None:
@@ -181,7 +215,7 @@ class SlippageEnv(GraspSceneEnv):
 
     def _apply_action(self, a: np.ndarray) -> None:
         self.jaw_goal = self._closure_ctrl(float(a[0]))
-        self._run(self.substeps, self.jaw_goal, self._pull_at)
+        self._run(self.substeps, self.jaw_goal, None)       # None: the episode's pull (_pull_schedule)
 
     def _observe(self) -> np.ndarray:
         pos, fn, ft, rep = self._readings()

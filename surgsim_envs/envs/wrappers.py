@@ -1,7 +1,8 @@
 """Optional wrappers for the SurgSim tasks.
 
 :class:`PixelObservation` replaces (or augments) the state observation with an RGB frame
-rendered offscreen (needs OpenGL: ``MUJOCO_GL=egl`` or ``osmesa``).
+rendered offscreen (needs OpenGL: ``MUJOCO_GL=egl`` or ``osmesa``). :class:`InfoKeys` keeps only
+the named info entries (cheaper async vector envs).
 """
 
 from __future__ import annotations
@@ -32,3 +33,32 @@ class PixelObservation(gym.ObservationWrapper):
         if self.keep_state:
             return {"state": observation, "pixels": frame}
         return frame
+
+
+class InfoKeys(gym.Wrapper):
+    """Keep only ``keys`` of every ``info`` (reset and step), for vector envs that do not need the
+    rest: an async vector env pickles each step's info in the worker and merges the infos of all
+    workers key by key in the main process (Gymnasium's ``VectorEnv._add_info``), serially, and
+    with the tasks' ~17 info entries that costs more than the pipe round-trip itself (measured:
+    docs/benchmarks.md, "Env step: third pass"). Keys missing from an info are skipped.
+
+    ``gym.make_vec("SurgSim/Palpation-v0", num_envs=2, vectorization_mode="async",
+    wrappers=[functools.partial(InfoKeys, keys=("is_success",))])``
+    """
+
+    def __init__(self, env: gym.Env, keys=("success", "is_success")):
+        super().__init__(env)
+        if isinstance(keys, str) or not all(isinstance(k, str) for k in keys):
+            raise ConfigError(f"InfoKeys keys must be a sequence of info key names (str), got {keys!r}")
+        self.keys = tuple(keys)
+
+    def _slim(self, info: dict) -> dict:
+        return {k: info[k] for k in self.keys if k in info}
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        return obs, self._slim(info)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        return obs, reward, terminated, truncated, self._slim(info)

@@ -490,11 +490,11 @@ class Simulation:
         if tool.config.drive != "position":
             raise ConfigError(f"tool '{name}' has drive={tool.config.drive!r} and no actuators; build it with drive='position'")
         pos = np.asarray(position, dtype=float).reshape(-1)
-        if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+        if pos.shape != (3,) or not np.isfinite(pos).all():
             raise ConfigError(f"tool target position must be 3 finite numbers (m), got {position!r}")
         local = tool.frame.T @ (pos - tool.home)
         travel = tool.config.travel
-        if np.any(np.abs(local) > travel + 1e-12):
+        if max(abs(v) for v in local.tolist()) > travel + 1e-12:
             raise ConfigError(f"target {pos.round(4).tolist()} m is outside tool '{name}''s reach of +-{travel} m "
                               f"about its home {tool.home.round(4).tolist()} m; raise its travel or choose a closer target")
         act = tool.actuator_ids[:3]
@@ -589,7 +589,10 @@ class Simulation:
         idx = self._tool_bodies[self.tool(name).name]
         out = np.zeros(3)
         for contact in self.contacts.values():
-            out += contact.result.tool_force[idx].sum(axis=0)
+            if len(idx) == 1:            # one body: its row (the sum over one row, without the reduction)
+                out += contact.result.tool_force[idx[0]]
+            else:
+                out += contact.result.tool_force[idx].sum(axis=0)
         return out
 
     def contact_report(self) -> dict[str, dict[str, float]]:
@@ -597,21 +600,25 @@ class Simulation:
         normal_force N (sum of normal magnitudes), tangential_force N (sum over the tool's bodies of
         the magnitude of each body's summed friction force), contacts (nodes), slipping (nodes),
         penetration m (max depth)."""
-        out = {}
-        for name in self.tools:
-            idx = self._tool_bodies[name]
-            fn = ft = 0.0
-            nc = ns = 0
-            pen = 0.0
-            for contact in self.contacts.values():
-                r = contact.report
-                fn += float(r.normal_force[idx].sum())
-                ft += float(r.tangential_force[idx].sum())
-                nc += int(r.contacts[idx].sum())
-                ns += int(r.slipping[idx].sum())
-                pen = max(pen, float(r.penetration[idx].max()) if len(idx) else 0.0)
-            out[name] = {"normal_force": fn, "tangential_force": ft, "contacts": nc, "slipping": ns, "penetration": pen}
-        return out
+        return {name: self.tool_contact_report(name) for name in self.tools}
+
+    def tool_contact_report(self, name: str) -> dict[str, float]:
+        """:meth:`contact_report` of tool ``name`` only (the same numbers; what a task reads per step)."""
+        idx = self._tool_bodies[self.tool(name).name]
+        fn = ft = 0.0
+        nc = ns = 0
+        pen = 0.0
+        n = len(idx)
+        for contact in self.contacts.values():
+            r = contact.report
+            if n == 0:
+                continue
+            fn += float(r.normal_force[idx].sum())
+            ft += float(r.tangential_force[idx].sum())
+            nc += int(r.contacts[idx].sum())
+            ns += int(r.slipping[idx].sum())
+            pen = max(pen, float(r.penetration[idx].max()))
+        return {"normal_force": fn, "tangential_force": ft, "contacts": nc, "slipping": ns, "penetration": pen}
 
     def jaw_forces(self, name: str) -> dict[str, np.ndarray]:
         """Per-jaw contact forces of tool ``name``: {"normal": (3,) N, "tangential": (3,) N}."""

@@ -35,7 +35,7 @@ from surgsim_envs.scene.simulation import (_add_wrench, _advance_geoms, _gather_
                                            _zero_rows)
 from surgsim_envs.tissue.guard import first_non_finite, max_speed_squared
 from surgsim_envs.tissue.mass_spring import MassSpringModel
-from surgsim_envs.tissue.msd_kernels import elastic_energy, symplectic_step, volume_energy
+from surgsim_envs.tissue.msd_kernels import elastic_energy, symplectic_step_work, volume_energy
 
 
 @njit(cache=True)
@@ -73,12 +73,13 @@ def run_substeps(k, j, count, resume, native, controls, ctrl_ids, ctrl_values, g
     with its reaction. counts: [tissue steps, simulation steps, tissue steps taken in this batch];
     clock: [tissue time, time of the last good state]. guard: (in_kernel, masses, kM, energy,
     good_pos, good_vel, snap): with ``in_kernel`` the costly checks run here (:func:`_costly_check`),
-    else they are handed back. sub: (n, n * dt, gpos0 buffer): sub-cycling (``tissue_subcycles``).
+    else they are handed back. sub: (n, n * dt, gpos0 buffer, spring work buffer (4, E)): sub-cycling
+    (``tissue_subcycles``) and the spring pass's buffer (``MassSpringModel.spring_work``).
     Returns (status, MuJoCo step index, tissue step index within it)."""
     step1, step2, m_ptr, d_ptr = native
     ctrl, goal, rate, moving, dt = controls
     xfrc, bodies, wrench = reaction
-    n, big_dt, gpos0 = sub
+    n, big_dt, gpos0, work = sub
     gpos, gmat, gvel, tcom = gather[9], gather[10], gather[11], gather[12]
     (pos, vel, inv_mass, b0, gravity, fixed, si, sj, L0, K1, K2, kMg0, decay0, kMg, decay, s_state, dl_state, f_buf,
      tets, V0, kv) = tissue
@@ -111,11 +112,11 @@ def run_substeps(k, j, count, resume, native, controls, ctrl_ids, ctrl_values, g
                     for q in range(3):
                         integrated[i, q] = forces[i, q]
                 if counts[2] == 0:
-                    symplectic_step(pos, vel, inv_mass, b0, forces, gravity, fixed, dt, si, sj, L0, K1, K2, kMg0,
-                                    decay0, s_state, dl_state, f_buf, tets, V0, kv)
+                    symplectic_step_work(pos, vel, inv_mass, b0, forces, gravity, fixed, dt, si, sj, L0, K1, K2,
+                                         kMg0, decay0, s_state, dl_state, f_buf, tets, V0, kv, work)
                 else:
-                    symplectic_step(pos, vel, inv_mass, b0, forces, gravity, fixed, dt, si, sj, L0, K1, K2, kMg,
-                                    decay, s_state, dl_state, f_buf, tets, V0, kv)
+                    symplectic_step_work(pos, vel, inv_mass, b0, forces, gravity, fixed, dt, si, sj, L0, K1, K2,
+                                         kMg, decay, s_state, dl_state, f_buf, tets, V0, kv, work)
                 counts[2] += 1
                 for q in range(fixed_idx.shape[0]):
                     i = fixed_idx[q]
@@ -202,7 +203,7 @@ class MassSpringSymplecticRunner:
         n = sim.tissue_subcycles
         if self._gpos0 is None or self._gpos0.shape != sim._gpos.shape:
             self._gpos0 = np.empty_like(sim._gpos)
-        sub = (n, dt * n, self._gpos0)
+        sub = (n, dt * n, self._gpos0, tissue.spring_work())
         try:
             while True:
                 gstate = self._guard_arrays()

@@ -312,9 +312,10 @@ class MassSpringModel(TissueModel):
                 raise ConfigError(f"stiffness must be a finite, non-negative ({self.n_nodes},) array in N/m, "
                                   f"got shape {np.shape(stiffness)}")
         if self.active_integrator == "symplectic":
-            kern.symplectic_step(self.positions, self.velocities, self.inv_mass, self.b0, fext, self.gravity,
-                                 self.fixed, dt, self.si, self.sj, self.rest_lengths, self.K1, self.K2,
-                                 kMg, decay, self._s, self._dl, self._f, self._vtets, self.volume_rest, self.volume_kv)
+            kern.symplectic_step_work(self.positions, self.velocities, self.inv_mass, self.b0, fext, self.gravity,
+                                      self.fixed, dt, self.si, self.sj, self.rest_lengths, self.K1, self.K2, kMg,
+                                      decay, self._s, self._dl, self._f, self._vtets, self.volume_rest,
+                                      self.volume_kv, self.spring_work())
         else:
             kMg_next, _ = self._branch_coeffs(dt)
             if self._cg is None:
@@ -344,6 +345,14 @@ class MassSpringModel(TissueModel):
         return (self.positions, self.velocities, self.inv_mass, self.b0, self.gravity, self.fixed, self.si, self.sj,
                 self.rest_lengths, self.K1, self.K2, kMg0, decay0, kMg, decay, self._s, self._dl, self._f,
                 self._vtets, self.volume_rest, self.volume_kv)
+
+    def spring_work(self) -> np.ndarray:
+        """The (4, springs) float64 work buffer of the symplectic spring pass
+        (:func:`~surgsim_envs.tissue.msd_kernels.symplectic_step_work`), allocated once per spring count."""
+        w = getattr(self, "_spring_work", None)
+        if w is None or w.shape[1] != len(self.si):
+            w = self._spring_work = np.empty((4, len(self.si)))
+        return w
 
     def committed_symplectic_steps(self, dt: float) -> None:
         """Bookkeeping after a compiled caller advanced the model with :meth:`symplectic_kernel_state`

@@ -181,14 +181,109 @@ def _volume_matvec(x, h2, tets, vgrad, vcoef, out):
             out[n, 2] += c * vgrad[t, a, 2]
 
 
+@njit(cache=True, fastmath=True, error_model="numpy", nogil=True)
+def spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, commit, f_out, work):
+    """:func:`spring_forces` (same forces, same branch update) in three passes over a (4, E) work
+    buffer ``work`` (any content; overwritten): (1) gather the spring vectors x_j - x_i into
+    structure-of-arrays rows; (2) per spring the force over length, f / l, a loop over contiguous
+    arrays with no scatter and no Python error checks (``error_model="numpy"``), which the compiler
+    vectorises (sqrt, division); (3) scatter +-(f/l) d onto the nodes in spring order, keeping node
+    ``si[e]``'s running sum in registers while consecutive springs share it (loaded from and stored to
+    ``f_out`` around each run, so every node receives the same additions in the same order as in
+    :func:`spring_forces`; the lattices sort springs by ``si``, so no store-to-load chain runs through
+    memory; any order gives the same sums). A spring of length <= 1e-300 m exerts no force (as in
+    :func:`spring_forces`). Measured here: bit for bit the forces of :func:`spring_forces` called on
+    its own, and the tasks' trajectories identical to the single-pass kernel's (fastmath lets the
+    compiler contract arithmetic differently in other contexts: tests hold the two to 1e-12
+    relative); ~1.8x faster on the tasks' lattices (docs/benchmarks.md "Env step: third pass")."""
+    ne = si.shape[0]
+    wx = work[0]
+    wy = work[1]
+    wz = work[2]
+    wc = work[3]
+    for e in range(ne):
+        i = si[e]
+        j = sj[e]
+        wx[e] = pos[j, 0] - pos[i, 0]
+        wy[e] = pos[j, 1] - pos[i, 1]
+        wz[e] = pos[j, 2] - pos[i, 2]
+    if commit:
+        for e in range(ne):
+            dx = wx[e]
+            dy = wy[e]
+            dz = wz[e]
+            length = math.sqrt(dx * dx + dy * dy + dz * dz)
+            dl = length - L0[e]
+            sb = decay[e] * s_state[e] + kMg[e] * (dl - dl_state[e])
+            s_state[e] = sb
+            dl_state[e] = dl
+            f = K1[e] * dl + K2[e] * dl * dl * dl + sb
+            wc[e] = f / length if length > 1e-300 else 0.0
+    else:
+        for e in range(ne):
+            dx = wx[e]
+            dy = wy[e]
+            dz = wz[e]
+            length = math.sqrt(dx * dx + dy * dy + dz * dz)
+            dl = length - L0[e]
+            sb = decay[e] * s_state[e] + kMg[e] * (dl - dl_state[e])
+            f = K1[e] * dl + K2[e] * dl * dl * dl + sb
+            wc[e] = f / length if length > 1e-300 else 0.0
+    for a in range(pos.shape[0]):
+        f_out[a, 0] = 0.0
+        f_out[a, 1] = 0.0
+        f_out[a, 2] = 0.0
+    if ne == 0:
+        return
+    cur = si[0]
+    ax = f_out[cur, 0]
+    ay = f_out[cur, 1]
+    az = f_out[cur, 2]
+    for e in range(ne):
+        i = si[e]
+        if i != cur:
+            f_out[cur, 0] = ax
+            f_out[cur, 1] = ay
+            f_out[cur, 2] = az
+            cur = i
+            ax = f_out[cur, 0]        # what earlier springs (as their j side) added to it
+            ay = f_out[cur, 1]
+            az = f_out[cur, 2]
+        j = sj[e]
+        c = wc[e]
+        fx = c * wx[e]
+        fy = c * wy[e]
+        fz = c * wz[e]
+        ax += fx
+        ay += fy
+        az += fz
+        f_out[j, 0] -= fx
+        f_out[j, 1] -= fy
+        f_out[j, 2] -= fz
+    f_out[cur, 0] = ax
+    f_out[cur, 1] = ay
+    f_out[cur, 2] = az
+
+
 @njit(cache=True, fastmath=True, nogil=True)
 def symplectic_step(pos, vel, inv_mass, b0, fext, gravity, fixed, dt,
                     si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, f_buf, tets, V0, kv):
     """One semi-implicit (symplectic) Euler step in place:
 
     v += dt * ((f_spring + f_volume + f_ext - b0 v) / m + g);  x += dt * v   (fixed nodes untouched).
+
+    Allocates the (4, E) work buffer of :func:`symplectic_step_work` (the hot callers pass their own).
     """
-    spring_forces(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, True, f_buf)
+    symplectic_step_work(pos, vel, inv_mass, b0, fext, gravity, fixed, dt, si, sj, L0, K1, K2, kMg, decay,
+                         s_state, dl_state, f_buf, tets, V0, kv, np.empty((4, si.shape[0])))
+
+
+@njit(cache=True, fastmath=True, nogil=True)
+def symplectic_step_work(pos, vel, inv_mass, b0, fext, gravity, fixed, dt,
+                         si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, f_buf, tets, V0, kv, work):
+    """:func:`symplectic_step` with the spring pass's (4, E) float64 work buffer ``work`` given
+    (:func:`spring_forces_passes`)."""
+    spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, True, f_buf, work)
     volume_forces(pos, tets, V0, kv, f_buf)
     g0 = gravity[0]
     g1 = gravity[1]

@@ -12,6 +12,7 @@ three jaws always move in parallel. Commands: :meth:`GrasperTool.set_jaw_opening
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 
 import mujoco
@@ -59,7 +60,10 @@ class GrasperTool(ToolSpec):
 
     def jaw_forces(self, sim) -> dict[str, np.ndarray]:
         """Per-jaw contact forces: {"normal": (3,) N, "tangential": (3,) N} (last physics step)."""
-        rows = sim.geom_rows(self.jaw_geom_ids)
+        cached = getattr(self, "_jaw_rows", None)
+        if cached is None or cached[0]() is not sim:    # rows of this sim's contact arrays, looked up once
+            cached = self._jaw_rows = (weakref.ref(sim), np.array(sim.geom_rows(self.jaw_geom_ids), dtype=np.int64))
+        rows = cached[1]
         fn, ft = np.zeros(3), np.zeros(3)
         for contact in sim.contacts.values():
             fn += contact.result.geom_normal_force[rows]
