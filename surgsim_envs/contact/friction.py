@@ -17,7 +17,8 @@ coordinates, ``n`` the unit contact normal and ``x`` the node position:
 so a caller that changed only ``mu`` never gets a static cap below the kinetic one). A sticking
 contact breaks away once the stick spring exceeds mu_s f_n and then slides at mu f_n; a sliding
 contact sticks again as soon as its spring falls back to mu f_n or less (the node stopped moving
-relative to the tool, or reversed). With mu_s == mu this is the single-coefficient law exactly.
+relative to the tool, or reversed; to round-off, 1e-9 relative). With mu_s == mu this is the
+single-coefficient law.
 
 A new contact starts with its anchor at the node (zero tangential force). The anchor is dropped
 when the contact ends (signed distance >= 0), see :mod:`surgsim_envs.contact.model`.
@@ -65,8 +66,11 @@ def stick_slip(x0, x1, x2, normal, f_n, mu, mu_s, k_t, pos, mat, g, anchor_local
     tx, ty, tz = ex - en * normal[0], ey - en * normal[1], ez - en * normal[2]
     stretch = math.sqrt(tx * tx + ty * ty + tz * tz)
     cap = mu * f_n
-    if state != 2 and mu_s > mu:
-        cap = mu_s * f_n          # a sticking contact holds up to the static cap
+    if state != 2:
+        if mu_s > mu:
+            cap = mu_s * f_n      # a sticking contact holds up to the static cap
+    else:
+        cap *= 1.0 + 1e-9         # a stopped sliding contact sticks (its spring is at the cap to round-off)
     if k_t * stretch <= cap:
         f_t_out[0] = -k_t * tx
         f_t_out[1] = -k_t * ty
