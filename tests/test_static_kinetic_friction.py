@@ -77,3 +77,22 @@ def test_default_is_one_coefficient_and_bad_static_coefficient_is_refused():
         _patch(0.5, 0.4)
     with pytest.raises(ConfigError, match="tool_static_friction"):
         ContactModel(2, [0, 1], [0.5], tool_static_friction=[0.6, 0.7])   # one per tool
+
+
+@pytest.mark.slow
+def test_slippage_task_exposes_the_static_coefficient():
+    """Slippage-v0 draws the kinetic mu per episode; ``static_friction_ratio`` sets mu_s = ratio * mu
+    on the jaws' contact (and in info); a ratio below 1 is refused."""
+    import gymnasium as gym
+
+    import surgsim_envs  # noqa: F401
+
+    env = gym.make("SurgSim/Slippage-v0", static_friction_ratio=1.5)
+    env.reset(seed=0)
+    contact = next(iter(env.unwrapped.sim.contacts.values()))
+    assert np.allclose(contact.tool_static_friction, 1.5 * contact.tool_friction)
+    info = env.step(np.zeros(1, np.float32))[-1]
+    assert info["mu_static"] == pytest.approx(1.5 * info["mu"])
+    env.close()
+    with pytest.raises(ConfigError, match="static_friction_ratio"):
+        gym.make("SurgSim/Slippage-v0", static_friction_ratio=0.8)

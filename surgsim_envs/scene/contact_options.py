@@ -19,11 +19,11 @@ from surgsim_envs.errors import ConfigError
 
 
 def static_friction_ratio(contact_cfg) -> float:
-    """mu_s / mu of a ContactConfig, checked (a number >= 1)."""
+    """mu_s / mu of a ContactConfig (or a task config with that field), checked (a number >= 1)."""
     r = getattr(contact_cfg, "static_friction_ratio", 1.0)
     if isinstance(r, bool) or not isinstance(r, (int, float)) or not math.isfinite(r) or r < 1.0:
-        raise ConfigError(f"ContactConfig.static_friction_ratio={r!r} must be a number >= 1 (static friction mu_s "
-                          "as a multiple of the kinetic mu; 1 = one coefficient)")
+        raise ConfigError(f"{type(contact_cfg).__name__}.static_friction_ratio={r!r} must be a number >= 1 (static "
+                          "friction mu_s as a multiple of the kinetic mu; 1 = one coefficient)")
     return float(r)
 
 
