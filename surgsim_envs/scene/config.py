@@ -197,8 +197,9 @@ class ContactConfig:
     static_friction_ratio: mu_s / mu >= 1, the static friction coefficient of every tool as a
         multiple of its (kinetic) friction (1 = one coefficient; surgsim_envs.contact.friction).
         Tasks that draw mu per episode keep the ratio.
-    implicit_damping: "auto" (on for tissue models with the capability ``quasi_static``, whose
-        velocities are finite differences, where explicit contact damping diverges), True or
+    implicit_damping: "auto" (on for tissue models with the capabilities ``quasi_static``, whose
+        velocities are finite differences, where explicit contact damping diverges, and
+        ``implicit_contact``, whose solve takes the stiffness), True or
         False (ContactParams.implicit_damping: the damping enters the tissue's solve as c_n / dt).
     """
 

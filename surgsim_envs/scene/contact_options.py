@@ -4,9 +4,10 @@
 coefficient above its kinetic one (:mod:`surgsim_envs.contact.friction`).
 ``ContactConfig.implicit_damping`` ("auto", True, False) decides per tissue whether the contact
 damping enters the tissue's solve as the stiffness c_n / dt (``ContactParams.implicit_damping``):
-"auto" turns it on for tissue models that declare the capability ``quasi_static`` (their velocities
-are finite differences of equilibria, and explicit damping c_n / dt above about half a node's
-stiffness makes the sequence of equilibria diverge; see docs/models/fem_static.md).
+"auto" turns it on for tissue models that declare the capabilities ``quasi_static`` (their
+velocities are finite differences of equilibria, and explicit damping c_n / dt above about half a
+node's stiffness makes the sequence of equilibria diverge; see docs/models/fem_static.md) and
+``implicit_contact`` (their solve takes the reported stiffness, which now carries the damping).
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ def contact_params_for(params: ContactParams, contact_cfg, tissue) -> ContactPar
         if opt != "auto":
             raise ConfigError(f"ContactConfig.implicit_damping={opt!r}; use 'auto' (on for quasi-static tissue "
                               "models), True or False")
-        on = "quasi_static" in getattr(tissue, "capabilities", ())
+        caps = getattr(tissue, "capabilities", ())
+        on = "quasi_static" in caps and "implicit_contact" in caps   # the solve must take the stiffness
     elif isinstance(opt, bool):
         on = opt
     else:
