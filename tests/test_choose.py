@@ -120,3 +120,27 @@ def test_auto_resolution_with_shipped_table():
     scene = build_scene(SceneConfig(tissues=[t], cameras=[], floor=False))
     assert scene.config.tissues[0].spacing == pick.spacing
     assert scene.resolutions["slab"] == pick
+
+
+def test_shipped_table_has_fem_static_and_a_tight_tolerance_picks_it():
+    """The shipped table (``surgsim bench accuracy --quick``, docs/benchmarks.md) has fem_static rows
+    for its three spacings, with fem's force errors (same element, same exact contact). Below the
+    error of every cheaper row (layered reaches 3.2 % at 1.3 mm) the cheapest qualifying row is
+    fem_static, and ``resolution="auto"`` with ``model="auto"`` builds the quasi-static model."""
+    from surgsim_envs.bench.choose import load_table
+
+    rows = {(r["model"], r["spacing"]): r for r in load_table()}
+    for s in (0.003, 0.002, 0.0013):
+        static, fem = rows[("fem_static", s)], rows[("fem", s)]
+        assert static["integrator"] == "quasi_static" and static["error"] == pytest.approx(fem["error"], rel=1e-6)
+    pick = choose(0.03, 1000.0)
+    assert (pick.model, pick.integrator) == ("fem_static", "quasi_static") and pick.error <= 0.03
+    assert pick.us_per_ms <= min(r["us_per_ms"] for r in rows.values() if r["error"] <= 0.03 and not r.get("baseline"))
+    assert resolve_resolution("auto", error_tolerance=0.03, step_budget_us=1000.0) == ("fem_static", pick.spacing)
+    # restricted to the FEM element, fem_static wins at the 5 % target too (fem symplectic costs more)
+    assert choose(0.05, 1e6, models=["fem", "fem_static"]).model == "fem_static"
+    t = TissueConfig(name="slab", organ="slab", model="auto", resolution="auto", error_tolerance=0.03,
+                     step_budget_us=1000.0, volume_options={"size": (0.016, 0.016, 0.005)}, position=(0, 0, 0.0025),
+                     anchors=("bottom",))
+    scene = build_scene(SceneConfig(tissues=[t], cameras=[], floor=False))
+    assert scene.config.tissues[0].spacing == pick.spacing and scene.tissues["slab"].name == "fem_static"

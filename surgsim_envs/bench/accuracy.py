@@ -163,16 +163,18 @@ def plot(rows: list[dict], path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.6, 5.4))
+    fig, ax = plt.subplots(figsize=(10.0, 5.6))
     series = sorted({(r["model"], r["integrator"]) for r in rows}, key=lambda k: (k[0].startswith("mujoco"), k))
-    for m, integ in series:
+    colours = plt.get_cmap("tab20").colors            # one colour per series (tab10 repeats beyond 10)
+    for n, (m, integ) in enumerate(series):
         sub = sorted((r for r in rows if r["model"] == m and r["integrator"] == integ and math.isfinite(r["us_per_ms"])),
                      key=lambda r: r["spacing"])
         if not sub:
             continue
         style = "s--" if sub[0].get("baseline") else "o-"
         name = f"{m} ({sub[0].get('peer', 'MuJoCo')} baseline)" if sub[0].get("baseline") else f"{m} / {integ}"
-        ax.plot([r["us_per_ms"] for r in sub], [max(r["error"], 1e-4) for r in sub], style, label=name, ms=5)
+        ax.plot([r["us_per_ms"] for r in sub], [max(r["error"], 1e-4) for r in sub], style, label=name, ms=5,
+                color=colours[(2 * n) % 20 if n < 10 else (2 * n + 1) % 20])
         for r in sub:
             ax.annotate(r.get("label", f"{r['spacing'] * 1e3:g}"), (r["us_per_ms"], max(r["error"], 1e-4)),
                         fontsize=7, textcoords="offset points", xytext=(4, 3))
@@ -191,7 +193,7 @@ def plot(rows: list[dict], path: str) -> None:
     ax.set_title("Sphere indentation of a bonded 30 mm liver slab\n(labels: mm spacing under the sphere; "
                  "cN: trilinear flex with N cells per axis; circled: Pareto front)", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, loc="best")  # the peers sit top right
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)  # outside: no point hidden
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

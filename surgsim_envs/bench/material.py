@@ -389,6 +389,8 @@ class SlipResult:
     #: |sum of friction forces| / (mu * sum of normal forces): 1 when every contact is at its cap
     mobilised: np.ndarray = field(default_factory=lambda: np.zeros(0))
     onset: str = "slide"
+    #: static friction coefficient of the jaws (= mu unless set; the onset reference is mu_static * N)
+    mu_static: float = math.nan
 
     def as_dict(self) -> dict:
         return {"pull": [float(v) for v in self.pull], "normal_sum": [float(v) for v in self.normal_sum],
@@ -424,14 +426,14 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
          spacing: float = 0.003, squeeze: float = 0.0005, dt: float = 5e-5, contact_stiffness: float = 60.0,
          contact_damping: float = 0.02, handle_stiffness: float = 100.0, handle_speed: float = 0.01,
          close_time: float = 0.15, settle_time: float = 0.1, pull_time: float = 0.6, onset_slide: float = 2.5e-3,
-         volume=None, onset: str = "contact", **opts) -> SlipResult:
+         volume=None, onset: str = "contact", mu_static: float | None = None, **opts) -> SlipResult:
     """Three flat jaws (120 degrees apart, longer than the tissue) close radially by ``squeeze`` (m)
     on a tissue cylinder (``radius``, ``length`` m) over ``close_time`` s, hold for ``settle_time`` s,
     then a handle spring (``handle_stiffness`` N/m, far end moving at ``handle_speed`` m/s) pulls the
     tissue along its axis (as a body force spread by mass) for ``pull_time`` s.
 
-    Coulomb friction ``mu`` on the jaws; penalty contact ``contact_stiffness`` N/m per node.
-    Gross slip (reference: mu * sum(N)): ``onset="contact"`` (default) reads it from the contact
+    Coulomb friction ``mu`` on the jaws (kinetic; ``mu_static`` >= mu the static coefficient, None =
+    mu); penalty contact ``contact_stiffness`` N/m per node. Gross slip (reference: mu_static * sum(N)): ``onset="contact"`` (default) reads it from the contact
     state (:func:`surgsim_envs.bench.slip_onset.gross_slip_index`: the share of contact points
     sliding and the motion of the contact patch); ``onset="slide"`` when the tissue has slid
     ``onset_slide`` m (the earlier rule, which lands on a stick-slip dip at low mu).
@@ -443,6 +445,10 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     mat = SLIP_MATERIAL if material is None else get_material(material)
     if not (isinstance(mu, (int, float, np.floating)) and math.isfinite(mu) and mu >= 0):
         raise ConfigError(f"mu must be a friction coefficient >= 0, got {mu!r}")
+    mu_s = float(mu) if mu_static is None else mu_static
+    if not (isinstance(mu_s, (int, float, np.floating)) and math.isfinite(mu_s) and mu_s >= mu):
+        raise ConfigError(f"mu_static must be a static friction coefficient >= mu = {mu!r} (or None = mu), "
+                          f"got {mu_static!r}")
     _positive(radius=radius, length=length, spacing=spacing, squeeze=squeeze, dt=dt, close_time=close_time,
               settle_time=settle_time, pull_time=pull_time, handle_stiffness=handle_stiffness,
               handle_speed=handle_speed, onset_slide=onset_slide)
@@ -451,7 +457,8 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     vol = grasp_cylinder(radius, length, spacing) if volume is None else volume
     tissue = _build(cls, vol, mat, opts)
     cm = ContactModel(tissue.n_nodes, tissue.surface_nodes, [float(mu)],
-                      ContactParams(stiffness=contact_stiffness, damping=contact_damping))
+                      ContactParams(stiffness=contact_stiffness, damping=contact_damping),
+                      tool_static_friction=[float(mu_s)])
     er, mats = _jaw_frames()
     jaw_half = np.array([0.002, 0.003, 0.5 * length + 0.015])
     kind, tool = np.full(3, BOX), np.zeros(3, dtype=int)
@@ -500,4 +507,4 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     onset_pull = float(pull[hit[0]]) if len(hit) else math.nan
     onset_normal = float(normal[hit[0]]) if len(hit) else math.nan
     return SlipResult(tt, pull, normal, slide, onset_pull, onset_normal, float(mu), vol.n_nodes, cls.name,
-                      share, speed, mobilised, onset)
+                      share, speed, mobilised, onset, float(mu_s))

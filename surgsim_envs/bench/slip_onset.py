@@ -17,9 +17,12 @@ Rule (:func:`gross_slip_index`): the first sample where
   (default 0.2) of the handle speed (a partial-slip creep is much slower),
 
 both held for ``hold`` consecutive samples (default 5), so that one noisy sample does not count.
-The pull at that sample is compared with mu * sum(N) there. Static and kinetic friction are one
-coefficient in the contact law (:mod:`surgsim_envs.contact.friction`), so the onset pull is mu_s
-* sum(N) = mu * sum(N).
+The pull at that sample is compared with mu * sum(N) there (mu the kinetic coefficient;
+``mobilised`` is measured against it). With one coefficient (the default, mu_s = mu) the onset
+pull is mu * sum(N). With a static coefficient mu_s > mu (:mod:`surgsim_envs.contact.friction`) a
+uniformly loaded patch breaks away at mu_s * sum(N), but a soft grasp gives way between mu and
+mu_s times sum(N): its light edge points break away first and slide at mu f_n while the rest
+still sticks (docs/contact.md, "Static and kinetic friction").
 """
 
 from __future__ import annotations

@@ -7,7 +7,8 @@ Contact law for a candidate tissue node ``i`` at ``x`` (velocity ``v``) and a to
     v_rel   = v - (u + w x (x - p))                       node velocity relative to the geom surface
     v_n     = v_rel . n                                   < 0 while approaching / compressing
     f_n     = k_n depth + c_n max(-v_n, 0)                normal force magnitude, N (always >= 0)
-    f_t     = stick/slip spring, |f_t| <= mu_tool f_n     see :mod:`surgsim_envs.contact.friction`
+    f_t     = stick/slip spring: sticks while |f_t| <= mu_s f_n (static), slides at mu f_n (kinetic),
+              see :mod:`surgsim_envs.contact.friction` (mu_s = mu unless ``tool_static_friction``)
     F_i    += f_n n + f_t                                 force ON the tissue node
     F_tool -= f_n n + f_t,  tau_tool -= (x - c_tool) x (f_n n + f_t)
 
@@ -15,6 +16,16 @@ The damping acts only while the node approaches the surface, so the contact neve
 adhesion): a separating node feels at most the elastic ``k_n depth``, and nothing once it is out.
 Reaction torques are taken with the force applied at the node position, so tissue plus tools
 conserve linear *and* angular momentum exactly.
+
+Implicit damping (``ContactParams.implicit_damping``, for quasi-static tissue models, whose
+velocities are finite differences (x^{n+1} - x^n) / dt): the damping of an approaching point is
+not applied from the old velocity. The point's explicit normal force keeps only the tool part,
+``k_n depth + c_n max(v_s . n, 0)`` (v_s the geom surface velocity), and its reported stiffness
+gains ``c_n / dt``; the tissue's linearised solve ``f - k (x^{n+1} - x^n)`` then applies
+``-c_n (v^{n+1} - v_s) . n`` at the new velocity: backward-Euler damping, stable for any c_n / dt
+(explicit damping on a quasi-static model diverges once c_n / dt exceeds about half a node's
+stiffness). The tissue contract takes one isotropic stiffness per node, so on approaching points
+c_n / dt also resists tangential motion for that step; at rest (v = 0) nothing changes.
 
 Optional surface samples (``surface=...``, :mod:`surgsim_envs.contact.surface_points`): points
 embedded in the surface triangles are contact points too, with the same law at their interpolated
@@ -72,11 +83,16 @@ class ContactParams:
     damping: c_n, N s/m per node, normal damping, acting only while the node approaches the
         surface (never pulls, so never adhesive).
     tangential_stiffness: k_t, N/m per node, stick spring of the Coulomb friction; None = k_n.
+    implicit_damping: False (default): the damping force uses the node's current velocity. True:
+        the damping of an approaching point is reported as stiffness c_n / dt for the tissue's
+        implicit solve (module docstring); for quasi-static models (capability ``quasi_static``),
+        whose velocities are finite differences. Needs a tissue step that uses the stiffness.
     """
 
     stiffness: float | str = 200.0
     damping: float = 0.5
     tangential_stiffness: float | None = None
+    implicit_damping: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.stiffness, str):
@@ -90,6 +106,8 @@ class ContactParams:
                 _is_number(self.tangential_stiffness) and self.tangential_stiffness > 0):
             raise ConfigError(f"tangential_stiffness must be > 0 N/m or None (= stiffness), "
                               f"got {self.tangential_stiffness!r}")
+        if not isinstance(self.implicit_damping, (bool, np.bool_)):
+            raise ConfigError(f"implicit_damping must be True or False, got {self.implicit_damping!r}")
 
 
 def _is_number(v) -> bool:
@@ -102,7 +120,8 @@ class ContactResult:
 
     forces: (N,3) N, contact force ON each tissue node (zeros off contact).
     stiffness: (N,) N/m, isotropic contact stiffness per node (sum over its contacts of
-        max(k_n, k_t) while sticking, k_n while slipping) for implicit tissue integrators.
+        max(k_n, k_t) while sticking, k_n while slipping, plus c_n / dt on approaching points with
+        ``implicit_damping``) for implicit tissue integrators.
     tool_force: (T,3) N, total force ON each tool (minus the sum of its forces on the tissue).
     tool_torque: (T,3) N m, torque ON each tool about ``tool_com``.
     report: per-tool summary.
@@ -125,13 +144,16 @@ _OK, _BAD_KIND, _BAD_TOOL, _BAD_SIZE = 0, 1, 2, 3
 
 @njit(cache=True, nogil=True)
 def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel, tool_com,
-                    mu, k_n, c_n, k_t, anchor_local, anchor_on,
+                    mu, mu_s, k_n, c_n, c_imp, k_t, anchor_local, anchor_on,
                     forces, stiffness, node_tool_k, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv,
                     tool_fn, tool_ft, tool_ftv, contacts, slipping, penetration, last_contact, last_slip,
                     err):
     """Contact points p < C are the candidate nodes ``cand[p]``; points p >= C are the surface
     samples ``s = p - C`` at ``sum_j s_w[s, j] x[s_nodes[s, j]]`` whose forces go back to the nodes
-    with the same weights. ``touched`` lists every node that can receive a force (zeroed first)."""
+    with the same weights. ``touched`` lists every node that can receive a force (zeroed first).
+    mu, mu_s (T,) kinetic and static friction per tool; c_imp: 0 (damping from the velocity) or
+    c_n / dt (implicit damping: reported as stiffness, module docstring). ``anchor_on[c, g]`` is
+    the contact state (friction.NO_CONTACT / STICKING / SLIDING)."""
     G = kind.shape[0]
     T = tool_force.shape[0]
     # validate geoms and precompute bounding radii
@@ -254,19 +276,26 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
             vsz = gvel[g, 5] + gvel[g, 0] * dy - gvel[g, 1] * dx
             vn = (v0 - vsx) * nrm[0] + (v1 - vsy) * nrm[1] + (v2 - vsz) * nrm[2]
             f_n = k_n * depth
+            k_damp = 0.0
             if vn < 0.0:
-                f_n -= c_n * vn
+                if c_imp > 0.0:    # implicit: the tool part here, c_n / dt into the stiffness
+                    vsn = vsx * nrm[0] + vsy * nrm[1] + vsz * nrm[2]
+                    if vsn > 0.0:
+                        f_n += c_n * vsn
+                    k_damp = c_imp
+                else:
+                    f_n -= c_n * vn
             t = tool[g]
-            is_new = anchor_on[c, g] == 0
-            anchor_on[c, g] = 1
-            slip = stick_slip(x0, x1, x2, nrm, f_n, mu[t], k_t, gpos, gmat, g, anchor_local, c, is_new, ft)
+            slip = stick_slip(x0, x1, x2, nrm, f_n, mu[t], mu_s[t], k_t, gpos, gmat, g, anchor_local, c,
+                              anchor_on[c, g], ft)
+            anchor_on[c, g] = 2 if slip else 1
             gx = f_n * nrm[0] + ft[0]
             gy = f_n * nrm[1] + ft[1]
             gz = f_n * nrm[2] + ft[2]
             fx += gx
             fy += gy
             fz += gz
-            kg = k_n if (slip or k_n > k_t) else k_t
+            kg = (k_n if (slip or k_n > k_t) else k_t) + k_damp
             kk += kg
             if c < C:
                 node_tool_k[i, t] += kg
@@ -368,11 +397,11 @@ def contact_kernel_prepared(positions, velocities, gpos, gmat, gvel, tool_com, s
     :meth:`ContactModel.kernel_state`. Returns the kernel's status (0 = OK; else call
     ``ContactModel._raise_kernel_error``). Same kernel, same result, and the positions and tool
     centres are kept for :meth:`ContactModel.attribute_increment` as compute_prepared keeps them."""
-    (cand, s_nodes, s_w, touched, kind, tool, size, mu, k_n, c_n, k_t, anchor_local, anchor_on, forces,
-     stiffness, node_tool_k, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv, tool_fn, tool_ft, tool_ftv,
-     contacts, slipping, penetration, last0, last1, err, com_copy, pos_copy) = state
+    (cand, s_nodes, s_w, touched, kind, tool, size, mu, k_n, c_n, k_t, anchor_local, anchor_on,
+     forces, stiffness, node_tool_k, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv, tool_fn, tool_ft, tool_ftv,
+     contacts, slipping, penetration, last0, last1, err, com_copy, pos_copy, mu_s, c_imp) = state
     _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel,
-                    tool_com, mu, k_n, c_n, k_t, anchor_local, anchor_on, forces, stiffness, node_tool_k,
+                    tool_com, mu, mu_s, k_n, c_n, c_imp, k_t, anchor_local, anchor_on, forces, stiffness, node_tool_k,
                     tool_force, tool_torque, geom_fn, geom_ft, geom_ftv, tool_fn, tool_ft, tool_ftv, contacts,
                     slipping, penetration, last0, last1, err)
     if err[0] != 0:
@@ -398,7 +427,12 @@ class ContactModel:
 
     n_nodes: number of tissue nodes N.
     candidate_nodes: (C,) unique indices of the nodes that may touch tools (usually surface nodes).
-    tool_friction: (T,) Coulomb coefficient mu >= 0 per tool (also fixes the number of tools T).
+    tool_friction: (T,) Coulomb coefficient mu >= 0 per tool (also fixes the number of tools T);
+        the kinetic one when ``tool_static_friction`` is given.
+    tool_static_friction: (T,) static coefficient mu_s >= mu per tool, or None (= tool_friction: one
+        coefficient). A sticking contact breaks away at mu_s f_n and slides at mu f_n
+        (:mod:`surgsim_envs.contact.friction`). Both arrays are kept and may be rewritten in place
+        (``tool_friction[:] = mu``); the kernel never uses a static cap below the kinetic one.
     params: :class:`ContactParams`.
     node_masses: (N,) kg, needed only for ``stiffness="auto"``.
     surface: (F,3) surface triangles (node indices, e.g. ``tissue.surface``) to add embedded
@@ -417,7 +451,7 @@ class ContactModel:
 
     def __init__(self, n_nodes: int, candidate_nodes, tool_friction, params: ContactParams | None = None,
                  node_masses=None, *, surface=None, surface_subdivisions: int | None = None,
-                 sample_spacing: float | None = None, rest_positions=None):
+                 sample_spacing: float | None = None, rest_positions=None, tool_static_friction=None):
         if not (isinstance(n_nodes, (int, np.integer)) and n_nodes > 0):
             raise ConfigError(f"n_nodes must be a positive integer, got {n_nodes!r}")
         self.n_nodes = int(n_nodes)
@@ -436,6 +470,16 @@ class ContactModel:
         if len(mu) == 0 or not np.all(np.isfinite(mu)) or np.any(mu < 0):
             raise ConfigError(f"tool_friction must be one Coulomb coefficient >= 0 per tool, got {mu.tolist()}")
         self.tool_friction = mu
+        if tool_static_friction is None:
+            mu_s = mu.copy()
+        else:
+            mu_s = np.ascontiguousarray(np.asarray(tool_static_friction, dtype=np.float64).reshape(-1))
+            if mu_s.shape != mu.shape or not np.all(np.isfinite(mu_s)) or np.any(mu_s < mu):
+                raise ConfigError(f"tool_static_friction must be one static coefficient per tool, each >= the kinetic "
+                                  f"tool_friction {mu.tolist()}; got {np.asarray(tool_static_friction).tolist()} "
+                                  "(None = the same as tool_friction)")
+        #: (T,) static friction coefficient per tool (mu_s >= tool_friction; equal by default)
+        self.tool_static_friction = mu_s
         self.params = params if params is not None else ContactParams()
         if not isinstance(self.params, ContactParams):
             raise ConfigError(f"params must be a ContactParams, got {type(self.params).__name__}")
@@ -586,8 +630,9 @@ class ContactModel:
         r, rep = self.result, self.report
         err = self._err
         _contact_kernel(pos, vel, self.candidate_nodes, self.sample_nodes, self.sample_weights, self._touched,
-                        kind, tool, size, gpos, gmat, gvel, com,
-                        self.tool_friction, k_n * scale, float(self.params.damping) * scale, float(k_t) * scale,
+                        kind, tool, size, gpos, gmat, gvel, com, self.tool_friction, self.tool_static_friction,
+                        k_n * scale, float(self.params.damping) * scale, self._implicit_damping(dt) * scale,
+                        float(k_t) * scale,
                         self._anchor_local, self._anchor_on, r.forces, r.stiffness, self.node_tool_stiffness,
                         r.tool_force,
                         r.tool_torque, r.geom_normal_force, r.geom_tangential_force, self._geom_ftv,
@@ -598,6 +643,10 @@ class ContactModel:
         self._com[:] = com
         self._pos[:] = pos
         return r
+
+    def _implicit_damping(self, dt: float) -> float:
+        """c_n / dt (N/m per node) when the damping is implicit (``ContactParams.implicit_damping``), else 0."""
+        return float(self.params.damping) / dt if self.params.implicit_damping else 0.0
 
     def _raise_kernel_error(self, kind, tool, size) -> None:
         err, N, T = self._err, self.n_nodes, self.n_tools
@@ -626,7 +675,7 @@ class ContactModel:
         k_t = self.params.tangential_stiffness or k_n
         scale = self.point_scale
         self._prepared = (kind, tool, size, float(k_n) * scale, float(self.params.damping) * scale,
-                          float(k_t) * scale)
+                          self._implicit_damping(dt) * scale, float(k_t) * scale)
 
     def compute_prepared(self, positions, velocities, shape_pos, shape_mat, shape_vel, tool_com) -> ContactResult:
         """:meth:`compute` for the scene's hot loop, after :meth:`prepare`: the same kernel and the
@@ -637,11 +686,11 @@ class ContactModel:
         if self._prepared is None:
             raise ConfigError("compute_prepared() needs prepare(shape_kind, shape_tool, shape_size, dt) first "
                               "(and again after compute() with a different number of geoms)")
-        kind, tool, size, k_n, c_n, k_t = self._prepared
+        kind, tool, size, k_n, c_n, c_imp, k_t = self._prepared
         r, rep, err = self.result, self.report, self._err
         _contact_kernel(positions, velocities, self.candidate_nodes, self.sample_nodes, self.sample_weights,
                         self._touched, kind, tool, size, shape_pos, shape_mat, shape_vel, tool_com,
-                        self.tool_friction, k_n, c_n, k_t,
+                        self.tool_friction, self.tool_static_friction, k_n, c_n, c_imp, k_t,
                         self._anchor_local, self._anchor_on, r.forces, r.stiffness, self.node_tool_stiffness,
                         r.tool_force,
                         r.tool_torque, r.geom_normal_force, r.geom_tangential_force, self._geom_ftv,
@@ -657,17 +706,19 @@ class ContactModel:
         """The arguments of the contact kernel after :meth:`prepare`, for a compiled caller that
         runs :func:`contact_kernel_prepared` itself (the scene's compiled substeps): a tuple of the
         model's own arrays and the prepared constants, in :func:`contact_kernel_prepared` order.
-        Valid until the next :meth:`prepare` (or a compute() with another geom count)."""
+        Valid until the next :meth:`prepare` (or a compute() with another geom count). The static
+        friction and the implicit damping (c_n / dt) are the last two entries, so that compiled callers
+        that index the earlier entries (forces = [13], stiffness = [14], ...) keep their indices."""
         if self._prepared is None:
             raise ConfigError("kernel_state() needs prepare(shape_kind, shape_tool, shape_size, dt) first")
-        kind, tool, size, k_n, c_n, k_t = self._prepared
+        kind, tool, size, k_n, c_n, c_imp, k_t = self._prepared
         r, rep = self.result, self.report
         return (self.candidate_nodes, self.sample_nodes, self.sample_weights, self._touched, kind, tool, size,
                 self.tool_friction, k_n, c_n, k_t, self._anchor_local, self._anchor_on, r.forces, r.stiffness,
                 self.node_tool_stiffness, r.tool_force, r.tool_torque, r.geom_normal_force,
                 r.geom_tangential_force, self._geom_ftv, rep.normal_force, rep.tangential_force, self._tool_ftv,
                 rep.contacts, rep.slipping, rep.penetration, self._last[0], self._last[1], self._err,
-                self._com, self._pos)
+                self._com, self._pos, self.tool_static_friction, c_imp)
 
     def attribute_increment_prepared(self, integrated_forces) -> None:
         """:meth:`attribute_increment` without the argument check (``integrated_forces`` a

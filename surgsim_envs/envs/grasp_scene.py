@@ -38,7 +38,8 @@ class GraspSceneConfig:
     step_budget_us: float = 5_000.0    # resolution="auto": compute limit, us per simulated ms
     on_unstable: str = "raise"         # "terminate": a tissue divergence ends the episode (info["unstable"])
     closing_speed: float = 0.03        # m/s, jaw rate limit
-    mu: Sequence[float] = (0.6, 1.0)                 # tool-tissue Coulomb friction
+    mu: Sequence[float] = (0.6, 1.0)                 # tool-tissue Coulomb friction (kinetic)
+    static_friction_ratio: float = 1.0  # static friction mu_s = ratio * mu (>= 1; 1 = one coefficient)
     young_scale: Sequence[float] = (0.8, 1.2)        # organ Young's modulus scale
     camera: str = "overview"
     render_width: int = 480
@@ -58,6 +59,9 @@ class GraspSceneConfig:
                               f"{substeps} physics steps of a control step, or 'auto'")
         check_grasp_organ(self.organ, f"{what}.organ")
         check_range(self.mu, "mu", 0.0, 2.0)
+        from surgsim_envs.scene.contact_options import static_friction_ratio
+
+        static_friction_ratio(self)
         check_range(self.young_scale, "young_scale", 0.5, 1.25)
 
 
@@ -130,6 +134,7 @@ class GraspSceneEnv(SurgSimEnv):
         self.sim.tissue().scale_material("young", scale)   # the contract's only way to change stiffness
         for contact in self.sim.contacts.values():
             contact.tool_friction[:] = mu
+            contact.tool_static_friction[:] = c.static_friction_ratio * mu   # mu_s >= mu (validated)
         self.sim.reset(seed=int(rng.integers(2**31)))
         check_explicit_step(self.sim.tissue(), self.sim.dt, f"young_scale {scale:.2f}")
         self.mu, self.young_scale = mu, scale
@@ -151,5 +156,6 @@ class GraspSceneEnv(SurgSimEnv):
         return self._readings_value
 
     def _metrics(self) -> dict[str, Any]:
-        return {"organ": self.organ, "mu": self.mu, "young_scale": self.young_scale,
+        return {"organ": self.organ, "mu": self.mu, "mu_static": self.config.static_friction_ratio * self.mu,
+                "young_scale": self.young_scale,
                 "slip_distance_m": self.slip_distance, "success": False, "is_success": False, "dropped": False}

@@ -4,7 +4,8 @@ At reset the three-jaw grasper closes on the organ tip (``initial_closure``, ``s
 Then the wrist is pulled out of the organ along the tool axis by a force
 ``F(t) = rate * t + amplitude * sin(2 pi f t + phase)`` (N, >= 0; the along-axis wrist drive
 becomes a force motor with ``pull_damping`` N s/m of joint damping), while the tool-tissue
-friction mu is drawn per episode (0.3-1.0). The agent only modulates the jaw closure.
+friction mu is drawn per episode (0.3-1.0; kinetic, with a static coefficient
+``static_friction_ratio * mu``, default ratio 1). The agent only modulates the jaw closure.
 
 Action (1,) in [-1, 1]: jaw opening target from fully open (-1) to ``min_radius`` (+1),
 rate-limited at ``closing_speed`` m/s.

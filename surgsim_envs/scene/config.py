@@ -194,12 +194,21 @@ class ContactConfig:
     tissue's median surface edge (subdivisions ceil(edge / tip_radius), at most 8), an int n =
     edge subdivisions (1 = nodes only), None = nodes only. Each contact point then carries
     1/n^2 of the per-node stiffness and damping (same stiffness per surface area).
+    static_friction_ratio: mu_s / mu >= 1, the static friction coefficient of every tool as a
+        multiple of its (kinetic) friction (1 = one coefficient; surgsim_envs.contact.friction).
+        Tasks that draw mu per episode keep the ratio.
+    implicit_damping: "auto" (on for tissue models with the capabilities ``quasi_static``, whose
+        velocities are finite differences, where explicit contact damping diverges, and
+        ``implicit_contact``, whose solve takes the stiffness), True or
+        False (ContactParams.implicit_damping: the damping enters the tissue's solve as c_n / dt).
     """
 
     stiffness: Any = 200.0
     damping: float = 0.02
     tangential_stiffness: float | None = None
     surface_samples: Any = "auto"
+    static_friction_ratio: float = 1.0
+    implicit_damping: Any = "auto"
 
 
 def _default_cameras() -> list[CameraConfig]:

@@ -32,6 +32,7 @@ import numpy as np
 from numba import njit
 
 from surgsim_envs.contact import BOX, CAPSULE, CYLINDER, SPHERE, ContactModel, ContactParams
+from surgsim_envs.scene.contact_options import contact_params_for, static_friction_ratio
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.builder import Scene
 from surgsim_envs.scene.config import validate_step
@@ -172,15 +173,18 @@ class Simulation:
         self.contacts: dict[str, ContactModel] = {}
         params = ContactParams(stiffness=cfg.contact.stiffness, damping=cfg.contact.damping,
                                tangential_stiffness=cfg.contact.tangential_stiffness)
+        ratio = static_friction_ratio(cfg.contact)
         for name, model in self.tissues.items():
             mat_mu = float(model.material.friction)
             mu = np.array([self._body_friction[b] if self._body_friction[b] is not None else mat_mu
                            for b in range(len(self._bodies))], dtype=np.float64)
             if len(mu) == 0:
                 mu = np.zeros(1)
-            self.contacts[name] = ContactModel(model.n_nodes, model.surface_nodes, mu, params,
+            self.contacts[name] = ContactModel(model.n_nodes, model.surface_nodes, mu,
+                                               contact_params_for(params, cfg.contact, model),
                                                node_masses=model.masses, surface=model.surface,
-                                               surface_subdivisions=self._surface_subdivisions(model))
+                                               surface_subdivisions=self._surface_subdivisions(model),
+                                               tool_static_friction=ratio * mu)
         self._pairs = [(self.tissues[n], self.contacts[n]) for n in self.tissues]
         for contact in self.contacts.values():   # validated once here; the step loop uses compute_prepared
             contact.prepare(self._shape_kind, self._shape_tool, self._shape_size, self.dt)

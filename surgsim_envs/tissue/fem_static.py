@@ -248,8 +248,9 @@ class QuasiStaticFEMModel(TetFEMModel):
             raise TissueUnstableError(exc.model, exc.dt, exc.critical_dt, exc.reason + (
                 "; fem_static is quasi-static (no dt limit): a divergence comes from explicit forces "
                 "that depend on its finite-difference velocities, such as contact damping: lower the "
-                "contact damping (ContactParams.damping / ContactConfig.damping, e.g. <= 0.1 N s/m) "
-                "or raise dt")) from None
+                "contact damping (ContactParams.damping / ContactConfig.damping, e.g. <= 0.1 N s/m), "
+                "raise dt, or make the damping implicit (ContactParams(implicit_damping=True); scenes do "
+                "it for quasi-static models with ContactConfig.implicit_damping='auto')")) from None
 
     def internal_forces(self) -> np.ndarray:
         """(N,3) N elastic nodal forces -K u (no inertia, no viscous term: quasi-static)."""
