@@ -143,8 +143,12 @@ def figure_chart(rows_json: Path, out: Path) -> None:
 
     from surgsim_envs.bench.accuracy import plot
 
-    shipped = Path(__file__).resolve().parents[1] / "surgsim_envs" / "bench" / "data" / "accuracy_table.json"
-    rows = json.loads(shipped.read_text())["rows"] + json.loads(rows_json.read_text())["rows"]
+    from surgsim_envs.tissue.resolution import TABLE_PATH
+
+    shipped = json.loads(Path(TABLE_PATH).read_text())["rows"]    # the table choose() reads
+    extra = json.loads(rows_json.read_text())["rows"]
+    have = {(r["model"], r.get("integrator"), r["spacing"]) for r in shipped}
+    rows = shipped + [r for r in extra if (r["model"], r.get("integrator"), r["spacing"]) not in have]
     plot(rows, str(out / "accuracy_with_diffusion.png"))
 
 
