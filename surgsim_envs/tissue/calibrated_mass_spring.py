@@ -30,6 +30,10 @@ from surgsim_envs.tissue.mass_spring import (CG_MAX_ITER, CG_TOLERANCE, NONLINEA
                                              MassSpringModel)
 from surgsim_envs.tissue.spring_calibration import calibrate
 
+#: factor on the Lanczos estimate of the largest eigenvalue in :meth:`CalibratedMassSpringModel.critical_dt`
+#: (the Ritz value approaches lambda_max from below; DT_SAFETY applies on top of it)
+LANCZOS_MARGIN = 1.05
+
 
 class CalibratedMassSpringModel(MassSpringModel):
     """Mass-spring-damper network whose spring constants and nodal volume term are identified from
@@ -171,19 +175,76 @@ class CalibratedMassSpringModel(MassSpringModel):
         return self.spring_forces() - self.b0[:, None] * self.velocities + self.volume_forces()
 
     def critical_dt(self) -> float:
-        """Largest stable dt (s) of the symplectic integrator (Gershgorin bound of springs plus the
-        volume term's Gauss-Newton tangent; see :meth:`MassSpringModel.critical_dt`)."""
+        """Largest stable dt (s) of the symplectic integrator: 2/sqrt(lambda) with nodal damping, lambda the
+        largest eigenvalue of M^-1 K (springs with their instantaneous Maxwell stiffness, tension
+        geometric term, nodal volume term) at the current state, from a matrix-free Lanczos estimate
+        (scipy ``eigsh``, relative tolerance 1e-3) raised by ``LANCZOS_MARGIN``; never below the guaranteed
+        bound (Gershgorin for the springs + :meth:`volume_lambda_bound`), which alone cut the stable dt to
+        0.4-0.6 of the exact one. Contact stiffness is not included (as in ``mass_spring``)."""
         kMg, decay = self._branch_coeffs(self._pending_dt)
         lam = float(kern.gershgorin_lambda_max(self.positions, self.inv_mass, self.si, self.sj, self.rest_lengths,
                                                self.K1, self.K2, self.kM, self._s, self._dl, decay, kMg,
                                                self._vtets, self.volume_rest, self.volume_kv))
-        rows = np.zeros((self.n_nodes, 3))
-        nvk.row_sums(self.positions, self._ntets, self.node_bulk / self.node_rest_volume, rows)
-        lam += float(np.max(rows * self.inv_mass[:, None], initial=0.0))
+        lam += self.volume_lambda_bound()
+        try:
+            lam = min(lam, LANCZOS_MARGIN * self._lanczos_lambda())
+        except Exception:  # noqa: BLE001 - ARPACK may not converge; the guaranteed bound stands
+            pass
         beta = float(np.max(self.b0 * self.inv_mass)) if self.n_nodes else 0.0
         if lam <= 0:
             return math.inf if beta == 0 else 2.0 / beta
         return (-beta + math.sqrt(beta * beta + 4.0 * lam)) / lam
+
+    def _lanczos_lambda(self) -> float:
+        """Largest eigenvalue (1/s^2) of M^-1/2 K M^-1/2 on the free nodes, matrix-free (numba products)."""
+        import scipy.sparse.linalg as spla
+
+        n, ne = self.n_nodes, len(self.si)
+        ca, cg, unit = np.zeros(ne), np.zeros(ne), np.zeros((ne, 3))
+        kern.spring_tangents(self.positions, self.si, self.sj, self.rest_lengths, self.K1, self.K2, self.kM,
+                             self._s, True, ca, cg, unit)
+        vgrad = np.zeros((len(self._ntets), 4, 3))
+        nvk.tangents(self.positions, self._ntets, vgrad)
+        c = self.node_bulk / self.node_rest_volume
+        s = np.repeat(np.where(self.fixed, 0.0, np.sqrt(self.inv_mass)), 3)
+        zero_m, sbuf, out = np.zeros(n), np.zeros(n), np.zeros((n, 3))
+        no_t, no_g, no_c = np.zeros((0, 4), dtype=np.int64), np.zeros((0, 4, 3)), np.zeros(0)
+
+        def matvec(y):
+            x = np.ascontiguousarray((np.ravel(y) * s).reshape(n, 3))
+            kern._system_matvec(x, zero_m, 1.0, self.si, self.sj, ca, cg, unit, self.fixed, out, no_t, no_g, no_c)
+            nvk.matvec_add(x, 1.0, self._ntets, vgrad, c, sbuf, out)
+            return out.ravel() * s
+
+        op = spla.LinearOperator((3 * n, 3 * n), matvec=matvec, dtype=np.float64)
+        v0 = np.cos(np.arange(3 * n) * 0.7071) * s
+        return float(spla.eigsh(op, k=1, which="LA", tol=1e-3, v0=v0, return_eigenvectors=False)[0])
+
+    def volume_lambda_bound(self, positions: np.ndarray | None = None) -> float:
+        """Upper bound (1/s^2) of the largest eigenvalue of M^-1 K_v, K_v = sum_i c_i G_i G_i^T the nodal
+        volume term's Gauss-Newton tangent (c_i = k_v,i / V0_i, G_i = dV_i/dx). By Cauchy-Schwarz,
+        (G_i . x)^2 <= g_i sum_{a in S_i} m_a |x_a|^2 with g_i = sum_a |G_ia|^2 / m_a (S_i: node i's
+        1-ring), so x^T K_v x <= max_a (sum_{i: a in S_i} c_i g_i) x^T M x. About 2x tighter than
+        the absolute row sums (:func:`nodal_volume_kernels.row_sums`), which cut the stable dt of the
+        5 mm palpation slab to 0.41 of its eigenvalue-exact value."""
+        x = self.positions if positions is None else np.ascontiguousarray(positions, dtype=np.float64)
+        tets, n = self._ntets, self.n_nodes
+        g = np.zeros((len(tets), 4, 3))
+        nvk.tangents(x, tets, g)
+        # G_ia = sum over tets holding i and a of dV_t/dx_a / 4: 16 (i, a) corner pairs per tet
+        ii = np.repeat(tets, 4, axis=1).ravel()
+        aa = np.tile(tets, (1, 4)).ravel()
+        vals = np.tile(0.25 * g, (1, 4, 1)).reshape(-1, 3)
+        key = ii * n + aa
+        uniq, inv = np.unique(key, return_inverse=True)
+        G = np.zeros((len(uniq), 3))
+        np.add.at(G, inv, vals)
+        pi, pa = uniq // n, uniq % n
+        free = ~self.fixed[pa]
+        gi = np.bincount(pi, weights=np.where(free, np.sum(G * G, axis=1) * self.inv_mass[pa], 0.0), minlength=n)
+        c = self.node_bulk / self.node_rest_volume
+        bound = np.bincount(pa, weights=c[pi] * gi[pi], minlength=n)
+        return float(np.max(np.where(self.fixed, 0.0, bound), initial=0.0))
 
     def _tangent(self, positions: np.ndarray, relaxed: bool, clamp: bool):
         """Springs (base class) plus the nodal volume term's Gauss-Newton tangent sum_i c_i G_i G_i^T."""

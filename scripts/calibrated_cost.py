@@ -1,0 +1,97 @@
+"""Cost of ``mass_spring_calibrated`` against the plain ``mass_spring`` network, same process, on the
+palpation task's tissue (10 x 10 x 2 cm liver slab with a 20 kPa inclusion, 5 mm lattice, bed fixed)
+and the indentation bench slab (issue 16, docs/benchmarks.md "Calibrated mass-spring (issue 16,
+third pass)").
+
+    python scripts/calibrated_cost.py [--repeats 200]
+
+Per model: springs, critical_dt() (the Gershgorin bound the "auto" integrator and stable_dt() use)
+against the exact symplectic limit from the largest eigenvalue of M^-1 K (scipy eigsh), wall time
+of one symplectic and one implicit step (median over ``repeats``, after numba compilation) and
+compute per simulated ms = step time x steps per ms (symplectic at stable_dt(), implicit at 1 ms).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import time
+
+import numpy as np
+
+
+def exact_critical_dt(model) -> float:
+    """2/sqrt(lambda_max(M^-1 K)) with nodal damping: the symplectic limit of the linearised model."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    K = model.stiffness_matrix(relaxed=False).tocsr()
+    free = np.repeat(~model.fixed, 3)
+    mi = np.repeat(1.0 / np.sqrt(model.masses), 3)[free]
+    A = sp.diags(mi) @ K[free][:, free] @ sp.diags(mi)
+    lam = float(spla.eigsh(A, k=1, which="LA", return_eigenvectors=False, tol=1e-4)[0])
+    beta = float(np.max(model.b0 / model.masses))
+    return (-beta + math.sqrt(beta * beta + 4.0 * lam)) / lam
+
+
+def step_us(model, dt: float, repeats: int) -> float:
+    f = np.zeros((model.n_nodes, 3))
+    top = model.rest_positions[:, 2] >= model.rest_positions[:, 2].max() - 1e-9
+    f[top, 2] = -0.02 / max(int(top.sum()), 1)
+    for _ in range(5):                      # compile / warm up
+        model.step(dt, f)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        model.step(dt, f)
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times) * 1e6)
+
+
+def volumes():
+    from surgsim_envs.bench.indent_mesh import graded_slab
+    from surgsim_envs.geometry import organ_volume
+
+    slab = organ_volume("slab_inclusion", spacing=0.005)
+    yield "palpation slab 5 mm (liver + 20 kPa inclusion)", slab, {1: {"preset": "liver", "young": 20_000.0}}
+    yield "bench indentation slab 2 mm (quarter, graded)", graded_slab(0.12, 0.03, 0.002, 0.0124), None
+
+
+def main(argv=None) -> int:
+    from surgsim_envs.tissue import get_material, make
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=200)
+    args = ap.parse_args(argv)
+    print(f"load: {os.getloadavg()}")
+    for label, vol, regions in volumes():
+        fixed = np.isclose(vol.nodes[:, 2], vol.nodes[:, 2].min())
+        print(f"\n{label}: {vol.n_nodes} nodes, {len(vol.tets)} tets")
+        print("model | springs | critical_dt ms (Gershgorin) | exact ms | symplectic us/step | us per sim ms "
+              "| implicit us/step (1 ms) | build s")
+        base = None
+        for name in ("mass_spring", "mass_spring_calibrated"):
+            t0 = time.perf_counter()
+            kw = {"region_materials": regions} if regions else {}
+            m = make(name, vol, get_material("liver"), fixed=fixed, integrator="symplectic", **kw)
+            build = time.perf_counter() - t0
+            cdt, exact = m.critical_dt(), exact_critical_dt(m)
+            sdt = m.stable_dt()
+            us_s = step_us(m, sdt, args.repeats)
+            mi = make(name, vol, get_material("liver"), fixed=fixed, integrator="implicit", **kw)
+            us_i = step_us(mi, 1e-3, max(args.repeats // 4, 10))
+            per_ms = us_s * (1e-3 / sdt)
+            row = (name, len(m.springs), cdt * 1e3, exact * 1e3, us_s, per_ms, us_i, build)
+            print("{} | {} | {:.3f} | {:.3f} | {:.1f} | {:.0f} | {:.0f} | {:.1f}".format(*row))
+            if base is None:
+                base = row
+            else:
+                print(f"ratio calibrated/plain: symplectic us per sim ms {per_ms / base[5]:.2f}x, step {us_s / base[4]:.2f}x, "
+                      f"critical dt {row[2] / base[2]:.2f}x (exact {row[3] / base[3]:.2f}x), implicit step {us_i / base[6]:.2f}x")
+    print(f"load: {os.getloadavg()}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
