@@ -90,8 +90,9 @@ def corner_shares(X: np.ndarray, tets: np.ndarray) -> np.ndarray:
     angle the tet subtends there (Van Oosterom & Strackee 1983, tan(omega/2) = |a.(b x c)| /
     (abc + (a.b)c + (a.c)b + (b.c)a)).
 
-    On a box lattice split into tets (Kuhn) the solid angles at a box corner always add up to an
-    octant, so every corner owns 1/8 of each box around it, as the springs' half-per-end energy does.
+    On a cube lattice split into tets (Kuhn) the six tets are congruent and the solid angles at a
+    cube corner add up to an octant, so every corner owns 1/8 of each cube around it, as the springs'
+    half-per-end energy does (on stretched boxes approximately: 0.88-1.15 x 1/8 at 3:2:1).
     The usual V_t/4 lumping gives the corners of a Kuhn box 1/4 (the two ends of the split
     diagonal, in all 6 tets) or 1/12 (the others, in 2): averaged out inside, but on boundary edges,
     corners and symmetry cuts the fit then pulls the springs there soft (the axis node of the
