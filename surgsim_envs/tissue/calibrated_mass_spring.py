@@ -71,9 +71,11 @@ class CalibratedMassSpringModel(MassSpringModel):
         if np.any(v0 <= 0):
             raise ConfigError(f"mass_spring_calibrated: volume '{self.volume.name}' has nodes with non-positive "
                               "volume; the volume term needs positively oriented tets")
-        self._ntets = tets
         self.node_rest_volume = v0
         self.node_bulk = np.ascontiguousarray(self.calibration.node_bulk)
+        # the volume term only where nu needs it: no tets to visit when every k_v is 0 (nu <= 1/4 and
+        # springs that fit); the kernels then cost nothing
+        self._ntets = tets if np.any(self.node_bulk > 0) else np.zeros((0, 4), dtype=np.int64)
         self.volume_stiffness = "calibrated"
 
     def _build_springs(self, overrides) -> None:
