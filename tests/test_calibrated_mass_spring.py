@@ -182,3 +182,20 @@ def test_solid_angle_shares_give_every_box_corner_an_eighth():
     w = corner_shares(vol.nodes, vol.tets.astype(np.int64)) * vol.tet_volumes()[:, None]
     owned = np.bincount(vol.tets.ravel(), weights=w.ravel(), minlength=8)
     assert owned == pytest.approx(np.full(8, vol.tet_volumes().sum() / 8), rel=1e-9)
+
+
+def test_scale_material_recalibrates_like_a_fresh_fit():
+    """Contract v2: scale_material re-derives the springs. A uniform E scale is applied without a refit
+    (the fit is linear in E); a masked one is refitted from the old springs and equals a cold fit."""
+    vol = box_volume((0.02, 0.02, 0.01), 0.0025)
+    m = make("mass_spring_calibrated", vol, _elastic(5_000.0, 0.45))
+    k0, kv0 = m.calibration.stiffness.copy(), m.node_bulk.copy()
+    m.scale_material("young", 3.0)
+    assert m.calibration.iterations == 0
+    assert m.calibration.stiffness == pytest.approx(3.0 * k0, rel=1e-12)
+    assert m.node_bulk == pytest.approx(3.0 * kv0, rel=1e-12)
+    mask = m.element_centroids()[:, 0] > 0
+    m.scale_material("young", 4.0, mask)
+    cold = calibrate(vol, m.fields["young"], m.fields["poisson"])
+    assert m.calibration.stiffness == pytest.approx(cold.stiffness, rel=1e-4, abs=1e-6 * cold.stiffness.max())
+    assert np.max(m.K1) > 3.5 * np.max(k0)          # elastic (g1 = 0): K1 = k; the masked half follows E

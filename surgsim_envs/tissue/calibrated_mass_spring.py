@@ -19,6 +19,7 @@ Docs: docs/models/mass_spring_calibrated.md.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import ClassVar
 
 import numpy as np
@@ -63,7 +64,20 @@ class CalibratedMassSpringModel(MassSpringModel):
     # Parameters (hooks called by MassSpringModel.__init__)
     def _setup_volume_term(self, volume_stiffness) -> None:
         super()._setup_volume_term(None)           # no per-tet term
-        self.calibration = calibrate(self.volume, self.fields["young"], self.fields["poisson"])
+        previous = getattr(self, "calibration", None)
+        young, poisson = np.array(self.fields["young"], dtype=np.float64), np.array(self.fields["poisson"])
+        ratio = young / self._calibrated_young if previous is not None else None
+        if (ratio is not None and np.array_equal(poisson, self._calibrated_poisson)
+                and np.allclose(ratio, ratio[0], rtol=1e-12, atol=0.0)):
+            # E scaled uniformly, nu unchanged: the fit is linear in E (same springs, constants x ratio)
+            f = float(ratio[0])
+            self.calibration = replace(previous, stiffness=previous.stiffness * f, node_bulk=previous.node_bulk * f,
+                                       iterations=0)
+        else:
+            # scale_material with a mask / set_field: start from the old springs, rescaled per spring
+            initial = None if previous is None else previous.stiffness * self._spring_young_ratio(previous.pairs)
+            self.calibration = calibrate(self.volume, young, poisson, initial=initial)
+        self._calibrated_young, self._calibrated_poisson = young, poisson
         tets = np.ascontiguousarray(self.volume.tets, dtype=np.int64)
         x = self.rest_positions
         v0 = np.zeros(len(x))
@@ -77,6 +91,15 @@ class CalibratedMassSpringModel(MassSpringModel):
         # springs that fit); the kernels then cost nothing
         self._ntets = tets if np.any(self.node_bulk > 0) else np.zeros((0, 4), dtype=np.int64)
         self.volume_stiffness = "calibrated"
+
+    def _spring_young_ratio(self, pairs: np.ndarray) -> np.ndarray:
+        """(S,) ratio of the current to the last calibrated Young's modulus, node-averaged, per spring."""
+        tets = self.volume.tets.astype(np.int64).reshape(-1)
+        w = np.repeat(self.volume.tet_volumes(), 4)
+        new = np.bincount(tets, weights=w * np.repeat(self.fields["young"], 4), minlength=self.n_nodes)
+        old = np.bincount(tets, weights=w * np.repeat(self._calibrated_young, 4), minlength=self.n_nodes)
+        r = new / np.where(old > 0, old, 1.0)
+        return 0.5 * (r[pairs[:, 0]] + r[pairs[:, 1]])
 
     def _build_springs(self, overrides) -> None:
         if overrides.get("K1") is not None:

@@ -139,16 +139,18 @@ def _mandel_dyad(d: np.ndarray) -> np.ndarray:
                      _SQRT2 * d[:, 0] * d[:, 2], _SQRT2 * d[:, 0] * d[:, 1]], axis=1)
 
 
-def _nnls(A: sp.csr_matrix, b: np.ndarray, max_iter: int = FIT_MAX_ITER, tol: float = FIT_TOL):
-    """min 0.5 |A x - b|^2 subject to x >= 0 (projected Barzilai-Borwein gradient). Returns (x, iterations)."""
+def _nnls(A: sp.csr_matrix, b: np.ndarray, max_iter: int = FIT_MAX_ITER, tol: float = FIT_TOL, x0=None):
+    """min 0.5 |A x - b|^2 subject to x >= 0 (projected Barzilai-Borwein gradient from ``x0``, default 0).
+    Returns (x, iterations)."""
     # plain numpy reductions, not BLAS dot: a multi-threaded BLAS stalls on a loaded machine
     def dot(u, v):
         return float(np.sum(u * v))
 
     at = A.T.tocsr()
-    x = np.zeros(A.shape[1])
+    x = np.zeros(A.shape[1]) if x0 is None else np.maximum(np.asarray(x0, dtype=np.float64), 0.0)
     g = at @ (A @ x - b)
-    scale = math.sqrt(dot(g, g)) + 1e-300
+    g0 = at @ b                        # the gradient at x = 0 sets the tolerance, whatever the start
+    scale = math.sqrt(dot(g0, g0)) + 1e-300
     step = 1.0 / max(float(sp.linalg.norm(A, "fro")) ** 2 / max(A.shape[1], 1), 1e-300)
     it = 0
     for it in range(1, max_iter + 1):
@@ -165,10 +167,12 @@ def _nnls(A: sp.csr_matrix, b: np.ndarray, max_iter: int = FIT_MAX_ITER, tol: fl
     return x, it
 
 
-def calibrate(volume, young, poisson) -> Calibration:
+def calibrate(volume, young, poisson, initial=None) -> Calibration:
     """Spring constants and nodal volume stiffness matching linear elasticity of every tet.
 
     volume: the tet :class:`~surgsim_envs.geometry.Volume` (m); young (T,) Pa, poisson (T,) per tet.
+    initial: optional (S,) spring constants (N/m) to start the fit from (a previous calibration of the
+        same volume, e.g. after ``scale_material``); the result is the same fit, reached sooner.
     See the module docstring for the method.
     """
     tets = np.asarray(volume.tets, dtype=np.int64)
@@ -206,7 +210,10 @@ def calibrate(volume, young, poisson) -> Calibration:
     b = node_target.ravel()
     colnorm = np.sqrt(np.asarray(A.multiply(A).sum(axis=0)).ravel())
     colnorm[colnorm == 0] = 1.0
-    x, iters = _nnls((A @ sp.diags(1.0 / colnorm)).tocsr(), b)
+    x0 = None
+    if initial is not None and np.shape(initial) == (ns,):
+        x0 = np.asarray(initial, dtype=np.float64) * colnorm
+    x, iters = _nnls((A @ sp.diags(1.0 / colnorm)).tocsr(), b, x0=x0)
     k = x / colnorm
     residual = float(np.linalg.norm(A @ k - b) / (np.linalg.norm(b) + 1e-300))
     quarter = np.repeat(vol / 4.0, 4)         # the volume term's own nodal volumes (sum of V_t / 4)
