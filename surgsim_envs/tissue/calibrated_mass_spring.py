@@ -91,6 +91,7 @@ class CalibratedMassSpringModel(MassSpringModel):
         # springs that fit); the kernels then cost nothing
         self._ntets = tets if np.any(self.node_bulk > 0) else np.zeros((0, 4), dtype=np.int64)
         self._cg = None                # implicit buffers (sized by springs and tets) follow on first use
+        self._vgbuf = np.zeros((len(self._ntets), 4, 3))
         self.volume_stiffness = "calibrated"
 
     def _spring_young_ratio(self, pairs: np.ndarray) -> np.ndarray:
@@ -166,7 +167,8 @@ class CalibratedMassSpringModel(MassSpringModel):
                                   f"got shape {np.shape(stiffness)}")
         if self.active_integrator == "symplectic":
             np.copyto(self._fvol, fext)
-            nvk.add_forces(self.positions, self._ntets, self.node_rest_volume, self.node_bulk, self._vbuf, self._fvol)
+            nvk.add_forces_cached(self.positions, self._ntets, self.node_rest_volume, self.node_bulk, self._vbuf,
+                                  self._vgbuf, self._fvol)
             kern.symplectic_step(self.positions, self.velocities, self.inv_mass, self.b0, self._fvol, self.gravity,
                                  self.fixed, dt, self.si, self.sj, self.rest_lengths, self.K1, self.K2,
                                  kMg, decay, self._s, self._dl, self._f, self._vtets, self.volume_rest, self.volume_kv)
