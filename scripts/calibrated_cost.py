@@ -5,9 +5,10 @@ third pass)").
 
     python scripts/calibrated_cost.py [--repeats 200]
 
-Per model: springs, critical_dt() (the Gershgorin bound the "auto" integrator and stable_dt() use)
+Per model: springs (left out: those the fit set to 0), critical_dt() (the Gershgorin bound the "auto" integrator and stable_dt() use)
 against the exact symplectic limit from the largest eigenvalue of M^-1 K (scipy eigsh), wall time
-of one symplectic and one implicit step (median over ``repeats``, after numba compilation) and
+of one symplectic and one implicit step (median over ``repeats``, after numba compilation; the two
+models stepped in turn so that the machine load hits both alike) and
 compute per simulated ms = step time x steps per ms (symplectic at stable_dt(), implicit at 1 ms).
 """
 
@@ -35,18 +36,24 @@ def exact_critical_dt(model) -> float:
     return (-beta + math.sqrt(beta * beta + 4.0 * lam)) / lam
 
 
-def step_us(model, dt: float, repeats: int) -> float:
-    f = np.zeros((model.n_nodes, 3))
-    top = model.rest_positions[:, 2] >= model.rest_positions[:, 2].max() - 1e-9
-    f[top, 2] = -0.02 / max(int(top.sum()), 1)
-    for _ in range(5):                      # compile / warm up
-        model.step(dt, f)
-    times = []
+def interleaved_step_us(models, dt_of, repeats: int) -> list[float]:
+    """Median wall time (us) of one step of each model, the models stepped in turn (one step each per
+    round) so that a changing machine load hits them alike."""
+    forces = []
+    for m in models:
+        f = np.zeros((m.n_nodes, 3))
+        top = m.rest_positions[:, 2] >= m.rest_positions[:, 2].max() - 1e-9
+        f[top, 2] = -0.02 / max(int(top.sum()), 1)
+        forces.append(f)
+        for _ in range(5):                  # compile / warm up
+            m.step(dt_of(m), f)
+    times = [[] for _ in models]
     for _ in range(repeats):
-        t0 = time.perf_counter()
-        model.step(dt, f)
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times) * 1e6)
+        for k, m in enumerate(models):
+            t0 = time.perf_counter()
+            m.step(dt_of(m), forces[k])
+            times[k].append(time.perf_counter() - t0)
+    return [float(np.median(t) * 1e6) for t in times]
 
 
 def volumes():
@@ -70,25 +77,27 @@ def main(argv=None) -> int:
         print(f"\n{label}: {vol.n_nodes} nodes, {len(vol.tets)} tets")
         print("model | springs | critical_dt ms (Gershgorin) | exact ms | symplectic us/step | us per sim ms "
               "| implicit us/step (1 ms) | build s")
-        base = None
-        for name in ("mass_spring", "mass_spring_calibrated"):
+        kw = {"region_materials": regions} if regions else {}
+        names = ("mass_spring", "mass_spring_calibrated")
+        built, builds = [], []
+        for name in names:
             t0 = time.perf_counter()
-            kw = {"region_materials": regions} if regions else {}
-            m = make(name, vol, get_material("liver"), fixed=fixed, integrator="symplectic", **kw)
-            build = time.perf_counter() - t0
-            cdt, exact = m.critical_dt(), exact_critical_dt(m)
-            sdt = m.stable_dt()
-            us_s = step_us(m, sdt, args.repeats)
-            mi = make(name, vol, get_material("liver"), fixed=fixed, integrator="implicit", **kw)
-            us_i = step_us(mi, 1e-3, max(args.repeats // 4, 10))
-            per_ms = us_s * (1e-3 / sdt)
-            row = (name, len(m.springs), cdt * 1e3, exact * 1e3, us_s, per_ms, us_i, build)
+            built.append(make(name, vol, get_material("liver"), fixed=fixed, integrator="symplectic", **kw))
+            builds.append(time.perf_counter() - t0)
+        implicit = [make(name, vol, get_material("liver"), fixed=fixed, integrator="implicit", **kw) for name in names]
+        sdts = [m.stable_dt() for m in built]
+        dt_of = {id(m): d for m, d in zip(built, sdts)}
+        us_s = interleaved_step_us(built, lambda m: dt_of[id(m)], args.repeats)
+        us_i = interleaved_step_us(implicit, lambda m: 1e-3, max(args.repeats // 4, 10))
+        rows = []
+        for k, (name, m) in enumerate(zip(names, built)):
+            row = (name, len(m.springs), m.critical_dt() * 1e3, exact_critical_dt(m) * 1e3, us_s[k],
+                   us_s[k] * (1e-3 / sdts[k]), us_i[k], builds[k])
+            rows.append(row)
             print("{} | {} | {:.3f} | {:.3f} | {:.1f} | {:.0f} | {:.0f} | {:.1f}".format(*row))
-            if base is None:
-                base = row
-            else:
-                print(f"ratio calibrated/plain: symplectic us per sim ms {per_ms / base[5]:.2f}x, step {us_s / base[4]:.2f}x, "
-                      f"critical dt {row[2] / base[2]:.2f}x (exact {row[3] / base[3]:.2f}x), implicit step {us_i / base[6]:.2f}x")
+        base, row = rows
+        print(f"ratio calibrated/plain: symplectic us per sim ms {row[5] / base[5]:.2f}x, step {row[4] / base[4]:.2f}x, "
+              f"critical dt {row[2] / base[2]:.2f}x (exact {row[3] / base[3]:.2f}x), implicit step {row[6] / base[6]:.2f}x")
     print(f"load: {os.getloadavg()}")
     return 0
 
