@@ -34,6 +34,8 @@ from surgsim_envs.tissue.spring_calibration import calibrate
 #: factor on the Lanczos estimate of the largest eigenvalue in :meth:`CalibratedMassSpringModel.critical_dt`
 #: (the Ritz value approaches lambda_max from below; DT_SAFETY applies on top of it)
 LANCZOS_MARGIN = 1.05
+#: the Lanczos estimate is used only down to bound / LANCZOS_FLOOR (the bound is 2-3x the exact value)
+LANCZOS_FLOOR = 16.0
 
 
 class CalibratedMassSpringModel(MassSpringModel):
@@ -221,8 +223,8 @@ class CalibratedMassSpringModel(MassSpringModel):
                                                self.K1, self.K2, self.kM, self._s, self._dl, decay, kMg,
                                                self._vtets, self.volume_rest, self.volume_kv))
         lam += self.volume_lambda_bound()
-        try:
-            lam = min(lam, LANCZOS_MARGIN * self._lanczos_lambda())
+        try:   # the bound overestimates by 2-3x here; never trust an estimate LANCZOS_FLOOR times below it
+            lam = min(lam, max(LANCZOS_MARGIN * self._lanczos_lambda(), lam / LANCZOS_FLOOR))
         except Exception:  # noqa: BLE001 - ARPACK may not converge; the guaranteed bound stands
             pass
         beta = float(np.max(self.b0 * self.inv_mass)) if self.n_nodes else 0.0
