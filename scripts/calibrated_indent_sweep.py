@@ -21,7 +21,6 @@ import os
 import sys
 import time
 
-import numpy as np
 
 from surgsim_envs.bench.accuracy import force_error
 from surgsim_envs.bench.material import indent
