@@ -3,7 +3,7 @@ palpation task's tissue (10 x 10 x 2 cm liver slab with a 20 kPa inclusion, 5 mm
 and the indentation bench slab (issue 16, docs/benchmarks.md "Calibrated mass-spring (issue 16,
 third pass)").
 
-    python scripts/calibrated_cost.py [--repeats 200]
+    surgsim bench calibrated-cost [--repeats 200]
 
 Per model: springs (left out: those the fit set to 0), critical_dt() (the Gershgorin bound the "auto" integrator and stable_dt() use)
 against the exact symplectic limit from the largest eigenvalue of M^-1 K (scipy eigsh), wall time
@@ -65,12 +65,16 @@ def volumes():
     yield "bench indentation slab 2 mm (quarter, graded)", graded_slab(0.12, 0.03, 0.002, 0.0124), None
 
 
-def main(argv=None) -> int:
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--repeats", type=int, default=200, help="timed steps per model (median reported)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from surgsim_envs.errors import ConfigError
     from surgsim_envs.tissue import get_material, make
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=200)
-    args = ap.parse_args(argv)
+    if args.repeats < 1:
+        raise ConfigError(f"surgsim bench calibrated-cost: --repeats must be >= 1, got {args.repeats}")
     print(f"load: {os.getloadavg()}")
     for label, vol, regions in volumes():
         fixed = np.isclose(vol.nodes[:, 2], vol.nodes[:, 2].min())
@@ -100,6 +104,12 @@ def main(argv=None) -> int:
               f"critical dt {row[2] / base[2]:.2f}x (exact {row[3] / base[3]:.2f}x), implicit step {row[6] / base[6]:.2f}x")
     print(f"load: {os.getloadavg()}")
     return 0
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
 
 
 if __name__ == "__main__":
