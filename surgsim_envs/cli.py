@@ -30,6 +30,8 @@ BENCH: dict[str, tuple[str, str]] = {
     "haptics": ("surgsim_envs.bench.haptics_speed", "haptic servo loop period"),
     "haptics-flood": ("surgsim_envs.bench.haptics_flood", "haptic servo period while its UDP port is flooded"),
     "accuracy": ("surgsim_envs.bench.accuracy", "speed against accuracy chart (Pareto front)"),
+    "calibrated-cost": ("surgsim_envs.bench.calibrated_cost",
+                        "calibrated vs plain mass-spring: critical dt, step cost per simulated ms"),
     "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
     "soak": ("surgsim_envs.bench.soak", "long random-action runs: NaN, exceptions, force bounds, memory growth"),
     "diffusion": ("surgsim_envs.bench.diffusion_bench", "diffusion model (paper 000) update time vs the paper's Table 9.1"),

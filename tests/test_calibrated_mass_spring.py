@@ -100,28 +100,132 @@ def test_calibrated_model_rejects_manual_spring_constants():
         calibrate(vol, 1000.0, 0.5)
 
 
-def _indent_error(nu, young, radius, thickness, spacing):
+def _indent_error(nu, young, radius, thickness, spacing=None, max_cell_spacings=3.0):
+    """Mean relative force error over [d_v/4, d_v] against Dimitriadis (bonded layer); spacing defaults
+    to half the contact radius at d_v, cells graded up to ``max_cell_spacings`` spacings."""
     mat = _elastic(young, nu)
     dv = dimitriadis_valid_depth(radius, thickness)
+    if spacing is None:
+        spacing = round(0.5 * np.sqrt(radius * dv), 5)
     res = indent("mass_spring_calibrated", mat, indenter_radius=radius, depth=dv, thickness=thickness,
-                 spacing=spacing, n_depths=8, time_steps=0)
+                 spacing=spacing, n_depths=8, time_steps=0, max_cell=max_cell_spacings * spacing)
     ref = dimitriadis_force(res.depth, radius, young, nu, thickness, bonded=True)
     return force_error(res.depth, res.force, ref, dv), res.force[-1] / ref[-1]
 
 
-def test_indentation_matches_dimitriadis_nearly_incompressible():
-    """Held-out case (E 12 kPa, nu 0.49, R 6 mm, 20 mm layer, contact radius 2.2 spacings): within
-    10 % (the plain network is ~55 % too soft)."""
-    err, end = _indent_error(0.49, 12_000.0, 0.006, 0.02, 0.0015)
+def test_indentation_within_10_percent_at_nu_0_3_held_out():
+    """Held-out case (E 2.5 kPa, R 8 mm, 20 mm layer, spacing = contact radius / 2): within 10 % at
+    nu = 0.3, where the springs carry nearly all the stiffness (measured 0.076; the plain network is
+    ~0.45 soft)."""
+    err, end = _indent_error(0.3, 2_500.0, 0.008, 0.02)
     assert err < 0.10, (err, end)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("nu", [0.3, 0.45])
-def test_indentation_error_falls_with_refinement(nu):
-    """Held-out (E 30 kPa, R 6 mm, 30 mm layer): the error falls from 2 mm to 1.5 mm and is <= 12 %
-    at 1.5 mm (measured 0.25 -> 0.12 at nu 0.3 on the bench case)."""
-    coarse, _ = _indent_error(nu, 30_000.0, 0.006, 0.03, 0.002)
-    fine, _ = _indent_error(nu, 30_000.0, 0.006, 0.03, 0.0015)
-    assert fine < 0.12
-    assert fine < coarse
+@pytest.mark.parametrize("young,radius,thickness", [(800.0, 0.003, 0.02), (40_000.0, 0.010, 0.04)])
+@pytest.mark.parametrize("nu", [0.3, 0.4, 0.45, 0.49])
+def test_indentation_within_10_percent_held_out_sweep(young, radius, thickness, nu):
+    """Issue 16: <= 10 % for nu 0.3-0.49 on (E, R, layer) never used while building the method."""
+    err, end = _indent_error(nu, young, radius, thickness)
+    assert err < 0.10, (err, end)
+
+
+@pytest.mark.slow
+def test_indentation_error_falls_with_refinement():
+    """Bench case (E 4 kPa, R 5 mm, 30 mm layer), nu = 0.3, cells graded up to 3 spacings: the error
+    falls 2 -> 1.5 -> 1 mm and is <= 10 % at 1 mm (measured 0.138 / 0.08 / 0.044)."""
+    errs = [_indent_error(0.3, 4_000.0, 0.005, 0.03, spacing=h)[0] for h in (0.002, 0.0015, 0.001)]
+    assert errs[0] > errs[1] > errs[2], errs
+    assert errs[2] < 0.10, errs
+
+
+def _axis_compliance(quarter: bool, model: str) -> float:
+    """z compliance (m/N) of the top node on the axis of a 24 x 24 x 12 mm box (2 mm lattice, bottom
+    bonded) under a point load; the quarter box carries roller conditions on its cuts and a quarter load."""
+    import scipy.sparse.linalg as spla
+
+    from surgsim_envs.bench.indent_mesh import graded_slab
+    from surgsim_envs.bench.material import linear_stiffness
+
+    vol = graded_slab(0.024, 0.012, 0.002, 0.006, grading=1.0, quarter=quarter)
+    X = vol.nodes
+    bottom = np.isclose(X[:, 2], -0.012)
+    K = linear_stiffness(make(model, vol, _elastic(4000.0, 0.25), fixed=bottom)).tocsr()
+    cons = np.zeros(X.shape, dtype=bool)
+    cons[bottom] = True
+    if quarter:
+        cons[np.isclose(X[:, 0], 0.0), 0] = True
+        cons[np.isclose(X[:, 1], 0.0), 1] = True
+    free = ~cons.ravel()
+    i = int(np.flatnonzero(np.all(np.isclose(X, 0.0), axis=1))[0])
+    f = np.zeros(X.size)
+    f[3 * i + 2] = 0.25 if quarter else 1.0
+    u = np.zeros(X.size)
+    u[free] = spla.spsolve(K[free][:, free].tocsc(), f[free])
+    return u[3 * i + 2]
+
+
+def test_symmetry_cut_does_not_soften_the_network():
+    """A quarter model with roller cuts must respond like the whole body (FEM: 0.99). With V_t/4 nodal
+    shares the fit left the cut's corner node 1.47x too compliant (the bench slab's indentation axis);
+    with solid-angle shares the ratio is 1.08."""
+    q, full = _axis_compliance(True, "mass_spring_calibrated"), _axis_compliance(False, "mass_spring_calibrated")
+    assert 0.95 < q / full < 1.15
+
+
+def test_solid_angle_shares_give_every_box_corner_an_eighth():
+    """Kuhn split of a cube: each corner owns 1/8 of it (V_t/4 lumping gives 1/4 or 1/12)."""
+    from surgsim_envs.tissue.spring_calibration import corner_shares
+
+    vol = box_volume((0.003, 0.003, 0.003), 0.003)       # one cube, 6 tets
+    assert vol.n_nodes == 8
+    w = corner_shares(vol.nodes, vol.tets.astype(np.int64)) * vol.tet_volumes()[:, None]
+    owned = np.bincount(vol.tets.ravel(), weights=w.ravel(), minlength=8)
+    assert owned == pytest.approx(np.full(8, vol.tet_volumes().sum() / 8), rel=1e-9)
+
+
+def test_scale_material_recalibrates_like_a_fresh_fit():
+    """Contract v2: scale_material re-derives the springs. A uniform E scale is applied without a refit
+    (the fit is linear in E); a masked one is refitted from the old springs and equals a cold fit."""
+    vol = box_volume((0.02, 0.02, 0.01), 0.0025)
+    m = make("mass_spring_calibrated", vol, _elastic(5_000.0, 0.45))
+    k0, kv0 = m.calibration.stiffness.copy(), m.node_bulk.copy()
+    m.scale_material("young", 3.0)
+    assert m.calibration.iterations == 0
+    assert m.calibration.stiffness == pytest.approx(3.0 * k0, rel=1e-12)
+    assert m.node_bulk == pytest.approx(3.0 * kv0, rel=1e-12)
+    mask = m.element_centroids()[:, 0] > 0
+    m.scale_material("young", 4.0, mask)
+    cold = calibrate(vol, m.fields["young"], m.fields["poisson"])
+    assert m.calibration.stiffness == pytest.approx(cold.stiffness, rel=1e-4, abs=1e-6 * cold.stiffness.max())
+    assert np.max(m.K1) > 3.5 * np.max(k0)          # elastic (g1 = 0): K1 = k; the masked half follows E
+
+
+def test_critical_dt_is_the_eigenvalue_limit_and_the_step_is_stable_below_it():
+    """critical_dt() (Lanczos, margin 1.05) lies within 10 % below the exact symplectic limit
+    2/sqrt(lambda_max(M^-1 K)) of stiffness_matrix(); the old Gershgorin/row-sum bound was 0.4-0.6 of
+    it. Stepping at stable_dt() stays bounded; at 1.5x the exact limit the guard stops the run."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from surgsim_envs.errors import TissueUnstableError
+
+    vol = box_volume((0.02, 0.02, 0.01), 0.0025)
+    mat = _elastic(5_000.0, 0.45).replace(damping=0.0)
+    fixed = vol.nodes[:, 2] < -0.0049
+    m = make("mass_spring_calibrated", vol, mat, fixed=fixed, integrator="symplectic")
+    free = np.repeat(~fixed, 3)
+    s = np.repeat(1.0 / np.sqrt(m.masses), 3)[free]
+    A = sp.diags(s) @ m.stiffness_matrix(relaxed=False).tocsr()[free][:, free] @ sp.diags(s)
+    exact = 2.0 / np.sqrt(spla.eigsh(A, k=1, which="LA", return_eigenvectors=False)[0])
+    assert 0.9 * exact <= m.critical_dt() <= exact
+    rng = np.random.default_rng(0)
+    m.velocities[~fixed] = rng.normal(size=(int((~fixed).sum()), 3)) * 1e-3
+    for _ in range(400):
+        m.step(m.stable_dt())
+    assert np.max(np.abs(m.positions - vol.nodes)) < 1e-3
+    fast = make("mass_spring_calibrated", vol, mat, fixed=fixed, integrator="symplectic")
+    fast.velocities[~fixed] = rng.normal(size=(int((~fixed).sum()), 3)) * 1e-3
+    with pytest.raises(TissueUnstableError):
+        for _ in range(2000):
+            fast.step(1.5 * exact)

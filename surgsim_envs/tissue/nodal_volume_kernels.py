@@ -50,6 +50,30 @@ def add_forces(pos, tets, V0, kv, vbuf, f_out):
 
 
 @njit(cache=True, fastmath=True)
+def add_forces_cached(pos, tets, V0, kv, vbuf, vgrad, f_out):
+    """:func:`add_forces` with one gradient evaluation per tet: the first pass keeps dV_t/dx in
+    ``vgrad`` (T,4,3) for the second (the gradient is most of the work)."""
+    vbuf[:] = 0.0
+    g = np.empty((4, 3))
+    for t in range(tets.shape[0]):
+        q = 0.25 * _tet_volume_gradient(pos, tets, t, g)
+        for a in range(4):
+            vbuf[tets[t, a]] += q
+            vgrad[t, a, 0] = g[a, 0]
+            vgrad[t, a, 1] = g[a, 1]
+            vgrad[t, a, 2] = g[a, 2]
+    for i in range(vbuf.shape[0]):
+        vbuf[i] = kv[i] * (vbuf[i] - V0[i]) / V0[i]        # pressure p_i (Pa)
+    for t in range(tets.shape[0]):
+        p = 0.25 * (vbuf[tets[t, 0]] + vbuf[tets[t, 1]] + vbuf[tets[t, 2]] + vbuf[tets[t, 3]])
+        for a in range(4):
+            n = tets[t, a]
+            f_out[n, 0] -= p * vgrad[t, a, 0]
+            f_out[n, 1] -= p * vgrad[t, a, 1]
+            f_out[n, 2] -= p * vgrad[t, a, 2]
+
+
+@njit(cache=True, fastmath=True)
 def energy(pos, tets, V0, kv, vbuf):
     """Energy (J) of the nodal-volume term at ``pos``."""
     node_volumes(pos, tets, vbuf)

@@ -21,7 +21,9 @@ every tet:
 3. **Fit (virial matching, per node).** Under a uniform strain eps a spring of rest length L
    and direction d stores 0.5 k L^2 (d.eps.d)^2; half of it is attributed to each end node. For
    every node i the springs' summed (Mandel 6x6) stiffness must equal that of its share of the
-   continuum, sum over its tets of V_t/4 (mu_t T + ...): 21 equations per node, one unknown per
+   continuum, sum over its tets of w_ti V_t (mu_t T + ...), w_ti the tet's solid angle at i over
+   the sum of its four (:func:`corner_shares`; V_t/4 made boundary nodes of lattices inconsistent
+   with the springs' half-per-end split): 21 equations per node, one unknown per
    spring, k >= 0. Solved as one sparse non-negative least-squares problem (projected
    Barzilai-Borwein gradient). It is the nodal version of per-element stiffness fitting (Lloyd,
    Szekely, Harders 2007, "Identification of spring parameters for deformable object simulation",
@@ -33,7 +35,8 @@ every tet:
    isotropic).
 4. **Volume term at the nodes** (averaged nodal volume, Bonet & Burton 1998, as ``fem``'s ANP):
    E = 0.5 sum_i k_v,i (V_i - V_i0)^2 / V_i0 with V_i = sum over the node's tets of V_t / 4 and
-   k_v,i the volume-weighted mean of its tets' lambda - mu. A per-tet volume term locks linear tets
+   k_v,i the volume-weighted mean of its tets' lambda - mu, plus the bulk part of whatever the
+   springs could not fit at that node (:func:`bulk_completion`). A per-tet volume term locks linear tets
    as nu -> 0.5 (the indentation force grows 25 % too stiff at nu = 0.49); the nodal one does not.
 
 Units: m, Pa, N/m. numpy + scipy only (the stepping kernels are in
@@ -82,6 +85,29 @@ class Calibration:
     n_edges: int
 
 
+def corner_shares(X: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """(T,4) fraction of each tet's volume owned by each of its corners, proportional to the solid
+    angle the tet subtends there (Van Oosterom & Strackee 1983, tan(omega/2) = |a.(b x c)| /
+    (abc + (a.b)c + (a.c)b + (b.c)a)).
+
+    On a cube lattice split into tets (Kuhn) the six tets are congruent and the solid angles at a
+    cube corner add up to an octant, so every corner owns 1/8 of each cube around it, as the springs'
+    half-per-end energy does (on stretched boxes approximately: 0.88-1.15 x 1/8 at 3:2:1).
+    The usual V_t/4 lumping gives the corners of a Kuhn box 1/4 (the two ends of the split
+    diagonal, in all 6 tets) or 1/12 (the others, in 2): averaged out inside, but on boundary edges,
+    corners and symmetry cuts the fit then pulls the springs there soft (the axis node of the
+    quarter indentation slab was 1.4x too compliant)."""
+    omega = np.empty((len(tets), 4))
+    for a in range(4):
+        r = [X[tets[:, b]] - X[tets[:, a]] for b in range(4) if b != a]
+        ln = [np.linalg.norm(v, axis=1) for v in r]
+        num = np.abs(np.einsum("ij,ij->i", r[0], np.cross(r[1], r[2])))
+        den = (ln[0] * ln[1] * ln[2] + np.einsum("ij,ij->i", r[0], r[1]) * ln[2]
+               + np.einsum("ij,ij->i", r[0], r[2]) * ln[1] + np.einsum("ij,ij->i", r[1], r[2]) * ln[0])
+        omega[:, a] = 2.0 * np.arctan2(num, den)
+    return omega / omega.sum(axis=1, keepdims=True)
+
+
 def cross_face_pairs(tets: np.ndarray, n_nodes: int) -> np.ndarray:
     """(F,2) sorted node pairs opposite each interior face (the two tets sharing it), unique."""
     tets = np.asarray(tets, dtype=np.int64)
@@ -113,16 +139,18 @@ def _mandel_dyad(d: np.ndarray) -> np.ndarray:
                      _SQRT2 * d[:, 0] * d[:, 2], _SQRT2 * d[:, 0] * d[:, 1]], axis=1)
 
 
-def _nnls(A: sp.csr_matrix, b: np.ndarray, max_iter: int = FIT_MAX_ITER, tol: float = FIT_TOL):
-    """min 0.5 |A x - b|^2 subject to x >= 0 (projected Barzilai-Borwein gradient). Returns (x, iterations)."""
+def _nnls(A: sp.csr_matrix, b: np.ndarray, max_iter: int = FIT_MAX_ITER, tol: float = FIT_TOL, x0=None):
+    """min 0.5 |A x - b|^2 subject to x >= 0 (projected Barzilai-Borwein gradient from ``x0``, default 0).
+    Returns (x, iterations)."""
     # plain numpy reductions, not BLAS dot: a multi-threaded BLAS stalls on a loaded machine
     def dot(u, v):
         return float(np.sum(u * v))
 
     at = A.T.tocsr()
-    x = np.zeros(A.shape[1])
+    x = np.zeros(A.shape[1]) if x0 is None else np.maximum(np.asarray(x0, dtype=np.float64), 0.0)
     g = at @ (A @ x - b)
-    scale = math.sqrt(dot(g, g)) + 1e-300
+    g0 = at @ b                        # the gradient at x = 0 sets the tolerance, whatever the start
+    scale = math.sqrt(dot(g0, g0)) + 1e-300
     step = 1.0 / max(float(sp.linalg.norm(A, "fro")) ** 2 / max(A.shape[1], 1), 1e-300)
     it = 0
     for it in range(1, max_iter + 1):
@@ -139,10 +167,12 @@ def _nnls(A: sp.csr_matrix, b: np.ndarray, max_iter: int = FIT_MAX_ITER, tol: fl
     return x, it
 
 
-def calibrate(volume, young, poisson) -> Calibration:
+def calibrate(volume, young, poisson, initial=None) -> Calibration:
     """Spring constants and nodal volume stiffness matching linear elasticity of every tet.
 
     volume: the tet :class:`~surgsim_envs.geometry.Volume` (m); young (T,) Pa, poisson (T,) per tet.
+    initial: optional (S,) spring constants (N/m) to start the fit from (a previous calibration of the
+        same volume, e.g. after ``scale_material``); the result is the same fit, reached sooner.
     See the module docstring for the method.
     """
     tets = np.asarray(volume.tets, dtype=np.int64)
@@ -162,7 +192,7 @@ def calibrate(volume, young, poisson) -> Calibration:
     eye_u = (_IU[0] == _IU[1]).astype(float)
     mm_u = np.outer(_M, _M)[_IU]
     target_t = ((2.0 * mu)[:, None] * eye_u[None] + (lam - kv)[:, None] * mm_u[None]) * _WU[None]   # (T,21)
-    share = np.repeat(vol / 4.0, 4)
+    share = (vol[:, None] * corner_shares(X, tets)).ravel()
     node_target = np.zeros((n, 21))
     for c in range(21):
         node_target[:, c] = np.bincount(tets.reshape(-1), weights=share * np.repeat(target_t[:, c], 4), minlength=n)
@@ -180,9 +210,25 @@ def calibrate(volume, young, poisson) -> Calibration:
     b = node_target.ravel()
     colnorm = np.sqrt(np.asarray(A.multiply(A).sum(axis=0)).ravel())
     colnorm[colnorm == 0] = 1.0
-    x, iters = _nnls((A @ sp.diags(1.0 / colnorm)).tocsr(), b)
+    x0 = None
+    if initial is not None and np.shape(initial) == (ns,):
+        x0 = np.asarray(initial, dtype=np.float64) * colnorm
+    x, iters = _nnls((A @ sp.diags(1.0 / colnorm)).tocsr(), b, x0=x0)
     k = x / colnorm
     residual = float(np.linalg.norm(A @ k - b) / (np.linalg.norm(b) + 1e-300))
-    node_vol = np.bincount(tets.reshape(-1), weights=share, minlength=n)
-    node_bulk = np.bincount(tets.reshape(-1), weights=share * np.repeat(kv, 4), minlength=n) / node_vol
+    quarter = np.repeat(vol / 4.0, 4)         # the volume term's own nodal volumes (sum of V_t / 4)
+    node_vol = np.bincount(tets.reshape(-1), weights=quarter, minlength=n)
+    node_bulk = np.bincount(tets.reshape(-1), weights=quarter * np.repeat(kv, 4), minlength=n) / node_vol
+    node_bulk = node_bulk + bulk_completion(A @ k - b, n) / node_vol
     return Calibration(pairs, k, node_bulk, residual, int(iters), int(n_edges))
+
+
+def bulk_completion(misfit: np.ndarray, n: int) -> np.ndarray:
+    """(N,) bulk stiffness (Pa m^3) the volume term adds where the springs miss some: the least-squares
+    projection of each node's deficit (target - springs, Mandel 6x6) on the volume term's form m m^T,
+    (m^T R_i m) / 9, kept where positive. ``misfit`` is the fit's (21 N,) residual springs - target."""
+    r = -np.asarray(misfit).reshape(n, 21) / _WU[None]
+    full = np.zeros((n, 6, 6))
+    full[:, _IU[0], _IU[1]] = r
+    full[:, _IU[1], _IU[0]] = r
+    return np.maximum(np.einsum("i,nij,j->n", _M, full, _M) / 9.0, 0.0)
