@@ -225,6 +225,35 @@ def test_prefactored_solver_tracks_the_all_node_force_while_the_probe_moves(wall
     assert len(seen - set(probe.nodes.tolist())) >= 2          # the contact set did change
 
 
+def test_fast_step_touches_the_contact_region_and_recovers_the_rest_lazily():
+    """The prefactored step writes only the columns around the contact; the probe force equals the
+    all-node static solution (within 2 %; exact for the linear springs) at every pose, and the
+    positions recovered afterwards (lazily, row by row or all at once) are the all-node solution."""
+    import copy
+
+    vol = abdominal_wall_volume(0.004, size=(0.06, 0.06))
+    model, probe = _pressed(vol, 0.003, radius=0.005)
+    model.solver = "prefactored"
+    model.static_solve()
+    z = vol.nodes[probe.candidates, 2].max()
+    far = np.flatnonzero(np.hypot(vol.nodes[:, 0], vol.nodes[:, 1]) > 0.02)
+    for k in range(6):
+        probe.move_to((0.0008 * (k + 1), 0.0, z + 0.005 - 0.003))
+        model.step(1e-3)
+        assert model._lazy and model.last_active < 0.5 * model.n_nodes   # only the contact region written
+        f = probe.force()[2]
+        rows = model.node_positions(far)                                  # evaluated, nothing written
+        assert model._lazy
+        ref = copy.deepcopy(model)                                        # writes the positions out
+        assert not model._lazy
+        np.testing.assert_allclose(rows, model.positions[far], rtol=0, atol=1e-12)
+        expect = ref.static_solve()
+        f_ref = ref.contact_force(probe.nodes)[2]
+        assert f_ref > 0.05 and abs(f / f_ref - 1) < 0.02, (k, f, f_ref)
+        assert abs(f / f_ref - 1) < 1e-6                                  # exact to round-off
+        np.testing.assert_allclose(model.positions, expect, rtol=0, atol=1e-9)
+
+
 def test_prefactored_step_holds_springs_at_extreme_length_as_rigid_links(wall):
     """Pressed to 50 and 60 % of the thickness (springs at their extreme length), the prefactored
     step's rigid links give the all-node active-set force, with pushes and no interpenetration."""

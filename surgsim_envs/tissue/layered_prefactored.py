@@ -1,0 +1,207 @@
+"""The ``layered`` model's "prefactored" per-step solver: the all-node equilibrium of the springs
+with moving contact nodes, touching only the contact region per step (paper 001, eqs. 2.5, 2.8).
+
+The spring Laplacian ``A`` of every node except the ANCHORS (Dirichlet nodes held at rest when it
+was built: bonded faces, bone) is factorised once. A contact node c held at displacement t_c adds
+a reaction lambda_c, so ``u = v0 + sum_c g_c lambda_c`` with ``g_c = A^-1 e_c`` (one back-solve the
+first time c is held, then cached) and ``v0`` the anchors' response; the held displacements give
+``G_CC lambda = t_C - v0_C`` (|C| x |C|, per axis). Exact for the linear springs (eq. 2.8). A spring
+at its extreme length becomes a rigid link with its own reaction (a column ``g_j - g_i`` of its
+axis), found by an active-set iteration warm-started from the previous step's links; the link
+reactions are the accumulated pushes (eq. 2.5) that ``contact_force`` reads.
+
+Per step (numba kernels in :mod:`layered_prefactored_kernels`) only the NEAR set is written: whole
+lattice columns within ``near`` lattice spacings of the contact's footprint (the contact nodes'
+neighbours for the force, the compressed column for the extreme-length check). The other nodes'
+positions are recovered lazily (``LayeredModel.positions`` materialises them when read;
+``LayeredModel.node_positions(idx)`` evaluates rows without writing). Every ``refresh`` steps the
+whole volume is written and every spring checked against its extreme length. Units: m, N, N/m.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from surgsim_envs.tissue import layered_prefactored_kernels as pk
+from surgsim_envs.tissue.layered_block import MAX_ACTIVE_SET_ITERS
+
+#: a spring shorter than its extreme length by more than this fraction of it joins as a rigid link
+LINK_TOL = 1e-9
+#: default steps between full writes (and full extreme-length checks)
+REFRESH = 50
+
+
+class PrefactoredContact:
+    """All-node spring equilibrium with contact nodes by their reactions (module docstring).
+
+    model: the LayeredModel; radius: m, half-width of the near set beyond the contact footprint
+    (at least one lattice spacing); refresh: steps between full writes.
+    """
+
+    def __init__(self, model, radius: float, refresh: int = REFRESH):
+        self.model = model
+        n = model.n_nodes
+        self.anchor = model.fixed & np.all(model.fixed_targets == model.rest_positions, axis=1)
+        self.anchor_idx = np.flatnonzero(self.anchor)
+        self.anchor_targets = model.fixed_targets[self.anchor_idx].copy()
+        self.free = np.flatnonzero(~self.anchor)
+        self.local = np.full(n, -1, dtype=np.int64)
+        self.local[self.free] = np.arange(len(self.free))
+        lap = model._laplacian()
+        self.lu = spla.splu(lap[self.free][:, self.free].tocsc(), permc_spec="MMD_AT_PLUS_A")
+        u_anchor = self.anchor_targets - model.rest_positions[self.anchor_idx]
+        self.v0 = np.ascontiguousarray(self.lu.solve(np.ascontiguousarray(
+            -(lap[self.free][:, self.anchor_idx] @ u_anchor))))
+        self.slot_of = np.full(n, -1, dtype=np.int64)
+        self.Gt = np.zeros((16, len(self.free)))    # row k: A^-1 e_c of the node in slot k
+        self.n_slots = 0
+        self.near_cells = max(1, int(np.ceil(float(radius) / model.volume.spacing)))
+        self.refresh = int(refresh)
+        self._near_key = None
+        self.near = np.zeros(0, dtype=np.int64)
+        self.link_i = np.zeros(0, dtype=np.int64)   # rigid links: node, axis (its +axis neighbour is the other end)
+        self.link_a = np.zeros(0, dtype=np.int64)
+        self.link_force = np.zeros(0)
+        self._mark = np.zeros(n, dtype=np.int64)
+        self._pos_of = np.zeros(n, dtype=np.int64)
+        self._near_mark = np.zeros(n, dtype=np.int64)
+        self._stamp = 0
+        self._steps = 0
+        self.last_region = 0
+        self.last_iterations = 0
+        # the current solution: per axis the reacting nodes' slots and loads (eq. 1)
+        self.uniq_slots = np.zeros(0, dtype=np.int64)
+        self.w3 = np.zeros((3, 0))
+        self.finite = True
+
+    def valid(self) -> bool:
+        """False once an anchor was released or moved (the factorisation no longer applies)."""
+        m = self.model
+        return bool(m.fixed[self.anchor_idx].all()) and np.array_equal(m.fixed_targets[self.anchor_idx],
+                                                                       self.anchor_targets)
+
+    # ------------------------------------------------------------------------------------------
+    def _ensure_slots(self, nodes: np.ndarray) -> None:
+        """Back-solve (once) the compliance rows of the non-anchor ``nodes`` without one."""
+        new = nodes[(self.slot_of[nodes] < 0) & ~self.anchor[nodes]]
+        if not len(new):
+            return
+        new = np.unique(new)
+        need = self.n_slots + len(new)
+        if need > self.Gt.shape[0]:
+            grown = np.zeros((max(need, 2 * self.Gt.shape[0]), self.Gt.shape[1]))
+            grown[:self.n_slots] = self.Gt[:self.n_slots]
+            self.Gt = grown
+        e = np.zeros((len(self.free), len(new)))
+        e[self.local[new], np.arange(len(new))] = 1.0
+        cols = self.lu.solve(e)
+        self.Gt[self.n_slots:need] = cols.T
+        self.slot_of[new] = np.arange(self.n_slots, need)
+        self.n_slots = need
+
+    def _near_nodes(self, contact: np.ndarray) -> np.ndarray:
+        """Whole lattice columns within ``near_cells`` of the contact footprint (cached per footprint)."""
+        m = self.model
+        idx = m.volume.lattice_index
+        ci = idx[contact]
+        lo, hi = ci.min(axis=0), ci.max(axis=0)
+        key = (int(lo[0]), int(lo[1]), int(hi[0]), int(hi[1]))
+        if key != self._near_key:
+            r = self.near_cells
+            sel = ((idx[:, 0] >= lo[0] - r) & (idx[:, 0] <= hi[0] + r) & (idx[:, 1] >= lo[1] - r)
+                   & (idx[:, 1] <= hi[1] + r) & ~self.anchor)
+            self.near = np.flatnonzero(sel)
+            self._near_key = key
+        return self.near
+
+    # ------------------------------------------------------------------------------------------
+    def solve(self, contact: np.ndarray, full: bool | None = None) -> tuple[np.ndarray, bool]:
+        """Equilibrium with the Dirichlet nodes ``contact`` (non-anchor) at their targets: writes the
+        near set (every free node if ``full``, by default every ``refresh`` steps), the rigid links
+        and their pushes; returns (nodes written, settled). The model's other positions are then
+        stale until :meth:`materialise` (the model calls it when they are read)."""
+        m = self.model
+        rest = m.rest_positions
+        self._steps += 1
+        if full is None:
+            full = self._steps % self.refresh == 0
+        contact = np.asarray(contact, dtype=np.int64)
+        nodes = self.free if (full or not len(contact)) else self._near_nodes(contact)
+        self._stamp += 1
+        stamp = self._stamp
+        nm = self._near_mark
+        nm[nodes] = stamp
+        nm[contact] = stamp
+        t_c = m.fixed_targets[contact] - rest[contact]
+        li, la = self.link_i, self.link_a
+        settled = False
+        it = 0
+        for it in range(MAX_ACTIVE_SET_ITERS):
+            lj = m.nbr[li, 2 * la + 1].astype(np.int64)
+            self._ensure_slots(contact)
+            if len(li):
+                self._ensure_slots(li)
+                self._ensure_slots(lj)
+            self._stamp += 1
+            uniq = pk.unique_reacting(contact, li, lj, self.anchor, self._mark, self._stamp, self._pos_of)
+            w = np.zeros((3, len(uniq)))
+            lam = np.zeros(len(li))
+            s0 = rest[lj, la] - rest[li, la] - m.lmin[li, 2 * la + 1]
+            viol, finite = pk.solve_step(contact, t_c, li, la, s0, uniq, self._pos_of, self.anchor, self.local,
+                                         self.slot_of, self.Gt, self.v0, m.nbr, m.lmin, nodes, rest, m.fixed,
+                                         m.fixed_targets, m._x, m._xstamp, m._xversion, nm, stamp, LINK_TOL, w, lam)
+            keep = lam > 0.0
+            if keep.all() and not len(viol):
+                settled = True
+                break
+            # released links (in tension) go, springs past their extreme length join (warm start)
+            key = np.unique(np.concatenate([li[keep] * 3 + la[keep], viol[:, 0] * 3 + viol[:, 1]]))
+            li, la = key // 3, key % 3
+        self.last_iterations = it + 1
+        # the pushes of the previous links and of the written nodes go; the settled links' reactions
+        # are the new pushes (eq. 2.5)
+        m.push[nodes] = 0.0
+        if len(self.link_i):
+            m.push[self.link_i] = 0.0
+            m.push[m.nbr[self.link_i, 2 * self.link_a + 1]] = 0.0
+        if not settled:
+            li, la, lam = li[:0], la[:0], lam[:0]
+        if len(li):
+            lj = m.nbr[li, 2 * la + 1].astype(np.int64)
+            f = np.maximum(lam, 0.0)
+            m.push[li, 2 * la + 1] = f
+            m.push[lj, 2 * la] = f
+        self.link_i, self.link_a, self.link_force = li, la, lam
+        self.uniq_slots = self.slot_of[uniq]
+        self.w3 = w
+        self.finite = bool(finite)
+        self.last_region = len(nodes)
+        return nodes, settled
+
+    @property
+    def links(self) -> list[np.ndarray]:
+        """Per axis, the (L,2) node pairs (i below j) held as rigid links."""
+        out = []
+        for a in range(3):
+            i = self.link_i[self.link_a == a]
+            out.append(np.stack([i, self.model.nbr[i, 2 * a + 1].astype(np.int64)], axis=1))
+        return out
+
+    def positions_of(self, nodes: np.ndarray) -> np.ndarray:
+        """(K,3) m current positions of ``nodes`` from the solution (nothing written)."""
+        m = self.model
+        out = np.empty((len(nodes), 3))
+        pk.rows_positions(np.asarray(nodes, dtype=np.int64), self.local, self.uniq_slots, self.w3, self.Gt,
+                          self.v0, m.rest_positions, m.fixed, m.fixed_targets, out)
+        return out
+
+    def materialise(self) -> None:
+        """Write every free node's position from the current solution."""
+        m = self.model
+        ok = pk.write_rows(self.free, self.local, self.uniq_slots, self.w3, self.Gt, self.v0, m.rest_positions,
+                           m.fixed, m.fixed_targets, m._x, m._xstamp, m._xversion)
+        self.finite = self.finite and bool(ok)
+
+
+__all__ = ["PrefactoredContact", "REFRESH", "LINK_TOL"]
