@@ -2,11 +2,14 @@
 
 A >= 50,000-node abdominal wall (dd = 2 mm, 12 x 12 cm); a position-controlled 5 mm sphere is
 pressed ``depth`` into it (all-node static solve), then moved along x at ``speed`` m/s in 1 ms
-steps. Each step pins the covered nodes and calls ``model.step`` (active-node local static
-integration with a per-step budget of ``max_updates`` node updates; the rest carries over). Per
-step: wall time of ``model.step`` (median), active nodes (median), and at ``samples`` steps the
-probe force against the all-node solution at the same pose (a deep copy solved by
-``static_solve``). Timings depend on the machine's load, reported with them.
+steps. Each step moves the probe (``probe.move_to``: the covered nodes held on the sphere), calls
+``model.step`` (``--solver prefactored``: the contact region only, the rest recovered lazily;
+``local``: the work-list local iteration with a budget of ``max_updates`` node updates) and reads
+the probe force. Per step: wall time of ``model.step`` (median, p90; its thread CPU time too, which
+excludes the time the scheduler gives to other processes), of the whole cycle (move + step +
+force), nodes written, contact nodes, and at ``samples`` steps the probe force against the
+all-node solution at the same pose (a deep copy solved by ``static_solve``). Timings depend on
+the machine's load, reported with them.
 """
 
 from __future__ import annotations

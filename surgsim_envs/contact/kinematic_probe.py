@@ -99,4 +99,5 @@ class KinematicProbe:
         cf = getattr(self.model, "contact_force", None)
         if cf is not None:
             return cf(self.nodes)
-        return -self.model.internal_forces()[self.nodes].sum(axis=0)
+        # the held nodes' elastic forces push the tool (-internal_forces() is what the tool applies)
+        return self.model.internal_forces()[self.nodes].sum(axis=0)
