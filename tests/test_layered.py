@@ -252,6 +252,10 @@ def test_fast_step_touches_the_contact_region_and_recovers_the_rest_lazily():
         assert f_ref > 0.05 and abs(f / f_ref - 1) < 0.02, (k, f, f_ref)
         assert abs(f / f_ref - 1) < 1e-6                                  # exact to round-off
         np.testing.assert_allclose(model.positions, expect, rtol=0, atol=1e-9)
+    probe.move_to((0.0, 0.0, z + 0.01))          # lifted: the wall returns to rest, still lazily
+    model.step(1e-3)
+    assert model._lazy and model.last_active < 0.5 * model.n_nodes
+    np.testing.assert_allclose(model.positions, vol.nodes, rtol=0, atol=1e-12)
 
 
 def test_prefactored_step_holds_springs_at_extreme_length_as_rigid_links(wall):

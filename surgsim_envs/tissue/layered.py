@@ -387,7 +387,7 @@ class LayeredModel(TissueModel):
         prev = self._touched[:self._n_touched]
         self.velocities[prev] = 0.0
         contact = self._contacts(pc)
-        near = pc._near_nodes(contact) if len(contact) else pc.free
+        near = pc._near_nodes(contact) if len(contact) else pc.near
         before = self._x[near]
         before_stamp = self._xstamp[near]
         nodes, settled = pc.solve(contact)

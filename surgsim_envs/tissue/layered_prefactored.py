@@ -127,7 +127,12 @@ class PrefactoredContact:
         if full is None:
             full = self._steps % self.refresh == 0
         contact = np.asarray(contact, dtype=np.int64)
-        nodes = self.free if (full or not len(contact)) else self._near_nodes(contact)
+        if full:
+            nodes = self.free
+        elif len(contact):
+            nodes = self._near_nodes(contact)
+        else:   # no contact: the previous near set goes back to the anchors' response, the rest lazily
+            nodes = self.near
         self._stamp += 1
         stamp = self._stamp
         nm = self._near_mark
