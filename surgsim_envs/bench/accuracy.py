@@ -204,7 +204,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-baselines", action="store_true",
                         help="skip the MuJoCo flex baselines (mujoco_flex_full/_trilinear)")
     parser.add_argument("--scene", choices=("indent", "layered"), default="indent",
-                        help="indent: sphere into a liver slab vs Dimitriadis (default); layered: sphere into an "
+                        help="indent: sphere into a liver slab vs Dimitriadis (default); layered: flat punch into an "
                              "abdominal wall vs converged fem_static (surgsim_envs.bench.accuracy_layered)")
 
 
