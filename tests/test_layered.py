@@ -439,3 +439,19 @@ def test_layered_wall_against_fem_on_the_bonded_wall():
     ratio = np.asarray(res["layered"]) / np.asarray(res["fem"])
     np.testing.assert_allclose(ratio, ratio[0], rtol=1e-6)
     assert 1.1 < ratio[0] < 1.35
+
+
+def test_layered_accuracy_scene_reads_the_linear_reaction():
+    """``surgsim bench accuracy --scene layered``: the punch force the harness reads from a model
+    (static_solve, then the reaction on the held nodes) is the linear stiffness reaction of the same
+    press (an independent path: K u with the held displacements), and is linear in depth."""
+    from surgsim_envs.bench.accuracy_layered import RADIUS, _scene, press
+    from surgsim_envs.bench.layers_accuracy import press_linear
+
+    row = press("layered", 0.006, time_steps=2, solver="prefactored")
+    vol, bottom, top, z_top = _scene(0.006)
+    lay = LayeredModel(vol, fixed=bottom)
+    f_lin = press_linear(lay.stiffness_matrix(), vol.nodes, bottom, top, (0.0, 0.0), RADIUS, row["depth"], z_top)
+    np.testing.assert_allclose(row["force"], f_lin, rtol=1e-6)
+    assert row["force"][0] > 0 and abs(row["force"][-1] / row["force"][0] - 4.0) < 1e-6   # 2 mm vs 0.5 mm
+    assert row["contact_nodes"] >= 5 and np.isfinite(row["us_per_ms"])
