@@ -22,6 +22,11 @@ slabs in x, 60 steps on the 59k-node wall) without a full write. Units: m, N, N/
 
 from __future__ import annotations
 
+import atexit
+import queue
+import threading
+import weakref
+
 import numpy as np
 import scipy.sparse.linalg as spla
 
@@ -34,14 +39,72 @@ LINK_TOL = 1e-9
 REFRESH = 50
 
 
+class RowPrefetcher:
+    """Compliance rows ``A^-1 e_c`` solved in a daemon thread ahead of need (:meth:`request`), handed
+    over by :meth:`take`; the owner writes them into its own arrays (the thread touches only its
+    queue and its finished dict)."""
+
+    def __init__(self, lu, local: np.ndarray):
+        self._lu, self._local = lu, local
+        self._n = int((local >= 0).sum())
+        self._done: dict[int, np.ndarray] = {}
+        self._asked: set[int] = set()
+        self._lock = threading.Lock()
+        self._queue: queue.Queue = queue.Queue()
+        self._thread = threading.Thread(target=self._work, name="layered-row-prefetch", daemon=True)
+        self._thread.start()
+        _LIVE.add(self)
+
+    def _work(self) -> None:
+        while True:
+            c = self._queue.get()
+            if c is None:
+                return
+            e = np.zeros(self._n)
+            e[self._local[c]] = 1.0
+            col = self._lu.solve(e)
+            with self._lock:
+                self._done[c] = col
+
+    def request(self, nodes: np.ndarray) -> None:
+        for c in nodes.tolist():
+            if c not in self._asked:
+                self._asked.add(c)
+                self._queue.put(c)
+
+    def take(self, nodes: np.ndarray) -> dict[int, np.ndarray]:
+        """The finished rows of ``nodes`` (removed from the store)."""
+        with self._lock:
+            return {c: self._done.pop(c) for c in nodes.tolist() if c in self._done}
+
+    def close(self, wait: float = 0.0) -> None:
+        """Stop the thread (after the row it is solving; waits up to ``wait`` s for it)."""
+        self._queue.put(None)
+        if wait > 0:
+            self._thread.join(wait)
+
+
+#: live prefetchers, stopped at interpreter exit (a daemon thread inside SuperLU during shutdown
+#: makes the interpreter print spurious errors)
+_LIVE: "weakref.WeakSet[RowPrefetcher]" = weakref.WeakSet()
+
+
+@atexit.register
+def _stop_prefetchers() -> None:
+    for p in list(_LIVE):
+        p.close(wait=2.0)
+
+
 class PrefactoredContact:
     """All-node spring equilibrium with contact nodes by their reactions (module docstring).
 
     model: the LayeredModel; radius: m, half-width of the near set beyond the contact footprint
-    (at least one lattice spacing); refresh: steps between checks of the anchors.
+    (at least one lattice spacing); refresh: steps between checks of the anchors; prefetch: solve the
+    compliance rows of the surface nodes around the contact in a background thread (SuperLU's
+    solve releases the GIL), so a node joining the contact rarely waits for its back-solve.
     """
 
-    def __init__(self, model, radius: float, refresh: int = REFRESH):
+    def __init__(self, model, radius: float, refresh: int = REFRESH, prefetch: bool = True):
         self.model = model
         n = model.n_nodes
         self.anchor = model.fixed & np.all(model.fixed_targets == model.rest_positions, axis=1)
@@ -72,12 +135,17 @@ class PrefactoredContact:
         self._steps = 0
         self._sweep_pos = 0
         self._slabs = None
+        self._prefetch = RowPrefetcher(self.lu, self.local) if prefetch else None
         self.last_region = 0
         self.last_iterations = 0
         # the current solution: per axis the reacting nodes' slots and loads (eq. 1)
         self.uniq_slots = np.zeros(0, dtype=np.int64)
         self.w3 = np.zeros((3, 0))
         self.finite = True
+
+    def __del__(self):
+        if getattr(self, "_prefetch", None) is not None:
+            self._prefetch.close()
 
     def valid(self) -> bool:
         """False once an anchor was released or moved (the factorisation no longer applies)."""
@@ -97,10 +165,14 @@ class PrefactoredContact:
             grown = np.zeros((max(need, 2 * self.Gt.shape[0]), self.Gt.shape[1]))
             grown[:self.n_slots] = self.Gt[:self.n_slots]
             self.Gt = grown
-        e = np.zeros((len(self.free), len(new)))
-        e[self.local[new], np.arange(len(new))] = 1.0
-        cols = self.lu.solve(e)
-        self.Gt[self.n_slots:need] = cols.T
+        ready = self._prefetch.take(new) if self._prefetch is not None else {}
+        todo = np.array([c for c in new.tolist() if c not in ready], dtype=np.int64)
+        if len(todo):
+            e = np.zeros((len(self.free), len(todo)))
+            e[self.local[todo], np.arange(len(todo))] = 1.0
+            ready.update(zip(todo.tolist(), self.lu.solve(e).T))
+        for q, c in enumerate(new.tolist()):
+            self.Gt[self.n_slots + q] = ready[c]
         self.slot_of[new] = np.arange(self.n_slots, need)
         self.n_slots = need
 
@@ -197,6 +269,11 @@ class PrefactoredContact:
         self.w3 = w
         self.finite = bool(finite)
         self.last_region = len(nodes)
+        if self._prefetch is not None and len(contact):   # the surface around the contact may join next
+            ring = self.near[(m.nbr[self.near, 5] < 0) & (self.slot_of[self.near] < 0)]
+            if len(ring):   # nearest to the contact first
+                d = np.linalg.norm(rest[ring] - rest[contact].mean(axis=0), axis=1)
+                self._prefetch.request(ring[np.argsort(d)])
         return nodes, settled
 
     @property
