@@ -455,3 +455,24 @@ def test_layered_accuracy_scene_reads_the_linear_reaction():
     np.testing.assert_allclose(row["force"], f_lin, rtol=1e-6)
     assert row["force"][0] > 0 and abs(row["force"][-1] / row["force"][0] - 4.0) < 1e-6   # 2 mm vs 0.5 mm
     assert row["contact_nodes"] >= 5 and np.isfinite(row["us_per_ms"])
+
+
+def test_round_robin_sweep_covers_every_node_and_spring(wall, monkeypatch):
+    """The prefactored step's sweep pieces (written and checked one per step) together hold every
+    free node and both ends of every spring between free nodes, so no extreme length goes unchecked."""
+    from surgsim_envs.tissue import layered_prefactored
+
+    monkeypatch.setattr(layered_prefactored, "SWEEP_CHUNK", 64)   # several pieces per slab pair
+    model = LayeredModel(wall, fixed=wall.face_nodes(4), solver="prefactored")
+    pc = model._prefactored_solver()
+    chunks = pc._sweep_chunks()
+    n_pairs = len(np.unique(wall.lattice_index[pc.free, 0])) - 1
+    assert len(chunks) >= 2 * n_pairs and set(np.concatenate(chunks).tolist()) == set(pc.free.tolist())
+    owner = np.zeros((model.n_nodes, len(chunks)), dtype=bool)
+    for k, c in enumerate(chunks):
+        owner[c, k] = True
+    for d in (1, 3, 5):
+        i = pc.free[model.nbr[pc.free, d] >= 0]
+        j = model.nbr[i, d]
+        i, j = i[~pc.anchor[j]], j[~pc.anchor[j]]
+        assert np.all((owner[i] & owner[j]).any(axis=1))

@@ -15,9 +15,10 @@ lattice columns within ``near`` lattice spacings of the contact's footprint (the
 neighbours for the force, the compressed column for the extreme-length check). The other nodes'
 positions are recovered lazily (``LayeredModel.positions`` materialises them when read;
 ``LayeredModel.node_positions(idx)`` evaluates rows without writing). Each step also writes the
-next two lattice slabs (x index k, k + 1; round robin), so every node is written and
-finite-checked and every spring checked against its extreme length once per sweep (the number of
-slabs in x, 60 steps on the 59k-node wall) without a full write. Units: m, N, N/m.
+next piece of a round-robin sweep (two lattice slabs x = k, k + 1 cut along y into overlapping
+pieces of ~``SWEEP_CHUNK`` nodes), so every node is written and finite-checked and every spring
+checked against its extreme length once per sweep (about 240 steps on the 59k-node wall) without
+a full write. Units: m, N, N/m.
 """
 
 from __future__ import annotations
@@ -37,6 +38,8 @@ from surgsim_envs.tissue.layered_block import MAX_ACTIVE_SET_ITERS
 LINK_TOL = 1e-9
 #: steps between checks that the anchors are unchanged (the factorisation still applies)
 REFRESH = 50
+#: nodes per piece of the round-robin sweep (:meth:`PrefactoredContact._sweep_chunks`)
+SWEEP_CHUNK = 512
 
 
 class RowPrefetcher:
@@ -191,18 +194,31 @@ class PrefactoredContact:
             self._near_key = key
         return self.near
 
+    def _sweep_chunks(self) -> list[np.ndarray]:
+        """Round-robin pieces of the free nodes: lattice slabs x = k, k + 1, cut along y into pieces of
+        about ``SWEEP_CHUNK`` nodes that overlap by one y row; together they hold both ends of every
+        spring, so a sweep over them writes every node and checks every spring once."""
+        idx = self.model.volume.lattice_index[self.free]
+        ix, iy = idx[:, 0] - idx[:, 0].min(), idx[:, 1] - idx[:, 1].min()
+        chunks = []
+        for k in range(max(1, int(ix.max()))):
+            pair = np.flatnonzero((ix == k) | (ix == k + 1))
+            ys = iy[pair]
+            pieces = max(1, int(round(len(pair) / SWEEP_CHUNK)))
+            bounds = np.linspace(ys.min(), ys.max() + 1, pieces + 1).round().astype(int)
+            for lo, hi in zip(bounds[:-1], bounds[1:]):
+                sel = pair[(ys >= lo) & (ys <= hi)]   # hi inclusive: the overlap row
+                if len(sel):
+                    chunks.append(self.free[sel])
+        return chunks
+
     def _sweep_chunk(self) -> np.ndarray:
-        """The next two lattice slabs (x index k and k + 1) of the free nodes, round robin: every node
-        is written and every spring (the +x ones between the two slabs included) checked once per
-        sweep, without a full write."""
+        """The next round-robin piece (:meth:`_sweep_chunks`)."""
         if self._slabs is None:
-            ix = self.model.volume.lattice_index[self.free, 0]
-            order = np.argsort(ix, kind="stable")
-            self._slab_nodes = self.free[order]
-            self._slabs = np.searchsorted(ix[order], np.arange(ix.min(), ix.max() + 2))
+            self._slabs = self._sweep_chunks()
         k = self._sweep_pos
-        self._sweep_pos = 0 if k + 2 >= len(self._slabs) - 1 else k + 1
-        return self._slab_nodes[self._slabs[k]:self._slabs[min(k + 2, len(self._slabs) - 1)]]
+        self._sweep_pos = (k + 1) % len(self._slabs)
+        return self._slabs[k]
 
     # ------------------------------------------------------------------------------------------
     def solve(self, contact: np.ndarray, full: bool | None = None) -> tuple[np.ndarray, bool]:

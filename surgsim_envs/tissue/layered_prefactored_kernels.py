@@ -47,19 +47,29 @@ def unique_reacting(contact, link_i, link_j, anchor, mark, stamp, pos_of):
 def write_rows(nodes, local, slots, w3, Gt, v0, rest, fixed, fixed_targets, x, xstamp, version):
     """x[nodes] from eq. (1) (``w3`` (3,U) loads on the nodes of ``slots`` (U,); Dirichlet nodes at
     their targets); stamps ``xstamp`` = ``version``. Returns False if a value is not finite."""
-    ok = True
+    acc = np.empty((nodes.shape[0], 3))
     for q in range(nodes.shape[0]):
         i = nodes[q]
         r = local[i]
         for a in range(3):
-            if fixed[i] or r < 0:
+            acc[q, a] = rest[i, a] + (v0[r, a] if r >= 0 else 0.0)
+    for k in range(slots.shape[0]):
+        row = slots[k]
+        for q in range(nodes.shape[0]):
+            r = local[nodes[q]]
+            if r >= 0:
+                g = Gt[row, r]
+                for a in range(3):
+                    acc[q, a] += g * w3[a, k]
+    ok = True
+    for q in range(nodes.shape[0]):
+        i = nodes[q]
+        for a in range(3):
+            if fixed[i] or local[i] < 0:
                 x[i, a] = fixed_targets[i, a]
             else:
-                s = rest[i, a] + v0[r, a]
-                for k in range(slots.shape[0]):
-                    s += Gt[slots[k], r] * w3[a, k]
-                x[i, a] = s
-                if not np.isfinite(s):
+                x[i, a] = acc[q, a]
+                if not np.isfinite(acc[q, a]):
                     ok = False
         xstamp[i] = version
     return ok
@@ -125,6 +135,7 @@ def solve_step(contact, t_c, link_i, link_a, s0, uniq, pos_of, anchor, local, sl
             g[q, p] = Gt[sl[p], local[uniq[q]]]
     finite = True
     viol = np.empty((nodes.shape[0] * 3, 2), dtype=np.int64)
+    acc = np.empty(nodes.shape[0])
     nv = 0
     for a in range(3):
         nl = 0
@@ -185,18 +196,25 @@ def solve_step(contact, t_c, link_i, link_a, s0, uniq, pos_of, anchor, local, sl
                 w_out[a, cb[r]] += sb[r] * lam[r]
         for r in range(nl):
             lam_links[lq[r]] = lam[nc + r]
-        # positions of the nodes on this axis
+        # positions of the nodes on this axis: one compliance row at a time (streamed, not strided)
         for q in range(nodes.shape[0]):
             i = nodes[q]
             li = local[i]
-            if fixed[i] or li < 0:
+            acc[q] = rest[i, a] + (v0[li, a] if li >= 0 else 0.0)
+        for k in range(nu):
+            wk = w_out[a, k]
+            row = sl[k]
+            for q in range(nodes.shape[0]):
+                li = local[nodes[q]]
+                if li >= 0:
+                    acc[q] += Gt[row, li] * wk
+        for q in range(nodes.shape[0]):
+            i = nodes[q]
+            if fixed[i] or local[i] < 0:
                 x[i, a] = fixed_targets[i, a]
             else:
-                s = rest[i, a] + v0[li, a]
-                for k in range(nu):
-                    s += Gt[sl[k], li] * w_out[a, k]
-                x[i, a] = s
-                if not np.isfinite(s):
+                x[i, a] = acc[q]
+                if not np.isfinite(acc[q]):
                     finite = False
             xstamp[i] = version
         # springs of the written region shorter than their extreme length
