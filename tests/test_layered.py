@@ -476,3 +476,20 @@ def test_round_robin_sweep_covers_every_node_and_spring(wall, monkeypatch):
         j = model.nbr[i, d]
         i, j = i[~pc.anchor[j]], j[~pc.anchor[j]]
         assert np.all((owner[i] & owner[j]).any(axis=1))
+
+
+def test_prefetched_rows_give_the_same_force(wall):
+    """With ``prefetch_rows`` the compliance rows come from a background thread: same force as the
+    all-node solution while the probe slides over new nodes."""
+    import copy
+
+    model, probe = _pressed(wall, 0.003)
+    model.solver, model.prefetch_rows = "prefactored", True
+    z = wall.nodes[probe.candidates, 2].max()
+    for k in range(8):
+        probe.move_to((0.001 * k, 0.0, z + 0.006 - 0.003))
+        model.step(1e-3)
+    assert model._pc._prefetch is not None
+    ref = copy.deepcopy(model)
+    ref.static_solve()
+    assert abs(probe.force()[2] / ref.contact_force(probe.nodes)[2] - 1) < 1e-6

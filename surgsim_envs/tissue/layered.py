@@ -75,6 +75,9 @@ class LayeredModel(TissueModel):
         the nodes within ``block_radius`` m of the contact written each step, springs at their
         extreme length as rigid links with their own reactions; steps with external forces use the
         local iteration).
+    prefetch_rows: with "prefactored", back-solve the compliance rows of the surface around the
+        contact in a background thread (a second core) so a node joining the contact does not
+        wait for its back-solve; off by default (the step stays on one core).
     **base_kwargs: fixed, gravity (ignored: quasi-static without body load), guard.
     """
 
@@ -87,7 +90,8 @@ class LayeredModel(TissueModel):
 
     def __init__(self, volume, material=None, *, max_compression: float = MAX_COMPRESSION, f_tol: float = F_TOL,
                  x_tol: float = X_TOL, max_updates: int = MAX_UPDATES, omega: float = OMEGA, solver: str = "local",
-                 block_radius: float = BLOCK_RADIUS, region_materials=None, **base_kwargs):
+                 block_radius: float = BLOCK_RADIUS, prefetch_rows: bool = False, region_materials=None,
+                 **base_kwargs):
         if not isinstance(volume, LayeredVolume):  # a plain lattice volume: one material per region label
             from surgsim_envs.geometry.volume import Volume
             from surgsim_envs.materials import get_material
@@ -122,7 +126,7 @@ class LayeredModel(TissueModel):
         self.max_compression = float(max_compression)
         self.f_tol, self.x_tol, self.max_updates = float(f_tol), float(x_tol), int(max_updates)
         self.omega = float(omega)
-        self.solver, self.block_radius = solver, float(block_radius)
+        self.solver, self.block_radius, self.prefetch_rows = solver, float(block_radius), bool(prefetch_rows)
         n = self.n_nodes
         self.nbr = np.ascontiguousarray(volume.neighbours, dtype=np.int32)
         X = self.rest_positions
@@ -364,7 +368,7 @@ class LayeredModel(TissueModel):
         pc = self._pc
         if pc is None or (self.steps % pc.refresh == 0 and not pc.valid()):
             self._materialise()
-            pc = self._pc = PrefactoredContact(self, self.block_radius)
+            pc = self._pc = PrefactoredContact(self, self.block_radius, prefetch=self.prefetch_rows)
         return pc
 
     def _contacts(self, pc) -> np.ndarray:

@@ -107,7 +107,7 @@ class PrefactoredContact:
     solve releases the GIL), so a node joining the contact rarely waits for its back-solve.
     """
 
-    def __init__(self, model, radius: float, refresh: int = REFRESH, prefetch: bool = True):
+    def __init__(self, model, radius: float, refresh: int = REFRESH, prefetch: bool = False):
         self.model = model
         n = model.n_nodes
         self.anchor = model.fixed & np.all(model.fixed_targets == model.rest_positions, axis=1)
