@@ -225,6 +225,39 @@ def test_prefactored_solver_tracks_the_all_node_force_while_the_probe_moves(wall
     assert len(seen - set(probe.nodes.tolist())) >= 2          # the contact set did change
 
 
+def test_fast_step_touches_the_contact_region_and_recovers_the_rest_lazily():
+    """The prefactored step writes only the columns around the contact; the probe force equals the
+    all-node static solution (within 2 %; exact for the linear springs) at every pose, and the
+    positions recovered afterwards (lazily, row by row or all at once) are the all-node solution."""
+    import copy
+
+    vol = abdominal_wall_volume(0.004, size=(0.06, 0.06))
+    model, probe = _pressed(vol, 0.003, radius=0.005)
+    model.solver = "prefactored"
+    model.static_solve()
+    z = vol.nodes[probe.candidates, 2].max()
+    far = np.flatnonzero(np.hypot(vol.nodes[:, 0], vol.nodes[:, 1]) > 0.02)
+    for k in range(6):
+        probe.move_to((0.0008 * (k + 1), 0.0, z + 0.005 - 0.003))
+        model.step(1e-3)
+        assert model._lazy and model.last_active < 0.5 * model.n_nodes   # only the contact region written
+        f = probe.force()[2]
+        rows = model.node_positions(far)                                  # evaluated, nothing written
+        assert model._lazy
+        ref = copy.deepcopy(model)                                        # writes the positions out
+        assert not model._lazy
+        np.testing.assert_allclose(rows, model.positions[far], rtol=0, atol=1e-12)
+        expect = ref.static_solve()
+        f_ref = ref.contact_force(probe.nodes)[2]
+        assert f_ref > 0.05 and abs(f / f_ref - 1) < 0.02, (k, f, f_ref)
+        assert abs(f / f_ref - 1) < 1e-6                                  # exact to round-off
+        np.testing.assert_allclose(model.positions, expect, rtol=0, atol=1e-9)
+    probe.move_to((0.0, 0.0, z + 0.01))          # lifted: the wall returns to rest, still lazily
+    model.step(1e-3)
+    assert model._lazy and model.last_active < 0.5 * model.n_nodes
+    np.testing.assert_allclose(model.positions, vol.nodes, rtol=0, atol=1e-12)
+
+
 def test_prefactored_step_holds_springs_at_extreme_length_as_rigid_links(wall):
     """Pressed to 50 and 60 % of the thickness (springs at their extreme length), the prefactored
     step's rigid links give the all-node active-set force, with pushes and no interpenetration."""
@@ -406,3 +439,57 @@ def test_layered_wall_against_fem_on_the_bonded_wall():
     ratio = np.asarray(res["layered"]) / np.asarray(res["fem"])
     np.testing.assert_allclose(ratio, ratio[0], rtol=1e-6)
     assert 1.1 < ratio[0] < 1.35
+
+
+def test_layered_accuracy_scene_reads_the_linear_reaction():
+    """``surgsim bench accuracy --scene layered``: the punch force the harness reads from a model
+    (static_solve, then the reaction on the held nodes) is the linear stiffness reaction of the same
+    press (an independent path: K u with the held displacements), and is linear in depth."""
+    from surgsim_envs.bench.accuracy_layered import RADIUS, _scene, press
+    from surgsim_envs.bench.layers_accuracy import press_linear
+
+    row = press("layered", 0.006, time_steps=2, solver="prefactored")
+    vol, bottom, top, z_top = _scene(0.006)
+    lay = LayeredModel(vol, fixed=bottom)
+    f_lin = press_linear(lay.stiffness_matrix(), vol.nodes, bottom, top, (0.0, 0.0), RADIUS, row["depth"], z_top)
+    np.testing.assert_allclose(row["force"], f_lin, rtol=1e-6)
+    assert row["force"][0] > 0 and abs(row["force"][-1] / row["force"][0] - 4.0) < 1e-6   # 2 mm vs 0.5 mm
+    assert row["contact_nodes"] >= 5 and np.isfinite(row["us_per_ms"])
+
+
+def test_round_robin_sweep_covers_every_node_and_spring(wall, monkeypatch):
+    """The prefactored step's sweep pieces (written and checked one per step) together hold every
+    free node and both ends of every spring between free nodes, so no extreme length goes unchecked."""
+    from surgsim_envs.tissue import layered_prefactored
+
+    monkeypatch.setattr(layered_prefactored, "SWEEP_CHUNK", 64)   # several pieces per slab pair
+    model = LayeredModel(wall, fixed=wall.face_nodes(4), solver="prefactored")
+    pc = model._prefactored_solver()
+    chunks = pc._sweep_chunks()
+    n_pairs = len(np.unique(wall.lattice_index[pc.free, 0])) - 1
+    assert len(chunks) >= 2 * n_pairs and set(np.concatenate(chunks).tolist()) == set(pc.free.tolist())
+    owner = np.zeros((model.n_nodes, len(chunks)), dtype=bool)
+    for k, c in enumerate(chunks):
+        owner[c, k] = True
+    for d in (1, 3, 5):
+        i = pc.free[model.nbr[pc.free, d] >= 0]
+        j = model.nbr[i, d]
+        i, j = i[~pc.anchor[j]], j[~pc.anchor[j]]
+        assert np.all((owner[i] & owner[j]).any(axis=1))
+
+
+def test_prefetched_rows_give_the_same_force(wall):
+    """With ``prefetch_rows`` the compliance rows come from a background thread: same force as the
+    all-node solution while the probe slides over new nodes."""
+    import copy
+
+    model, probe = _pressed(wall, 0.003)
+    model.solver, model.prefetch_rows = "prefactored", True
+    z = wall.nodes[probe.candidates, 2].max()
+    for k in range(8):
+        probe.move_to((0.001 * k, 0.0, z + 0.006 - 0.003))
+        model.step(1e-3)
+    assert model._pc._prefetch is not None
+    ref = copy.deepcopy(model)
+    ref.static_solve()
+    assert abs(probe.force()[2] / ref.contact_force(probe.nodes)[2] - 1) < 1e-6

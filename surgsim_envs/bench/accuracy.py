@@ -205,9 +205,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--models", default=None, help="comma-separated model names (default: all registered)")
     parser.add_argument("--no-baselines", action="store_true",
                         help="skip the MuJoCo flex baselines (mujoco_flex_full/_trilinear)")
+    parser.add_argument("--scene", choices=("indent", "layered"), default="indent",
+                        help="indent: sphere into a liver slab vs Dimitriadis (default); layered: flat punch into an "
+                             "abdominal wall vs converged fem_static (surgsim_envs.bench.accuracy_layered)")
 
 
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, "scene", "indent") == "layered":
+        from surgsim_envs.bench.accuracy_layered import run_scene
+
+        return run_scene(args)
     models = None if not args.models else [m.strip() for m in args.models.split(",") if m.strip()]
     rows = sweep(models, QUICK_SPACINGS if args.quick else SPACINGS)
     if not getattr(args, "no_baselines", False):

@@ -53,17 +53,37 @@ class KinematicProbe:
         self.axis = int(axis)
         self.nodes = np.zeros(0, dtype=np.int64)
         self._base_fixed = model.fixed.copy()
+        # candidates sorted along the first footprint axis: a move tests only the slice under the sphere
+        self._sort_axis = [a for a in range(3) if a != self.axis][0]
+        key = model.rest_positions[self.candidates, self._sort_axis]
+        order = np.argsort(key, kind="stable")
+        self._sorted = self.candidates[order]
+        self._sorted_key = key[order]
+        self._held = np.zeros(model.n_nodes, dtype=bool)      # nodes this probe holds
+        self._stamp = np.zeros(model.n_nodes, dtype=np.int64)
+        self._moves = 0
 
     def move_to(self, centre) -> np.ndarray:
         """Place the probe; pins the covered nodes, frees the ones it left. Returns the contact nodes."""
-        nodes, targets = sphere_contact(self.model.rest_positions, self.candidates, centre, self.radius, self.axis)
+        c = np.asarray(centre, dtype=np.float64).reshape(-1)
+        lo, hi = (np.searchsorted(self._sorted_key, c[self._sort_axis] + s * self.radius, side=side)
+                  for s, side in ((-1.0, "left"), (1.0, "right"))) if c.shape == (3,) else (0, len(self._sorted))
+        nodes, targets = sphere_contact(self.model.rest_positions, self._sorted[lo:hi], centre, self.radius, self.axis)
         # a node not yet held joins only if the sphere reaches its CURRENT position: one the deformed
         # surface already carried below the sphere is not touched (pinning it would pull it up)
-        new = ~np.isin(nodes, self.nodes)
-        below = self.model.positions[nodes, self.axis] < targets[:, self.axis]
+        new = ~self._held[nodes]
+        below = np.zeros(len(nodes), dtype=bool)
+        if new.any():   # a model with lazily recovered positions evaluates only these rows
+            rows = getattr(self.model, "node_positions", None)
+            pos = rows(nodes[new]) if rows is not None else self.model.positions[nodes[new]]
+            below[new] = pos[:, self.axis] < targets[new, self.axis]
         keep = ~(new & below)
         nodes, targets = nodes[keep], targets[keep]
-        left = np.setdiff1d(self.nodes, nodes)
+        self._moves += 1
+        self._stamp[nodes] = self._moves
+        left = self.nodes[self._stamp[self.nodes] != self._moves]
+        self._held[left] = False
+        self._held[nodes] = True
         left = left[~self._base_fixed[left]]
         if len(left):
             self.model.release(left)
@@ -79,4 +99,5 @@ class KinematicProbe:
         cf = getattr(self.model, "contact_force", None)
         if cf is not None:
             return cf(self.nodes)
-        return -self.model.internal_forces()[self.nodes].sum(axis=0)
+        # the held nodes' elastic forces push the tool (-internal_forces() is what the tool applies)
+        return self.model.internal_forces()[self.nodes].sum(axis=0)

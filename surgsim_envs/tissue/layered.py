@@ -46,8 +46,9 @@ X_TOL = 1e-7
 OMEGA = 1.8
 #: per-step solvers (class docstring)
 SOLVERS = ("local", "prefactored")
-#: default half-width (m) of the region the "prefactored" solver writes around the contact each step
-BLOCK_RADIUS = 0.015
+#: default width (m) of the ring of lattice columns around the contact footprint the "prefactored"
+#: solver writes each step (at least one lattice spacing: the contact nodes' neighbours)
+BLOCK_RADIUS = 0.002
 #: default node updates per step (bounds the step time; what is left continues next step)
 MAX_UPDATES = 2_000_000
 
@@ -74,6 +75,9 @@ class LayeredModel(TissueModel):
         the nodes within ``block_radius`` m of the contact written each step, springs at their
         extreme length as rigid links with their own reactions; steps with external forces use the
         local iteration).
+    prefetch_rows: with "prefactored", back-solve the compliance rows of the surface around the
+        contact in a background thread (a second core) so a node joining the contact does not
+        wait for its back-solve; off by default (the step stays on one core).
     **base_kwargs: fixed, gravity (ignored: quasi-static without body load), guard.
     """
 
@@ -86,7 +90,8 @@ class LayeredModel(TissueModel):
 
     def __init__(self, volume, material=None, *, max_compression: float = MAX_COMPRESSION, f_tol: float = F_TOL,
                  x_tol: float = X_TOL, max_updates: int = MAX_UPDATES, omega: float = OMEGA, solver: str = "local",
-                 block_radius: float = BLOCK_RADIUS, region_materials=None, **base_kwargs):
+                 block_radius: float = BLOCK_RADIUS, prefetch_rows: bool = False, region_materials=None,
+                 **base_kwargs):
         if not isinstance(volume, LayeredVolume):  # a plain lattice volume: one material per region label
             from surgsim_envs.geometry.volume import Volume
             from surgsim_envs.materials import get_material
@@ -121,7 +126,7 @@ class LayeredModel(TissueModel):
         self.max_compression = float(max_compression)
         self.f_tol, self.x_tol, self.max_updates = float(f_tol), float(x_tol), int(max_updates)
         self.omega = float(omega)
-        self.solver, self.block_radius = solver, float(block_radius)
+        self.solver, self.block_radius, self.prefetch_rows = solver, float(block_radius), bool(prefetch_rows)
         n = self.n_nodes
         self.nbr = np.ascontiguousarray(volume.neighbours, dtype=np.int32)
         X = self.rest_positions
@@ -199,8 +204,9 @@ class LayeredModel(TissueModel):
         kk = self.kk_build.copy()
         kk[i_idx, d_idx] *= factor
         self.kk = np.ascontiguousarray(kk)
+        self._materialise()
         self._lap_cache = None
-        self._prefactored = None
+        self._pc = None
         self._seed_all = True
 
     def scale_material(self, name: str = "young", factor=1.0, mask=None) -> None:
@@ -234,10 +240,51 @@ class LayeredModel(TissueModel):
         self._update_springs()
 
     def __getstate__(self):
-        """Copies and pickles drop the prefactored solver's factorisation (rebuilt on the next step)."""
+        """Copies and pickles drop the prefactored solver's factorisation (rebuilt on the next step);
+        the positions are written out first."""
+        self._materialise()
         state = self.__dict__.copy()
-        state["_prefactored"] = None
+        state["_pc"] = None
         return state
+
+    # ------------------------------------------------------------------------------------------
+    # lazy positions: the prefactored step writes only the nodes near the contact; the others are
+    # recovered from its solution when read
+    _lazy: bool = False
+    _pc = None
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(N,3) m node positions (written out from the prefactored solution if it left some stale)."""
+        if self._lazy:
+            self._materialise()
+        return self._x
+
+    @positions.setter
+    def positions(self, value) -> None:
+        self._lazy = False
+        self._x = value
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.rest_positions)
+
+    def _materialise(self) -> None:
+        if self._lazy:
+            self._lazy = False
+            self._pc.materialise()
+
+    def _drop_prefactored(self) -> None:
+        self._materialise()
+        self._pc = None
+
+    def node_positions(self, nodes) -> np.ndarray:
+        """(K,3) m positions of ``nodes`` (evaluated from the prefactored solution for stale rows,
+        without writing the rest of the volume)."""
+        idx = self._as_indices(nodes, "nodes")
+        if not self._lazy:
+            return self._x[idx].copy()
+        return self._pc.positions_of(idx)
 
     # ------------------------------------------------------------------------------------------
     def _alloc(self) -> None:
@@ -260,6 +307,12 @@ class LayeredModel(TissueModel):
         self._ief_nonzero = False
         self.integrated_external_forces = np.zeros((n, 3))
         self._zero_kc = np.zeros(n)
+        self._xstamp = np.zeros(n, dtype=np.int64)
+        self._xversion = 0
+        # the model's own zero load (read-only): a step without forces on it may take the fast path
+        self._ext_zero = np.zeros((n, 3))
+        self._ext_zero.flags.writeable = False
+        self.external_forces = self._ext_zero
         self.last_updates = 0
         self.last_sweeps = 0
         self.last_active = 0
@@ -272,40 +325,121 @@ class LayeredModel(TissueModel):
         """Dirichlet nodes (contact points pressed by a kinematic tool, anchors); moving them
         activates their neighbours."""
         idx = self._as_indices(nodes, "fixed nodes")
-        super().set_fixed(idx, targets)
+        pc = self._pc
+        if pc is not None and pc.anchor[idx].any():   # an anchor moved: the factorisation no longer applies
+            t = self.rest_positions[idx] if targets is None else np.broadcast_to(np.asarray(targets, float), (len(idx), 3))
+            if not np.array_equal(np.asarray(t)[pc.anchor[idx]], self.rest_positions[idx[pc.anchor[idx]]]):
+                self._drop_prefactored()
+        if targets is not None and len(idx) and hasattr(self, "_moved_fixed") and self.fixed[idx].all():
+            # held nodes moved (a tool's contact each step): the Dirichlet set is unchanged
+            t = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
+            if len(t) not in (1, len(idx)) or not np.all(np.isfinite(t)):
+                raise ConfigError(f"targets must be finite with shape ({len(idx)}, 3) or (3,), got {np.shape(targets)}")
+            self.fixed_targets[idx] = t
+            self._x[idx] = self.fixed_targets[idx]
+            self.velocities[idx] = 0.0
+        else:
+            lazy, self._lazy = self._lazy, False   # write the targets without writing out stale rows
+            try:
+                super().set_fixed(idx, targets)
+            finally:
+                self._lazy = lazy
         if hasattr(self, "_moved_fixed"):
-            self._moved_fixed = np.union1d(self._moved_fixed, idx).astype(np.int64)
+            self._moved_fixed = np.concatenate([self._moved_fixed, idx])
 
     def release(self, nodes=None) -> None:
         """Free ``nodes`` (all if None) except rigid-material nodes; they relax at the next step."""
         idx = np.flatnonzero(self.fixed) if nodes is None else self._as_indices(nodes, "released nodes")
         keep = np.isin(idx, getattr(self, "rigid_nodes", np.zeros(0, np.int64)))
+        if self._pc is not None and self._pc.anchor[idx[~keep]].any():   # an anchor released: refactorise
+            self._drop_prefactored()
         super().release(idx[~keep])
         if hasattr(self, "_moved_fixed"):
-            self._moved_fixed = np.union1d(self._moved_fixed, idx[~keep]).astype(np.int64)
+            self._moved_fixed = np.concatenate([self._moved_fixed, idx[~keep]])
 
     # ------------------------------------------------------------------------------------------
     def _advance(self, dt: float, forces: np.ndarray, stiffness: np.ndarray | None) -> None:
         self.solve(forces, stiffness, dt=dt)
 
-    def _prefactored_solve(self, ext: np.ndarray, kc: np.ndarray, dt: float | None) -> bool:
-        """The "prefactored" solver's step (class docstring); False if it does not apply."""
-        from surgsim_envs.tissue.layered_block import PrefactoredContact
+    def _prefactored_solver(self):
+        """The "prefactored" solver (built on first use and when the anchors changed)."""
+        from surgsim_envs.tissue.layered_prefactored import PrefactoredContact
 
+        pc = self._pc
+        if pc is None or (self.steps % pc.refresh == 0 and not pc.valid()):
+            self._materialise()
+            pc = self._pc = PrefactoredContact(self, self.block_radius, prefetch=self.prefetch_rows)
+        return pc
+
+    def _contacts(self, pc) -> np.ndarray:
+        fx = self._fixed_idx
+        return fx[~pc.anchor[fx]]
+
+    def step(self, dt: float, forces: np.ndarray | None = None, stiffness: np.ndarray | None = None) -> None:
+        """As :meth:`TissueModel.step`. With ``solver="prefactored"``, no external forces (``forces``
+        None and ``external_forces`` the model's own zero load) and no contact stiffness, the step
+        touches only the contact region: the prefactored solution, the nodes near the contact
+        written (finite-checked, finite-difference velocities), the rest recovered when read."""
+        if (self.solver != "prefactored" or forces is not None or stiffness is not None
+                or self.external_forces is not self._ext_zero or self._seed_all):
+            return super().step(dt, forces, stiffness)
+        if not (isinstance(dt, (float, int, np.floating)) and math.isfinite(dt) and dt > 0):
+            raise ConfigError(f"dt must be a positive number of seconds, got {dt!r}; default is 1e-3")
+        pc = self._prefactored_solver()
+        self._last_dt = float(dt)
+        self._xversion += 1
+        prev = self._touched[:self._n_touched]
+        self.velocities[prev] = 0.0
+        contact = self._contacts(pc)
+        near = pc._near_nodes(contact) if len(contact) else pc.near
+        before = self._x[near]
+        before_stamp = self._xstamp[near]
+        nodes, settled = pc.solve(contact)
+        if not settled:  # the rigid links did not settle: the active-set all-node solve
+            self.prefactored_fallbacks = getattr(self, "prefactored_fallbacks", 0) + 1
+            self._lazy = False
+            self.static_solve(self.external_forces, self._zero_kc)
+            nodes = np.flatnonzero(~self.fixed)
+            self.velocities[nodes] = 0.0
+        else:
+            from surgsim_envs.tissue.layered_prefactored_kernels import fd_velocities
+
+            self._lazy = True
+            fd_velocities(near, before, before_stamp, self._xversion, self._x, self.velocities, 1.0 / float(dt))
+            nodes = near
+        self._touched[:len(nodes)] = nodes
+        self._n_touched = len(nodes)
+        self.last_updates, self.last_sweeps, self.last_active = len(nodes), 1, len(nodes)
+        self.unconverged = 0
+        self._moved_fixed = np.zeros(0, dtype=np.int64)
+        self._n_queue = 0
+        if self._ief_nonzero:
+            self.integrated_external_forces[:] = 0.0
+            self._ief_nonzero = False
+        self.time += float(dt)
+        self.steps += 1
+        if not pc.finite:   # every written node is checked; the slab sweep covers all of them
+            self._lazy = False
+            self.guard.fail(self, float(dt), f"non-finite positions at t={self.time:.4g} s")
+
+    def _prefactored_solve(self, ext: np.ndarray, kc: np.ndarray, dt: float | None) -> bool:
+        """The "prefactored" solver's step from :meth:`solve` (everything written); False if it
+        does not apply (external forces or contact stiffness)."""
         if self._seed_all or np.any(kc > 0) or np.any(ext != 0.0):
             return False
-        pc = getattr(self, "_prefactored", None)
-        if pc is None or not pc.valid():
-            pc = self._prefactored = PrefactoredContact(self, self.block_radius)
+        pc = self._prefactored_solver()
+        self._xversion += 1
         prev_touched = self._touched[:self._n_touched].copy()
         self.velocities[prev_touched] = 0.0
-        nodes, settled = pc.solve()
+        before = self._x.copy()
+        _, settled = pc.solve(self._contacts(pc), full=True)
+        self._lazy = False
         if not settled:  # the rigid links did not settle: the active-set all-node solve
             self.prefactored_fallbacks = getattr(self, "prefactored_fallbacks", 0) + 1
             self.static_solve(ext, kc)
-            nodes = np.flatnonzero(~self.fixed)
-        elif dt is not None and dt > 0:  # finite-difference velocities of the nodes written
-            self.velocities[nodes] = (self.positions[nodes] - pc.before) / dt
+        nodes = np.flatnonzero(~self.fixed)
+        if dt is not None and dt > 0:  # finite-difference velocities
+            self.velocities[nodes] = (self._x[nodes] - before[nodes]) / dt
         self._touched[:len(nodes)] = nodes
         self._n_touched = len(nodes)
         self.last_updates, self.last_sweeps, self.last_active = len(nodes), 1, len(nodes)
@@ -315,7 +449,7 @@ class LayeredModel(TissueModel):
             self._ief_nonzero = False
         self._moved_fixed = np.zeros(0, dtype=np.int64)
         self._n_queue = 0
-        self.external_forces = ext
+        self.external_forces = self._ext_zero
         return True
 
     def solve(self, forces=None, stiffness=None, *, dt: float | None = None, all_nodes: bool = False,
@@ -453,7 +587,13 @@ class LayeredModel(TissueModel):
         the sum of their spring forces, accumulated through rigid springs (eqs. 2.4-2.5)."""
         idx = self._as_indices(nodes, "contact nodes")
         out = np.zeros((len(idx), 3))
-        kern.spring_forces(self.positions, self.rest_positions, self.nbr, self.kk, self.push, idx, out)
+        x = self._x
+        if self._lazy:
+            from surgsim_envs.tissue.layered_prefactored_kernels import all_fresh
+
+            if not all_fresh(idx, self.nbr, self._xstamp, self._xversion, self._prefactored_solver().local, self.fixed):
+                x = self.positions
+        kern.spring_forces(x, self.rest_positions, self.nbr, self.kk, self.push, idx, out)
         return out.sum(axis=0)
 
     def elastic_energy(self) -> float:
