@@ -141,11 +141,9 @@ class PalpationPressEnv(PalpationEnv):
         sim.set_tool_target(probe, self._hover_target(here[:2]), speed=c.move_speed)     # lift
         lift = max(0.0, self._hover_target(here[:2])[2] - here[2])
         travel = float(np.hypot(*(site - here[:2])))
-        for _ in range(int(np.ceil(lift / c.move_speed / sim.dt))):
-            sim.physics_step()
+        sim.physics_step(int(np.ceil(lift / c.move_speed / sim.dt)))       # nothing read: one batched call
         sim.set_tool_target(probe, self._hover_target(site), speed=c.move_speed)
-        for _ in range(int(np.ceil(travel / c.move_speed / sim.dt)) + c.settle_steps):
-            sim.physics_step()
+        sim.physics_step(int(np.ceil(travel / c.move_speed / sim.dt)) + c.settle_steps)
         bottom = np.array([site[0], site[1], self.surface_z + c.tip_radius - c.press_depth])
         sim.set_tool_target(probe, bottom, speed=c.press_speed)
         fz, depth, fmax = [], [], 0.0

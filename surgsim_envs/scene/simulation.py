@@ -326,9 +326,13 @@ class Simulation:
     def _gather(self) -> None:
         _gather_geoms(*self._gather_args)
 
-    def physics_step(self) -> None:
-        """One physics step in the documented order (module docstring)."""
-        self._physics_steps(1)
+    def physics_step(self, n: int = 1) -> None:
+        """``n`` physics steps (default one) in the documented order (module docstring), in one
+        compiled call where the scene has one: the same physics as ``n`` calls of one step."""
+        if not (isinstance(n, (int, np.integer)) and n >= 0):
+            raise ConfigError(f"physics_step(n): n must be a whole number of steps >= 0, got {n!r}")
+        if n:
+            self._physics_steps(int(n))
 
     def step_with_controls(self, actuators, values) -> None:
         """``len(values)`` MuJoCo steps (each ``tissue_subcycles`` physics steps); before the k-th,
