@@ -14,6 +14,10 @@ import sys
 
 __version__ = "0.1.0"
 
+from surgsim_envs.numba_cache import invalidate_stale_caches  # noqa: E402  (os/hashlib only)
+
+invalidate_stale_caches()   # numba checks only a kernel's own file: drop caches of changed kernels
+
 from surgsim_envs.asset_files import assets_path  # noqa: E402  (pathlib only)
 
 

@@ -1,0 +1,115 @@
+"""Keep numba's on-disk caches true to the sources.
+
+The kernels are compiled with ``@njit(cache=True)``; numba stores the machine code in
+``__pycache__/*.nbi`` / ``*.nbc`` next to each module and checks only the *function's own file*
+when it loads it. A kernel that calls (or inlines) a kernel from another file keeps the old callee
+after that other file changes (a ``git pull``, an upgrade, an edit): the physics would silently be
+the previous version's. On import of the package, :func:`invalidate_stale_caches` compares a
+stamp of the sources of the package's numba modules with the one stored beside the caches and, if
+they differ, deletes the package's numba cache files, so that every kernel is compiled again from
+the current sources.
+
+Caches numba keeps elsewhere (``NUMBA_CACHE_DIR``, or a user cache directory when the package
+folder is read-only) are left alone; ``python -m surgsim_envs.numba_cache --clear`` deletes the
+package's caches by hand.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent
+STAMP_NAME = "numba_sources.stamp"
+CACHE_SUFFIXES = (".nbi", ".nbc")
+
+
+def _py_files(package: Path) -> list[str]:
+    """Every .py file under ``package`` (not descending into __pycache__), sorted."""
+    out = []
+    for root, dirs, files in os.walk(package):
+        dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+        out.extend(os.path.join(root, f) for f in sorted(files) if f.endswith(".py"))
+    return out
+
+
+def files_stamp(package: Path = PACKAGE) -> str:
+    """A cheap digest of (path, size, mtime in ns) of every .py file under ``package``."""
+    parts = []
+    for path in _py_files(package):
+        st = os.stat(path)
+        parts.append(f"{path}\0{st.st_size}\0{st.st_mtime_ns}")
+    return hashlib.sha1("\n".join(parts).encode()).hexdigest()
+
+
+def kernels_stamp(package: Path = PACKAGE) -> str:
+    """A digest of the path and content of every .py file under ``package`` that uses numba."""
+    h = hashlib.sha1()
+    for path in _py_files(package):
+        with open(path, "rb") as fh:
+            text = fh.read()
+        if b"numba" in text:
+            h.update(os.path.relpath(path, package).encode() + b"\0" + hashlib.sha1(text).digest())
+    return h.hexdigest()
+
+
+def cache_files(package: Path = PACKAGE) -> list[Path]:
+    """The numba cache files numba wrote next to the package's modules."""
+    out = []
+    for root, dirs, files in os.walk(package):
+        if os.path.basename(root) == "__pycache__":
+            out.extend(Path(root) / f for f in files if f.endswith(CACHE_SUFFIXES))
+    return out
+
+
+def clear_caches(package: Path = PACKAGE) -> int:
+    """Delete the package's numba cache files; returns how many were deleted (files another
+    process deletes at the same time are skipped)."""
+    n = 0
+    for path in cache_files(package):
+        try:
+            path.unlink()
+            n += 1
+        except OSError:
+            pass
+    return n
+
+
+def invalidate_stale_caches(package: Path = PACKAGE) -> int:
+    """If a numba module's source changed since the stamp was written, delete the package's numba
+    caches and write the new stamp. Returns the number of cache files deleted (0 when nothing
+    changed or the package folder is not writable). Two levels: a stat of every .py file (about a
+    millisecond); only when that changed, the content of the numba modules (so an edit elsewhere,
+    or a checkout that only touches mtimes, keeps the caches). Never raises: a failure only costs
+    a recompilation."""
+    try:
+        stamp_dir = package / "__pycache__"
+        stamp = stamp_dir / STAMP_NAME
+        files = files_stamp(package)
+        try:
+            old_files, old_kernels = stamp.read_text().split()
+        except (OSError, ValueError):
+            old_files = old_kernels = ""
+        if files == old_files:
+            return 0
+        if not os.access(package, os.W_OK):
+            return 0
+        kernels = kernels_stamp(package)
+        deleted = clear_caches(package) if kernels != old_kernels else 0
+        stamp_dir.mkdir(exist_ok=True)
+        tmp = stamp_dir / f"{STAMP_NAME}.{os.getpid()}"
+        tmp.write_text(f"{files} {kernels}")
+        os.replace(tmp, stamp)
+        return deleted
+    except Exception:  # noqa: BLE001 - never stop an import over a cache
+        return 0
+
+
+if __name__ == "__main__":  # pragma: no cover - manual tool
+    import sys
+
+    if "--clear" in sys.argv[1:]:
+        print(f"deleted {clear_caches()} numba cache files under {PACKAGE}")
+    else:
+        print(f"deleted {invalidate_stale_caches()} stale numba cache files under {PACKAGE}")
