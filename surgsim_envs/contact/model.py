@@ -612,14 +612,21 @@ class ContactModel:
         N, T = self.n_nodes, self.n_tools
         pos = _array(positions, (N, 3), np.float64, "positions", "m")
         vel = _array(velocities, (N, 3), np.float64, "velocities", "m/s")
-        kind = np.ascontiguousarray(shape_kind, dtype=np.int64).reshape(-1)
-        G = len(kind)
-        tool = _array(shape_tool, (G,), np.int64, "shape_tool", "tool index per geom")
-        size = _array(shape_size, (G, 3), np.float64, "shape_size", "m")
+        consts = self._constants(shape_kind, shape_tool, shape_size, dt)
+        G = len(consts[0])
         gpos = _array(shape_pos, (G, 3), np.float64, "shape_pos", "m")
         gmat = _array(shape_mat, (G, 9), np.float64, "shape_mat", "row-major rotation")
         gvel = _array(shape_vel, (G, 6), np.float64, "shape_vel", "[rad/s, m/s]")
         com = _array(tool_com, (T, 3), np.float64, "tool_com", "m")
+        return self._run(pos, vel, gpos, gmat, gvel, com, consts)
+
+    def _constants(self, shape_kind, shape_tool, shape_size, dt) -> tuple:
+        """Checked per-scene constants: (kind (G,), tool (G,), size (G,3) m, k_n, c_n, c_n/dt if
+        implicit, k_t, each per contact point); re-sizes the per-geom buffers to G."""
+        kind = np.ascontiguousarray(shape_kind, dtype=np.int64).reshape(-1)
+        G = len(kind)
+        tool = _array(shape_tool, (G,), np.int64, "shape_tool", "tool index per geom")
+        size = _array(shape_size, (G, 3), np.float64, "shape_size", "m")
         if not (_is_number(dt) and dt > 0):
             raise ConfigError(f"dt must be a positive number of seconds, got {dt!r}")
         if G != self._n_geoms:
@@ -627,12 +634,16 @@ class ContactModel:
         k_n = self.stiffness_for(dt)
         k_t = self.params.tangential_stiffness or k_n
         scale = self.point_scale
-        r, rep = self.result, self.report
-        err = self._err
+        return (kind, tool, size, float(k_n) * scale, float(self.params.damping) * scale,
+                self._implicit_damping(dt) * scale, float(k_t) * scale)
+
+    def _run(self, pos, vel, gpos, gmat, gvel, com, consts) -> ContactResult:
+        """The contact kernel on checked arrays and constants; raises on a bad shape."""
+        kind, tool, size, k_n, c_n, c_imp, k_t = consts
+        r, rep, err = self.result, self.report, self._err
         _contact_kernel(pos, vel, self.candidate_nodes, self.sample_nodes, self.sample_weights, self._touched,
                         kind, tool, size, gpos, gmat, gvel, com, self.tool_friction, self.tool_static_friction,
-                        k_n * scale, float(self.params.damping) * scale, self._implicit_damping(dt) * scale,
-                        float(k_t) * scale,
+                        k_n, c_n, c_imp, k_t,
                         self._anchor_local, self._anchor_on, r.forces, r.stiffness, self.node_tool_stiffness,
                         r.tool_force,
                         r.tool_torque, r.geom_normal_force, r.geom_tangential_force, self._geom_ftv,
@@ -640,8 +651,8 @@ class ContactModel:
                         rep.penetration, self._last[0], self._last[1], err)
         if err[0] != _OK:
             self._raise_kernel_error(kind, tool, size)
-        self._com[:] = com
-        self._pos[:] = pos
+        np.copyto(self._com, com)
+        np.copyto(self._pos, pos)
         return r
 
     def _implicit_damping(self, dt: float) -> float:
@@ -649,7 +660,7 @@ class ContactModel:
         return float(self.params.damping) / dt if self.params.implicit_damping else 0.0
 
     def _raise_kernel_error(self, kind, tool, size) -> None:
-        err, N, T = self._err, self.n_nodes, self.n_tools
+        err, T = self._err, self.n_tools
         g = int(err[1])
         if err[0] == _BAD_KIND:
             raise ConfigError(f"shape_kind[{g}] = {kind[g]} is not a shape code; use 0..{N_KINDS - 1} "
@@ -663,19 +674,7 @@ class ContactModel:
         """Validate and keep the per-scene constants for :meth:`compute_prepared`: the geom shape
         codes (G,), tool index per geom (G,), sizes (G,3) m and the time step dt (s), which fixes
         the penalty stiffness. The arrays are kept by reference (the caller's own buffers)."""
-        kind = np.ascontiguousarray(shape_kind, dtype=np.int64).reshape(-1)
-        G = len(kind)
-        tool = _array(shape_tool, (G,), np.int64, "shape_tool", "tool index per geom")
-        size = _array(shape_size, (G, 3), np.float64, "shape_size", "m")
-        if not (_is_number(dt) and dt > 0):
-            raise ConfigError(f"dt must be a positive number of seconds, got {dt!r}")
-        if G != self._n_geoms:
-            self._alloc_geoms(G)
-        k_n = self.stiffness_for(dt)
-        k_t = self.params.tangential_stiffness or k_n
-        scale = self.point_scale
-        self._prepared = (kind, tool, size, float(k_n) * scale, float(self.params.damping) * scale,
-                          self._implicit_damping(dt) * scale, float(k_t) * scale)
+        self._prepared = self._constants(shape_kind, shape_tool, shape_size, dt)
 
     def compute_prepared(self, positions, velocities, shape_pos, shape_mat, shape_vel, tool_com) -> ContactResult:
         """:meth:`compute` for the scene's hot loop, after :meth:`prepare`: the same kernel and the
@@ -686,21 +685,7 @@ class ContactModel:
         if self._prepared is None:
             raise ConfigError("compute_prepared() needs prepare(shape_kind, shape_tool, shape_size, dt) first "
                               "(and again after compute() with a different number of geoms)")
-        kind, tool, size, k_n, c_n, c_imp, k_t = self._prepared
-        r, rep, err = self.result, self.report, self._err
-        _contact_kernel(positions, velocities, self.candidate_nodes, self.sample_nodes, self.sample_weights,
-                        self._touched, kind, tool, size, shape_pos, shape_mat, shape_vel, tool_com,
-                        self.tool_friction, self.tool_static_friction, k_n, c_n, c_imp, k_t,
-                        self._anchor_local, self._anchor_on, r.forces, r.stiffness, self.node_tool_stiffness,
-                        r.tool_force,
-                        r.tool_torque, r.geom_normal_force, r.geom_tangential_force, self._geom_ftv,
-                        rep.normal_force, rep.tangential_force, self._tool_ftv, rep.contacts, rep.slipping,
-                        rep.penetration, self._last[0], self._last[1], err)
-        if err[0] != _OK:
-            self._raise_kernel_error(kind, tool, size)
-        np.copyto(self._com, tool_com)
-        np.copyto(self._pos, positions)
-        return r
+        return self._run(positions, velocities, shape_pos, shape_mat, shape_vel, tool_com, self._prepared)
 
     def kernel_state(self) -> tuple:
         """The arguments of the contact kernel after :meth:`prepare`, for a compiled caller that
