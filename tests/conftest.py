@@ -31,3 +31,15 @@ def truthcube(shared_data):
     spec.loader.exec_module(tc)
     rest, measured = tc.load_truthcube(shared_data / "truthcube" / "uniaxial_positions.csv")
     return tc, rest, measured
+
+
+@pytest.fixture(scope="module")
+def palpation():
+    """A SurgSim/Palpation-v0 env shared by a test module (closed after it)."""
+    import gymnasium as gym
+
+    import surgsim_envs.envs  # noqa: F401  (registers the tasks)
+
+    env = gym.make("SurgSim/Palpation-v0")
+    yield env
+    env.close()

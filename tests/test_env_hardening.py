@@ -13,13 +13,6 @@ import surgsim_envs  # noqa: F401
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError
 
 
-@pytest.fixture(scope="module")
-def palpation():
-    env = gym.make("SurgSim/Palpation-v0")
-    yield env
-    env.close()
-
-
 def test_failed_first_reset_does_not_break_later_calls(palpation):
     """Gymnasium's passive checker kept no reset data after a raising first reset, and every later
     step failed with 'TypeError: cannot unpack non-iterable NoneType object'."""

@@ -20,13 +20,6 @@ from surgsim_envs.envs.wrappers import InfoKeys
 from surgsim_envs.errors import ConfigError
 
 
-@pytest.fixture(scope="module")
-def palpation():
-    env = gym.make("SurgSim/Palpation-v0")
-    yield env
-    env.close()
-
-
 def test_action_fast_path_clips_a_copy_and_still_refuses_nan(palpation):
     u = palpation.unwrapped
     palpation.reset(seed=0)

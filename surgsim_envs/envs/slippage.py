@@ -77,8 +77,10 @@ class SlippageConfig(GraspSceneConfig):
 
 # ----------------------------------------------------------------------------------------------
 # term functions
+@njit(cache=True)
 def pull_force(t: float, rate: float, amplitude: float, frequency: float, phase: float) -> float:
-    """N, the pull at ``t`` s after the grasp: a ramp plus a sinusoid, never negative."""
+    """N, the pull at ``t`` s after the grasp: a ramp plus a sinusoid, never negative (compiled:
+    the control schedule :func:`_schedule` calls it per MuJoCo step)."""
     return max(0.0, rate * t + amplitude * math.sin(2.0 * math.pi * frequency * t + phase))
 
 
@@ -98,13 +100,12 @@ def slip_penalty(slip_now: float, slip_before: float, weight_per_mm: float) -> f
 
 
 @njit(cache=True)
-def _schedule(values, jaw, jaw_goal, lim, t, dt, pulling, rate, amplitude, w, phase, t0, top):
+def _schedule(values, jaw, jaw_goal, lim, t, dt, pulling, rate, amplitude, frequency, phase, t0, top):
     """Fill ``values`` (K, 2) with the control schedule of :meth:`SlippageEnv._run`: column 0 the jaw
     control moving from ``jaw`` towards ``jaw_goal`` by at most ``lim`` per MuJoCo step, column 1
-    (if ``pulling``) the pull ``min(top, pull_force(t - t0, rate, amplitude, f, phase))`` with
-    ``w = 2 pi f``, t advancing by ``dt`` from ``t`` (as mj_step2 advances d.time). The same
-    operations in the same order as the Python loop it replaces (no fastmath; libm's sin), so the
-    schedule is bit for bit the same."""
+    (if ``pulling``) the pull ``min(top, pull_force(t - t0, rate, amplitude, frequency, phase))``, t
+    advancing by ``dt`` from ``t`` (as mj_step2 advances d.time). The same operations in the same
+    order as the Python loop it replaces (no fastmath), so the schedule is bit for bit the same."""
     for k in range(values.shape[0]):
         d = jaw_goal - jaw
         if d < -lim:
@@ -114,11 +115,7 @@ def _schedule(values, jaw, jaw_goal, lim, t, dt, pulling, rate, amplitude, w, ph
         jaw += d
         values[k, 0] = jaw
         if pulling:
-            tau = t - t0
-            p = rate * tau + amplitude * math.sin(w * tau + phase)
-            if not p > 0.0:                      # as max(0.0, p)
-                p = 0.0
-            values[k, 1] = p if p < top else top
+            values[k, 1] = min(top, pull_force(t - t0, rate, amplitude, frequency, phase))
         t += dt
 
 
@@ -177,9 +174,8 @@ class SlippageEnv(GraspSceneEnv):
         jaw = float(sim.data.ctrl[self._jaw_act])
         t = float(sim.data.time)
         if pull is None:            # the episode's pull: schedule and pull in one compiled call
-            w = 2.0 * math.pi * self.frequency     # pull_force evaluates 2.0 * math.pi * frequency * t left to right
-            _schedule(values, jaw, jaw_goal, lim, t, dt, True, self.rate, self.amplitude, w, self.phase, self.t0,
-                      float(self.config.max_pull))
+            _schedule(values, jaw, jaw_goal, lim, t, dt, True, self.rate, self.amplitude, self.frequency, self.phase,
+                      self.t0, float(self.config.max_pull))
             if steps:
                 self.pull = float(values[-1, 1])
         else:
@@ -216,7 +212,7 @@ class SlippageEnv(GraspSceneEnv):
 
     def _apply_action(self, a: np.ndarray) -> None:
         self.jaw_goal = self._closure_ctrl(float(a[0]))
-        self._run(self.substeps, self.jaw_goal, None)       # None: the episode's pull (_pull_schedule)
+        self._run(self.substeps, self.jaw_goal, None)       # None: the episode's pull (compiled schedule)
 
     def _observe(self) -> np.ndarray:
         pos, fn, ft, rep = self._readings()

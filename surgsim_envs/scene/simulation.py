@@ -616,11 +616,8 @@ class Simulation:
         fn = ft = 0.0
         nc = ns = 0
         pen = 0.0
-        n = len(idx)
-        for contact in self.contacts.values():
+        for contact in self.contacts.values() if len(idx) else ():
             r = contact.report
-            if n == 0:
-                continue
             fn += float(r.normal_force[idx].sum())
             ft += float(r.tangential_force[idx].sum())
             nc += int(r.contacts[idx].sum())

@@ -207,6 +207,8 @@ def spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state,
         wx[e] = pos[j, 0] - pos[i, 0]
         wy[e] = pos[j, 1] - pos[i, 1]
         wz[e] = pos[j, 2] - pos[i, 2]
+    # pass 2, written out twice on purpose: ``commit`` is tested outside the loops so each loop
+    # body stays branch-free for the vectoriser (the only difference: committing the branch state)
     if commit:
         for e in range(ne):
             dx = wx[e]
