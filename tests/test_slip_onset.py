@@ -53,3 +53,36 @@ def test_onset_with_static_friction_lies_between_kinetic_and_static_grip(model, 
     res = slip(model, mu=mu, mu_static=mu_s, pull_time=0.6 + 1.5 * mu, handle_speed=0.01 * min(1.0, mu / 0.3))
     assert res.mu_static == mu_s
     assert 1.0 * mu * res.slip_onset_normal <= res.slip_onset_pull <= mu_s * res.slip_onset_normal
+
+
+def test_quasi_static_model_without_implicit_contact_is_refused_by_name():
+    from surgsim_envs.tissue.capabilities import CapabilityError
+
+    with pytest.raises(CapabilityError, match="neo_hookean.*implicit_contact"):
+        slip("neo_hookean", mu=0.6)
+
+
+def test_bad_handle_is_refused():
+    with pytest.raises(ConfigError, match="handle='rope'"):
+        slip("mass_spring", mu=0.6, handle="rope")
+
+
+@pytest.mark.slow
+def test_quasi_static_fem_onset_with_a_clamp():
+    """fem_static has no inertia: the rig clamps the far end face and slides the jaws (displacement
+    control); the clamp's reaction at onset is mu * sum(N) within 5 % (0.969 at dt 0.5 ms, load ~9;
+    dt 2 ms samples too coarsely: 0.92). About 5 min under load: the jaws touch ~300 nodes, so each
+    condensed contact solve is ~900 x 900."""
+    res = slip("fem_static", mu=0.6, dt=5e-4, pull_time=1.2)
+    assert res.slip_onset_pull == pytest.approx(0.6 * res.slip_onset_normal, rel=0.05)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model, mu, squeeze", [("fractional", 0.1, 5e-4), ("fractional", 0.6, 5e-4),
+                                                ("fractional", 1.2, 5e-4), ("fem", 1.2, 2.5e-4)])
+def test_onset_other_models(model, mu, squeeze):
+    """fractional: 0.981 / 0.981 / 0.980 (load ~4). fem at mu 1.2 inverts elements with the default
+    0.5 mm squeeze: the pull needed, and so the shear strain, scales with mu x squeeze whatever E
+    is; with half the squeeze it reads 0.982 (load ~7)."""
+    res = slip(model, mu=mu, squeeze=squeeze, pull_time=0.6 + 1.0 * mu, handle_speed=0.01 * min(1.0, mu / 0.3))
+    assert res.slip_onset_pull == pytest.approx(mu * res.slip_onset_normal, rel=0.05)

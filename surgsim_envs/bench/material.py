@@ -370,15 +370,15 @@ def relax(model, material="liver", *, strain: float = 0.05, ramp_time: float = 0
 class SlipResult:
     """Grasp-and-pull record from the start of the pull: ``time`` (s), ``pull`` (N), ``normal_sum``
     (N, summed jaw normal force), ``slide`` (m, axial motion of the tissue's centre of mass);
-    ``slip_onset_pull`` (N): pull when the slide first exceeds ``onset_slide``; ``slip_onset_normal``
-    (N) the jaws' normal force at that instant (nan if the grasp never slipped)."""
+    ``slip_onset_pull`` (N): pull at gross slip (see :func:`slip`'s ``onset``); ``slip_onset_normal``
+    (N) the jaws' normal force at that instant (both None if the grasp held for the whole pull)."""
 
     time: np.ndarray
     pull: np.ndarray
     normal_sum: np.ndarray
     slide: np.ndarray
-    slip_onset_pull: float
-    slip_onset_normal: float
+    slip_onset_pull: float | None
+    slip_onset_normal: float | None
     mu: float
     nodes: int
     model: str = ""
@@ -413,6 +413,19 @@ def grasp_cylinder(radius: float, length: float, spacing: float):
     return lattice_volume(trimesh.creation.cylinder(radius=radius, height=length, sections=48), spacing)
 
 
+def _end_clamp(tissue, radius: float, spacing: float) -> np.ndarray:
+    """Indices of the nodes a clamp holds on the tissue cylinder's far (+z) end face: within a
+    quarter spacing of the face and ``radius - 1.5 spacing`` of the axis, clear of the jaws."""
+    x = tissue.rest_positions
+    on_face = x[:, 2] >= x[:, 2].max() - 0.25 * spacing
+    inside = np.hypot(x[:, 0], x[:, 1]) <= radius - 1.5 * spacing
+    idx = np.flatnonzero(on_face & inside)
+    if len(idx) < 3:
+        raise ConfigError(f"slip(handle='clamp'): only {len(idx)} end-face node(s) lie clear of the jaws "
+                          f"(radius {radius} m, spacing {spacing} m); use a finer spacing or handle='spring'")
+    return idx
+
+
 def _jaw_frames():
     ang = np.deg2rad([90.0, 210.0, 330.0])
     er = np.stack([np.cos(ang), np.sin(ang), np.zeros(3)], axis=1)
@@ -423,10 +436,11 @@ def _jaw_frames():
 
 
 def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length: float = 0.04,
-         spacing: float = 0.003, squeeze: float = 0.0005, dt: float = 5e-5, contact_stiffness: float = 60.0,
+         spacing: float = 0.003, squeeze: float = 0.0005, dt: float | None = None, contact_stiffness: float = 60.0,
          contact_damping: float = 0.02, handle_stiffness: float = 100.0, handle_speed: float = 0.01,
          close_time: float = 0.15, settle_time: float = 0.1, pull_time: float = 0.6, onset_slide: float = 2.5e-3,
-         volume=None, onset: str = "contact", mu_static: float | None = None, **opts) -> SlipResult:
+         volume=None, onset: str = "contact", mu_static: float | None = None, handle: str = "auto",
+         **opts) -> SlipResult:
     """Three flat jaws (120 degrees apart, longer than the tissue) close radially by ``squeeze`` (m)
     on a tissue cylinder (``radius``, ``length`` m) over ``close_time`` s, hold for ``settle_time`` s,
     then a handle spring (``handle_stiffness`` N/m, far end moving at ``handle_speed`` m/s) pulls the
@@ -438,6 +452,16 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     sliding and the motion of the contact patch); ``onset="slide"`` when the tissue has slid
     ``onset_slide`` m (the earlier rule, which lands on a stick-slip dip at low mu).
     ``material`` defaults to a 20 kPa gel. ``tests/test_grasp_slip.py`` asserts the Coulomb behaviour of this rig.
+
+    ``handle``: ``"spring"`` pulls through the handle spring as a body force spread by mass (a body
+    with inertia); ``"clamp"`` clamps the centre of the far end face (nodes within ``radius - 1.5
+    spacing`` of the axis) and slides the jaws the other way at ``handle_speed`` (displacement
+    control, as a pull-out test machine does, in the clamp's frame so that the supports never
+    move); the pull is the clamp's reaction, slide and patch speed are taken relative to the jaws. A quasi-static model has no inertia, so
+    a free body held only by friction has no equilibrium once it slips and its solver needs
+    supports: ``"auto"`` (default) takes ``"clamp"`` for models with the ``quasi_static``
+    capability and ``"spring"`` otherwise. ``dt`` (s) defaults to 5e-5, and to 5e-4 for a
+    quasi-static model, whose steps are equilibria, so that ``dt`` only sets the sampling.
     """
     from surgsim_envs.contact import BOX, ContactModel, ContactParams
 
@@ -449,13 +473,24 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     if not (isinstance(mu_s, (int, float, np.floating)) and math.isfinite(mu_s) and mu_s >= mu):
         raise ConfigError(f"mu_static must be a static friction coefficient >= mu = {mu!r} (or None = mu), "
                           f"got {mu_static!r}")
+    quasi_static = "quasi_static" in getattr(cls, "capabilities", ())
+    if dt is None:
+        dt = 5e-4 if quasi_static else 5e-5
     _positive(radius=radius, length=length, spacing=spacing, squeeze=squeeze, dt=dt, close_time=close_time,
               settle_time=settle_time, pull_time=pull_time, handle_stiffness=handle_stiffness,
               handle_speed=handle_speed, onset_slide=onset_slide)
     if onset not in ("contact", "slide"):
         raise ConfigError(f"onset={onset!r} must be 'contact' (from the contact state) or 'slide' (a slide distance)")
+    if handle not in ("auto", "spring", "clamp"):
+        raise ConfigError(f"handle={handle!r} must be 'spring' (body force through a handle spring), 'clamp' "
+                          "(displacement-controlled clamp on the far end face) or 'auto'")
     vol = grasp_cylinder(radius, length, spacing) if volume is None else volume
+    if quasi_static:      # as in the tasks: a quasi-static model needs implicit contact in a contact scene
+        cls.require("implicit_contact", task="the grasp-and-pull rig (a quasi-static model in a contact scene)")
     tissue = _build(cls, vol, mat, opts)
+    if handle == "auto":
+        handle = "clamp" if quasi_static else "spring"
+    clamp = _end_clamp(tissue, radius, spacing) if handle == "clamp" else None
     cm = ContactModel(tissue.n_nodes, tissue.surface_nodes, [float(mu)],
                       ContactParams(stiffness=contact_stiffness, damping=contact_damping),
                       tool_static_friction=[float(mu_s)])
@@ -465,6 +500,8 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     size = np.tile(jaw_half, (3, 1))
     com = np.zeros((1, 3))
     weights = tissue.masses / tissue.total_mass
+    if clamp is not None:
+        tissue.set_fixed(clamp)
     forces = np.zeros_like(tissue.positions)
     gvel = np.zeros((3, 6))
     clearance = 0.0005
@@ -472,27 +509,38 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     z0 = t0 = None
     rows = []
     res = None
+    jaw_z = 0.0                                         # axial jaw travel (clamp mode: the jaws move, not the clamp)
     for i in range(int(round((close_time + settle_time + pull_time) / dt))):
         t = i * dt
         s = min(t / close_time, 1.0)                    # smooth radial closing, then held
         rho = radius + clearance - travel * s * s * (3 - 2 * s)
         gvel[:, 3:] = -er * travel * (6 * s * (1 - s) / close_time if t < close_time else 0.0)
-        res = cm.compute(tissue.positions, tissue.velocities, kind, tool, size, er * (rho + jaw_half[0]),
-                         mats, gvel, com, dt)
+        pulling = t >= close_time + settle_time
+        jaw_vz = -handle_speed if (clamp is not None and pulling) else 0.0
+        if pulling and t0 is not None and clamp is not None:
+            jaw_z = -handle_speed * (t - t0)
+        gvel[:, 5] = jaw_vz
+        centres = er * (rho + jaw_half[0])
+        centres[:, 2] = jaw_z
+        res = cm.compute(tissue.positions, tissue.velocities, kind, tool, size, centres, mats, gvel, com, dt)
         pull = 0.0
-        if t >= close_time + settle_time:
+        if pulling:
             zc = weights @ tissue.positions[:, 2]
             if z0 is None:
                 z0, t0 = zc, t
-            pull = max(handle_stiffness * (handle_speed * (t - t0) - (zc - z0)), 0.0)
+            if clamp is None:
+                pull = max(handle_stiffness * (handle_speed * (t - t0) - (zc - z0)), 0.0)
+            else:           # the clamp holds the tissue while the jaws slide back: its reaction is the pull
+                pull = float(tissue.reaction_forces()[:, 2].sum())
             touching = np.any(res.forces != 0.0, axis=1)
-            speed = float(tissue.velocities[touching, 2].mean()) if touching.any() else 0.0
+            speed = float(tissue.velocities[touching, 2].mean()) - jaw_vz if touching.any() else 0.0
             share = float(res.report.slipping[0]) / max(int(res.report.contacts[0]), 1)
             fn = float(res.report.normal_force[0])
             mobilised = float(res.report.tangential_force[0]) / (mu * fn) if mu * fn > 0 else 0.0
-            rows.append((t - t0, pull, fn, zc - z0, share, speed, mobilised))
+            rows.append((t - t0, pull, fn, zc - z0 - jaw_z, share, speed, mobilised))
         np.copyto(forces, res.forces)
-        forces[:, 2] += pull * weights
+        if clamp is None:
+            forces[:, 2] += pull * weights
         tissue.step(dt, forces, res.stiffness)
     if res is None or res.report.contacts[0] == 0:
         raise ConfigError("slip: the jaws never touched the tissue; increase squeeze")
@@ -504,7 +552,7 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
         hit = np.array([k]) if k is not None else np.zeros(0, dtype=int)
     else:
         hit = np.flatnonzero(slide > onset_slide)
-    onset_pull = float(pull[hit[0]]) if len(hit) else math.nan
-    onset_normal = float(normal[hit[0]]) if len(hit) else math.nan
+    onset_pull = float(pull[hit[0]]) if len(hit) else None
+    onset_normal = float(normal[hit[0]]) if len(hit) else None
     return SlipResult(tt, pull, normal, slide, onset_pull, onset_normal, float(mu), vol.n_nodes, cls.name,
                       share, speed, mobilised, onset, float(mu_s))

@@ -83,8 +83,12 @@ def run(args: argparse.Namespace) -> int:
             opts_mat = None
         res = mt.slip(args.model, opts_mat, mu=args.mu, **opts)
         out = {"pull": res.pull.tolist(), "normal_sum": res.normal_sum.tolist(), "slip_onset_pull": res.slip_onset_pull}
-        text = (f"{res.model}: slip onset at pull {res.slip_onset_pull:.4g} N; mu * sum(N) there = "
-                f"{res.mu * res.slip_onset_normal:.4g} N")
+        if res.slip_onset_pull is None:
+            text = (f"{res.model}: no gross slip: the grasp held for the whole pull (max pull "
+                    f"{res.pull.max():.4g} N); lengthen pull_time or lower mu")
+        else:
+            text = (f"{res.model}: slip onset at pull {res.slip_onset_pull:.4g} N; mu * sum(N) there = "
+                    f"{res.mu * res.slip_onset_normal:.4g} N")
         xy, labels = (res.time, res.pull), ("time since pull start (s)", "pull (N)")
     if args.plot:
         import matplotlib
