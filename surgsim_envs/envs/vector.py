@@ -343,23 +343,51 @@ class SurgSimVectorEnv(VectorEnv):
 
     def call(self, name: str, *args, **kwargs) -> tuple:
         """``name(*args, **kwargs)`` on every env (or the attribute's value if not callable)."""
+        return self.call_envs(None, name, *args, **kwargs)
+
+    def call_envs(self, indices, name: str, *args, **kwargs) -> tuple:
+        """:meth:`call` on the envs ``indices`` only (None: all), results in that order."""
         self._check_usable()
-        self._command(ipc.CALL, lambda w: (name, args, kwargs))
+        which = self._which(indices)
+        self._command(ipc.CALL, lambda w: (name, args, kwargs, which[w]))
         replies = self._gather(ipc.OK, f"call({name!r})")
-        return tuple(x for w in range(len(self._workers)) for x in replies[w])
+        results = tuple(x for w in range(len(self._workers)) for x in replies[w])
+        if indices is None:
+            return results
+        order = [lo + j for (lo, _), local in zip(self._ranges, which) for j in local]
+        by_env = dict(zip(order, results))
+        return tuple(by_env[i] for i in self._indices(indices))
 
     def get_attr(self, name: str) -> tuple:
         return self.call(name)
 
-    def set_attr(self, name: str, values) -> None:
-        """Set attribute ``name`` of every env: one value for all, or a list/tuple of one per env."""
+    def set_attr(self, name: str, values, indices=None) -> None:
+        """Set attribute ``name`` of every env (or of ``indices``): one value for all, or a
+        list/tuple of one per env."""
         self._check_usable()
+        targets = list(range(self.num_envs)) if indices is None else self._indices(indices)
         if not isinstance(values, (list, tuple)):
-            values = [values] * self.num_envs
-        if len(values) != self.num_envs:
-            raise ConfigError(f"set_attr({name!r}) needs one value per env ({self.num_envs}), got {len(values)}")
-        self._command(ipc.SET_ATTR, lambda w: (name, list(values[slice(*self._ranges[w])])))
+            values = [values] * len(targets)
+        if len(values) != len(targets):
+            raise ConfigError(f"set_attr({name!r}) needs one value per env ({len(targets)}), got {len(values)}")
+        value_of = dict(zip(targets, values))
+        which = [[i - lo for i in sorted(value_of) if lo <= i < hi] for lo, hi in self._ranges]
+        self._command(ipc.SET_ATTR, lambda w: (name, [value_of[self._ranges[w][0] + j] for j in which[w]], which[w]))
         self._gather(ipc.OK, f"set_attr({name!r})")
+
+    def _which(self, indices) -> list:
+        """Per worker: its local env numbers among ``indices`` (None: all -> None per worker)."""
+        if indices is None:
+            return [None] * len(self._workers)
+        idx = sorted(set(self._indices(indices)))
+        return [[i - lo for i in idx if lo <= i < hi] for lo, hi in self._ranges]
+
+    def _indices(self, indices) -> list:
+        idx = [int(i) for i in ([indices] if isinstance(indices, (int, np.integer)) else indices)]
+        bad = [i for i in idx if not 0 <= i < self.num_envs]
+        if bad:
+            raise ConfigError(f"env indices {bad} out of range for {self.num_envs} envs")
+        return idx
 
     def render(self):
         return self.call("render")

@@ -112,16 +112,19 @@ class _Worker:
                 other[i] = o
         return self._reply(other)
 
-    def call(self, name, args, kwargs):
+    def call(self, name, args, kwargs, which=None):
+        """``name(*args, **kwargs)`` (or the attribute) of each env, or of the local envs ``which``."""
         out = []
-        for env in self.envs:
-            f = env.get_wrapper_attr(name)
+        for j in range(len(self.envs)) if which is None else which:
+            self.current = self.lo + j
+            f = self.envs[j].get_wrapper_attr(name)
             out.append(f(*args, **kwargs) if callable(f) else f)
         return out
 
-    def set_attr(self, name, values):
-        for env, value in zip(self.envs, values):
-            env.set_wrapper_attr(name, value)
+    def set_attr(self, name, values, which=None):
+        for j, value in zip(range(len(self.envs)) if which is None else which, values):
+            self.current = self.lo + j
+            self.envs[j].set_wrapper_attr(name, value)
 
     def close(self):
         for env in self.envs:
