@@ -301,3 +301,37 @@ def test_tasks_match_sync(task, episode):
     finally:
         ours.close()
         sync.close()
+
+
+def test_disabled_autoreset_needs_a_masked_reset():
+    """autoreset_mode=DISABLED: stepping an env whose episode ended raises naming the env and the
+    fix; a reset with reset_mask for that env lets it run on."""
+    vec = SurgSimVectorEnv(functools.partial(Toy, horizon=2), 2, autoreset_mode="Disabled")
+    try:
+        vec.reset(seed=0)
+        a = np.zeros((2, 2), np.float32)
+        ended = np.zeros(2, bool)
+        for _ in range(2):
+            _, _, term, trunc, _ = vec.step(a)
+            ended |= term | trunc
+            if ended.any():
+                break
+        assert ended.any()
+        with pytest.raises(RuntimeError, match=r"env \d was stepped after its episode ended.*reset_mask"):
+            vec.step(a)
+        obs, info = vec.reset(options={"reset_mask": np.ones(2, bool)})
+        assert list(info["_t"]) == [True, True] and list(info["t"]) == [0, 0]
+        vec.step(a)
+    finally:
+        vec.close()
+
+
+@pytest.mark.slow
+def test_spawn_context_matches_sync():
+    ours = SurgSimVectorEnv(Toy, 2, context="spawn")
+    sync = SyncVectorEnv([Toy] * 2)
+    try:
+        assert_same_run(ours, sync, 20, 1, np.random.default_rng(3))
+    finally:
+        ours.close()
+        sync.close()
