@@ -102,15 +102,17 @@ def assert_same_run(ours, sync, steps: int, seed, rng, info_filter=numeric_part,
         assert ended > 0, "the run had no episode end: the autoreset was not exercised"
 
 
-@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
-def test_toy_matches_sync_every_step(mode):
-    """3 envs on 2 workers (2 + 1): observations, rewards, terminations, truncations and the
-    numeric infos (with their masks, dtypes and nested dicts) equal SyncVectorEnv's over 40 steps
-    with several autoresets; SAME_STEP's final_obs / final_info too."""
-    ours = SurgSimVectorEnv(Toy, 3, workers=2, autoreset_mode=mode)
+@pytest.mark.parametrize("mode, in_main", [(AutoresetMode.NEXT_STEP, False), (AutoresetMode.SAME_STEP, False),
+                                           (AutoresetMode.NEXT_STEP, True), (AutoresetMode.SAME_STEP, True)])
+def test_toy_matches_sync_every_step(mode, in_main):
+    """3 envs on 2 workers (2 + 1; with in_main the block of 2 in this process): observations,
+    rewards, terminations, truncations and the numeric infos (with their masks, dtypes and nested
+    dicts) equal SyncVectorEnv's over 40 steps with several autoresets; SAME_STEP's final_obs /
+    final_info too."""
+    ours = SurgSimVectorEnv(Toy, 3, workers=2, autoreset_mode=mode, in_main=in_main)
     sync = SyncVectorEnv([Toy] * 3, autoreset_mode=mode)
     try:
-        assert ours.worker_envs == [(0, 2), (2, 3)]
+        assert ours.worker_envs == [(0, 2), (2, 3)] and len(ours.worker_pids) == (1 if in_main else 2)
         assert ours.metadata["autoreset_mode"] == mode
         assert ours.single_observation_space == sync.single_observation_space
         assert ours.action_space == sync.action_space and ours.observation_space == sync.observation_space
@@ -207,15 +209,16 @@ def test_returned_arrays_are_fresh_copies():
         vec.close()
 
 
-def test_env_error_names_env_and_vector_env_recovers():
-    vec = SurgSimVectorEnv(Toy, 3, workers=2)
+@pytest.mark.parametrize("bad, in_main", [(2, False), (0, True), (2, True)])
+def test_env_error_names_env_and_vector_env_recovers(bad, in_main):
+    vec = SurgSimVectorEnv(Toy, 3, workers=2, in_main=in_main)
     try:
         vec.reset(seed=0)
         a = np.zeros((3, 2), np.float32)
-        a[2, 1] = np.nan
+        a[bad, 1] = np.nan
         with pytest.raises(NonFiniteInputError) as e:
             vec.step(a)
-        assert "env 2 of SurgSimVectorEnv" in "".join(e.value.__notes__)
+        assert f"env {bad} of SurgSimVectorEnv" in "".join(e.value.__notes__)
         obs, _ = vec.reset(seed=0)
         assert obs.shape == (3, 3)
         vec.step(np.zeros((3, 2), np.float32))

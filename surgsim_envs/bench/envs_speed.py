@@ -40,7 +40,8 @@ def add_arguments(parser) -> None:
                              "InfoKeys(keys=('is_success',))")
     parser.add_argument("--vector", action="store_true",
                         help="also time, alternately in rounds, one env, gym's AsyncVectorEnv and our SurgSimVectorEnv "
-                             "(gym.make_vec's default; --workers envs, and 2 x --workers envs on the same workers), "
+                             "(gym.make_vec's default; --workers envs, 2 x --workers envs on the same workers, and "
+                             "--workers envs with one block in the main process), "
                              "for the task and for busy-wait stand-ins (bench/vector_speed.py)")
     parser.add_argument("--spin-us", default="task,300",
                         help="with --vector: stand-in step times, us, comma-separated; 'task' = the task's measured "
@@ -448,14 +449,15 @@ def single_rate_quick(env_id: str, steps: int, repeats: int) -> float:
 
 def print_vector(rows) -> None:
     """The ``--vector`` table: env steps/s and speed-up over one env, same rounds."""
-    names = ("async", "vector", "vector_2x")
-    print(f"{'what':34s} {'1 env/s':>8s} " + " ".join(f"{n + ' x':>11s}" for n in names) + "   load before/after")
+    names = ("async", "vector", "vector_2x", "vector_in_main")
+    print("speed-up over one env, same rounds")
+    print(f"{'what':34s} {'1 env/s':>8s} " + " ".join(f"{n + ' x':>16s}" for n in names) + "   load before/after")
     for r in rows:
         prefixes = [("vector_", r["task"])] + [(k[: -len("single_steps_per_s")], f"  spin {k[4:].split('_')[0]} us")
                                               for k in r if k.startswith("spin") and k.endswith("single_steps_per_s")]
         for p, label in prefixes:
             print(f"{label:34s} {r[p + 'single_steps_per_s']:8.0f} "
-                  + " ".join(f"{r[p + n + '_speedup']:11.2f}" for n in names)
+                  + " ".join(f"{r[p + n + '_speedup']:16.2f}" for n in names)
                   + f"   {r['load_avg_1min_before']:.1f}/{r['load_avg_1min_after']:.1f}")
 
 

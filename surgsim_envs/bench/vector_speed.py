@@ -38,6 +38,37 @@ def _run_vector(vec, acts):
     return len(acts) * vec.num_envs / (time.perf_counter() - t0)
 
 
+def worker_pids(env) -> list:
+    """Process ids of a vector env's workers (ours or Gymnasium's AsyncVectorEnv); [] otherwise."""
+    if hasattr(env, "worker_pids"):
+        return list(env.worker_pids)
+    return [p.pid for p in getattr(env, "processes", [])]
+
+
+def cpu_ns(pids) -> int:
+    """Sum of the time on CPU (ns) of the main threads of ``pids`` (/proc/<pid>/schedstat)."""
+    total = 0
+    for pid in pids:
+        with open(f"/proc/{pid}/schedstat") as f:
+            total += int(f.read().split()[0])
+    return total
+
+
+def _timed(run, env, acts) -> tuple:
+    """``(env steps/s, this process's CPU us per env step, the workers' CPU us per env step)``."""
+    pids = worker_pids(env)
+    try:
+        w0 = cpu_ns(pids)
+    except OSError:                          # no /proc (not Linux): no worker CPU figure
+        pids, w0 = [], 0
+    c0 = time.process_time()
+    rate = run(env, acts)
+    main_us = time.process_time() - c0
+    steps = len(acts) * getattr(env, "num_envs", 1)
+    worker_us = (cpu_ns(pids) - w0) * 1e-3 / steps if pids else float("nan")
+    return rate, main_us * 1e6 / steps, worker_us
+
+
 def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = False, seed: int = 0) -> dict:
     """``contenders``: name -> an env (``num_envs`` absent: one env in this process) or a vector
     env. Warms each up, then ``repeats`` rounds, each timing every contender for ``steps`` env
@@ -53,17 +84,25 @@ def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = Fals
         else:
             _run_single(env, _actions(env.action_space, 10, rng, palpation))
     rates = {k: [] for k in contenders}
+    main_cpu = {k: [] for k in contenders}
+    worker_cpu = {k: [] for k in contenders}
     for _ in range(repeats):
         for name, env in contenders.items():
             if hasattr(env, "num_envs"):
                 acts = _actions(env.action_space, max(1, steps // env.num_envs), rng, palpation)
-                rates[name].append(_run_vector(env, acts))
+                r, m, w = _timed(_run_vector, env, acts)
             else:
-                rates[name].append(_run_single(env, _actions(env.action_space, steps, rng, palpation)))
-    out = {f"{k}_steps_per_s": statistics.median(v) for k, v in rates.items()}
+                r, m, w = _timed(_run_single, env, _actions(env.action_space, steps, rng, palpation))
+            rates[name].append(r)
+            main_cpu[name].append(m)
+            worker_cpu[name].append(w)
+    med = statistics.median
+    out = {f"{k}_steps_per_s": med(v) for k, v in rates.items()}
+    out.update({f"{k}_main_cpu_us_per_env_step": med(v) for k, v in main_cpu.items()})
+    out.update({f"{k}_worker_cpu_us_per_env_step": med(v) for k, v in worker_cpu.items() if k != single})
     for k, v in rates.items():
         if k != single:
-            out[f"{k}_speedup"] = statistics.median(a / b for a, b in zip(v, rates[single]))
+            out[f"{k}_speedup"] = med(a / b for a, b in zip(v, rates[single]))
     return out
 
 
@@ -73,19 +112,22 @@ def _close_all(contenders: dict) -> None:
 
 
 def task_contenders(env_id: str, workers: int) -> dict:
-    """One env, AsyncVectorEnv(workers envs), SurgSimVectorEnv(workers envs) and
-    SurgSimVectorEnv(2 x workers envs on the same workers)."""
+    """One env, AsyncVectorEnv(workers envs), SurgSimVectorEnv(workers envs),
+    SurgSimVectorEnv(2 x workers envs on the same workers) and SurgSimVectorEnv(workers envs,
+    ``in_main``: this process steps one block, workers - 1 processes the others)."""
     import gymnasium as gym
 
     single = gym.make(env_id)            # first: the workers fork a process that has loaded the task
     return {"single": single,
             "async": gym.make_vec(env_id, num_envs=workers, vectorization_mode="async"),
             "vector": gym.make_vec(env_id, num_envs=workers, workers=workers, timeout_s=STEP_TIMEOUT),
-            "vector_2x": gym.make_vec(env_id, num_envs=2 * workers, workers=workers, timeout_s=STEP_TIMEOUT)}
+            "vector_2x": gym.make_vec(env_id, num_envs=2 * workers, workers=workers, timeout_s=STEP_TIMEOUT),
+            "vector_in_main": gym.make_vec(env_id, num_envs=workers, workers=workers, in_main=True,
+                                           timeout_s=STEP_TIMEOUT)}
 
 
 def spin_contenders(step_us: float, info: dict | None, workers: int) -> dict:
-    """The same four with :class:`~surgsim_envs.bench.envs_speed.SpinEnv` (busy-waits ``step_us``,
+    """The same five with :class:`~surgsim_envs.bench.envs_speed.SpinEnv` (busy-waits ``step_us``,
     returns a deep copy of ``info``)."""
     from gymnasium.vector import AsyncVectorEnv
 
@@ -94,7 +136,8 @@ def spin_contenders(step_us: float, info: dict | None, workers: int) -> dict:
     make = functools.partial(SpinEnv, step_us, info)
     return {"single": make(), "async": AsyncVectorEnv([make] * workers),
             "vector": SurgSimVectorEnv(make, workers, workers=workers, timeout_s=STEP_TIMEOUT),
-            "vector_2x": SurgSimVectorEnv(make, 2 * workers, workers=workers, timeout_s=STEP_TIMEOUT)}
+            "vector_2x": SurgSimVectorEnv(make, 2 * workers, workers=workers, timeout_s=STEP_TIMEOUT),
+            "vector_in_main": SurgSimVectorEnv(make, workers, workers=workers, in_main=True, timeout_s=STEP_TIMEOUT)}
 
 
 def vector_compare(env_id: str, workers: int, steps: int, repeats: int, spin_us=(), info: dict | None = None) -> dict:

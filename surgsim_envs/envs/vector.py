@@ -51,7 +51,7 @@ from gymnasium.vector.utils import batch_space
 
 from surgsim_envs.envs import vector_ipc as ipc
 from surgsim_envs.envs.vector_info import InfoMerger
-from surgsim_envs.envs.vector_worker import worker_main
+from surgsim_envs.envs.vector_worker import _Worker, worker_main
 from surgsim_envs.errors import ConfigError, VectorEnvWorkerError
 
 #: spaces whose samples are fixed-shape arrays (what the shared memory holds)
@@ -90,8 +90,9 @@ class SurgSimVectorEnv(VectorEnv):
     def __init__(self, env_id: str, num_envs: int = 1, *, workers: int | None = None, info_keys=None,
                  autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP, max_info_keys: int = 64,
                  context: str | None = None, timeout_s: float = 300.0, start_timeout_s: float = 600.0,
-                 close_timeout_s: float = 5.0, **env_kwargs):
-        self._workers: list = []
+                 close_timeout_s: float = 5.0, in_main: bool = False, **env_kwargs):
+        self._workers: dict = {}                 # block number -> (process, command pipe, reply pipe)
+        self._local = None                       # with in_main: block 0, stepped by this process
         self._shm = None
         self.closed = False
         self._broken: str | None = None
@@ -125,9 +126,13 @@ class SurgSimVectorEnv(VectorEnv):
         bounds = np.linspace(0, self.num_envs, n_workers + 1).round().astype(int)
         self._ranges = [(int(bounds[w]), int(bounds[w + 1])) for w in range(n_workers)]
         self._poller = select.poll()
-        self._fd_worker: dict = {}
+        if not isinstance(in_main, bool):
+            raise ConfigError(f"in_main must be True or False, got {in_main!r}")
+        self.in_main = in_main
         try:
             for w, (lo, hi) in enumerate(self._ranges):
+                if in_main and w == 0:
+                    continue
                 cmd_r, cmd_w = ctx.Pipe(duplex=False)
                 rep_r, rep_w = ctx.Pipe(duplex=False)
                 proc = ctx.Process(target=worker_main, name=f"SurgSimVectorEnv-{w}", daemon=True,
@@ -136,13 +141,24 @@ class SurgSimVectorEnv(VectorEnv):
                 proc.start()
                 cmd_r.close()
                 rep_w.close()
-                self._workers.append((proc, cmd_w, rep_r))
+                self._workers[w] = (proc, cmd_w, rep_r)
                 self._poller.register(rep_r.fileno(), select.POLLIN)
-                self._fd_worker[rep_r.fileno()] = w
+            if in_main:
+                lo, hi = self._ranges[0]
+                try:
+                    self._local = _Worker(env_id, env_kwargs, lo, hi, self.autoreset_mode.value, keys, keep_other,
+                                          max_info_keys)
+                except BaseException as exc:
+                    exc.add_note(f"raised while making {self._envs_of(0)} of {self.env_id} in the main process")
+                    raise
             described = self._gather(ipc.OK, "start-up", timeout=start_timeout_s)
+            if in_main:
+                described[0] = self._local.description()
             self._setup(described, max_info_keys)
             self._command(ipc.ATTACH, lambda w: (self._shm.name, self._layout))
             self._gather(ipc.OK, "attach")
+            if in_main:
+                self._local.use_views(self._v, self._layout.same_step)
         except BaseException:
             self.close(terminate=True)
             raise
@@ -170,14 +186,13 @@ class SurgSimVectorEnv(VectorEnv):
         self.render_mode = first["render_mode"]
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._pids = [described[w]["pid"] for w in range(len(self._workers))]
         obs, act = self.single_observation_space, self.single_action_space
         self._layout = ipc.Layout(self.num_envs, obs.shape, obs.dtype, act.shape, act.dtype, max_info_keys,
                                   same_step=self.autoreset_mode == AutoresetMode.SAME_STEP)
         self._shm = shared_memory.SharedMemory(create=True, size=self._layout.nbytes)
         self._v = self._layout.views(self._shm.buf)
         self._merger = InfoMerger(self.num_envs, self._ranges)
-        self._cmd_fds = [c.fileno() for _, c, _ in self._workers]
+        self._cmd_fds = {w: c.fileno() for w, (_, c, _) in self._workers.items()}
 
     # --- messaging --------------------------------------------------------------------------
     def _envs_of(self, w: int) -> str:
@@ -194,7 +209,7 @@ class SurgSimVectorEnv(VectorEnv):
             raise ConfigError("step_async was called without step_wait: call step_wait() first")
 
     def _command(self, op: int, payload_of=None) -> None:
-        for w, (_, cmd, _) in enumerate(self._workers):
+        for w, (_, cmd, _) in self._workers.items():
             try:
                 ipc.send(cmd.fileno(), op, None if payload_of is None else payload_of(w))
             except OSError:
@@ -214,7 +229,7 @@ class SurgSimVectorEnv(VectorEnv):
 
     def _gather(self, expect: int, what: str, timeout: float | None = None) -> dict:
         """Wait for one reply from every worker; return ``{worker: payload}``; raise the first error."""
-        pending = {rep.fileno(): w for w, (_, _, rep) in enumerate(self._workers)}
+        pending = {rep.fileno(): w for w, (_, _, rep) in self._workers.items()}
         timeout = self.timeout_s if timeout is None else timeout
         deadline = time.monotonic() + timeout
         replies: dict = {}
@@ -246,6 +261,39 @@ class SurgSimVectorEnv(VectorEnv):
                 self._raise_worker_error(w, payload, what)
             out[w] = payload
         return out
+
+    def _broadcast(self, op: int, payload_of, what: str) -> dict:
+        """Send ``op`` to every worker, run it on the main process's own block (``in_main``) in the
+        meantime, and return ``{block: reply payload}``."""
+        self._command(op, payload_of)
+        local = self._run_local(op, None if payload_of is None else payload_of(0), what)
+        replies = self._gather(ipc.OK, what)
+        if self._local is not None:
+            replies[0] = local
+        return replies
+
+    def _run_local(self, op: int, payload, what: str):
+        """``op`` on the in-main block (None without one). An error waits for the workers' replies
+        (so that the pipes stay in step) before it is raised."""
+        if self._local is None:
+            return None
+        try:
+            if op == ipc.STEP:
+                return self._local.step()
+            if op == ipc.RESET:
+                return self._local.reset(*payload)
+            if op == ipc.CALL:
+                return self._local.call(*payload)
+            return self._local.set_attr(*payload)
+        except BaseException as exc:
+            env = self._local.current
+            try:
+                self._gather(ipc.OK, what)
+            except Exception:  # noqa: BLE001 - the env's own error is the one to report
+                pass
+            exc.add_note(f"raised in env {env} of SurgSimVectorEnv({self.env_id}, num_envs={self.num_envs}) "
+                         f"(in the main process) during {what}")
+            raise
 
     def _raise_worker_error(self, w: int, p: dict, what: str):
         exc = p["exception"]
@@ -307,9 +355,10 @@ class SurgSimVectorEnv(VectorEnv):
                 raise ConfigError(f"options['reset_mask'] must be a numpy bool array of shape ({n},), got {mask!r}")
             if not mask.any():
                 raise ConfigError("options['reset_mask'] must have at least one True entry, got all False")
-        self._command(ipc.RESET, lambda w: (seeds[slice(*self._ranges[w])], options,
-                                            None if mask is None else mask[slice(*self._ranges[w])].tolist()))
-        other, _ = self._absorb(self._gather(ipc.OK, "reset"))
+        replies = self._broadcast(ipc.RESET, lambda w: (
+            seeds[slice(*self._ranges[w])], options, None if mask is None else mask[slice(*self._ranges[w])].tolist()),
+            "reset")
+        other, _ = self._absorb(replies)
         return self._v["obs"].copy(), self._infos(other, {})
 
     def step_async(self, actions) -> None:
@@ -320,7 +369,7 @@ class SurgSimVectorEnv(VectorEnv):
         if a.shape != acts.shape:
             raise ConfigError(f"actions must have shape {acts.shape} (num_envs x action shape), got {a.shape}")
         acts[...] = a
-        for w, fd in enumerate(self._cmd_fds):
+        for w, fd in self._cmd_fds.items():
             try:
                 ipc.send_step(fd)
             except OSError:
@@ -332,7 +381,11 @@ class SurgSimVectorEnv(VectorEnv):
         if not self._waiting:
             raise ConfigError("step_wait() without step_async(actions)")
         self._waiting = False
-        other, final_other = self._absorb(self._gather(ipc.OK, "step"))
+        local = self._run_local(ipc.STEP, None, "step")
+        replies = self._gather(ipc.OK, "step")
+        if self._local is not None:
+            replies[0] = local
+        other, final_other = self._absorb(replies)
         v = self._v
         return (v["obs"].copy(), v["rewards"].copy(), v["terminations"].copy(), v["truncations"].copy(),
                 self._infos(other, final_other))
@@ -349,9 +402,8 @@ class SurgSimVectorEnv(VectorEnv):
         """:meth:`call` on the envs ``indices`` only (None: all), results in that order."""
         self._check_usable()
         which = self._which(indices)
-        self._command(ipc.CALL, lambda w: (name, args, kwargs, which[w]))
-        replies = self._gather(ipc.OK, f"call({name!r})")
-        results = tuple(x for w in range(len(self._workers)) for x in replies[w])
+        replies = self._broadcast(ipc.CALL, lambda w: (name, args, kwargs, which[w]), f"call({name!r})")
+        results = tuple(x for w in range(len(self._ranges)) for x in replies[w])
         if indices is None:
             return results
         order = [lo + j for (lo, _), local in zip(self._ranges, which) for j in local]
@@ -372,13 +424,13 @@ class SurgSimVectorEnv(VectorEnv):
             raise ConfigError(f"set_attr({name!r}) needs one value per env ({len(targets)}), got {len(values)}")
         value_of = dict(zip(targets, values))
         which = [[i - lo for i in sorted(value_of) if lo <= i < hi] for lo, hi in self._ranges]
-        self._command(ipc.SET_ATTR, lambda w: (name, [value_of[self._ranges[w][0] + j] for j in which[w]], which[w]))
-        self._gather(ipc.OK, f"set_attr({name!r})")
+        self._broadcast(ipc.SET_ATTR, lambda w: (name, [value_of[self._ranges[w][0] + j] for j in which[w]], which[w]),
+                        f"set_attr({name!r})")
 
     def _which(self, indices) -> list:
         """Per worker: its local env numbers among ``indices`` (None: all -> None per worker)."""
         if indices is None:
-            return [None] * len(self._workers)
+            return [None] * len(self._ranges)
         idx = sorted(set(self._indices(indices)))
         return [[i - lo for i in idx if lo <= i < hi] for lo, hi in self._ranges]
 
@@ -394,41 +446,45 @@ class SurgSimVectorEnv(VectorEnv):
 
     @property
     def worker_pids(self) -> list:
-        """Process ids of the workers, in order (worker w hosts a contiguous block of envs)."""
-        return [p.pid for p, _, _ in self._workers]
+        """Process ids of the worker processes, in block order (with ``in_main`` block 0 is this
+        process and not listed)."""
+        return [p.pid for p, _, _ in self._workers.values()]
 
     @property
     def worker_envs(self) -> list:
-        """``(first, last + 1)`` env indices of each worker."""
+        """``(first, last + 1)`` env indices of each block (block 0 in this process with ``in_main``)."""
         return list(self._ranges)
 
     def close_extras(self, terminate: bool = False, **kwargs) -> None:
         """Ask the workers to close their envs and exit; terminate (then kill) those still running
         after ``close_timeout_s``. Never waits longer than about ``close_timeout_s + 2`` s."""
         deadline = time.monotonic() + (0.0 if terminate else self.close_timeout_s)
-        for proc, cmd, _ in self._workers:
+        for proc, cmd, _ in self._workers.values():
             if proc.is_alive() and not terminate:
                 try:
                     ipc.send(cmd.fileno(), ipc.CLOSE)
                 except OSError:
                     pass
-        for proc, _, _ in self._workers:
+        if self._local is not None:
+            self._local.close()
+            self._local = None
+        for proc, _, _ in self._workers.values():
             proc.join(max(0.0, deadline - time.monotonic()))
-        for proc, _, _ in self._workers:
+        for proc, _, _ in self._workers.values():
             if proc.is_alive():
                 proc.terminate()
                 proc.join(1.0)
             if proc.is_alive():
                 proc.kill()
                 proc.join(1.0)
-        for proc, cmd, rep in self._workers:
+        for proc, cmd, rep in self._workers.values():
             cmd.close()
             rep.close()
             try:
                 proc.close()
             except ValueError:      # still running after kill (should not happen): leave it to the OS
                 pass
-        self._workers = []
+        self._workers = {}
         if self._shm is not None:
             self._v = None
             try:

@@ -18,6 +18,9 @@ NEXT_STEP, SAME_STEP, DISABLED = "NextStep", "SameStep", "Disabled"
 
 
 class _Worker:
+    """Envs ``lo..hi-1`` and what a worker does with them (also used in the main process for the
+    ``in_main`` block)."""
+
     def __init__(self, env_id, env_kwargs, lo, hi, autoreset, info_keys, keep_other, max_info_keys):
         import gymnasium as gym
 
@@ -42,6 +45,10 @@ class _Worker:
         self.shm = shared_memory.SharedMemory(name=name)
         self.v = layout.views(self.shm.buf)
         self.same_step = layout.same_step
+
+    def use_views(self, views, same_step):
+        """Work on the main process's own views (a block stepped in the main process)."""
+        self.v, self.same_step = views, same_step
 
     def _reply(self, other, final_other=None):
         new = self.writer.take_new()
