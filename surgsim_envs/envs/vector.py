@@ -29,6 +29,11 @@ Gymnasium's ``_key`` masks (:mod:`~surgsim_envs.envs.vector_info`); strings, lis
 step costs as much as the step's pipe round trip. ``info_keys="all"`` adds them back (pickled,
 only for steps that have them); a tuple of key names keeps just those (``()``: no infos at all).
 
+**in_main=True**: the main process steps block 0 itself while the workers step the others
+(``workers`` then counts the main process: ``num_envs=2, workers=2`` is one worker process).
+One sleep/wake-up less per step for the main process; a crash (not an exception) in a block-0
+env then takes the main process with it.
+
 **Failures**: an exception inside an env is re-raised in the main process with a note naming
 the env index and the worker's traceback (the vector env stays usable after a ``reset``). A
 worker that dies or does not answer within ``timeout_s`` raises
