@@ -39,7 +39,9 @@ def parse(argv=None):
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--eval-episodes", type=int, default=10)
     p.add_argument("--gamma", type=float, default=0.99, help="discount factor (SB3 default 0.99)")
-    p.add_argument("--vec", choices=["sync", "async"], default="async", help="vector env mode (n-envs > 1)")
+    p.add_argument("--vec", choices=["sync", "async", "shared"], default="async",
+                   help="vector env (n-envs > 1): sync = SB3 DummyVecEnv, async = SubprocVecEnv, shared = "
+                        "surgsim_envs.envs.vector_sb3 (shared-memory workers, less overhead per step)")
     p.add_argument("--out", default=None)
     p.add_argument("--on-unstable", choices=["terminate", "raise"], default="terminate",
                    help="a diverging tissue ends the episode (info['unstable']) instead of killing the run")
@@ -130,8 +132,14 @@ def main(argv=None) -> int:
     vec_cls = SubprocVecEnv if (args.vec == "async" and args.n_envs > 1) else DummyVecEnv
     # "module:id" makes worker processes (forkserver/spawn) import surgsim_envs, which registers the tasks
     env_kwargs = {"on_unstable": args.on_unstable}
-    venv = make_vec_env(f"surgsim_envs:{args.task}", n_envs=args.n_envs, seed=args.seed, vec_env_cls=vec_cls,
-                        env_kwargs=env_kwargs)
+    if args.vec == "shared" and args.n_envs > 1:
+        from surgsim_envs.envs.vector_sb3 import make_sb3_vec_env
+
+        venv = make_sb3_vec_env(args.task, args.n_envs, seed=args.seed, env_kwargs=env_kwargs,
+                                info_keys=("is_success", "success", "unstable"))
+    else:
+        venv = make_vec_env(f"surgsim_envs:{args.task}", n_envs=args.n_envs, seed=args.seed, vec_env_cls=vec_cls,
+                            env_kwargs=env_kwargs)
     if args.resume:
         venv = VecNormalize.load(str(Path(args.resume) / "vecnormalize.pkl"), venv)
     else:

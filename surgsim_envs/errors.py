@@ -70,3 +70,8 @@ class GrowthDivergedError(TissueUnstableError):
 
 class GrowthNotConvergedError(SurgSimError, RuntimeError):
     """The tissue-growth iteration did not reach its threshold within ``max_iter`` iterations."""
+
+
+class VectorEnvWorkerError(SurgSimError, RuntimeError):
+    """A worker process of a SurgSim vector env (surgsim_envs/envs/vector.py) died or did not answer
+    in time; the message names the worker, its env indices and what it was doing."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import time
 
@@ -37,6 +38,19 @@ def add_arguments(parser) -> None:
                              "task's measured env-step time (the pipe round-trip against ours), the same with the "
                              "task's info dict, the main process's info merge, and our envs wrapped in "
                              "InfoKeys(keys=('is_success',))")
+    parser.add_argument("--vector", action="store_true",
+                        help="also time, alternately in rounds, one env, gym's AsyncVectorEnv and our SurgSimVectorEnv "
+                             "(gym.make_vec's default; --workers envs, 2 x --workers envs on the same workers, and "
+                             "--workers envs with one block in the main process), "
+                             "for the task and for busy-wait stand-ins (bench/vector_speed.py)")
+    parser.add_argument("--spin-us", default="task,300",
+                        help="with --vector: stand-in step times, us, comma-separated; 'task' = the task's measured "
+                             "step time (default 'task,300')")
+    parser.add_argument("--vector-only", action="store_true",
+                        help="with --vector: skip the single-process figures except the step time")
+    parser.add_argument("--signal-options", action="store_true",
+                        help="also time the per-step signal options for --workers processes (pipe byte, "
+                             "semaphore pair, multiprocessing Connection)")
     parser.add_argument("--checked-loop", action="store_true",
                         help="also time, alternately in this process, the physics loop through the checked public "
                              "calls (ContactModel.compute + TissueModel.step per substep) against the prepared one")
@@ -395,6 +409,58 @@ def async_rate(env_id: str, workers: int, steps: int, repeats: int, info_keys=No
     return statistics.median(rates)
 
 
+def vector_row(env_id: str, args, step_us: float | None = None) -> dict:
+    """``--vector`` figures of one task (:func:`surgsim_envs.bench.vector_speed.vector_compare`)."""
+    from surgsim_envs.bench.vector_speed import vector_compare
+
+    if args.workers < 1:
+        raise ConfigError(f"--vector needs --workers >= 1, got {args.workers}")
+    spin = []
+    for s in str(args.spin_us).split(","):
+        s = s.strip()
+        if not s:
+            continue
+        if s == "task":
+            if step_us is None:
+                step_us = 1e6 / single_rate_quick(env_id, args.steps, args.repeats)
+            spin.append(step_us)
+        else:
+            try:
+                spin.append(float(s))
+            except ValueError:
+                raise ConfigError(f"--spin-us takes step times in us or 'task', got {s!r}") from None
+    row = {"task": env_id, "task_step_us": step_us}
+    row.update(vector_compare(env_id, args.workers, args.steps, args.repeats, spin, task_info(env_id)))
+    return row
+
+
+def single_rate_quick(env_id: str, steps: int, repeats: int) -> float:
+    """Median env steps/s of one env in this process (random actions, resets included)."""
+    import gymnasium as gym
+
+    from surgsim_envs.bench.vector_speed import alternate
+
+    env = gym.make(env_id)
+    try:
+        return alternate({"single": env}, steps, repeats, palpation="Palpation" in env_id)["single_steps_per_s"]
+    finally:
+        env.close()
+
+
+def print_vector(rows) -> None:
+    """The ``--vector`` table: env steps/s and speed-up over one env, same rounds."""
+    names = ("async", "vector", "vector_2x", "vector_in_main")
+    print("speed-up over one env, same rounds")
+    print(f"{'what':34s} {'1 env/s':>8s} " + " ".join(f"{n + ' x':>16s}" for n in names) + "   load before/after")
+    for r in rows:
+        prefixes = [("vector_", r["task"])] + [(k[: -len("single_steps_per_s")], f"  spin {k[4:].split('_')[0]} us")
+                                              for k in r if k.startswith("spin") and k.endswith("single_steps_per_s")]
+        for p, label in prefixes:
+            print(f"{label:34s} {r[p + 'single_steps_per_s']:8.0f} "
+                  + " ".join(f"{r[p + n + '_speedup']:16.2f}" for n in names)
+                  + f"   {r['load_avg_1min_before']:.1f}/{r['load_avg_1min_after']:.1f}")
+
+
 def run(args) -> int:
     import surgsim_envs  # noqa: F401
     from surgsim_envs.envs import TASKS
@@ -409,9 +475,16 @@ def run(args) -> int:
     if unknown:
         raise ConfigError(f"unknown task(s) {unknown}; known: {list(TASKS)}")
     rows = []
+    vector = getattr(args, "vector", False)
     for t in tasks:
+        if vector and getattr(args, "vector_only", False):
+            row = vector_row(t, args)
+            rows.append(row)
+            continue
         row = single_rate(t, args.steps, args.repeats, getattr(args, "checked_loop", False),
                           getattr(args, "compiled_vs_generic", False))
+        if vector:
+            row.update(vector_row(t, args, 1e6 / row["steps_per_s"]))
         if args.workers:
             row["async_workers"] = args.workers
             row["async_steps_per_s"] = async_rate(t, args.workers, args.steps, args.repeats)
@@ -423,12 +496,26 @@ def run(args) -> int:
                                                                 info_keys=("is_success",))
                 row["async_info_keys_speedup"] = row["async_info_keys_steps_per_s"] / row["steps_per_s"]
         rows.append(row)
+    out = {"envs": rows}
+    if getattr(args, "signal_options", False):
+        from surgsim_envs.bench.vector_speed import signal_roundtrip
+
+        out["signal_options"] = {w: signal_roundtrip(w, repeats=args.repeats) for w in range(1, max(1, args.workers) + 1)}
+        out["signal_options_load_avg_1min"] = os.getloadavg()[0]
     if args.json:
-        print(json.dumps({"envs": rows}, indent=2))
+        print(json.dumps(out, indent=2))
+        return 0
+    if vector:
+        print_vector(rows)
+    if getattr(args, "signal_options", False):
+        print(f"signal round trip, us: {out['signal_options']}")
+    if not any("steps_per_s" in r for r in rows):
         return 0
     print(f"{'task':24s} {'steps/s':>8s} {'ctrl Hz':>8s} {'dt ms':>6s} {'sub':>4s} {'nodes':>6s} {'reset ms':>9s}"
           f" {'async/s':>8s} {'speedup':>8s} {'overhead':>8s}")
     for r in rows:
+        if "steps_per_s" not in r:
+            continue
         print(f"{r['task']:24s} {r['steps_per_s']:8.0f} {r['control_hz']:8.0f} {r['physics_dt_s'] * 1e3:6.2f} "
               f"{r['substeps']:4d} {r['tissue_nodes']:6d} {r['reset_ms']:9.1f} "
               f"{r.get('async_steps_per_s', float('nan')):8.0f} {r.get('async_speedup', float('nan')):8.2f} "

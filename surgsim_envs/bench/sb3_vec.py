@@ -24,16 +24,24 @@ def add_arguments(p) -> None:
     p.add_argument("--workers", default="1,2,4", help="comma list; 1 = DummyVecEnv, n > 1 = SubprocVecEnv(n)")
     p.add_argument("--steps", type=int, default=200, help="env steps per timed block (all workers together)")
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--shared", action="store_true",
+                   help="also time SB3VectorEnv (surgsim_envs/envs/vector_sb3.py, shared-memory workers) for each n > 1")
     p.add_argument("--json", action="store_true")
 
 
-def rate(task: str, n: int, steps: int, repeats: int) -> float:
-    """Median env steps/s of an SB3 vector env of ``n`` copies of ``task``."""
+def rate(task: str, n: int, steps: int, repeats: int, shared: bool = False) -> float:
+    """Median env steps/s of an SB3 vector env of ``n`` copies of ``task`` (``shared``: SB3VectorEnv
+    wrapped in VecMonitor, else make_vec_env's DummyVecEnv for n = 1 and SubprocVecEnv)."""
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    venv = make_vec_env(f"surgsim_envs:{task}", n_envs=n, seed=0,
-                        vec_env_cls=DummyVecEnv if n == 1 else SubprocVecEnv, env_kwargs={"on_unstable": "terminate"})
+    if shared:
+        from surgsim_envs.envs.vector_sb3 import make_sb3_vec_env
+
+        venv = make_sb3_vec_env(task, n, seed=0, env_kwargs={"on_unstable": "terminate"})
+    else:
+        venv = make_vec_env(f"surgsim_envs:{task}", n_envs=n, seed=0,
+                            vec_env_cls=DummyVecEnv if n == 1 else SubprocVecEnv, env_kwargs={"on_unstable": "terminate"})
     rng = np.random.default_rng(0)
     low, high = venv.action_space.low, venv.action_space.high
     try:
@@ -73,6 +81,9 @@ def run(args) -> int:
     for n in workers:
         r = rate(args.task, n, args.steps, args.repeats)
         rows.append({"workers": n, "vec": "DummyVecEnv" if n == 1 else "SubprocVecEnv", "steps_per_s": r})
+        if getattr(args, "shared", False) and n > 1:
+            rows.append({"workers": n, "vec": "SB3VectorEnv",
+                         "steps_per_s": rate(args.task, n, args.steps, args.repeats, shared=True)})
     base = rows[0]["steps_per_s"]
     for row in rows:
         row["speedup_vs_first"] = row["steps_per_s"] / base

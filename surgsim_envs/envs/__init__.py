@@ -30,10 +30,39 @@ MAX_EPISODE_STEPS = {"SurgSim/Palpation-v0": 600, "SurgSim/Grasp-v0": 150, "Surg
                      "SurgSim/LayeredPalpation-v0": 30}  # one step = one quasi-static press
 
 
+def make_vector(env_id: str, num_envs: int = 1, **kwargs):
+    """Every task's ``vector_entry_point``: ``gym.make_vec(task, num_envs=n)`` (no
+    ``vectorization_mode``) returns :class:`~surgsim_envs.envs.vector.SurgSimVectorEnv`, the
+    shared-memory multi-process vector env; its options (``workers=``, ``info_keys=``,
+    ``autoreset_mode=``, ...) go in make_vec's keyword arguments, next to the env's own."""
+    from surgsim_envs.envs.vector import SurgSimVectorEnv
+
+    return SurgSimVectorEnv(env_id, num_envs, **kwargs)
+
+
+#: a task's vector_entry_point is the string "surgsim_envs.envs:make_vector|<task id>", which
+#: Gymnasium resolves with getattr(surgsim_envs.envs, "make_vector|<task id>") (module __getattr__
+#: below): a string keeps the spec JSON-serialisable (EnvSpec.to_json, Minari), a callable would not
+_VECTOR_ENTRY = "make_vector|"
+
+
+def __getattr__(name: str):
+    """``"make_vector|<task id>"`` -> :func:`make_vector` bound to that task (see _VECTOR_ENTRY)."""
+    if name.startswith(_VECTOR_ENTRY):
+        import functools
+
+        env_id = name[len(_VECTOR_ENTRY):]
+        if env_id in TASKS or env_id in QUASI_STATIC_TASKS:
+            return functools.partial(make_vector, env_id)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def register_envs() -> None:
     """Register the SurgSim tasks with Gymnasium (idempotent), each with its
     ``max_episode_steps`` (:data:`MAX_EPISODE_STEPS`; Gymnasium adds its TimeLimit wrapper, and
-    the env truncates at the same step itself, paying its end-of-episode terms).
+    the env truncates at the same step itself, paying its end-of-episode terms) and
+    :func:`make_vector` as its ``vector_entry_point`` (``gym.make_vec(task, n)`` is the
+    shared-memory vector env; ``vectorization_mode="sync"``/``"async"`` give Gymnasium's).
 
     Gymnasium's passive env checker is off: after a first ``reset`` that raises (e.g. a bad
     option) it keeps no reset data and every later ``step`` failed with a TypeError. The envs
@@ -45,7 +74,8 @@ def register_envs() -> None:
         if env_id in gym.registry:
             continue
         gym.register(id=env_id, entry_point=entry, disable_env_checker=True,
-                     max_episode_steps=MAX_EPISODE_STEPS[env_id])
+                     max_episode_steps=MAX_EPISODE_STEPS[env_id],
+                     vector_entry_point=f"{__name__}:{_VECTOR_ENTRY}{env_id}")
 
 
-__all__ = ["TASKS", "QUASI_STATIC_TASKS", "MAX_EPISODE_STEPS", "register_envs"]
+__all__ = ["TASKS", "QUASI_STATIC_TASKS", "MAX_EPISODE_STEPS", "make_vector", "register_envs"]

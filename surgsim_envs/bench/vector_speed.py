@@ -1,0 +1,258 @@
+"""Vector env figures for ``surgsim bench envs --vector`` (issue 18's async target: 2 workers
+>= 1.7x one process): one env in this process, Gymnasium's AsyncVectorEnv and
+:class:`~surgsim_envs.envs.vector.SurgSimVectorEnv` (``gym.make_vec``'s default for our tasks),
+all built up front and timed **alternately** in rounds (same load for each), for the task and for
+a busy-wait stand-in env of a given step time that returns the task's info dict (the ceiling any
+vector env can reach at that step time). Also the signal round trip of the IPC options the
+vector env could use (``--signal-options``)."""
+
+from __future__ import annotations
+
+import functools
+import os
+import statistics
+import time
+
+import numpy as np
+
+from surgsim_envs.bench.envs_speed import SpinEnv, _actions
+
+#: s, a vector step that takes longer raises instead of hanging
+STEP_TIMEOUT = 60.0
+
+
+def _run_single(env, acts):
+    t0 = time.perf_counter()
+    for a in acts:
+        _, _, term, trunc, _ = env.step(a)
+        if term or trunc:
+            env.reset()
+    return len(acts) / (time.perf_counter() - t0)
+
+
+def _run_vector(vec, acts):
+    """Env steps/s (vector steps x num_envs); the vector env autoresets by itself."""
+    t0 = time.perf_counter()
+    for a in acts:
+        vec.step(a)
+    return len(acts) * vec.num_envs / (time.perf_counter() - t0)
+
+
+def worker_pids(env) -> list:
+    """Process ids of a vector env's workers (ours or Gymnasium's AsyncVectorEnv); [] otherwise."""
+    if hasattr(env, "worker_pids"):
+        return list(env.worker_pids)
+    return [p.pid for p in getattr(env, "processes", [])]
+
+
+def cpu_ns(pids) -> int:
+    """Sum of the time on CPU (ns) of the main threads of ``pids`` (/proc/<pid>/schedstat)."""
+    total = 0
+    for pid in pids:
+        with open(f"/proc/{pid}/schedstat") as f:
+            total += int(f.read().split()[0])
+    return total
+
+
+def _timed(run, env, acts) -> tuple:
+    """``(env steps/s, this process's CPU us per env step, the workers' CPU us per env step)``."""
+    pids = worker_pids(env)
+    try:
+        w0 = cpu_ns(pids)
+    except OSError:                          # no /proc (not Linux): no worker CPU figure
+        pids, w0 = [], 0
+    c0 = time.process_time()
+    rate = run(env, acts)
+    main_us = time.process_time() - c0
+    steps = len(acts) * getattr(env, "num_envs", 1)
+    worker_us = (cpu_ns(pids) - w0) * 1e-3 / steps if pids else float("nan")
+    return rate, main_us * 1e6 / steps, worker_us
+
+
+def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = False, seed: int = 0) -> dict:
+    """``contenders``: name -> an env (``num_envs`` absent: one env in this process) or a vector
+    env. Warms each up, then ``repeats`` rounds, each timing every contender for ``steps`` env
+    steps in turn. Returns per name the median env steps/s, and per vector contender
+    ``<name>_speedup``: the median over rounds of its rate over the single env's in the same
+    round (the first contender without ``num_envs`` is the single env)."""
+    rng = np.random.default_rng(seed)
+    single = next(k for k, e in contenders.items() if not hasattr(e, "num_envs"))
+    for name, env in contenders.items():
+        env.reset(seed=seed)
+        if hasattr(env, "num_envs"):
+            _run_vector(env, _actions(env.action_space, 10, rng, palpation))
+        else:
+            _run_single(env, _actions(env.action_space, 10, rng, palpation))
+    rates = {k: [] for k in contenders}
+    main_cpu = {k: [] for k in contenders}
+    worker_cpu = {k: [] for k in contenders}
+    for _ in range(repeats):
+        for name, env in contenders.items():
+            if hasattr(env, "num_envs"):
+                acts = _actions(env.action_space, max(1, steps // env.num_envs), rng, palpation)
+                r, m, w = _timed(_run_vector, env, acts)
+            else:
+                r, m, w = _timed(_run_single, env, _actions(env.action_space, steps, rng, palpation))
+            rates[name].append(r)
+            main_cpu[name].append(m)
+            worker_cpu[name].append(w)
+    med = statistics.median
+    out = {f"{k}_steps_per_s": med(v) for k, v in rates.items()}
+    out.update({f"{k}_main_cpu_us_per_env_step": med(v) for k, v in main_cpu.items()})
+    out.update({f"{k}_worker_cpu_us_per_env_step": med(v) for k, v in worker_cpu.items() if k != single})
+    for k, v in rates.items():
+        if k != single:
+            out[f"{k}_speedup"] = med(a / b for a, b in zip(v, rates[single]))
+    return out
+
+
+def _close_all(contenders: dict) -> None:
+    for env in contenders.values():
+        env.close()
+
+
+def task_contenders(env_id: str, workers: int) -> dict:
+    """One env, AsyncVectorEnv(workers envs), SurgSimVectorEnv(workers envs),
+    SurgSimVectorEnv(2 x workers envs on the same workers) and SurgSimVectorEnv(workers envs,
+    ``in_main``: this process steps one block, workers - 1 processes the others)."""
+    import gymnasium as gym
+
+    single = gym.make(env_id)            # first: the workers fork a process that has loaded the task
+    return {"single": single,
+            "async": gym.make_vec(env_id, num_envs=workers, vectorization_mode="async"),
+            "vector": gym.make_vec(env_id, num_envs=workers, workers=workers, timeout_s=STEP_TIMEOUT),
+            "vector_2x": gym.make_vec(env_id, num_envs=2 * workers, workers=workers, timeout_s=STEP_TIMEOUT),
+            "vector_in_main": gym.make_vec(env_id, num_envs=workers, workers=workers, in_main=True,
+                                           timeout_s=STEP_TIMEOUT)}
+
+
+def spin_contenders(step_us: float, info: dict | None, workers: int) -> dict:
+    """The same five with :class:`~surgsim_envs.bench.envs_speed.SpinEnv` (busy-waits ``step_us``,
+    returns a deep copy of ``info``)."""
+    from gymnasium.vector import AsyncVectorEnv
+
+    from surgsim_envs.envs.vector import SurgSimVectorEnv
+
+    make = functools.partial(SpinEnv, step_us, info)
+    return {"single": make(), "async": AsyncVectorEnv([make] * workers),
+            "vector": SurgSimVectorEnv(make, workers, workers=workers, timeout_s=STEP_TIMEOUT),
+            "vector_2x": SurgSimVectorEnv(make, 2 * workers, workers=workers, timeout_s=STEP_TIMEOUT),
+            "vector_in_main": SurgSimVectorEnv(make, workers, workers=workers, in_main=True, timeout_s=STEP_TIMEOUT)}
+
+
+def vector_compare(env_id: str, workers: int, steps: int, repeats: int, spin_us=(), info: dict | None = None) -> dict:
+    """The task's alternating comparison, then the busy-wait stand-in's for each step time in
+    ``spin_us`` (us; with the task's ``info``). Keys: ``vector_<name>_steps_per_s``,
+    ``vector_<name>_speedup`` and ``spin<us>_<name>_...``; ``load_avg_1min`` before and after."""
+    out = {"vector_workers": workers, "load_avg_1min_before": os.getloadavg()[0]}
+    contenders = task_contenders(env_id, workers)
+    try:
+        res = alternate(contenders, steps, repeats, palpation="Palpation" in env_id)
+    finally:
+        _close_all(contenders)
+    out.update({f"vector_{k}": v for k, v in res.items()})
+    for us in spin_us:
+        contenders = spin_contenders(float(us), info, workers)
+        try:
+            res = alternate(contenders, steps, repeats)
+        finally:
+            _close_all(contenders)
+        out.update({f"spin{us:.0f}_{k}": v for k, v in res.items()})
+    out["load_avg_1min_after"] = os.getloadavg()[0]
+    return out
+
+
+# --- the per-step signal: options measured on this machine ------------------------------------
+def _echo_pipe(rfd, wfd):
+    while True:
+        b = os.read(rfd, 1)
+        if not b or b == b"q":
+            return
+        os.write(wfd, b"\0")
+
+
+def _echo_semaphore(a, b):
+    while a.acquire(timeout=60):
+        b.release()
+
+
+def _echo_connection(r, w):
+    while True:
+        try:
+            m = r.recv_bytes()
+        except EOFError:
+            return
+        if m == b"q":
+            return
+        w.send_bytes(b"\0")
+
+
+def signal_roundtrip(workers: int, n: int = 5000, repeats: int = 5, context: str | None = None) -> dict:
+    """Median us of one signal round trip to ``workers`` echo processes and back (all signalled,
+    then all awaited), for one byte on an ``os.pipe``, a pair of ``multiprocessing.Semaphore`` and
+    ``multiprocessing.Connection.send_bytes``/``recv_bytes``. Blocking waits only (no busy-wait)."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context(context or "fork")
+    out = {}
+    for kind in ("pipe_byte", "semaphore", "connection"):
+        procs, ends = [], []
+        for _ in range(workers):
+            if kind == "pipe_byte":
+                r1, w1 = os.pipe()
+                r2, w2 = os.pipe()
+                p = ctx.Process(target=_echo_pipe, args=(r1, w2), daemon=True)
+                p.start()
+                os.close(r1)
+                os.close(w2)
+                ends.append((w1, r2))
+            elif kind == "semaphore":
+                a, b = ctx.Semaphore(0), ctx.Semaphore(0)
+                p = ctx.Process(target=_echo_semaphore, args=(a, b), daemon=True)
+                p.start()
+                ends.append((a, b))
+            else:
+                r1, w1 = ctx.Pipe(duplex=False)
+                r2, w2 = ctx.Pipe(duplex=False)
+                p = ctx.Process(target=_echo_connection, args=(r1, w2), daemon=True)
+                p.start()
+                ends.append((w1, r2))
+            procs.append(p)
+
+        if kind == "pipe_byte":
+            def once():
+                for w, _ in ends:
+                    os.write(w, b"\1")
+                for _, r in ends:
+                    os.read(r, 1)
+        elif kind == "semaphore":
+            def once():
+                for a, _ in ends:
+                    a.release()
+                for _, b in ends:
+                    b.acquire()
+        else:
+            def once():
+                for w, _ in ends:
+                    w.send_bytes(b"\1")
+                for _, r in ends:
+                    r.recv_bytes()
+        try:
+            for _ in range(200):
+                once()
+            times = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                for _ in range(n):
+                    once()
+                times.append((time.perf_counter() - t0) / n * 1e6)
+            out[f"{kind}_roundtrip_us"] = statistics.median(times)
+        finally:
+            for p in procs:
+                p.kill()
+                p.join(2)
+            if kind == "pipe_byte":
+                for w, r in ends:
+                    os.close(w)
+                    os.close(r)
+    return out

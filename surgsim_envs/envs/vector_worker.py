@@ -1,0 +1,206 @@
+"""The worker process of :class:`~surgsim_envs.envs.vector.SurgSimVectorEnv`: hosts envs
+``lo..hi-1`` of the vector, reads their actions from shared memory, steps them, writes
+observations, rewards, terminations, truncations and numeric infos back, and answers each
+command with one byte (or a short pickled message: new info keys, non-numeric infos, call
+results, an error). Protocol and layout: :mod:`surgsim_envs.envs.vector_ipc`."""
+
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import traceback
+
+from surgsim_envs.envs import vector_ipc as ipc
+from surgsim_envs.envs.vector_info import InfoWriter
+
+NEXT_STEP, SAME_STEP, DISABLED = "NextStep", "SameStep", "Disabled"
+
+
+class _Worker:
+    """Envs ``lo..hi-1`` and what a worker does with them (also used in the main process for the
+    ``in_main`` block)."""
+
+    def __init__(self, env_id, env_kwargs, lo, hi, autoreset, info_keys, keep_other, max_info_keys):
+        import gymnasium as gym
+
+        import surgsim_envs.envs  # noqa: F401  (registers the tasks)
+
+        self.lo, self.hi, self.autoreset = lo, hi, autoreset
+        make = (lambda: gym.make(env_id, **env_kwargs)) if isinstance(env_id, str) else (lambda: env_id(**env_kwargs))
+        self.envs = [make() for _ in range(hi - lo)]
+        self.writer = InfoWriter(max_info_keys, info_keys, keep_other)
+        self.ended = [False] * (hi - lo)
+        self.shm = self.v = None
+        self.current = f"{lo}..{hi - 1}"       # the env an error is reported against
+
+    def description(self) -> dict:
+        e = self.envs[0]
+        return {"observation_space": e.observation_space, "action_space": e.action_space,
+                "metadata": dict(e.metadata), "render_mode": e.render_mode, "pid": os.getpid()}
+
+    def attach(self, name, layout):
+        from multiprocessing import shared_memory
+
+        self.shm = shared_memory.SharedMemory(name=name)
+        self.v = layout.views(self.shm.buf)
+        self.same_step = layout.same_step
+
+    def use_views(self, views, same_step):
+        """Work on the main process's own views (a block stepped in the main process)."""
+        self.v, self.same_step = views, same_step
+
+    def _reply(self, other, final_other=None):
+        new = self.writer.take_new()
+        if new or other or final_other:
+            return {"new_keys": new, "other": other, "final_other": final_other}
+        return None
+
+    def step(self):
+        v, lo, writer = self.v, self.lo, self.writer
+        acts, obs_buf, rew, term, trunc = v["actions"], v["obs"], v["rewards"], v["terminations"], v["truncations"]
+        vals, pres = v["info_values"], v["info_present"]
+        other = final_other = None
+        for j, env in enumerate(self.envs):
+            i = self.current = lo + j
+            if self.ended[j] and self.autoreset == NEXT_STEP:
+                obs, info = env.reset()
+                r, te, tr = 0.0, False, False
+            else:
+                if self.ended[j] and self.autoreset == DISABLED:
+                    raise RuntimeError(
+                        f"env {i} was stepped after its episode ended, with autoreset_mode=DISABLED: reset it "
+                        f"first (reset(options={{'reset_mask': mask}}) with mask[{i}] True)")
+                obs, r, te, tr, info = env.step(acts[i].copy())
+                if self.same_step:
+                    if te or tr:
+                        v["final"][i] = True
+                        v["final_obs"][i] = obs
+                        o = writer.write(v["final_info_values"][i], v["final_info_present"][i], info)
+                        if o:
+                            final_other = final_other or {}
+                            final_other[i] = o
+                        obs, info = env.reset()
+                    else:
+                        v["final"][i] = False
+                        v["final_info_present"][i] = False
+                        v["final_info_values"][i] = 0.0
+            obs_buf[i] = obs
+            rew[i] = r
+            term[i] = te
+            trunc[i] = tr
+            self.ended[j] = bool(te or tr) and self.autoreset != SAME_STEP
+            o = writer.write(vals[i], pres[i], info)
+            if o:
+                other = other or {}
+                other[i] = o
+        return self._reply(other, final_other)
+
+    def reset(self, seeds, options, mask):
+        v, other = self.v, None
+        for j, env in enumerate(self.envs):
+            i = self.current = self.lo + j
+            v["info_present"][i] = False
+            v["info_values"][i] = 0.0
+            if self.same_step:
+                v["final"][i] = False
+                v["final_info_present"][i] = False
+                v["final_info_values"][i] = 0.0
+            if mask is not None and not mask[j]:
+                continue
+            obs, info = env.reset(seed=seeds[j], options=options)
+            v["obs"][i] = obs
+            v["terminations"][i] = v["truncations"][i] = False
+            v["rewards"][i] = 0.0
+            self.ended[j] = False
+            o = self.writer.write(v["info_values"][i], v["info_present"][i], info)
+            if o:
+                other = other or {}
+                other[i] = o
+        return self._reply(other)
+
+    def call(self, name, args, kwargs, which=None):
+        """``name(*args, **kwargs)`` (or the attribute) of each env, or of the local envs ``which``."""
+        out = []
+        for j in range(len(self.envs)) if which is None else which:
+            self.current = self.lo + j
+            f = self.envs[j].get_wrapper_attr(name)
+            out.append(f(*args, **kwargs) if callable(f) else f)
+        return out
+
+    def set_attr(self, name, values, which=None):
+        for j, value in zip(range(len(self.envs)) if which is None else which, values):
+            self.current = self.lo + j
+            self.envs[j].set_wrapper_attr(name, value)
+
+    def close(self):
+        for env in self.envs:
+            try:
+                env.close()
+            except Exception:  # noqa: BLE001 - closing must not fail the shutdown
+                pass
+        if self.shm is not None:
+            self.v = None
+            self.shm.close()
+
+
+def _error_payload(exc: BaseException, env_index) -> dict:
+    try:
+        pickle.dumps(exc)
+        picklable = exc
+    except Exception:  # noqa: BLE001 - an unpicklable exception is sent as text
+        picklable = None
+    return {"exception": picklable, "type": type(exc).__name__, "message": str(exc),
+            "traceback": traceback.format_exc(), "env": env_index}
+
+
+def worker_main(env_id, env_kwargs, lo, hi, cmd, rep, autoreset, info_keys, keep_other, max_info_keys):
+    """Process entry point. ``cmd``/``rep``: the worker's ends (``multiprocessing.Connection``,
+    used as raw file descriptors) of the command and reply pipes."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C goes to the main process, which closes us
+    cfd, rfd = cmd.fileno(), rep.fileno()
+    try:
+        worker = _Worker(env_id, env_kwargs, lo, hi, autoreset, info_keys, keep_other, max_info_keys)
+        ipc.send(rfd, ipc.OK, worker.description())
+    except BaseException as exc:  # noqa: BLE001 - reported to the main process
+        ipc.send(rfd, ipc.ERROR, _error_payload(exc, f"{lo}..{hi - 1}"))
+        return
+    while True:
+        try:
+            op, payload = ipc.receive(cfd)
+        except (ipc.WorkerGone, OSError):     # the main process is gone
+            break
+        if op == ipc.CLOSE:
+            worker.close()
+            try:
+                ipc.send_ok(rfd)
+            except OSError:
+                pass
+            break
+        worker.current = f"{lo}..{hi - 1}"
+        try:
+            if op == ipc.STEP:
+                out = worker.step()
+            elif op == ipc.RESET:
+                out = worker.reset(*payload)
+            elif op == ipc.CALL:
+                out = worker.call(*payload)
+            elif op == ipc.SET_ATTR:
+                out = worker.set_attr(*payload)
+            elif op == ipc.ATTACH:
+                out = worker.attach(*payload)
+            else:
+                raise RuntimeError(f"unknown vector env command {op}")
+        except BaseException as exc:  # noqa: BLE001 - reported to the main process
+            try:
+                ipc.send(rfd, ipc.ERROR, _error_payload(exc, worker.current))
+            except OSError:
+                break
+            continue
+        try:
+            if out is None:
+                ipc.send_ok(rfd)
+            else:
+                ipc.send(rfd, ipc.OK, out)
+        except OSError:
+            break
