@@ -136,7 +136,7 @@ class ElasticContact:
         rest = m.rest_positions
         held = np.flatnonzero(m.fixed & ~self.anchor)
         pen = np.flatnonzero((kc > 0) & ~m.fixed)
-        loaded = np.flatnonzero(np.any(ext != 0.0, axis=1) & ~m.fixed)
+        loaded = np.flatnonzero(np.any(ext != 0.0, axis=1) & ~m.fixed & ~(kc > 0))
         u_held = (m.fixed_targets[held] - rest[held]).ravel()
         dofs3 = lambda nodes: (3 * nodes[:, None] + np.arange(3)).ravel()  # noqa: E731
         hd, pd, ed = dofs3(held), dofs3(pen), dofs3(loaded)
