@@ -89,7 +89,8 @@ class LayeredModel(TissueModel):
                               "constrained local static integration on active nodes, force accumulation")
     integrators: ClassVar[tuple[str, ...]] = ("local_static",)
     quasi_static: ClassVar[bool] = True
-    capabilities: ClassVar[frozenset] = frozenset({"forces", "implicit_contact", "quasi_static", "static_solve"})
+    capabilities: ClassVar[frozenset] = frozenset({"forces", "implicit_contact", "quasi_static", "static_solve",
+                                                   "unstructured_mesh"})
 
     def __init__(self, volume, material=None, *, max_compression: float = MAX_COMPRESSION, f_tol: float = F_TOL,
                  x_tol: float = X_TOL, max_updates: int = MAX_UPDATES, omega: float = OMEGA, solver: str = "local",
@@ -105,7 +106,12 @@ class LayeredModel(TissueModel):
             base = get_material(material if material is not None else "liver")
             mats = {int(k): base for k in np.unique(volume.labels)}
             mats.update({int(k): get_material(v) for k, v in (region_materials or {}).items()})
-            volume = layered_from_grid(volume, mats)
+            try:
+                volume = layered_from_grid(volume, mats)
+            except ConfigError:   # not a tensor grid (a snapped organ lattice, a user mesh): NBB from its edges
+                from surgsim_envs.geometry.layered_mesh import layered_from_mesh
+
+                volume = layered_from_mesh(volume, mats)
             material, region_materials = base, None
         if not (0.0 < float(max_compression) < 1.0):
             raise ConfigError(f"layered: max_compression must be in (0, 1), got {max_compression!r}")
