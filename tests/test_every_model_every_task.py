@@ -46,6 +46,15 @@ def test_model_in_task(model, task):
     env.close()
 
 
+def test_layered_serves_every_task():
+    """Issue 11: the layered model (paper 001) has every capability every task asks for, so
+    test_model_in_task steps it in each (its NBB comes from the organ lattice, geometry/layered_mesh.py)."""
+    caps = tissue.registry.get("layered").capabilities
+    for task in sorted(TASKS):
+        assert not [c for c in _env_class(task).REQUIRES if c not in caps], task
+    assert "implicit_contact" in caps     # quasi-static in a contact scene
+
+
 def test_stiffness_randomisation_goes_through_scale_material(monkeypatch):
     """Palpation's inclusion and Grasp's young_scale reach the model only via scale_material."""
     calls = []

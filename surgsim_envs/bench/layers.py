@@ -37,13 +37,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="width (m) of the ring of lattice columns around the contact written each step (prefactored)")
     p.add_argument("--prefetch-rows", action="store_true",
                    help="prefactored: back-solve the rows of the surface around the contact in a background thread")
+    p.add_argument("--stiffness", choices=("paper", "elastic"), default="paper",
+                   help="node stiffness: paper (eq. 2.8 scalar springs, default) or elastic (the snapped cells' "
+                        "elasticity, written whole each step)")
     p.add_argument("--samples", type=int, default=3, help="steps compared with the all-node solution")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--out", default=None, help="also write the JSON here")
 
 
 def run_bench(spacing=0.002, steps=300, depth=0.004, speed=0.01, max_updates=20000, samples=3,
-              progress=True, solver="prefactored", block_radius=0.002, prefetch_rows=False) -> dict:
+              progress=True, solver="prefactored", block_radius=0.002, prefetch_rows=False, stiffness="paper") -> dict:
     from tqdm import tqdm
 
     from surgsim_envs.contact.kinematic_probe import KinematicProbe
@@ -54,7 +57,7 @@ def run_bench(spacing=0.002, steps=300, depth=0.004, speed=0.01, max_updates=200
     vol = abdominal_wall_volume(spacing, size=(0.12, 0.12))
     bottom = vol.face_nodes(4)  # no node below: the whole bottom face
     model = LayeredModel(vol, fixed=bottom, max_updates=int(max_updates), solver=solver, block_radius=block_radius,
-                         prefetch_rows=prefetch_rows)
+                         prefetch_rows=prefetch_rows, stiffness=stiffness)
     build_s = time.perf_counter() - t0
     top = np.flatnonzero(vol.neighbours[:, 5] < 0)
     z_top = float(vol.nodes[top, 2].max())
@@ -65,7 +68,9 @@ def run_bench(spacing=0.002, steps=300, depth=0.004, speed=0.01, max_updates=200
     model.static_solve()
     static_s = time.perf_counter() - t
     sample_at = set(np.linspace(steps // samples, steps - 1, samples).astype(int).tolist()) if samples else set()
+    t = time.perf_counter()
     model.step(1e-3)   # the first step factorises (prefactored solver) and compiles
+    first_step_s = time.perf_counter() - t
     times, cpu, cycles, active, contacts, forces, cmp = [], [], [], [], [], [], []
     for k in tqdm(range(steps), desc="bench layers", unit="step", file=sys.stderr, disable=not progress):
         t0 = time.perf_counter()
@@ -89,7 +94,7 @@ def run_bench(spacing=0.002, steps=300, depth=0.004, speed=0.01, max_updates=200
                         "error": abs(forces[-1] / f_ref - 1.0), "left_over": int(model.unconverged)})
     return {"bench": "layers", "nodes": int(vol.n_nodes), "surface_triangles": int(len(vol.surface)),
             "spacing_m": spacing, "depth_m": depth, "speed_m_s": speed, "steps": steps,
-            "max_updates": int(max_updates), "solver": solver, "block_radius_m": block_radius, "prefetch_rows": prefetch_rows,
+            "max_updates": int(max_updates), "solver": solver, "stiffness": stiffness, "first_step_s": first_step_s, "block_radius_m": block_radius, "prefetch_rows": prefetch_rows,
             "build_s": build_s, "static_solve_s": static_s,
             "ms_per_step_median": 1e3 * float(np.median(times)), "ms_per_step_p90": 1e3 * float(np.percentile(times, 90)),
             "cpu_ms_per_step_median": 1e3 * float(np.median(cpu)),
@@ -105,7 +110,8 @@ def run_bench(spacing=0.002, steps=300, depth=0.004, speed=0.01, max_updates=200
 
 def run(args) -> int:
     res = run_bench(args.spacing, args.steps, args.depth, args.speed, args.max_updates, args.samples,
-                    solver=args.solver, block_radius=args.block_radius, prefetch_rows=args.prefetch_rows)
+                    solver=args.solver, block_radius=args.block_radius, prefetch_rows=args.prefetch_rows,
+                    stiffness=args.stiffness)
     text = json.dumps(res, indent=2)
     if args.out:
         with open(args.out, "w") as fh:

@@ -217,14 +217,21 @@ def lattice_volume(surface, spacing: float, snap: bool = True, name: str = "volu
         used, tets, index, rest = _compact(flat_tets, origin, h, counts, name, extent)
         surf = boundary_triangles(tets)
         if not snap or max_snap == 0.0:
-            return Volume(rest, tets, surf, name=name)
+            return _with_index(Volume(rest, tets, surf, name=name), index)
         disp = _snap(mesh, tri, origin, h, counts, index, rest, tets, surf, max_snap, project_unsnapped, max_project,
                      min_quality)
         kept = drop_light_corners(rest + disp, tets, min_tets)
         if len(kept) == len(tets):
             break
         flat_tets = used[tets[kept]]
-    return Volume(rest + disp, tets, surf, name=name)
+    return _with_index(Volume(rest + disp, tets, surf, name=name), index)
+
+
+def _with_index(vol: Volume, index: np.ndarray) -> Volume:
+    """``vol`` carrying ``lattice_index`` (N,3) int, each node's lattice coordinates (the layered
+    model's neighbouring bounding boxes, :mod:`surgsim_envs.geometry.layered_mesh`)."""
+    vol.lattice_index = np.asarray(index, dtype=np.int64)
+    return vol
 
 
 def _compact(flat_tets, origin, h, counts, name, extent):

@@ -145,7 +145,10 @@ def _onto_bed(vol: Volume, min_quality: float) -> Volume:
     disp = np.zeros_like(vol.nodes)
     disp[below, 2] = -vol.nodes[below, 2]
     disp, _ = guard_snaps(vol.nodes, disp, vol.tets, min_quality=min_quality)
-    return Volume(vol.nodes + disp, vol.tets, vol.surface, vol.labels, vol.name)
+    out = Volume(vol.nodes + disp, vol.tets, vol.surface, vol.labels, vol.name)
+    if getattr(vol, "lattice_index", None) is not None:   # the lattice is unchanged (layered model's NBB)
+        out.lattice_index = vol.lattice_index
+    return out
 
 
 def _organ(surface_fn, name):

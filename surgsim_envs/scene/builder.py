@@ -126,6 +126,9 @@ def placed_volume(cfg: TissueConfig):
         out = vol.with_nodes(nodes)
     else:
         out = Volume(nodes, vol.tets.copy(), vol.surface.copy(), vol.labels.copy(), vol.name, vol.node_labels.copy())
+        index = getattr(vol, "lattice_index", None)
+        if index is not None and not any(float(a) != 0.0 for a in cfg.euler):   # lattice axes = world axes
+            out.lattice_index = index
     src = getattr(vol, "source_surface", None)
     if src is not None:  # the smooth organ surface, placed like the nodes (rendered by TissueBinding)
         out.source_surface = ((src[0] - centre) @ rot.T - shift + np.asarray(cfg.position, dtype=float), src[1].copy())

@@ -46,6 +46,9 @@ X_TOL = 1e-7
 OMEGA = 1.8
 #: per-step solvers (class docstring)
 SOLVERS = ("local", "prefactored")
+#: node stiffness forms: the paper's scalar NBB springs (eq. 2.8) or the snapped cells' elasticity
+#: (:mod:`surgsim_envs.tissue.layered_elastic`)
+STIFFNESS_FORMS = ("paper", "elastic")
 #: default width (m) of the ring of lattice columns around the contact footprint the "prefactored"
 #: solver writes each step (at least one lattice spacing: the contact nodes' neighbours)
 BLOCK_RADIUS = 0.002
@@ -86,12 +89,13 @@ class LayeredModel(TissueModel):
                               "constrained local static integration on active nodes, force accumulation")
     integrators: ClassVar[tuple[str, ...]] = ("local_static",)
     quasi_static: ClassVar[bool] = True
-    capabilities: ClassVar[frozenset] = frozenset({"forces", "implicit_contact", "quasi_static", "static_solve"})
+    capabilities: ClassVar[frozenset] = frozenset({"forces", "implicit_contact", "quasi_static", "static_solve",
+                                                   "unstructured_mesh"})
 
     def __init__(self, volume, material=None, *, max_compression: float = MAX_COMPRESSION, f_tol: float = F_TOL,
                  x_tol: float = X_TOL, max_updates: int = MAX_UPDATES, omega: float = OMEGA, solver: str = "local",
                  block_radius: float = BLOCK_RADIUS, prefetch_rows: bool = False, region_materials=None,
-                 **base_kwargs):
+                 stiffness: str = "paper", **base_kwargs):
         if not isinstance(volume, LayeredVolume):  # a plain lattice volume: one material per region label
             from surgsim_envs.geometry.volume import Volume
             from surgsim_envs.materials import get_material
@@ -102,7 +106,12 @@ class LayeredModel(TissueModel):
             base = get_material(material if material is not None else "liver")
             mats = {int(k): base for k in np.unique(volume.labels)}
             mats.update({int(k): get_material(v) for k, v in (region_materials or {}).items()})
-            volume = layered_from_grid(volume, mats)
+            try:
+                volume = layered_from_grid(volume, mats)
+            except ConfigError:   # not a tensor grid (a snapped organ lattice, a user mesh): NBB from its edges
+                from surgsim_envs.geometry.layered_mesh import layered_from_mesh
+
+                volume = layered_from_mesh(volume, mats)
             material, region_materials = base, None
         if not (0.0 < float(max_compression) < 1.0):
             raise ConfigError(f"layered: max_compression must be in (0, 1), got {max_compression!r}")
@@ -111,6 +120,9 @@ class LayeredModel(TissueModel):
                 raise ConfigError(f"layered: {key} must be > 0, got {val!r}")
         if not (isinstance(omega, (int, float)) and 1.0 <= omega < 2.0):
             raise ConfigError(f"layered: omega must be in [1, 2) (1 = plain local static iteration), got {omega!r}")
+        if stiffness not in STIFFNESS_FORMS:
+            raise ConfigError(f"layered: stiffness must be one of {STIFFNESS_FORMS} ('paper': eq. 2.8 scalar springs; "
+                              f"'elastic': linear elasticity of the snapped cells), got {stiffness!r}")
         if solver not in SOLVERS:
             raise ConfigError(f"layered: solver must be one of {SOLVERS}, got {solver!r}")
         if not (isinstance(block_radius, (int, float)) and math.isfinite(block_radius) and block_radius > 0):
@@ -145,6 +157,10 @@ class LayeredModel(TissueModel):
         self._build_g = laplace_modulus(self.fields["young"], self.fields["poisson"])
         self.kk_build = self._paper_springs()
         self.kk = self.kk_build.copy()
+        self.stiffness_form = stiffness
+        self._elastic = stiffness == "elastic"
+        self._elastic_k = self._build_elastic_k() if self._elastic else None
+        self._ec = None
         # rigid materials (bone) never move
         rigid = volume.rigid_nodes
         if len(rigid):
@@ -173,6 +189,39 @@ class LayeredModel(TissueModel):
         ok = self.nbr >= 0
         kk[ok] = g[ok] * vol.spring_area[ok] / self.rest_lengths[ok]
         return np.ascontiguousarray(kk)
+
+    def _build_elastic_k(self):
+        """3N x 3N elastic stiffness of the snapped cells (``stiffness="elastic"``) from the tet fields."""
+        from surgsim_envs.tissue.layered_elastic import cell_of_tets, elastic_stiffness
+
+        if getattr(self, "_tet_cells", None) is None:
+            self._tet_cells = cell_of_tets(self.volume.lattice_index, self.volume.tets)
+        return elastic_stiffness(self.rest_positions, self.volume.tets, self.fields["young"], self.fields["poisson"],
+                                 self._tet_cells)
+
+    def _elastic_solve(self, ext: np.ndarray, kc: np.ndarray, dt: float | None) -> int:
+        """``stiffness="elastic"``: the all-node constrained equilibrium (ElasticContact); returns
+        the number of nodes written."""
+        from surgsim_envs.tissue.layered_elastic import ElasticContact
+
+        ec = self._ec
+        if ec is None or not ec.valid():
+            ec = self._ec = ElasticContact(self)
+        xs = self._x.copy()
+        settled = ec.solve(ext, kc, xs)
+        nodes = np.flatnonzero(~self.fixed)
+        if dt is not None and dt > 0:
+            self.velocities[nodes] = (self._x[nodes] - xs[nodes]) / dt
+        self._touched[:len(nodes)] = nodes
+        self._n_touched = len(nodes)
+        self.last_updates, self.last_sweeps, self.last_active = len(nodes), 1, len(nodes)
+        self.unconverged = 0 if settled else self.n_nodes
+        self.last_active_set_iterations = ec.last_iterations
+        self._moved_fixed = np.zeros(0, dtype=np.int64)
+        self._n_queue = 0
+        self._ief_nonzero = True
+        self.external_forces = ext
+        return len(nodes)
 
     def _map_springs_to_tets(self):
         """(spring rows, tet ids) pairs: the tets sharing each NBB spring's edge (for scale_material)."""
@@ -205,6 +254,9 @@ class LayeredModel(TissueModel):
         kk[i_idx, d_idx] *= factor
         self.kk = np.ascontiguousarray(kk)
         self._materialise()
+        if self._elastic:
+            self._elastic_k = self._build_elastic_k()
+            self._ec = None
         self._lap_cache = None
         self._pc = None
         self._seed_all = True
@@ -245,6 +297,7 @@ class LayeredModel(TissueModel):
         self._materialise()
         state = self.__dict__.copy()
         state["_pc"] = None
+        state["_ec"] = None
         return state
 
     # ------------------------------------------------------------------------------------------
@@ -380,7 +433,7 @@ class LayeredModel(TissueModel):
         None and ``external_forces`` the model's own zero load) and no contact stiffness, the step
         touches only the contact region: the prefactored solution, the nodes near the contact
         written (finite-checked, finite-difference velocities), the rest recovered when read."""
-        if (self.solver != "prefactored" or forces is not None or stiffness is not None
+        if (self.solver != "prefactored" or self._elastic or forces is not None or stiffness is not None
                 or self.external_forces is not self._ext_zero or self._seed_all):
             return super().step(dt, forces, stiffness)
         if not (isinstance(dt, (float, int, np.floating)) and math.isfinite(dt) and dt > 0):
@@ -462,6 +515,8 @@ class LayeredModel(TissueModel):
         kc = self._zero_kc if stiffness is None else np.ascontiguousarray(stiffness, dtype=np.float64)
         if kc.shape != (n,) or np.any(kc < 0):
             raise ConfigError(f"layered: stiffness must be (N,) >= 0 N/m, got shape {kc.shape}")
+        if self._elastic:
+            return self._elastic_solve(ext, kc, dt)
         if self.solver == "prefactored" and not all_nodes and self._prefactored_solve(ext, kc, dt):
             return self.last_updates
         step_id = self.steps
@@ -525,6 +580,11 @@ class LayeredModel(TissueModel):
         n = self.n_nodes
         ext = self.external_forces if forces is None else np.ascontiguousarray(forces, dtype=np.float64)
         kc = self._zero_kc if stiffness is None else np.ascontiguousarray(stiffness, dtype=np.float64)
+        if method == "direct" and self._elastic:
+            fixed = np.flatnonzero(self.fixed)
+            self.positions[fixed] = self.fixed_targets[fixed]
+            self._elastic_solve(ext, kc, None)
+            return self.positions.copy()
         if method == "direct":
             from surgsim_envs.tissue.layered_block import BlockSolver
 
@@ -577,6 +637,10 @@ class LayeredModel(TissueModel):
     # ------------------------------------------------------------------------------------------
     def internal_forces(self) -> np.ndarray:
         """(N,3) N spring forces on every node, with forces accumulated through rigid springs."""
+        if self._elastic:
+            from surgsim_envs.tissue.layered_elastic import elastic_forces
+
+            return elastic_forces(self, np.arange(self.n_nodes))
         out = np.zeros((self.n_nodes, 3))
         kern.spring_forces(self.positions, self.rest_positions, self.nbr, self.kk, self.push,
                            np.arange(self.n_nodes, dtype=np.int64), out)
@@ -586,6 +650,10 @@ class LayeredModel(TissueModel):
         """(3,) N, the force the tissue exerts on a tool that holds ``nodes`` (the contact mass points):
         the sum of their spring forces, accumulated through rigid springs (eqs. 2.4-2.5)."""
         idx = self._as_indices(nodes, "contact nodes")
+        if self._elastic:
+            from surgsim_envs.tissue.layered_elastic import elastic_forces
+
+            return elastic_forces(self, idx).sum(axis=0)
         out = np.zeros((len(idx), 3))
         x = self._x
         if self._lazy:
@@ -597,6 +665,9 @@ class LayeredModel(TissueModel):
         return out.sum(axis=0)
 
     def elastic_energy(self) -> float:
+        if self._elastic:
+            u = (self.positions - self.rest_positions).ravel()
+            return float(0.5 * u @ (self._elastic_k @ u))
         return float(kern.elastic_energy(self.positions, self.rest_positions, self.nbr, self.kk))
 
     def critical_dt(self) -> float:
@@ -610,6 +681,8 @@ class LayeredModel(TissueModel):
         """Sparse 3N x 3N ``-df/dx`` of the springs (node-major dofs), without the NBB constraints."""
         import scipy.sparse as sp
 
+        if self._elastic:
+            return self._elastic_k.copy()
         n = self.n_nodes
         i_idx, d_idx = np.nonzero(self.nbr >= 0)
         j = self.nbr[i_idx, d_idx]
@@ -665,7 +738,7 @@ class LayeredModel(TissueModel):
         out = super().describe()
         out.update({"materials": list(self.volume.material_names), "layers": list(self.volume.layer_names),
                     "rigid_nodes": int(len(self.rigid_nodes)), "max_compression": self.max_compression,
-                    "f_tol": self.f_tol, "x_tol": self.x_tol})
+                    "f_tol": self.f_tol, "x_tol": self.x_tol, "stiffness": self.stiffness_form})
         return out
 
 
