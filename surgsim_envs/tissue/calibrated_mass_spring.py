@@ -29,7 +29,7 @@ from surgsim_envs.tissue import msd_kernels as kern
 from surgsim_envs.tissue import nodal_volume_kernels as nvk
 from surgsim_envs.tissue.mass_spring import (CG_MAX_ITER, CG_TOLERANCE, NONLINEAR_NETWORK_FACTOR,
                                              MassSpringModel)
-from surgsim_envs.tissue.spring_calibration import calibrate
+from surgsim_envs.tissue.spring_calibration import calibrate, calibration_basis
 
 #: factor on the Lanczos estimate of the largest eigenvalue in :meth:`CalibratedMassSpringModel.critical_dt`
 #: (the Ritz value approaches lambda_max from below; DT_SAFETY applies on top of it)
@@ -68,42 +68,34 @@ class CalibratedMassSpringModel(MassSpringModel):
         super()._setup_volume_term(None)           # no per-tet term
         previous = getattr(self, "calibration", None)
         young, poisson = np.array(self.fields["young"], dtype=np.float64), np.array(self.fields["poisson"])
-        ratio = young / self._calibrated_young if previous is not None else None
-        if (ratio is not None and np.array_equal(poisson, self._calibrated_poisson)
-                and np.allclose(ratio, ratio[0], rtol=1e-12, atol=0.0)):
-            # E scaled uniformly, nu unchanged: the fit is linear in E (same springs, constants x ratio)
-            f = float(ratio[0])
-            self.calibration = replace(previous, stiffness=previous.stiffness * f, node_bulk=previous.node_bulk * f,
-                                       iterations=0)
+        if np.all(poisson >= 0.25):
+            # linear in the moduli: one fit per mesh, then sparse products (scale_material costs ~ms)
+            if getattr(self, "_basis", None) is None:
+                self._basis = calibration_basis(self.volume)
+            self.calibration = self._basis.calibration(young, poisson)
         else:
-            # scale_material with a mask / set_field: start from the old springs, rescaled per spring
+            # some nu < 1/4: a non-negative fit of the field itself, from the old springs rescaled per spring
             initial = None if previous is None else previous.stiffness * self._spring_young_ratio(previous.pairs)
             self.calibration = calibrate(self.volume, young, poisson, initial=initial)
-        self._calibrated_young, self._calibrated_poisson = young, poisson
-        tets = np.ascontiguousarray(self.volume.tets, dtype=np.int64)
-        x = self.rest_positions
-        v0 = np.zeros(len(x))
-        nvk.node_volumes(np.ascontiguousarray(x), tets, v0)
-        if np.any(v0 <= 0):
-            raise ConfigError(f"mass_spring_calibrated: volume '{self.volume.name}' has nodes with non-positive "
-                              "volume; the volume term needs positively oriented tets")
-        self.node_rest_volume = v0
+        self._calibrated_young = young
+        if getattr(self, "node_rest_volume", None) is None:
+            tets = np.ascontiguousarray(self.volume.tets, dtype=np.int64)
+            v0 = np.zeros(self.n_nodes)
+            nvk.node_volumes(np.ascontiguousarray(self.rest_positions), tets, v0)
+            if np.any(v0 <= 0):
+                raise ConfigError(f"mass_spring_calibrated: volume '{self.volume.name}' has nodes with non-positive "
+                                  "volume; the volume term needs positively oriented tets")
+            self.node_rest_volume = v0
+            self._all_tets = tets
         self.node_bulk = np.ascontiguousarray(self.calibration.node_bulk)
         # the volume term only where nu needs it: no tets to visit when every k_v is 0 (nu <= 1/4 and
         # springs that fit); the kernels then cost nothing
-        self._ntets = tets if np.any(self.node_bulk > 0) else np.zeros((0, 4), dtype=np.int64)
-        self._cg = None                # implicit buffers (sized by springs and tets) follow on first use
-        self._vgbuf = np.zeros((len(self._ntets), 4, 3))
+        ntets = self._all_tets if np.any(self.node_bulk > 0) else np.zeros((0, 4), dtype=np.int64)
+        if len(ntets) != len(getattr(self, "_ntets", ())):
+            self._ntets = ntets
+            self._cg = None            # implicit buffers (sized by springs and tets) follow on first use
+            self._vgbuf = np.zeros((len(ntets), 4, 3))
         self.volume_stiffness = "calibrated"
-
-    def _spring_young_ratio(self, pairs: np.ndarray) -> np.ndarray:
-        """(S,) ratio of the current to the last calibrated Young's modulus, node-averaged, per spring."""
-        tets = self.volume.tets.astype(np.int64).reshape(-1)
-        w = np.repeat(self.volume.tet_volumes(), 4)
-        new = np.bincount(tets, weights=w * np.repeat(self.fields["young"], 4), minlength=self.n_nodes)
-        old = np.bincount(tets, weights=w * np.repeat(self._calibrated_young, 4), minlength=self.n_nodes)
-        r = new / np.where(old > 0, old, 1.0)
-        return 0.5 * (r[pairs[:, 0]] + r[pairs[:, 1]])
 
     def _build_springs(self, overrides) -> None:
         if overrides.get("K1") is not None:
