@@ -265,3 +265,30 @@ def test_critical_dt_is_the_eigenvalue_limit_and_the_step_is_stable_below_it():
     with pytest.raises(TissueUnstableError):
         for _ in range(2000):
             fast.step(1.5 * exact)
+
+
+def test_subcycled_step_is_n_symplectic_steps_and_auto_prefers_it_to_implicit():
+    """Integrator "subcycled": a step of dt is n = ceil(dt / stable_dt()) symplectic steps of dt / n under
+    the same external forces (bit-for-bit the same trajectory); "auto" takes it for dt up to
+    MAX_SUBCYCLES stable steps and the implicit step beyond."""
+    from surgsim_envs.tissue.calibrated_mass_spring import MAX_SUBCYCLES
+
+    vol = box_volume((0.02, 0.02, 0.01), 0.0025)
+    mat = _elastic(5_000.0, 0.45).replace(relax_fraction=0.3, relax_time=0.05)
+    fixed = vol.nodes[:, 2] < -0.0049
+    sub = make("mass_spring_calibrated", vol, mat, fixed=fixed, integrator="subcycled")
+    ref = make("mass_spring_calibrated", vol, mat, fixed=fixed, integrator="symplectic")
+    dt = 2.5 * sub.stable_dt()
+    f = np.zeros((vol.n_nodes, 3))
+    f[np.argmax(vol.nodes[:, 2]), 2] = -1e-4
+    for _ in range(20):
+        sub.step(dt, f)
+        for _ in range(3):
+            ref.step(dt / 3, f)
+    assert sub.subcycle_count(dt) == 3
+    np.testing.assert_allclose(sub.positions, ref.positions, rtol=0, atol=1e-15)
+    auto = make("mass_spring_calibrated", vol, mat, fixed=fixed, integrator="auto")
+    s = auto.stable_dt()
+    assert auto.choose_integrator(0.9 * s) == "symplectic"
+    assert auto.choose_integrator(1.5 * s) == "subcycled"
+    assert auto.choose_integrator((MAX_SUBCYCLES + 0.5) * s) == "implicit"

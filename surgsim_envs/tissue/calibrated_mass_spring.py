@@ -25,9 +25,10 @@ from typing import ClassVar
 import numpy as np
 
 from surgsim_envs.errors import ConfigError
+from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS, DT_SAFETY
 from surgsim_envs.tissue import msd_kernels as kern
 from surgsim_envs.tissue import nodal_volume_kernels as nvk
-from surgsim_envs.tissue.mass_spring import (CG_MAX_ITER, CG_TOLERANCE, NONLINEAR_NETWORK_FACTOR,
+from surgsim_envs.tissue.mass_spring import (CG_MAX_ITER, NONLINEAR_NETWORK_FACTOR,
                                              MassSpringModel)
 from surgsim_envs.tissue.spring_calibration import calibrate, calibration_basis
 
@@ -36,6 +37,10 @@ from surgsim_envs.tissue.spring_calibration import calibrate, calibration_basis
 LANCZOS_MARGIN = 1.05
 #: the Lanczos estimate is used only down to bound / LANCZOS_FLOOR (the bound is 2-3x the exact value)
 LANCZOS_FLOOR = 16.0
+#: "auto" sub-cycles the explicit step (integrator "subcycled") up to this many symplectic steps per dt
+#: before it takes the implicit one: one implicit step costs 6-13 symplectic ones here (docs/benchmarks.md
+#: "Calibrated mass-spring: cost and default (issue 16, fourth pass)")
+MAX_SUBCYCLES = 4
 
 
 class CalibratedMassSpringModel(MassSpringModel):
@@ -51,6 +56,10 @@ class CalibratedMassSpringModel(MassSpringModel):
     summary: ClassVar[str] = ("mass-spring network (paper 002) with spring constants and a nodal volume term "
                               "identified from linear elasticity (matches FEM at small strain), auto/symplectic/implicit")
     capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "implicit_contact", "viscoelastic"})
+    #: "subcycled": the symplectic step split into n = ceil(dt / stable_dt()) equal steps under the same
+    #: external forces (n re-evaluated with critical_dt(), as "auto" does); "auto" takes it instead of
+    #: "implicit" while n <= MAX_SUBCYCLES and the contact stiffness alone is stable at dt
+    integrators: ClassVar[tuple[str, ...]] = ("symplectic", "implicit", "subcycled")
 
     def __init__(self, volume, material="liver", *, integrator=None, K2=None, b0=None, b1=None, **base_kwargs):
         for key in ("K1", "springs", "volume_stiffness"):
@@ -61,6 +70,7 @@ class CalibratedMassSpringModel(MassSpringModel):
         n = self.n_nodes
         self._vbuf = np.zeros(n)
         self._fvol = np.zeros((n, 3))
+        self._subcycles, self._sub_dt, self._sub_step = 0, math.nan, 0
 
     # ---------------------------------------------------------------------------------------
     # Parameters (hooks called by MassSpringModel.__init__)
@@ -94,7 +104,8 @@ class CalibratedMassSpringModel(MassSpringModel):
         if len(ntets) != len(getattr(self, "_ntets", ())):
             self._ntets = ntets
             self._cg = None            # implicit buffers (sized by springs and tets) follow on first use
-            self._vgbuf = np.zeros((len(ntets), 4, 3))
+            # sparsity of the nodal volume gradients G_i (implicit step, Lanczos, bound): once per mesh
+            self._gpattern = nvk.gradient_pattern(ntets, self.n_nodes)
         self.volume_stiffness = "calibrated"
 
     def _build_springs(self, overrides) -> None:
@@ -148,6 +159,34 @@ class CalibratedMassSpringModel(MassSpringModel):
             self._cg = None
 
     # ---------------------------------------------------------------------------------------
+    # Integrator choice: explicit sub-cycles before implicit
+    def _pick(self, dt: float, crit: float, contact_rate: float) -> str:
+        choice = super()._pick(dt, crit, contact_rate)
+        if choice != self.auto_pair[1] or not (crit > 0) or not math.isfinite(crit):
+            return choice
+        n = math.ceil(dt / (DT_SAFETY * crit) - 1e-12)
+        # the contact force is held over the sub-steps: its own explicit limit applies to dt
+        contact_ok = contact_rate <= 0 or dt <= DT_SAFETY * 2.0 / math.sqrt(contact_rate)
+        if n <= MAX_SUBCYCLES and contact_ok:
+            self._subcycles = n
+            return "subcycled"
+        return choice
+
+    def subcycle_count(self, dt: float) -> int:
+        """Symplectic steps per step of ``dt`` s under integrator "subcycled": ceil(dt / stable_dt()), with
+        critical_dt() re-evaluated when dt changes, every AUTO_RECHECK_STEPS steps and after reset."""
+        if self.integrator == "auto" and self._subcycles:
+            return self._subcycles
+        if dt != self._sub_dt or self.steps - self._sub_step >= AUTO_RECHECK_STEPS or not self._subcycles:
+            self._subcycles = max(1, math.ceil(dt / self.stable_dt() - 1e-12))
+            self._sub_dt, self._sub_step = dt, self.steps
+        return self._subcycles
+
+    def _reset_state(self) -> None:
+        super()._reset_state()
+        self._subcycles, self._sub_dt, self._sub_step = 0, math.nan, 0
+
+    # ---------------------------------------------------------------------------------------
     # Stepping
     def _advance(self, dt: float, forces: np.ndarray, stiffness: np.ndarray | None) -> None:
         kMg, decay = self._branch_coeffs(self._pending_dt)
@@ -159,31 +198,41 @@ class CalibratedMassSpringModel(MassSpringModel):
             if kc.shape != (self.n_nodes,) or not np.all(np.isfinite(kc)) or np.any(kc < 0):
                 raise ConfigError(f"stiffness must be a finite, non-negative ({self.n_nodes},) array in N/m, "
                                   f"got shape {np.shape(stiffness)}")
-        if self.active_integrator == "symplectic":
-            np.copyto(self._fvol, fext)
-            nvk.add_forces_cached(self.positions, self._ntets, self.node_rest_volume, self.node_bulk, self._vbuf,
-                                  self._vgbuf, self._fvol)
-            kern.symplectic_step(self.positions, self.velocities, self.inv_mass, self.b0, self._fvol, self.gravity,
-                                 self.fixed, dt, self.si, self.sj, self.rest_lengths, self.K1, self.K2,
-                                 kMg, decay, self._s, self._dl, self._f, self._vtets, self.volume_rest, self.volume_kv)
-        else:
-            kMg_next, _ = self._branch_coeffs(dt)
-            if self._cg is None:
-                self._allocate_implicit_buffers()
-            r, z, p, ap, pre = self._cg
-            self.last_cg_iterations = nvk.implicit_step(
-                self.positions, self.velocities, self.masses, self.b0, fext, self.gravity, self.fixed, kc, dt,
-                self.si, self.sj, self.rest_lengths, self.K1, self.K2, kMg, decay, kMg_next, self._s, self._dl,
-                self._f, self._coef_a, self._coef_g, self._unit, self._diag, pre, r, z, p, ap,
-                CG_TOLERANCE, CG_MAX_ITER, self._ntets, self.node_rest_volume, self.node_bulk,
-                self._ngrad, self._nc, self._vbuf, self._nsbuf)
+        active = self.active_integrator
+        if active != "implicit":
+            n = self.subcycle_count(dt) if active == "subcycled" else 1
+            h = dt / n
+            for k in range(n):
+                if k:
+                    kMg, decay = self._branch_coeffs(h)
+                np.copyto(self._fvol, fext)
+                nvk.add_forces(self.positions, self._ntets, self.node_rest_volume, self.node_bulk, self._vbuf,
+                               self._fvol)
+                kern.symplectic_step_work(self.positions, self.velocities, self.inv_mass, self.b0, self._fvol,
+                                          self.gravity, self.fixed, h, self.si, self.sj, self.rest_lengths, self.K1,
+                                          self.K2, kMg, decay, self._s, self._dl, self._f, self._vtets,
+                                          self.volume_rest, self.volume_kv, self.spring_work())
+            self._pending_dt = h
+            return
+        kMg_next, _ = self._branch_coeffs(dt)
+        if self._cg is None:
+            self._allocate_implicit_buffers()
+        r, z, p, ap, pre = self._cg
+        self.last_cg_iterations = nvk.implicit_step(
+            self.positions, self.velocities, self.masses, self.b0, fext, self.gravity, self.fixed, kc, dt,
+            self.si, self.sj, self.rest_lengths, self.K1, self.K2, kMg, decay, kMg_next, self._s, self._dl,
+            self._f, self._coef_a, self._coef_g, self._unit, self._diag, pre, r, z, p, ap,
+            self.cg_tol, CG_MAX_ITER, self._ntets, self.node_rest_volume, self.node_bulk,
+            *self._gpattern, self._ngrad, self._nc, self._vbuf)
+        if stiffness is not None:   # backward Euler integrated f_ext - kc (x_{n+1} - x_n) = f_ext - dt kc v_{n+1}
+            free = ~self.fixed
+            self.integrated_external_forces[free] -= (dt * kc[free])[:, None] * self.velocities[free]
         self._pending_dt = dt
 
     def _allocate_implicit_buffers(self) -> None:
         super()._allocate_implicit_buffers()
-        self._ngrad = np.zeros((len(self._ntets), 4, 3))
+        self._ngrad = np.zeros((len(self._gpattern[1]), 3))
         self._nc = np.zeros(self.n_nodes)
-        self._nsbuf = np.zeros(self.n_nodes)
 
     # ---------------------------------------------------------------------------------------
     # Forces, energies, stiffness
@@ -232,17 +281,18 @@ class CalibratedMassSpringModel(MassSpringModel):
         ca, cg, unit = np.zeros(ne), np.zeros(ne), np.zeros((ne, 3))
         kern.spring_tangents(self.positions, self.si, self.sj, self.rest_lengths, self.K1, self.K2, self.kM,
                              self._s, True, ca, cg, unit)
-        vgrad = np.zeros((len(self._ntets), 4, 3))
-        nvk.tangents(self.positions, self._ntets, vgrad)
+        indptr, cols, slot = self._gpattern
+        G = np.zeros((len(cols), 3))
+        nvk.assemble_gradients(self.positions, self._ntets, slot, G)
         c = self.node_bulk / self.node_rest_volume
         s = np.repeat(np.where(self.fixed, 0.0, np.sqrt(self.inv_mass)), 3)
-        zero_m, sbuf, out = np.zeros(n), np.zeros(n), np.zeros((n, 3))
+        zero_m, out = np.zeros(n), np.zeros((n, 3))
         no_t, no_g, no_c = np.zeros((0, 4), dtype=np.int64), np.zeros((0, 4, 3)), np.zeros(0)
 
         def matvec(y):
             x = np.ascontiguousarray((np.ravel(y) * s).reshape(n, 3))
             kern._system_matvec(x, zero_m, 1.0, self.si, self.sj, ca, cg, unit, self.fixed, out, no_t, no_g, no_c)
-            nvk.matvec_add(x, 1.0, self._ntets, vgrad, c, sbuf, out)
+            nvk.gradient_matvec_add(x, 1.0, indptr, cols, G, c, out)
             return out.ravel() * s
 
         op = spla.LinearOperator((3 * n, 3 * n), matvec=matvec, dtype=np.float64)
@@ -254,21 +304,14 @@ class CalibratedMassSpringModel(MassSpringModel):
         volume term's Gauss-Newton tangent (c_i = k_v,i / V0_i, G_i = dV_i/dx). By Cauchy-Schwarz,
         (G_i . x)^2 <= g_i sum_{a in S_i} m_a |x_a|^2 with g_i = sum_a |G_ia|^2 / m_a (S_i: node i's
         1-ring), so x^T K_v x <= max_a (sum_{i: a in S_i} c_i g_i) x^T M x. About 2x tighter than
-        the absolute row sums (:func:`nodal_volume_kernels.row_sums`), which cut the stable dt of the
+        the absolute row sums (the second pass's bound), which cut the stable dt of the
         5 mm palpation slab to 0.41 of its eigenvalue-exact value."""
         x = self.positions if positions is None else np.ascontiguousarray(positions, dtype=np.float64)
-        tets, n = self._ntets, self.n_nodes
-        g = np.zeros((len(tets), 4, 3))
-        nvk.tangents(x, tets, g)
-        # G_ia = sum over tets holding i and a of dV_t/dx_a / 4: 16 (i, a) corner pairs per tet
-        ii = np.repeat(tets, 4, axis=1).ravel()
-        aa = np.tile(tets, (1, 4)).ravel()
-        vals = np.tile(0.25 * g, (1, 4, 1)).reshape(-1, 3)
-        key = ii * n + aa
-        uniq, inv = np.unique(key, return_inverse=True)
-        G = np.zeros((len(uniq), 3))
-        np.add.at(G, inv, vals)
-        pi, pa = uniq // n, uniq % n
+        n = self.n_nodes
+        indptr, pa, slot = self._gpattern
+        G = np.zeros((len(pa), 3))
+        nvk.assemble_gradients(x, self._ntets, slot, G)
+        pi = np.repeat(np.arange(n), np.diff(indptr))
         free = ~self.fixed[pa]
         gi = np.bincount(pi, weights=np.where(free, np.sum(G * G, axis=1) * self.inv_mass[pa], 0.0), minlength=n)
         c = self.node_bulk / self.node_rest_volume

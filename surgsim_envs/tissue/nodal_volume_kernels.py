@@ -7,7 +7,7 @@ Each node i owns the volume V_i = sum over its tets of V_t / 4 (V_t signed, m^3)
 Forces: with p_i = kv_i (V_i - V0_i) / V0_i (Pa), ``f_a = -sum_t (sum_{i in t} p_i / 4) dV_t/dx_a``
 (Bonet & Burton 1998 averaged nodal pressure, the volumetric part of ``fem``'s ANP). Gauss-Newton
 tangent: ``K = sum_i c_i G_i G_i^T``, c_i = kv_i / V0_i, G_i = dV_i/dx = sum_{t ∋ i} (dV_t/dx) / 4;
-the product K x is two passes over the tets (s_i = G_i . x, then scatter). The indefinite
+the product K x is two passes over the sparse G (s_i = G_i . x, then scatter; :func:`gradient_matvec_add`). The indefinite
 ``p_i d2V_i/dx2`` part is left out (zero at rest), as in the per-tet term of
 :mod:`surgsim_envs.tissue.msd_kernels`. :func:`implicit_step` is that module's backward-Euler
 step (springs + Maxwell branches) with this term in place of the per-tet one.
@@ -34,43 +34,127 @@ def node_volumes(pos, tets, out):
 
 @njit(cache=True, fastmath=True)
 def add_forces(pos, tets, V0, kv, vbuf, f_out):
-    """Add the nodal-volume forces (N) to ``f_out`` (N,3); ``vbuf`` (N,) is work space."""
-    node_volumes(pos, tets, vbuf)
+    """Add the nodal-volume forces (N) to ``f_out`` (N,3); ``vbuf`` (N,) is work space.
+
+    Two passes over the tets, written out with scalar locals: the volumes (a triple product per
+    tet), then each tet's gradient recomputed and scattered with its mean nodal pressure (recomputing
+    3 cross products is cheaper than storing and re-reading a (T,4,3) gradient array: 92 vs 120 us
+    for the 6,144-tet palpation slab)."""
+    vbuf[:] = 0.0
+    for t in range(tets.shape[0]):
+        a = tets[t, 0]
+        b = tets[t, 1]
+        c = tets[t, 2]
+        d = tets[t, 3]
+        ax = pos[a, 0]
+        ay = pos[a, 1]
+        az = pos[a, 2]
+        e10 = pos[b, 0] - ax
+        e11 = pos[b, 1] - ay
+        e12 = pos[b, 2] - az
+        e20 = pos[c, 0] - ax
+        e21 = pos[c, 1] - ay
+        e22 = pos[c, 2] - az
+        e30 = pos[d, 0] - ax
+        e31 = pos[d, 1] - ay
+        e32 = pos[d, 2] - az
+        q = (e10 * (e21 * e32 - e22 * e31) + e11 * (e22 * e30 - e20 * e32) + e12 * (e20 * e31 - e21 * e30)) / 24.0
+        vbuf[a] += q
+        vbuf[b] += q
+        vbuf[c] += q
+        vbuf[d] += q
     for i in range(vbuf.shape[0]):
         vbuf[i] = kv[i] * (vbuf[i] - V0[i]) / V0[i]        # pressure p_i (Pa)
-    g = np.empty((4, 3))
     for t in range(tets.shape[0]):
-        _tet_volume_gradient(pos, tets, t, g)
-        p = 0.25 * (vbuf[tets[t, 0]] + vbuf[tets[t, 1]] + vbuf[tets[t, 2]] + vbuf[tets[t, 3]])
-        for a in range(4):
-            n = tets[t, a]
-            f_out[n, 0] -= p * g[a, 0]
-            f_out[n, 1] -= p * g[a, 1]
-            f_out[n, 2] -= p * g[a, 2]
+        a = tets[t, 0]
+        b = tets[t, 1]
+        c = tets[t, 2]
+        d = tets[t, 3]
+        p = (vbuf[a] + vbuf[b] + vbuf[c] + vbuf[d]) * (0.25 / 6.0)
+        ax = pos[a, 0]
+        ay = pos[a, 1]
+        az = pos[a, 2]
+        e10 = pos[b, 0] - ax
+        e11 = pos[b, 1] - ay
+        e12 = pos[b, 2] - az
+        e20 = pos[c, 0] - ax
+        e21 = pos[c, 1] - ay
+        e22 = pos[c, 2] - az
+        e30 = pos[d, 0] - ax
+        e31 = pos[d, 1] - ay
+        e32 = pos[d, 2] - az
+        g10 = e21 * e32 - e22 * e31      # 6 dV/dx_b, 6 dV/dx_c, 6 dV/dx_d; dV/dx_a = -(sum)
+        g11 = e22 * e30 - e20 * e32
+        g12 = e20 * e31 - e21 * e30
+        g20 = e31 * e12 - e32 * e11
+        g21 = e32 * e10 - e30 * e12
+        g22 = e30 * e11 - e31 * e10
+        g30 = e11 * e22 - e12 * e21
+        g31 = e12 * e20 - e10 * e22
+        g32 = e10 * e21 - e11 * e20
+        f_out[b, 0] -= p * g10
+        f_out[b, 1] -= p * g11
+        f_out[b, 2] -= p * g12
+        f_out[c, 0] -= p * g20
+        f_out[c, 1] -= p * g21
+        f_out[c, 2] -= p * g22
+        f_out[d, 0] -= p * g30
+        f_out[d, 1] -= p * g31
+        f_out[d, 2] -= p * g32
+        f_out[a, 0] += p * (g10 + g20 + g30)
+        f_out[a, 1] += p * (g11 + g21 + g31)
+        f_out[a, 2] += p * (g12 + g22 + g32)
+
+
+def gradient_pattern(tets: np.ndarray, n_nodes: int):
+    """Sparsity of the nodal volume gradients G_i = dV_i/dx (row i: the nodes a of node i's tets), built
+    once per mesh: ``(indptr (N+1,), cols (nnz,), slot (T,4,4))`` with slot[t, p, q] the entry
+    (row tets[t,p], col tets[t,q]). About 15 entries per row against 16 corner pairs per tet
+    (~4x fewer than the tets carry)."""
+    tets = np.asarray(tets, dtype=np.int64)
+    rows = np.repeat(tets, 4, axis=1).ravel()
+    cols = np.tile(tets, (1, 4)).ravel()
+    key = rows * n_nodes + cols
+    uniq, inv = np.unique(key, return_inverse=True)
+    indptr = np.searchsorted(uniq // n_nodes, np.arange(n_nodes + 1)).astype(np.int64)
+    return indptr, np.ascontiguousarray(uniq % n_nodes, dtype=np.int64), inv.reshape(len(tets), 4, 4).astype(np.int64)
 
 
 @njit(cache=True, fastmath=True)
-def add_forces_cached(pos, tets, V0, kv, vbuf, vgrad, f_out):
-    """:func:`add_forces` with one gradient evaluation per tet: the first pass keeps dV_t/dx in
-    ``vgrad`` (T,4,3) for the second (the gradient is most of the work)."""
-    vbuf[:] = 0.0
+def assemble_gradients(pos, tets, slot, G):
+    """G (nnz,3) = the nodal volume gradients dV_i/dx_a (m^2) at ``pos`` in the pattern of
+    :func:`gradient_pattern`: each tet adds dV_t/dx_a / 4 to the rows of its four nodes."""
+    G[:, :] = 0.0
     g = np.empty((4, 3))
     for t in range(tets.shape[0]):
-        q = 0.25 * _tet_volume_gradient(pos, tets, t, g)
-        for a in range(4):
-            vbuf[tets[t, a]] += q
-            vgrad[t, a, 0] = g[a, 0]
-            vgrad[t, a, 1] = g[a, 1]
-            vgrad[t, a, 2] = g[a, 2]
-    for i in range(vbuf.shape[0]):
-        vbuf[i] = kv[i] * (vbuf[i] - V0[i]) / V0[i]        # pressure p_i (Pa)
-    for t in range(tets.shape[0]):
-        p = 0.25 * (vbuf[tets[t, 0]] + vbuf[tets[t, 1]] + vbuf[tets[t, 2]] + vbuf[tets[t, 3]])
-        for a in range(4):
-            n = tets[t, a]
-            f_out[n, 0] -= p * vgrad[t, a, 0]
-            f_out[n, 1] -= p * vgrad[t, a, 1]
-            f_out[n, 2] -= p * vgrad[t, a, 2]
+        _tet_volume_gradient(pos, tets, t, g)
+        for q in range(4):
+            g0 = 0.25 * g[q, 0]
+            g1 = 0.25 * g[q, 1]
+            g2 = 0.25 * g[q, 2]
+            for p in range(4):
+                k = slot[t, p, q]
+                G[k, 0] += g0
+                G[k, 1] += g1
+                G[k, 2] += g2
+
+
+@njit(cache=True, fastmath=True)
+def gradient_matvec_add(x, h2, indptr, cols, G, c, out):
+    """out += h2 * sum_i c_i G_i (G_i . x) with G from :func:`assemble_gradients` (one pass over its
+    entries to form G_i . x, one to scatter)."""
+    for i in range(indptr.shape[0] - 1):
+        s = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            a = cols[k]
+            s += G[k, 0] * x[a, 0] + G[k, 1] * x[a, 1] + G[k, 2] * x[a, 2]
+        s *= h2 * c[i]
+        if s != 0.0:
+            for k in range(indptr[i], indptr[i + 1]):
+                a = cols[k]
+                out[a, 0] += s * G[k, 0]
+                out[a, 1] += s * G[k, 1]
+                out[a, 2] += s * G[k, 2]
 
 
 @njit(cache=True, fastmath=True)
@@ -96,61 +180,10 @@ def tangents(pos, tets, vgrad):
 
 
 @njit(cache=True, fastmath=True)
-def matvec_add(x, h2, tets, vgrad, c, sbuf, out):
-    """out += h2 * sum_i c_i G_i (G_i . x) (the term's Gauss-Newton tangent times x)."""
-    sbuf[:] = 0.0
-    for t in range(tets.shape[0]):
-        q = 0.0
-        for a in range(4):
-            n = tets[t, a]
-            q += vgrad[t, a, 0] * x[n, 0] + vgrad[t, a, 1] * x[n, 1] + vgrad[t, a, 2] * x[n, 2]
-        q *= 0.25
-        for a in range(4):
-            sbuf[tets[t, a]] += q
-    for t in range(tets.shape[0]):
-        p = 0.0
-        for a in range(4):
-            n = tets[t, a]
-            p += c[n] * sbuf[n]
-        p *= 0.25 * h2
-        for a in range(4):
-            n = tets[t, a]
-            out[n, 0] += p * vgrad[t, a, 0]
-            out[n, 1] += p * vgrad[t, a, 1]
-            out[n, 2] += p * vgrad[t, a, 2]
-
-
-@njit(cache=True, fastmath=True)
-def row_sums(pos, tets, c, out):
-    """Upper bound of the absolute row sums (N/m) of the Gauss-Newton tangent into ``out`` (N,3):
-    |K_ra| <= sum_{t ∋ r} |g_t,r| / 4 * sum_{i in t} c_i |G_i|_1, |G_i|_1 <= sum_{t ∋ i} |g_t|_1 / 4."""
-    n = pos.shape[0]
-    g1 = np.zeros(n)
-    g = np.empty((4, 3))
-    for t in range(tets.shape[0]):
-        _tet_volume_gradient(pos, tets, t, g)
-        s = 0.0
-        for a in range(4):
-            s += abs(g[a, 0]) + abs(g[a, 1]) + abs(g[a, 2])
-        for a in range(4):
-            g1[tets[t, a]] += 0.25 * s
-    out[:, :] = 0.0
-    for t in range(tets.shape[0]):
-        _tet_volume_gradient(pos, tets, t, g)
-        w = 0.0
-        for a in range(4):
-            w += c[tets[t, a]] * g1[tets[t, a]]
-        for a in range(4):
-            n = tets[t, a]
-            for k in range(3):
-                out[n, k] += 0.25 * abs(g[a, k]) * w
-
-
-@njit(cache=True, fastmath=True)
 def _matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out, no_tets, no_grad, no_coef,
-            tets, vgrad, c, sbuf):
+            indptr, cols, G, c):
     _system_matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out, no_tets, no_grad, no_coef)
-    matvec_add(x, h2, tets, vgrad, c, sbuf, out)
+    gradient_matvec_add(x, h2, indptr, cols, G, c, out)
     for a in range(x.shape[0]):
         if fixed[a]:
             out[a, 0] = 0.0
@@ -162,11 +195,13 @@ def _matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out, no_tets, no
 def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
                   si, sj, L0, K1, K2, kMg, decay, kMg_next, s_state, dl_state,
                   f_buf, coef_a, coef_g, unit, diag_m, precond, r, z, p, ap, tol, max_iter,
-                  tets, V0, kv, vgrad, c, vbuf, sbuf):
+                  tets, V0, kv, indptr, cols, slot, G, c, vbuf):
     """One linearly implicit backward-Euler step in place (one Newton step, Jacobi-preconditioned
     matrix-free CG): (M + dt B + dt^2 (K_springs + K_volume + Kc)) v_new = M v + dt (f + f_ext + M g),
     x += dt v_new. As :func:`surgsim_envs.tissue.msd_kernels.implicit_step` with the nodal-volume
-    term (``tets``, ``V0``, ``kv`` per node; buffers ``vgrad`` (T,4,3), ``c``, ``vbuf``, ``sbuf`` (N,)).
+    term (``tets``, ``V0``, ``kv`` per node; its gradients in the pattern ``indptr``, ``cols``, ``slot`` of
+    :func:`gradient_pattern`, buffers ``G`` (nnz,3), ``c``, ``vbuf`` (N,)); the Jacobi preconditioner
+    has the term's exact diagonal sum_i c_i G_ia^2.
     Returns the number of CG iterations."""
     n = pos.shape[0]
     no_tets = np.zeros((0, 4), dtype=tets.dtype)
@@ -175,7 +210,7 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
     spring_forces(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, True, f_buf)
     spring_tangents(pos, si, sj, L0, K1, K2, kMg_next, s_state, True, coef_a, coef_g, unit)
     add_forces(pos, tets, V0, kv, vbuf, f_buf)
-    tangents(pos, tets, vgrad)
+    assemble_gradients(pos, tets, slot, G)
     for i in range(n):
         c[i] = kv[i] / V0[i]
     h2 = dt * dt
@@ -191,15 +226,13 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
             d = h2 * (coef_a[e] * unit[e, k] * unit[e, k] + coef_g[e])
             precond[i, k] += d
             precond[j, k] += d
-    for t in range(tets.shape[0]):     # diagonal of the volume tangent, cross-tet terms left out
-        w = 0.0
-        for a in range(4):
-            w += c[tets[t, a]]
-        w *= h2 / 16.0
-        for a in range(4):
-            m = tets[t, a]
-            for k in range(3):
-                precond[m, k] += w * vgrad[t, a, k] * vgrad[t, a, k]
+    for i in range(indptr.shape[0] - 1):     # diagonal of the volume tangent: sum_i c_i G_ia^2
+        w = h2 * c[i]
+        for k in range(indptr[i], indptr[i + 1]):
+            a = cols[k]
+            precond[a, 0] += w * G[k, 0] * G[k, 0]
+            precond[a, 1] += w * G[k, 1] * G[k, 1]
+            precond[a, 2] += w * G[k, 2] * G[k, 2]
     rhs_norm2 = 0.0
     for a in range(n):
         for k in range(3):
@@ -209,7 +242,7 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
             else:
                 z[a, k] = mass[a] * vel[a, k] + dt * (f_buf[a, k] + fext[a, k] + mass[a] * gravity[k])
                 rhs_norm2 += z[a, k] * z[a, k]
-    _matvec(vel, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap, no_tets, no_grad, no_coef, tets, vgrad, c, sbuf)
+    _matvec(vel, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap, no_tets, no_grad, no_coef, indptr, cols, G, c)
     rz = 0.0
     r_norm2 = 0.0
     for a in range(n):
@@ -224,7 +257,7 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
     limit = tol * tol * rhs_norm2
     it = 0
     while it < max_iter and r_norm2 > limit and r_norm2 > 1e-300:
-        _matvec(p, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap, no_tets, no_grad, no_coef, tets, vgrad, c, sbuf)
+        _matvec(p, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap, no_tets, no_grad, no_coef, indptr, cols, G, c)
         pap = 0.0
         for a in range(n):
             pap += p[a, 0] * ap[a, 0] + p[a, 1] * ap[a, 1] + p[a, 2] * ap[a, 2]
