@@ -104,8 +104,6 @@ class CalibratedMassSpringModel(MassSpringModel):
         if len(ntets) != len(getattr(self, "_ntets", ())):
             self._ntets = ntets
             self._cg = None            # implicit buffers (sized by springs and tets) follow on first use
-            # sparsity of the nodal volume gradients G_i (implicit step, Lanczos, bound): once per mesh
-            self._gpattern = nvk.gradient_pattern(ntets, self.n_nodes)
         self.volume_stiffness = "calibrated"
 
     def _build_springs(self, overrides) -> None:
@@ -223,7 +221,7 @@ class CalibratedMassSpringModel(MassSpringModel):
             self.si, self.sj, self.rest_lengths, self.K1, self.K2, kMg, decay, kMg_next, self._s, self._dl,
             self._f, self._coef_a, self._coef_g, self._unit, self._diag, pre, r, z, p, ap,
             self.cg_tol, CG_MAX_ITER, self._ntets, self.node_rest_volume, self.node_bulk,
-            *self._gpattern, self._ngrad, self._nc, self._vbuf)
+            self._ngrad, self._nc, self._vbuf, self._nsbuf)
         if stiffness is not None:   # backward Euler integrated f_ext - kc (x_{n+1} - x_n) = f_ext - dt kc v_{n+1}
             free = ~self.fixed
             self.integrated_external_forces[free] -= (dt * kc[free])[:, None] * self.velocities[free]
@@ -231,8 +229,9 @@ class CalibratedMassSpringModel(MassSpringModel):
 
     def _allocate_implicit_buffers(self) -> None:
         super()._allocate_implicit_buffers()
-        self._ngrad = np.zeros((len(self._gpattern[1]), 3))
+        self._ngrad = np.zeros((len(self._ntets), 4, 3))
         self._nc = np.zeros(self.n_nodes)
+        self._nsbuf = np.zeros(self.n_nodes)
 
     # ---------------------------------------------------------------------------------------
     # Forces, energies, stiffness
@@ -281,18 +280,17 @@ class CalibratedMassSpringModel(MassSpringModel):
         ca, cg, unit = np.zeros(ne), np.zeros(ne), np.zeros((ne, 3))
         kern.spring_tangents(self.positions, self.si, self.sj, self.rest_lengths, self.K1, self.K2, self.kM,
                              self._s, True, ca, cg, unit)
-        indptr, cols, slot = self._gpattern
-        G = np.zeros((len(cols), 3))
-        nvk.assemble_gradients(self.positions, self._ntets, slot, G)
+        vgrad = np.zeros((len(self._ntets), 4, 3))
+        nvk.tangents(self.positions, self._ntets, vgrad)
         c = self.node_bulk / self.node_rest_volume
         s = np.repeat(np.where(self.fixed, 0.0, np.sqrt(self.inv_mass)), 3)
-        zero_m, out = np.zeros(n), np.zeros((n, 3))
+        zero_m, sbuf, out = np.zeros(n), np.zeros(n), np.zeros((n, 3))
         no_t, no_g, no_c = np.zeros((0, 4), dtype=np.int64), np.zeros((0, 4, 3)), np.zeros(0)
 
         def matvec(y):
             x = np.ascontiguousarray((np.ravel(y) * s).reshape(n, 3))
             kern._system_matvec(x, zero_m, 1.0, self.si, self.sj, ca, cg, unit, self.fixed, out, no_t, no_g, no_c)
-            nvk.gradient_matvec_add(x, 1.0, indptr, cols, G, c, out)
+            nvk.matvec_add(x, 1.0, self._ntets, vgrad, c, sbuf, out)
             return out.ravel() * s
 
         op = spla.LinearOperator((3 * n, 3 * n), matvec=matvec, dtype=np.float64)
@@ -307,11 +305,18 @@ class CalibratedMassSpringModel(MassSpringModel):
         the absolute row sums (the second pass's bound), which cut the stable dt of the
         5 mm palpation slab to 0.41 of its eigenvalue-exact value."""
         x = self.positions if positions is None else np.ascontiguousarray(positions, dtype=np.float64)
-        n = self.n_nodes
-        indptr, pa, slot = self._gpattern
-        G = np.zeros((len(pa), 3))
-        nvk.assemble_gradients(x, self._ntets, slot, G)
-        pi = np.repeat(np.arange(n), np.diff(indptr))
+        tets, n = self._ntets, self.n_nodes
+        g = np.zeros((len(tets), 4, 3))
+        nvk.tangents(x, tets, g)
+        # G_ia = sum over tets holding i and a of dV_t/dx_a / 4: 16 (i, a) corner pairs per tet
+        ii = np.repeat(tets, 4, axis=1).ravel()
+        aa = np.tile(tets, (1, 4)).ravel()
+        vals = np.tile(0.25 * g, (1, 4, 1)).reshape(-1, 3)
+        key = ii * n + aa
+        uniq, inv = np.unique(key, return_inverse=True)
+        G = np.zeros((len(uniq), 3))
+        np.add.at(G, inv, vals)
+        pi, pa = uniq // n, uniq % n
         free = ~self.fixed[pa]
         gi = np.bincount(pi, weights=np.where(free, np.sum(G * G, axis=1) * self.inv_mass[pa], 0.0), minlength=n)
         c = self.node_bulk / self.node_rest_volume

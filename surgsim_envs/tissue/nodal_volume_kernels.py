@@ -7,7 +7,7 @@ Each node i owns the volume V_i = sum over its tets of V_t / 4 (V_t signed, m^3)
 Forces: with p_i = kv_i (V_i - V0_i) / V0_i (Pa), ``f_a = -sum_t (sum_{i in t} p_i / 4) dV_t/dx_a``
 (Bonet & Burton 1998 averaged nodal pressure, the volumetric part of ``fem``'s ANP). Gauss-Newton
 tangent: ``K = sum_i c_i G_i G_i^T``, c_i = kv_i / V0_i, G_i = dV_i/dx = sum_{t ∋ i} (dV_t/dx) / 4;
-the product K x is two passes over the sparse G (s_i = G_i . x, then scatter; :func:`gradient_matvec_add`). The indefinite
+the product K x is two passes over the tets (s_i = G_i . x, then scatter). The indefinite
 ``p_i d2V_i/dx2`` part is left out (zero at rest), as in the per-tet term of
 :mod:`surgsim_envs.tissue.msd_kernels`. :func:`implicit_step` is that module's backward-Euler
 step (springs + Maxwell branches) with this term in place of the per-tet one.
@@ -106,57 +106,6 @@ def add_forces(pos, tets, V0, kv, vbuf, f_out):
         f_out[a, 2] += p * (g12 + g22 + g32)
 
 
-def gradient_pattern(tets: np.ndarray, n_nodes: int):
-    """Sparsity of the nodal volume gradients G_i = dV_i/dx (row i: the nodes a of node i's tets), built
-    once per mesh: ``(indptr (N+1,), cols (nnz,), slot (T,4,4))`` with slot[t, p, q] the entry
-    (row tets[t,p], col tets[t,q]). About 15 entries per row against 16 corner pairs per tet
-    (~4x fewer than the tets carry)."""
-    tets = np.asarray(tets, dtype=np.int64)
-    rows = np.repeat(tets, 4, axis=1).ravel()
-    cols = np.tile(tets, (1, 4)).ravel()
-    key = rows * n_nodes + cols
-    uniq, inv = np.unique(key, return_inverse=True)
-    indptr = np.searchsorted(uniq // n_nodes, np.arange(n_nodes + 1)).astype(np.int64)
-    return indptr, np.ascontiguousarray(uniq % n_nodes, dtype=np.int64), inv.reshape(len(tets), 4, 4).astype(np.int64)
-
-
-@njit(cache=True, fastmath=True)
-def assemble_gradients(pos, tets, slot, G):
-    """G (nnz,3) = the nodal volume gradients dV_i/dx_a (m^2) at ``pos`` in the pattern of
-    :func:`gradient_pattern`: each tet adds dV_t/dx_a / 4 to the rows of its four nodes."""
-    G[:, :] = 0.0
-    g = np.empty((4, 3))
-    for t in range(tets.shape[0]):
-        _tet_volume_gradient(pos, tets, t, g)
-        for q in range(4):
-            g0 = 0.25 * g[q, 0]
-            g1 = 0.25 * g[q, 1]
-            g2 = 0.25 * g[q, 2]
-            for p in range(4):
-                k = slot[t, p, q]
-                G[k, 0] += g0
-                G[k, 1] += g1
-                G[k, 2] += g2
-
-
-@njit(cache=True, fastmath=True)
-def gradient_matvec_add(x, h2, indptr, cols, G, c, out):
-    """out += h2 * sum_i c_i G_i (G_i . x) with G from :func:`assemble_gradients` (one pass over its
-    entries to form G_i . x, one to scatter)."""
-    for i in range(indptr.shape[0] - 1):
-        s = 0.0
-        for k in range(indptr[i], indptr[i + 1]):
-            a = cols[k]
-            s += G[k, 0] * x[a, 0] + G[k, 1] * x[a, 1] + G[k, 2] * x[a, 2]
-        s *= h2 * c[i]
-        if s != 0.0:
-            for k in range(indptr[i], indptr[i + 1]):
-                a = cols[k]
-                out[a, 0] += s * G[k, 0]
-                out[a, 1] += s * G[k, 1]
-                out[a, 2] += s * G[k, 2]
-
-
 @njit(cache=True, fastmath=True)
 def energy(pos, tets, V0, kv, vbuf):
     """Energy (J) of the nodal-volume term at ``pos``."""
@@ -180,10 +129,35 @@ def tangents(pos, tets, vgrad):
 
 
 @njit(cache=True, fastmath=True)
+def matvec_add(x, h2, tets, vgrad, c, sbuf, out):
+    """out += h2 * sum_i c_i G_i (G_i . x) (the term's Gauss-Newton tangent times x)."""
+    sbuf[:] = 0.0
+    for t in range(tets.shape[0]):
+        q = 0.0
+        for a in range(4):
+            n = tets[t, a]
+            q += vgrad[t, a, 0] * x[n, 0] + vgrad[t, a, 1] * x[n, 1] + vgrad[t, a, 2] * x[n, 2]
+        q *= 0.25
+        for a in range(4):
+            sbuf[tets[t, a]] += q
+    for t in range(tets.shape[0]):
+        p = 0.0
+        for a in range(4):
+            n = tets[t, a]
+            p += c[n] * sbuf[n]
+        p *= 0.25 * h2
+        for a in range(4):
+            n = tets[t, a]
+            out[n, 0] += p * vgrad[t, a, 0]
+            out[n, 1] += p * vgrad[t, a, 1]
+            out[n, 2] += p * vgrad[t, a, 2]
+
+
+@njit(cache=True, fastmath=True)
 def _matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out, no_tets, no_grad, no_coef,
-            indptr, cols, G, c):
+            tets, vgrad, c, sbuf):
     _system_matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out, no_tets, no_grad, no_coef)
-    gradient_matvec_add(x, h2, indptr, cols, G, c, out)
+    matvec_add(x, h2, tets, vgrad, c, sbuf, out)
     for a in range(x.shape[0]):
         if fixed[a]:
             out[a, 0] = 0.0
@@ -195,13 +169,11 @@ def _matvec(x, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, out, no_tets, no
 def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
                   si, sj, L0, K1, K2, kMg, decay, kMg_next, s_state, dl_state,
                   f_buf, coef_a, coef_g, unit, diag_m, precond, r, z, p, ap, tol, max_iter,
-                  tets, V0, kv, indptr, cols, slot, G, c, vbuf):
+                  tets, V0, kv, vgrad, c, vbuf, sbuf):
     """One linearly implicit backward-Euler step in place (one Newton step, Jacobi-preconditioned
     matrix-free CG): (M + dt B + dt^2 (K_springs + K_volume + Kc)) v_new = M v + dt (f + f_ext + M g),
     x += dt v_new. As :func:`surgsim_envs.tissue.msd_kernels.implicit_step` with the nodal-volume
-    term (``tets``, ``V0``, ``kv`` per node; its gradients in the pattern ``indptr``, ``cols``, ``slot`` of
-    :func:`gradient_pattern`, buffers ``G`` (nnz,3), ``c``, ``vbuf`` (N,)); the Jacobi preconditioner
-    has the term's exact diagonal sum_i c_i G_ia^2.
+    term (``tets``, ``V0``, ``kv`` per node; buffers ``vgrad`` (T,4,3), ``c``, ``vbuf``, ``sbuf`` (N,)).
     Returns the number of CG iterations."""
     n = pos.shape[0]
     no_tets = np.zeros((0, 4), dtype=tets.dtype)
@@ -210,7 +182,7 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
     spring_forces(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, True, f_buf)
     spring_tangents(pos, si, sj, L0, K1, K2, kMg_next, s_state, True, coef_a, coef_g, unit)
     add_forces(pos, tets, V0, kv, vbuf, f_buf)
-    assemble_gradients(pos, tets, slot, G)
+    tangents(pos, tets, vgrad)
     for i in range(n):
         c[i] = kv[i] / V0[i]
     h2 = dt * dt
@@ -226,13 +198,15 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
             d = h2 * (coef_a[e] * unit[e, k] * unit[e, k] + coef_g[e])
             precond[i, k] += d
             precond[j, k] += d
-    for i in range(indptr.shape[0] - 1):     # diagonal of the volume tangent: sum_i c_i G_ia^2
-        w = h2 * c[i]
-        for k in range(indptr[i], indptr[i + 1]):
-            a = cols[k]
-            precond[a, 0] += w * G[k, 0] * G[k, 0]
-            precond[a, 1] += w * G[k, 1] * G[k, 1]
-            precond[a, 2] += w * G[k, 2] * G[k, 2]
+    for t in range(tets.shape[0]):     # diagonal of the volume tangent, cross-tet terms left out
+        w = 0.0
+        for a in range(4):
+            w += c[tets[t, a]]
+        w *= h2 / 16.0
+        for a in range(4):
+            m = tets[t, a]
+            for k in range(3):
+                precond[m, k] += w * vgrad[t, a, k] * vgrad[t, a, k]
     rhs_norm2 = 0.0
     for a in range(n):
         for k in range(3):
@@ -242,7 +216,7 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
             else:
                 z[a, k] = mass[a] * vel[a, k] + dt * (f_buf[a, k] + fext[a, k] + mass[a] * gravity[k])
                 rhs_norm2 += z[a, k] * z[a, k]
-    _matvec(vel, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap, no_tets, no_grad, no_coef, indptr, cols, G, c)
+    _matvec(vel, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap, no_tets, no_grad, no_coef, tets, vgrad, c, sbuf)
     rz = 0.0
     r_norm2 = 0.0
     for a in range(n):
@@ -257,7 +231,7 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
     limit = tol * tol * rhs_norm2
     it = 0
     while it < max_iter and r_norm2 > limit and r_norm2 > 1e-300:
-        _matvec(p, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap, no_tets, no_grad, no_coef, indptr, cols, G, c)
+        _matvec(p, diag_m, h2, si, sj, coef_a, coef_g, unit, fixed, ap, no_tets, no_grad, no_coef, tets, vgrad, c, sbuf)
         pap = 0.0
         for a in range(n):
             pap += p[a, 0] * ap[a, 0] + p[a, 1] * ap[a, 1] + p[a, 2] * ap[a, 2]
