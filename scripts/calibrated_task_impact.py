@@ -6,6 +6,7 @@ counting TissueUnstableError).
 
     python scripts/calibrated_task_impact.py --tasks SurgSim/Palpation-v0,SurgSim/Grasp-v0,SurgSim/Slippage-v0 \\
         --steps 60 --seeds 3
+    python scripts/calibrated_task_impact.py --generic      # both models on the generic loop
     python scripts/calibrated_task_impact.py --tasks SurgSim/Grasp-v0 --models mass_spring_calibrated --soak 10000
 """
 
@@ -19,10 +20,21 @@ import time
 import numpy as np
 
 
+GENERIC = False    # --generic: every Simulation steps with the generic (per-substep Python) loop
+
+
 def _make(task: str, model: str):
     import gymnasium as gym
 
     return gym.make(task, model=model)
+
+
+def _reset(env, seed: int) -> None:
+    env.reset(seed=seed)
+    if GENERIC:       # a task may build a Simulation per organ on reset: switch them all
+        u = env.unwrapped
+        for sim in [u.sim, *getattr(u, "_sims", {}).values()]:
+            sim.compiled_substeps = False
 
 
 def timing(task: str, models: list[str], steps: int, seeds: int) -> None:
@@ -34,7 +46,7 @@ def timing(task: str, models: list[str], steps: int, seeds: int) -> None:
     for seed in range(seeds):
         for m, env in envs.items():
             t0 = time.perf_counter()
-            env.reset(seed=seed)
+            _reset(env, seed)
             resets[m].append(time.perf_counter() - t0)
             env.action_space.seed(seed)
             for _ in range(steps):
@@ -63,7 +75,7 @@ def soak(task: str, model: str, steps: int) -> None:
 
     env = _make(task, model)
     seed, unstable, episodes = 0, 0, 1
-    env.reset(seed=seed)
+    _reset(env, seed)
     env.action_space.seed(seed)
     used = collections.Counter()
     t0 = time.perf_counter()
@@ -78,7 +90,7 @@ def soak(task: str, model: str, steps: int) -> None:
         if term or trunc:
             seed += 1
             episodes += 1
-            env.reset(seed=seed)
+            _reset(env, seed)
             env.action_space.seed(seed)
     wall = time.perf_counter() - t0
     print(f"soak {task} {model}: {steps} steps, {episodes} episodes, {unstable} TissueUnstableError, "
@@ -95,7 +107,11 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--models", default="mass_spring,mass_spring_calibrated")
     ap.add_argument("--soak", type=int, default=0, help="instead of timing: random env steps per task and model")
+    ap.add_argument("--generic", action="store_true",
+                    help="every model on the generic per-substep loop (Simulation.compiled_substeps = False)")
     args = ap.parse_args(argv)
+    global GENERIC
+    GENERIC = args.generic
     models = args.models.split(",")
     print(f"load: {os.getloadavg()}", flush=True)
     for task in args.tasks.split(","):

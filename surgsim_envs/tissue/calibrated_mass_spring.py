@@ -37,6 +37,10 @@ from surgsim_envs.tissue.spring_calibration import calibrate, calibration_basis
 LANCZOS_MARGIN = 1.05
 #: the Lanczos estimate is used only down to bound / LANCZOS_FLOOR (the bound is 2-3x the exact value)
 LANCZOS_FLOOR = 16.0
+#: critical_dt() runs the Lanczos estimate (~4 ms for the 232-node spleen, 30-70 ms for the palpation slab) once
+#: per this many steps (and after reset / a material change); in between it scales the bound by the last
+#: Lanczos/bound ratio (the bound, Gershgorin + volume_lambda_bound, costs ~0.1 ms)
+LANCZOS_REFRESH_STEPS = 2000
 #: "auto" sub-cycles the explicit step (integrator "subcycled") up to this many symplectic steps per dt
 #: before it takes the implicit one: one implicit step costs 6-13 symplectic ones here (docs/benchmarks.md
 #: "Calibrated mass-spring: cost and default (issue 16, fourth pass)")
@@ -71,6 +75,7 @@ class CalibratedMassSpringModel(MassSpringModel):
         self._vbuf = np.zeros(n)
         self._fvol = np.zeros((n, 3))
         self._subcycles, self._sub_dt, self._sub_step = 0, math.nan, 0
+        self._lanczos_step = 0
 
     # ---------------------------------------------------------------------------------------
     # Parameters (hooks called by MassSpringModel.__init__)
@@ -104,6 +109,8 @@ class CalibratedMassSpringModel(MassSpringModel):
         if len(ntets) != len(getattr(self, "_ntets", ())):
             self._ntets = ntets
             self._cg = None            # implicit buffers (sized by springs and tets) follow on first use
+            self._gpattern = None      # sparsity of the nodal gradients (volume_lambda_bound), on first use
+        self._lanczos_ratio = None     # critical_dt() runs Lanczos again for the new constants
         self.volume_stiffness = "calibrated"
 
     def _build_springs(self, overrides) -> None:
@@ -183,6 +190,7 @@ class CalibratedMassSpringModel(MassSpringModel):
     def _reset_state(self) -> None:
         super()._reset_state()
         self._subcycles, self._sub_dt, self._sub_step = 0, math.nan, 0
+        self._lanczos_ratio = None
 
     # ---------------------------------------------------------------------------------------
     # Stepping
@@ -200,16 +208,12 @@ class CalibratedMassSpringModel(MassSpringModel):
         if active != "implicit":
             n = self.subcycle_count(dt) if active == "subcycled" else 1
             h = dt / n
-            for k in range(n):
-                if k:
-                    kMg, decay = self._branch_coeffs(h)
-                np.copyto(self._fvol, fext)
-                nvk.add_forces(self.positions, self._ntets, self.node_rest_volume, self.node_bulk, self._vbuf,
-                               self._fvol)
-                kern.symplectic_step_work(self.positions, self.velocities, self.inv_mass, self.b0, self._fvol,
-                                          self.gravity, self.fixed, h, self.si, self.sj, self.rest_lengths, self.K1,
-                                          self.K2, kMg, decay, self._s, self._dl, self._f, self._vtets,
-                                          self.volume_rest, self.volume_kv, self.spring_work())
+            kMg_h, decay_h = self._branch_coeffs(h) if n > 1 else (kMg, decay)
+            nvk.symplectic_substeps(n, h, self.positions, self.velocities, self.inv_mass, self.b0, fext, self.gravity,
+                                    self.fixed, self.si, self.sj, self.rest_lengths, self.K1, self.K2, kMg, decay,
+                                    kMg_h, decay_h, self._s, self._dl, self._f, self._fvol, self.spring_work(),
+                                    self._vtets, self.volume_rest, self.volume_kv, self._ntets,
+                                    self.node_rest_volume, self.node_bulk, self._vbuf)
             self._pending_dt = h
             return
         kMg_next, _ = self._branch_coeffs(dt)
@@ -257,16 +261,22 @@ class CalibratedMassSpringModel(MassSpringModel):
         geometric term, nodal volume term) at the current state, from a matrix-free Lanczos estimate
         (scipy ``eigsh``, relative tolerance 1e-3) raised by ``LANCZOS_MARGIN``; never below the guaranteed
         bound (Gershgorin for the springs + :meth:`volume_lambda_bound`), which alone cut the stable dt to
-        0.4-0.6 of the exact one. Contact stiffness is not included (as in ``mass_spring``)."""
+        0.4-0.6 of the exact one. The Lanczos run is refreshed every LANCZOS_REFRESH_STEPS steps, after
+        reset() and after a material change; in between the bound at the current state is scaled by the
+        last Lanczos/bound ratio. Contact stiffness is not included (as in ``mass_spring``)."""
         kMg, decay = self._branch_coeffs(self._pending_dt)
-        lam = float(kern.gershgorin_lambda_max(self.positions, self.inv_mass, self.si, self.sj, self.rest_lengths,
-                                               self.K1, self.K2, self.kM, self._s, self._dl, decay, kMg,
-                                               self._vtets, self.volume_rest, self.volume_kv))
-        lam += self.volume_lambda_bound()
-        try:   # the bound overestimates by 2-3x here; never trust an estimate LANCZOS_FLOOR times below it
-            lam = min(lam, max(LANCZOS_MARGIN * self._lanczos_lambda(), lam / LANCZOS_FLOOR))
-        except Exception:  # noqa: BLE001 - ARPACK may not converge; the guaranteed bound stands
-            pass
+        bound = float(kern.gershgorin_lambda_max(self.positions, self.inv_mass, self.si, self.sj, self.rest_lengths,
+                                                 self.K1, self.K2, self.kM, self._s, self._dl, decay, kMg,
+                                                 self._vtets, self.volume_rest, self.volume_kv))
+        bound += self.volume_lambda_bound()
+        if self._lanczos_ratio is None or self.steps - self._lanczos_step >= LANCZOS_REFRESH_STEPS:
+            try:
+                ratio = LANCZOS_MARGIN * self._lanczos_lambda() / bound if bound > 0 else 1.0
+            except Exception:  # noqa: BLE001 - ARPACK may not converge; the guaranteed bound stands
+                ratio = 1.0
+            self._lanczos_ratio, self._lanczos_step = ratio, self.steps
+        # the bound overestimates by 2-3x here; never trust an estimate LANCZOS_FLOOR times below it
+        lam = bound * min(1.0, max(self._lanczos_ratio, 1.0 / LANCZOS_FLOOR))
         beta = float(np.max(self.b0 * self.inv_mass)) if self.n_nodes else 0.0
         if lam <= 0:
             return math.inf if beta == 0 else 2.0 / beta
@@ -305,23 +315,11 @@ class CalibratedMassSpringModel(MassSpringModel):
         the absolute row sums (the second pass's bound), which cut the stable dt of the
         5 mm palpation slab to 0.41 of its eigenvalue-exact value."""
         x = self.positions if positions is None else np.ascontiguousarray(positions, dtype=np.float64)
-        tets, n = self._ntets, self.n_nodes
-        g = np.zeros((len(tets), 4, 3))
-        nvk.tangents(x, tets, g)
-        # G_ia = sum over tets holding i and a of dV_t/dx_a / 4: 16 (i, a) corner pairs per tet
-        ii = np.repeat(tets, 4, axis=1).ravel()
-        aa = np.tile(tets, (1, 4)).ravel()
-        vals = np.tile(0.25 * g, (1, 4, 1)).reshape(-1, 3)
-        key = ii * n + aa
-        uniq, inv = np.unique(key, return_inverse=True)
-        G = np.zeros((len(uniq), 3))
-        np.add.at(G, inv, vals)
-        pi, pa = uniq // n, uniq % n
-        free = ~self.fixed[pa]
-        gi = np.bincount(pi, weights=np.where(free, np.sum(G * G, axis=1) * self.inv_mass[pa], 0.0), minlength=n)
-        c = self.node_bulk / self.node_rest_volume
-        bound = np.bincount(pa, weights=c[pi] * gi[pi], minlength=n)
-        return float(np.max(np.where(self.fixed, 0.0, bound), initial=0.0))
+        if self._gpattern is None:
+            self._gpattern = nvk.gradient_pattern(self._ntets, self.n_nodes)
+        indptr, cols, slot = self._gpattern
+        return float(nvk.lambda_bound(x, self._ntets, slot, indptr, cols, self.node_bulk / self.node_rest_volume,
+                                      self.inv_mass, self.fixed, np.empty((len(cols), 3)), np.empty(self.n_nodes)))
 
     def _tangent(self, positions: np.ndarray, relaxed: bool, clamp: bool):
         """Springs (base class) plus the nodal volume term's Gauss-Newton tangent sum_i c_i G_i G_i^T."""

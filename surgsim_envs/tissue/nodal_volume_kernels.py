@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from surgsim_envs.tissue.msd_kernels import _system_matvec, _tet_volume_gradient, spring_forces, spring_tangents
+from surgsim_envs.tissue.msd_kernels import (_system_matvec, _tet_volume_gradient, spring_forces, spring_tangents,
+                                             symplectic_step_work)
 
 
 @njit(cache=True, fastmath=True)
@@ -104,6 +105,71 @@ def add_forces(pos, tets, V0, kv, vbuf, f_out):
         f_out[a, 0] += p * (g10 + g20 + g30)
         f_out[a, 1] += p * (g11 + g21 + g31)
         f_out[a, 2] += p * (g12 + g22 + g32)
+
+
+def gradient_pattern(tets: np.ndarray, n_nodes: int):
+    """Sparsity of the nodal volume gradients G_i = dV_i/dx (row i: the nodes a of node i's tets), built
+    once per mesh: ``(indptr (N+1,), cols (nnz,), slot (T,4,4))`` with slot[t, p, q] the entry
+    (row tets[t,p], col tets[t,q])."""
+    tets = np.asarray(tets, dtype=np.int64)
+    rows = np.repeat(tets, 4, axis=1).ravel()
+    cols = np.tile(tets, (1, 4)).ravel()
+    uniq, inv = np.unique(rows * n_nodes + cols, return_inverse=True)
+    indptr = np.searchsorted(uniq // n_nodes, np.arange(n_nodes + 1)).astype(np.int64)
+    return (indptr, np.ascontiguousarray(uniq % n_nodes, dtype=np.int64),
+            np.ascontiguousarray(inv.reshape(len(tets), 4, 4), dtype=np.int64))
+
+
+@njit(cache=True, fastmath=True)
+def lambda_bound(pos, tets, slot, indptr, cols, c, inv_mass, fixed, G, gi):
+    """Cauchy-Schwarz bound (1/s^2) of the largest eigenvalue of M^-1 K_v (see
+    ``CalibratedMassSpringModel.volume_lambda_bound``): G (nnz,3) and gi (N,) are work space."""
+    G[:, :] = 0.0
+    g = np.empty((4, 3))
+    for t in range(tets.shape[0]):
+        _tet_volume_gradient(pos, tets, t, g)
+        for q in range(4):
+            for p in range(4):
+                k = slot[t, p, q]
+                G[k, 0] += 0.25 * g[q, 0]
+                G[k, 1] += 0.25 * g[q, 1]
+                G[k, 2] += 0.25 * g[q, 2]
+    n = indptr.shape[0] - 1
+    for i in range(n):
+        s = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            a = cols[k]
+            if not fixed[a]:
+                s += (G[k, 0] * G[k, 0] + G[k, 1] * G[k, 1] + G[k, 2] * G[k, 2]) * inv_mass[a]
+        gi[i] = c[i] * s
+    out = np.zeros(n)
+    for i in range(n):
+        for k in range(indptr[i], indptr[i + 1]):
+            out[cols[k]] += gi[i]
+    best = 0.0
+    for a in range(n):
+        if not fixed[a] and out[a] > best:
+            best = out[a]
+    return best
+
+
+@njit(cache=True, fastmath=True, nogil=True)
+def symplectic_substeps(n_sub, h, pos, vel, inv_mass, b0, fext, gravity, fixed, si, sj, L0, K1, K2,
+                        kMg_first, decay_first, kMg, decay, s_state, dl_state, f_buf, f_total, work,
+                        no_tets, no_V0, no_kv, tets, V0, kv, vbuf):
+    """``n_sub`` symplectic steps of ``h`` s under the same external forces ``fext`` (N): springs and
+    Maxwell branches (:func:`surgsim_envs.tissue.msd_kernels.symplectic_step_work`; the first step's
+    branch coefficients span the interval since the last commit) plus the nodal volume term
+    (:func:`add_forces`), in one compiled call (integrator "subcycled" and plain "symplectic")."""
+    for k in range(n_sub):
+        f_total[:, :] = fext
+        add_forces(pos, tets, V0, kv, vbuf, f_total)
+        if k == 0:
+            symplectic_step_work(pos, vel, inv_mass, b0, f_total, gravity, fixed, h, si, sj, L0, K1, K2,
+                                 kMg_first, decay_first, s_state, dl_state, f_buf, no_tets, no_V0, no_kv, work)
+        else:
+            symplectic_step_work(pos, vel, inv_mass, b0, f_total, gravity, fixed, h, si, sj, L0, K1, K2,
+                                 kMg, decay, s_state, dl_state, f_buf, no_tets, no_V0, no_kv, work)
 
 
 @njit(cache=True, fastmath=True)
