@@ -19,17 +19,16 @@ Docs: docs/models/mass_spring_calibrated.md.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from typing import ClassVar
 
 import numpy as np
 
 from surgsim_envs.errors import ConfigError
-from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS, DT_SAFETY
 from surgsim_envs.tissue import msd_kernels as kern
 from surgsim_envs.tissue import nodal_volume_kernels as nvk
-from surgsim_envs.tissue.mass_spring import (CG_MAX_ITER, NONLINEAR_NETWORK_FACTOR,
-                                             MassSpringModel)
+from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS, DT_SAFETY
+from surgsim_envs.tissue.mass_spring import (CG_MAX_ITER, NONLINEAR_NETWORK_FACTOR, MassSpringModel,
+                                             _finite_non_negative)
 from surgsim_envs.tissue.spring_calibration import calibrate, calibration_basis
 
 #: factor on the Lanczos estimate of the largest eigenvalue in :meth:`CalibratedMassSpringModel.critical_dt`
@@ -196,15 +195,16 @@ class CalibratedMassSpringModel(MassSpringModel):
     # Stepping
     def _advance(self, dt: float, forces: np.ndarray, stiffness: np.ndarray | None) -> None:
         kMg, decay = self._branch_coeffs(self._pending_dt)
-        fext = np.ascontiguousarray(forces, dtype=np.float64)
+        fext = (forces if forces.dtype == np.float64 and forces.flags.c_contiguous
+                else np.ascontiguousarray(forces, dtype=np.float64))
         if stiffness is None:
             kc = self._zero_kc
         else:
             kc = np.ascontiguousarray(stiffness, dtype=np.float64)
-            if kc.shape != (self.n_nodes,) or not np.all(np.isfinite(kc)) or np.any(kc < 0):
+            if kc.shape != (self.n_nodes,) or not _finite_non_negative(kc):
                 raise ConfigError(f"stiffness must be a finite, non-negative ({self.n_nodes},) array in N/m, "
                                   f"got shape {np.shape(stiffness)}")
-        active = self.active_integrator
+        active = self._active or self.active_integrator
         if active != "implicit":
             n = self.subcycle_count(dt) if active == "subcycled" else 1
             h = dt / n
