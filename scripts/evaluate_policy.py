@@ -3,6 +3,7 @@ and/or stochastic, against a uniform random policy; numpy only (no torch).
 
     python scripts/evaluate_policy.py --task SurgSim/PalpationPress-v0 --policy shipped --seeds 10001:10021
     python scripts/evaluate_policy.py --task SurgSim/Grasp-v0 --policy runs/grasp.npz --modes deterministic
+    python scripts/evaluate_policy.py --task SurgSim/Grasp-v0 --model mass_spring_calibrated --modes deterministic
 
 Episode k is reset with seed k and the policy's sampler with the same seed (``NpzPolicy.reset``),
 so every figure is reproducible episode by episode. Prints one JSON object.
@@ -29,6 +30,8 @@ def parse(argv=None):
     p.add_argument("--save", default=None, help="write the policy in stochastic mode with the single --noise-scales "
                    "value to this .npz")
     p.add_argument("--no-random", action="store_true", help="skip the random-policy baseline")
+    p.add_argument("--model", default=None, help="tissue model for the task (default: the task's own, e.g. "
+                   "mass_spring_calibrated)")
     args = p.parse_args(argv)
     try:
         a, b = (int(v) for v in args.seeds.split(":"))
@@ -61,13 +64,13 @@ def summary(results) -> dict:
             "mean_steps": round(float(np.mean(steps)), 2)}
 
 
-def evaluate(task: str, policy, seeds, progress: bool = True) -> dict:
+def evaluate(task: str, policy, seeds, progress: bool = True, model: str | None = None) -> dict:
     import gymnasium as gym
 
     import surgsim_envs  # noqa: F401
     from tqdm import tqdm
 
-    env = gym.make(task)
+    env = gym.make(task, **({"model": model} if model else {}))
     res = [rollout(env, policy, s) for s in tqdm(seeds, desc=task, disable=not progress, leave=False)]
     env.close()
     return summary(res)
@@ -84,12 +87,14 @@ def main(argv=None) -> int:
 
     try:
         path = shipped_path(args.task) if args.policy == "shipped" else args.policy
-        out = {"task": args.task, "policy": str(path), "seeds": [args.seed_range.start, args.seed_range.stop - 1]}
+        out = {"task": args.task, "policy": str(path), "seeds": [args.seed_range.start, args.seed_range.stop - 1],
+               "model": args.model or "task default"}
         scales = [None] if not args.noise_scales else [float(v) for v in args.noise_scales.split(",")]
         for mode in [m.strip() for m in args.modes.split(",") if m.strip()]:
             for scale in (scales if mode == "stochastic" else [None]):
                 key = mode if scale is None else f"{mode}_x{scale:g}"
-                out[key] = evaluate(args.task, NpzPolicy.load(path, mode=mode, noise_scale=scale), args.seed_range)
+                out[key] = evaluate(args.task, NpzPolicy.load(path, mode=mode, noise_scale=scale), args.seed_range,
+                                    model=args.model)
         if args.save:
             if len(scales) != 1 or scales[0] is None:
                 raise ConfigError("--save needs exactly one --noise-scales value")
@@ -108,7 +113,7 @@ def main(argv=None) -> int:
             def __call__(self, obs):
                 return space.sample()
 
-        out["random"] = evaluate(args.task, Random(), args.seed_range)
+        out["random"] = evaluate(args.task, Random(), args.seed_range, model=args.model)
     print(json.dumps(out, indent=2))
     return 0
 

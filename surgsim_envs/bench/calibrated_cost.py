@@ -5,11 +5,13 @@ third pass)").
 
     surgsim bench calibrated-cost [--repeats 200]
 
-Per model: springs (left out: those the fit set to 0), critical_dt() (the Gershgorin bound the "auto" integrator and stable_dt() use)
+Per model: springs (left out: those the fit set to 0), critical_dt() (what the "auto" integrator and stable_dt() use)
 against the exact symplectic limit from the largest eigenvalue of M^-1 K (scipy eigsh), wall time
 of one symplectic and one implicit step (median over ``repeats``, after numba compilation; the two
 models stepped in turn so that the machine load hits both alike) and
-compute per simulated ms = step time x steps per ms (symplectic at stable_dt(), implicit at 1 ms).
+compute per simulated ms = step time x steps per ms (symplectic at stable_dt(), implicit at 1 ms), and
+the cost of a masked ``scale_material`` (what a task's reset does to re-randomise an inclusion:
+the calibrated constants are a linear map of the tets' moduli, no refit).
 """
 
 from __future__ import annotations
@@ -56,6 +58,20 @@ def interleaved_step_us(models, dt_of, repeats: int) -> list[float]:
     return [float(np.median(t) * 1e6) for t in times]
 
 
+def scale_material_ms(model, repeats: int) -> float:
+    """Median wall time (ms) of a whole-body plus a masked ``scale_material`` (an inclusion re-randomised)."""
+    c = model.element_centroids()
+    mask = np.linalg.norm(c - c.mean(axis=0), axis=1) < 0.25 * np.ptp(c[:, 0])
+    times = []
+    for k in range(repeats):
+        t0 = time.perf_counter()
+        model.scale_material("young", 0.9 + 0.02 * (k % 5))
+        model.scale_material("young", 2.0 + 0.1 * (k % 3), mask)
+        times.append(time.perf_counter() - t0)
+    model.scale_material("young", 1.0)
+    return float(np.median(times) * 1e3)
+
+
 def volumes():
     from surgsim_envs.bench.indent_mesh import graded_slab
     from surgsim_envs.geometry import organ_volume
@@ -80,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
         fixed = np.isclose(vol.nodes[:, 2], vol.nodes[:, 2].min())
         print(f"\n{label}: {vol.n_nodes} nodes, {len(vol.tets)} tets")
         print("model | springs | critical_dt ms (Gershgorin) | exact ms | symplectic us/step | us per sim ms "
-              "| implicit us/step (1 ms) | build s")
+              "| implicit us/step (1 ms) | build s | scale_material ms")
         kw = {"region_materials": regions} if regions else {}
         names = ("mass_spring", "mass_spring_calibrated")
         built, builds = [], []
@@ -96,9 +112,9 @@ def run(args: argparse.Namespace) -> int:
         rows = []
         for k, (name, m) in enumerate(zip(names, built)):
             row = (name, len(m.springs), m.critical_dt() * 1e3, exact_critical_dt(m) * 1e3, us_s[k],
-                   us_s[k] * (1e-3 / sdts[k]), us_i[k], builds[k])
+                   us_s[k] * (1e-3 / sdts[k]), us_i[k], builds[k], scale_material_ms(m, 20))
             rows.append(row)
-            print("{} | {} | {:.3f} | {:.3f} | {:.1f} | {:.0f} | {:.0f} | {:.1f}".format(*row))
+            print("{} | {} | {:.3f} | {:.3f} | {:.1f} | {:.0f} | {:.0f} | {:.1f} | {:.1f}".format(*row))
         base, row = rows
         print(f"ratio calibrated/plain: symplectic us per sim ms {row[5] / base[5]:.2f}x, step {row[4] / base[4]:.2f}x, "
               f"critical dt {row[2] / base[2]:.2f}x (exact {row[3] / base[3]:.2f}x), implicit step {row[6] / base[6]:.2f}x")

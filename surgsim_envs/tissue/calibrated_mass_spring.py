@@ -19,7 +19,6 @@ Docs: docs/models/mass_spring_calibrated.md.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from typing import ClassVar
 
 import numpy as np
@@ -27,15 +26,24 @@ import numpy as np
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.tissue import msd_kernels as kern
 from surgsim_envs.tissue import nodal_volume_kernels as nvk
-from surgsim_envs.tissue.mass_spring import (CG_MAX_ITER, CG_TOLERANCE, NONLINEAR_NETWORK_FACTOR,
-                                             MassSpringModel)
-from surgsim_envs.tissue.spring_calibration import calibrate
+from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS, DT_SAFETY
+from surgsim_envs.tissue.mass_spring import (CG_MAX_ITER, NONLINEAR_NETWORK_FACTOR, MassSpringModel,
+                                             _finite_non_negative)
+from surgsim_envs.tissue.spring_calibration import calibrate, calibration_basis
 
 #: factor on the Lanczos estimate of the largest eigenvalue in :meth:`CalibratedMassSpringModel.critical_dt`
 #: (the Ritz value approaches lambda_max from below; DT_SAFETY applies on top of it)
 LANCZOS_MARGIN = 1.05
 #: the Lanczos estimate is used only down to bound / LANCZOS_FLOOR (the bound is 2-3x the exact value)
 LANCZOS_FLOOR = 16.0
+#: critical_dt() runs the Lanczos estimate (~4 ms for the 232-node spleen, 30-70 ms for the palpation slab) once
+#: per this many steps (and after reset / a material change); in between it scales the bound by the last
+#: Lanczos/bound ratio (the bound, Gershgorin + volume_lambda_bound, costs ~0.1 ms)
+LANCZOS_REFRESH_STEPS = 2000
+#: "auto" sub-cycles the explicit step (integrator "subcycled") up to this many symplectic steps per dt
+#: before it takes the implicit one: one implicit step costs 6-13 symplectic ones here (docs/benchmarks.md
+#: "Calibrated mass-spring: cost and default (issue 16, fourth pass)")
+MAX_SUBCYCLES = 4
 
 
 class CalibratedMassSpringModel(MassSpringModel):
@@ -51,6 +59,10 @@ class CalibratedMassSpringModel(MassSpringModel):
     summary: ClassVar[str] = ("mass-spring network (paper 002) with spring constants and a nodal volume term "
                               "identified from linear elasticity (matches FEM at small strain), auto/symplectic/implicit")
     capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "implicit_contact", "viscoelastic"})
+    #: "subcycled": the symplectic step split into n = ceil(dt / stable_dt()) equal steps under the same
+    #: external forces (n re-evaluated with critical_dt(), as "auto" does); "auto" takes it instead of
+    #: "implicit" while n <= MAX_SUBCYCLES and the contact stiffness alone is stable at dt
+    integrators: ClassVar[tuple[str, ...]] = ("symplectic", "implicit", "subcycled")
 
     def __init__(self, volume, material="liver", *, integrator=None, K2=None, b0=None, b1=None, **base_kwargs):
         for key in ("K1", "springs", "volume_stiffness"):
@@ -61,6 +73,8 @@ class CalibratedMassSpringModel(MassSpringModel):
         n = self.n_nodes
         self._vbuf = np.zeros(n)
         self._fvol = np.zeros((n, 3))
+        self._subcycles, self._sub_dt, self._sub_step = 0, math.nan, 0
+        self._lanczos_step = 0
 
     # ---------------------------------------------------------------------------------------
     # Parameters (hooks called by MassSpringModel.__init__)
@@ -68,42 +82,35 @@ class CalibratedMassSpringModel(MassSpringModel):
         super()._setup_volume_term(None)           # no per-tet term
         previous = getattr(self, "calibration", None)
         young, poisson = np.array(self.fields["young"], dtype=np.float64), np.array(self.fields["poisson"])
-        ratio = young / self._calibrated_young if previous is not None else None
-        if (ratio is not None and np.array_equal(poisson, self._calibrated_poisson)
-                and np.allclose(ratio, ratio[0], rtol=1e-12, atol=0.0)):
-            # E scaled uniformly, nu unchanged: the fit is linear in E (same springs, constants x ratio)
-            f = float(ratio[0])
-            self.calibration = replace(previous, stiffness=previous.stiffness * f, node_bulk=previous.node_bulk * f,
-                                       iterations=0)
+        if np.all(poisson >= 0.25):
+            # linear in the moduli: one fit per mesh, then sparse products (scale_material costs ~ms)
+            if getattr(self, "_basis", None) is None:
+                self._basis = calibration_basis(self.volume)
+            self.calibration = self._basis.calibration(young, poisson)
         else:
-            # scale_material with a mask / set_field: start from the old springs, rescaled per spring
+            # some nu < 1/4: a non-negative fit of the field itself, from the old springs rescaled per spring
             initial = None if previous is None else previous.stiffness * self._spring_young_ratio(previous.pairs)
             self.calibration = calibrate(self.volume, young, poisson, initial=initial)
-        self._calibrated_young, self._calibrated_poisson = young, poisson
-        tets = np.ascontiguousarray(self.volume.tets, dtype=np.int64)
-        x = self.rest_positions
-        v0 = np.zeros(len(x))
-        nvk.node_volumes(np.ascontiguousarray(x), tets, v0)
-        if np.any(v0 <= 0):
-            raise ConfigError(f"mass_spring_calibrated: volume '{self.volume.name}' has nodes with non-positive "
-                              "volume; the volume term needs positively oriented tets")
-        self.node_rest_volume = v0
+        self._calibrated_young = young
+        if getattr(self, "node_rest_volume", None) is None:
+            tets = np.ascontiguousarray(self.volume.tets, dtype=np.int64)
+            v0 = np.zeros(self.n_nodes)
+            nvk.node_volumes(np.ascontiguousarray(self.rest_positions), tets, v0)
+            if np.any(v0 <= 0):
+                raise ConfigError(f"mass_spring_calibrated: volume '{self.volume.name}' has nodes with non-positive "
+                                  "volume; the volume term needs positively oriented tets")
+            self.node_rest_volume = v0
+            self._all_tets = tets
         self.node_bulk = np.ascontiguousarray(self.calibration.node_bulk)
         # the volume term only where nu needs it: no tets to visit when every k_v is 0 (nu <= 1/4 and
         # springs that fit); the kernels then cost nothing
-        self._ntets = tets if np.any(self.node_bulk > 0) else np.zeros((0, 4), dtype=np.int64)
-        self._cg = None                # implicit buffers (sized by springs and tets) follow on first use
-        self._vgbuf = np.zeros((len(self._ntets), 4, 3))
+        ntets = self._all_tets if np.any(self.node_bulk > 0) else np.zeros((0, 4), dtype=np.int64)
+        if len(ntets) != len(getattr(self, "_ntets", ())):
+            self._ntets = ntets
+            self._cg = None            # implicit buffers (sized by springs and tets) follow on first use
+            self._gpattern = None      # sparsity of the nodal gradients (volume_lambda_bound), on first use
+        self._lanczos_ratio = None     # critical_dt() runs Lanczos again for the new constants
         self.volume_stiffness = "calibrated"
-
-    def _spring_young_ratio(self, pairs: np.ndarray) -> np.ndarray:
-        """(S,) ratio of the current to the last calibrated Young's modulus, node-averaged, per spring."""
-        tets = self.volume.tets.astype(np.int64).reshape(-1)
-        w = np.repeat(self.volume.tet_volumes(), 4)
-        new = np.bincount(tets, weights=w * np.repeat(self.fields["young"], 4), minlength=self.n_nodes)
-        old = np.bincount(tets, weights=w * np.repeat(self._calibrated_young, 4), minlength=self.n_nodes)
-        r = new / np.where(old > 0, old, 1.0)
-        return 0.5 * (r[pairs[:, 0]] + r[pairs[:, 1]])
 
     def _build_springs(self, overrides) -> None:
         if overrides.get("K1") is not None:
@@ -156,35 +163,72 @@ class CalibratedMassSpringModel(MassSpringModel):
             self._cg = None
 
     # ---------------------------------------------------------------------------------------
+    # Integrator choice: explicit sub-cycles before implicit
+    def _pick(self, dt: float, crit: float, contact_rate: float) -> str:
+        choice = super()._pick(dt, crit, contact_rate)
+        if choice != self.auto_pair[1] or not (crit > 0) or not math.isfinite(crit):
+            return choice
+        n = math.ceil(dt / (DT_SAFETY * crit) - 1e-12)
+        # the contact force is held over the sub-steps: its own explicit limit applies to dt
+        contact_ok = contact_rate <= 0 or dt <= DT_SAFETY * 2.0 / math.sqrt(contact_rate)
+        if n <= MAX_SUBCYCLES and contact_ok:
+            self._subcycles = n
+            return "subcycled"
+        return choice
+
+    def subcycle_count(self, dt: float) -> int:
+        """Symplectic steps per step of ``dt`` s under integrator "subcycled": ceil(dt / stable_dt()), with
+        critical_dt() re-evaluated when dt changes, every AUTO_RECHECK_STEPS steps and after reset."""
+        if self.integrator == "auto" and self._subcycles:
+            return self._subcycles
+        if dt != self._sub_dt or self.steps - self._sub_step >= AUTO_RECHECK_STEPS or not self._subcycles:
+            self._subcycles = max(1, math.ceil(dt / self.stable_dt() - 1e-12))
+            self._sub_dt, self._sub_step = dt, self.steps
+        return self._subcycles
+
+    def _reset_state(self) -> None:
+        super()._reset_state()
+        self._subcycles, self._sub_dt, self._sub_step = 0, math.nan, 0
+        self._lanczos_ratio = None
+
+    # ---------------------------------------------------------------------------------------
     # Stepping
     def _advance(self, dt: float, forces: np.ndarray, stiffness: np.ndarray | None) -> None:
         kMg, decay = self._branch_coeffs(self._pending_dt)
-        fext = np.ascontiguousarray(forces, dtype=np.float64)
+        fext = (forces if forces.dtype == np.float64 and forces.flags.c_contiguous
+                else np.ascontiguousarray(forces, dtype=np.float64))
         if stiffness is None:
             kc = self._zero_kc
         else:
             kc = np.ascontiguousarray(stiffness, dtype=np.float64)
-            if kc.shape != (self.n_nodes,) or not np.all(np.isfinite(kc)) or np.any(kc < 0):
+            if kc.shape != (self.n_nodes,) or not _finite_non_negative(kc):
                 raise ConfigError(f"stiffness must be a finite, non-negative ({self.n_nodes},) array in N/m, "
                                   f"got shape {np.shape(stiffness)}")
-        if self.active_integrator == "symplectic":
-            np.copyto(self._fvol, fext)
-            nvk.add_forces_cached(self.positions, self._ntets, self.node_rest_volume, self.node_bulk, self._vbuf,
-                                  self._vgbuf, self._fvol)
-            kern.symplectic_step(self.positions, self.velocities, self.inv_mass, self.b0, self._fvol, self.gravity,
-                                 self.fixed, dt, self.si, self.sj, self.rest_lengths, self.K1, self.K2,
-                                 kMg, decay, self._s, self._dl, self._f, self._vtets, self.volume_rest, self.volume_kv)
-        else:
-            kMg_next, _ = self._branch_coeffs(dt)
-            if self._cg is None:
-                self._allocate_implicit_buffers()
-            r, z, p, ap, pre = self._cg
-            self.last_cg_iterations = nvk.implicit_step(
-                self.positions, self.velocities, self.masses, self.b0, fext, self.gravity, self.fixed, kc, dt,
-                self.si, self.sj, self.rest_lengths, self.K1, self.K2, kMg, decay, kMg_next, self._s, self._dl,
-                self._f, self._coef_a, self._coef_g, self._unit, self._diag, pre, r, z, p, ap,
-                CG_TOLERANCE, CG_MAX_ITER, self._ntets, self.node_rest_volume, self.node_bulk,
-                self._ngrad, self._nc, self._vbuf, self._nsbuf)
+        active = self._active or self.active_integrator
+        if active != "implicit":
+            n = self.subcycle_count(dt) if active == "subcycled" else 1
+            h = dt / n
+            kMg_h, decay_h = self._branch_coeffs(h) if n > 1 else (kMg, decay)
+            nvk.symplectic_substeps(n, h, self.positions, self.velocities, self.inv_mass, self.b0, fext, self.gravity,
+                                    self.fixed, self.si, self.sj, self.rest_lengths, self.K1, self.K2, kMg, decay,
+                                    kMg_h, decay_h, self._s, self._dl, self._f, self._fvol, self.spring_work(),
+                                    self._vtets, self.volume_rest, self.volume_kv, self._ntets,
+                                    self.node_rest_volume, self.node_bulk, self._vbuf)
+            self._pending_dt = h
+            return
+        kMg_next, _ = self._branch_coeffs(dt)
+        if self._cg is None:
+            self._allocate_implicit_buffers()
+        r, z, p, ap, pre = self._cg
+        self.last_cg_iterations = nvk.implicit_step(
+            self.positions, self.velocities, self.masses, self.b0, fext, self.gravity, self.fixed, kc, dt,
+            self.si, self.sj, self.rest_lengths, self.K1, self.K2, kMg, decay, kMg_next, self._s, self._dl,
+            self._f, self._coef_a, self._coef_g, self._unit, self._diag, pre, r, z, p, ap,
+            self.cg_tol, CG_MAX_ITER, self._ntets, self.node_rest_volume, self.node_bulk,
+            self._ngrad, self._nc, self._vbuf, self._nsbuf)
+        if stiffness is not None:   # backward Euler integrated f_ext - kc (x_{n+1} - x_n) = f_ext - dt kc v_{n+1}
+            free = ~self.fixed
+            self.integrated_external_forces[free] -= (dt * kc[free])[:, None] * self.velocities[free]
         self._pending_dt = dt
 
     def _allocate_implicit_buffers(self) -> None:
@@ -217,16 +261,22 @@ class CalibratedMassSpringModel(MassSpringModel):
         geometric term, nodal volume term) at the current state, from a matrix-free Lanczos estimate
         (scipy ``eigsh``, relative tolerance 1e-3) raised by ``LANCZOS_MARGIN``; never below the guaranteed
         bound (Gershgorin for the springs + :meth:`volume_lambda_bound`), which alone cut the stable dt to
-        0.4-0.6 of the exact one. Contact stiffness is not included (as in ``mass_spring``)."""
+        0.4-0.6 of the exact one. The Lanczos run is refreshed every LANCZOS_REFRESH_STEPS steps, after
+        reset() and after a material change; in between the bound at the current state is scaled by the
+        last Lanczos/bound ratio. Contact stiffness is not included (as in ``mass_spring``)."""
         kMg, decay = self._branch_coeffs(self._pending_dt)
-        lam = float(kern.gershgorin_lambda_max(self.positions, self.inv_mass, self.si, self.sj, self.rest_lengths,
-                                               self.K1, self.K2, self.kM, self._s, self._dl, decay, kMg,
-                                               self._vtets, self.volume_rest, self.volume_kv))
-        lam += self.volume_lambda_bound()
-        try:   # the bound overestimates by 2-3x here; never trust an estimate LANCZOS_FLOOR times below it
-            lam = min(lam, max(LANCZOS_MARGIN * self._lanczos_lambda(), lam / LANCZOS_FLOOR))
-        except Exception:  # noqa: BLE001 - ARPACK may not converge; the guaranteed bound stands
-            pass
+        bound = float(kern.gershgorin_lambda_max(self.positions, self.inv_mass, self.si, self.sj, self.rest_lengths,
+                                                 self.K1, self.K2, self.kM, self._s, self._dl, decay, kMg,
+                                                 self._vtets, self.volume_rest, self.volume_kv))
+        bound += self.volume_lambda_bound()
+        if self._lanczos_ratio is None or self.steps - self._lanczos_step >= LANCZOS_REFRESH_STEPS:
+            try:
+                ratio = LANCZOS_MARGIN * self._lanczos_lambda() / bound if bound > 0 else 1.0
+            except Exception:  # noqa: BLE001 - ARPACK may not converge; the guaranteed bound stands
+                ratio = 1.0
+            self._lanczos_ratio, self._lanczos_step = ratio, self.steps
+        # the bound overestimates by 2-3x here; never trust an estimate LANCZOS_FLOOR times below it
+        lam = bound * min(1.0, max(self._lanczos_ratio, 1.0 / LANCZOS_FLOOR))
         beta = float(np.max(self.b0 * self.inv_mass)) if self.n_nodes else 0.0
         if lam <= 0:
             return math.inf if beta == 0 else 2.0 / beta
@@ -262,26 +312,14 @@ class CalibratedMassSpringModel(MassSpringModel):
         volume term's Gauss-Newton tangent (c_i = k_v,i / V0_i, G_i = dV_i/dx). By Cauchy-Schwarz,
         (G_i . x)^2 <= g_i sum_{a in S_i} m_a |x_a|^2 with g_i = sum_a |G_ia|^2 / m_a (S_i: node i's
         1-ring), so x^T K_v x <= max_a (sum_{i: a in S_i} c_i g_i) x^T M x. About 2x tighter than
-        the absolute row sums (:func:`nodal_volume_kernels.row_sums`), which cut the stable dt of the
+        the absolute row sums (the second pass's bound), which cut the stable dt of the
         5 mm palpation slab to 0.41 of its eigenvalue-exact value."""
         x = self.positions if positions is None else np.ascontiguousarray(positions, dtype=np.float64)
-        tets, n = self._ntets, self.n_nodes
-        g = np.zeros((len(tets), 4, 3))
-        nvk.tangents(x, tets, g)
-        # G_ia = sum over tets holding i and a of dV_t/dx_a / 4: 16 (i, a) corner pairs per tet
-        ii = np.repeat(tets, 4, axis=1).ravel()
-        aa = np.tile(tets, (1, 4)).ravel()
-        vals = np.tile(0.25 * g, (1, 4, 1)).reshape(-1, 3)
-        key = ii * n + aa
-        uniq, inv = np.unique(key, return_inverse=True)
-        G = np.zeros((len(uniq), 3))
-        np.add.at(G, inv, vals)
-        pi, pa = uniq // n, uniq % n
-        free = ~self.fixed[pa]
-        gi = np.bincount(pi, weights=np.where(free, np.sum(G * G, axis=1) * self.inv_mass[pa], 0.0), minlength=n)
-        c = self.node_bulk / self.node_rest_volume
-        bound = np.bincount(pa, weights=c[pi] * gi[pi], minlength=n)
-        return float(np.max(np.where(self.fixed, 0.0, bound), initial=0.0))
+        if self._gpattern is None:
+            self._gpattern = nvk.gradient_pattern(self._ntets, self.n_nodes)
+        indptr, cols, slot = self._gpattern
+        return float(nvk.lambda_bound(x, self._ntets, slot, indptr, cols, self.node_bulk / self.node_rest_volume,
+                                      self.inv_mass, self.fixed, np.empty((len(cols), 3)), np.empty(self.n_nodes)))
 
     def _tangent(self, positions: np.ndarray, relaxed: bool, clamp: bool):
         """Springs (base class) plus the nodal volume term's Gauss-Newton tangent sum_i c_i G_i G_i^T."""
