@@ -8,22 +8,30 @@ with the same kernels (so the result is bit-for-bit the generic loop's, tests/te
 2. ``mj_step1``; the tool geoms' poses and velocities (``_gather_geoms``);
 3. contact (``contact_kernel_prepared``: ``ContactModel.compute_prepared``'s kernel);
 4. tissue: refuse non-finite contact input (hand back, Python raises ``NonFiniteInputError``), the
-   model's step (``tissue_step``), fixed nodes, time and step count, the guard's cheap checks
+   model's step (a C function pointer, below), fixed nodes, time and step count, the guard's cheap checks
    (non-finite state, runaway speed: hand back, Python raises ``TissueUnstableError``) and, every
    ``check_every`` steps, its costly ones (kinetic energy against the reference; the reference
-   raised to kinetic + ``tissue_energy``; the state kept as the last good one);
+   raised to kinetic + the model's elastic energy; the state kept as the last good one);
 5. the reaction wrench into ``xfrc_applied``; ``mj_step2``; the rows zeroed again.
 
-**Pluggable tissue step.** :func:`run_substeps` is a template: it names three functions it does
-not define, ``tissue_unpack(tab, at)`` (the model's arrays from the address table, a tuple),
-``tissue_step(pos, vel, fext, dt, first, tissue)`` (one step in place under external forces
-``fext``; ``first``: the first step since the model was last stepped by anyone, whose Maxwell
-coefficients span the interval since the last commit) and ``tissue_energy(pos, tissue)`` (stored
-elastic energy, J, as the model's ``elastic_energy()``). :func:`specialise` compiles one copy of the
-template's code per model with those names bound (no copy of the loop's source; one numba cache
-entry per model, keyed by its name). The symplectic integrator integrates exactly the contact
-forces given, so the increment ``ContactModel.attribute_increment`` would add is zero and is not
-computed.
+**Pluggable tissue step.** The loop is one compiled function for every model; the model's step
+and energy are C function pointers it calls (``@cfunc``, :func:`step_signature`,
+:func:`energy_signature`, given as integer addresses, so the loop stays cacheable: numba keys a
+jitted-function *argument* by its address, which would recompile in every process). A model's
+step ``step(tab_address, rows, dt, first, implicit) -> int`` reads its arrays from the address
+table (:func:`step_arrays` gives the loop's part: positions, velocities, contact forces and
+stiffness, ``integrated_external_forces``, the "auto" state; the model's own section starts at
+``COMMON_SLOTS``), steps once in place (``first``: the first step of this call, whose Maxwell
+coefficients span the interval since the last commit; ``implicit``: the step "auto" picked; it
+writes the CG iterations to ``auto[4]``) and returns 1 if it changed ``integrated`` (the forces it
+integrated), whose difference to the contact forces the loop then gives the tools as
+``ContactModel.attribute_increment`` does. ``energy(tab_address, rows) -> float`` is the stored
+elastic energy (J) as the model's ``elastic_energy()``. Being calls through a pointer, the model's
+kernels are never inlined into the loop: with fastmath kernels, inlining into the loop changed the
+last bit of the calibrated model's volume forces; through the pointer the step runs the same code
+as when Python calls it (bit for bit the generic loop). The symplectic integrator integrates
+exactly the contact forces given, so the increment ``ContactModel.attribute_increment`` would add
+is zero and is not computed.
 
 **Arguments.** All arrays travel in one :class:`~surgsim_envs.scene.array_table.ArrayTable`
 (numba unboxes ~0.2 us per array argument: 16-30 us per control step for the ~90 arrays when they
@@ -34,17 +42,22 @@ so a haptic servo thread keeps running during a control step.
 
 from __future__ import annotations
 
-import types as pytypes
-
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import carray, njit, types
+from numba.extending import intrinsic
 
 from surgsim_envs.contact.model import contact_kernel_prepared
-from surgsim_envs.scene.array_table import ArrayTable, b1_1, f8_1, f8_2, f8_3, i8_1, i8_2, u1_2
-from surgsim_envs.scene.compiled_substeps import CONTACT_ERROR, DONE, GUARD_FAILED, NO_IDS, NO_VALUES, NON_FINITE_INPUT
+from surgsim_envs.scene.array_table import ArrayTable, _pointer, b1_1, f8_1, f8_2, f8_3, i8_1, i8_2, u1_2
+import math
+
+from surgsim_envs.contact.model import _attribute_increment
+from surgsim_envs.scene.compiled_substeps import (AUTO_RECHECK, CONTACT_ERROR, DONE, GUARD_FAILED, NO_IDS, NO_VALUES,
+                                                  NON_FINITE_INPUT)
 from surgsim_envs.scene.mujoco_native import call_model_data, model_data_addresses
 from surgsim_envs.scene.simulation import (_add_wrench, _advance_geoms, _gather_geoms, _rate_limit, _write_rows,
                                            _zero_rows)
+from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS, DT_SAFETY, _max_ratio
 from surgsim_envs.tissue.guard import first_non_finite, max_speed_squared
 
 # ---------------------------------------------------------------------------------------------
@@ -57,13 +70,14 @@ CONTACT_KINDS = ["i8_1", "i8_2", "f8_2", "i8_1", "i8_1", "i8_1", "f8_2", "f8_1",
                  "i8_1", "i8_1", "i8_1", "f8_2", "f8_2", "f8_1", "f8_1", "f8_2", "f8_1"]
 #: kernel_state() entries that are arrays, in table order (8, 9, 10, 33 are the scalars k_n, c_n, k_t, c_imp)
 CONTACT_ARRAY_ENTRIES = [0, 1, 2, 3, 4, 5, 6, 7] + list(range(11, 33)) + [34, 35]
-SLOT_REST = 46             # 20: controls, reaction, fixed nodes, counters, guard, sub-cycling, positions
+SLOT_REST = 46             # 21: controls, reaction, fixed nodes, counters, guard, sub-cycling, positions, auto
 REST_KINDS = ["f8_1", "f8_1", "f8_1", "b1_1",      # ctrl, goal, rate, moving
               "f8_2", "i8_1", "f8_2",              # xfrc_applied, bodies, wrench
               "i8_1", "f8_2", "f8_2",              # fixed_idx, fixed_targets, integrated_external_forces
               "f8_1", "i8_1",                      # clock, counts
               "f8_1", "f8_1", "f8_2", "f8_2", "b1_1",   # masses, energy, good_pos, good_vel, snap
-              "f8_2", "f8_2", "f8_2"]              # gpos0, positions, velocities
+              "f8_2", "f8_2", "f8_2",              # gpos0, positions, velocities
+              "f8_1"]                              # integrator "auto": [crit, crit dt, crit step, implicit, CG its]
 COMMON_SLOTS = SLOT_REST + len(REST_KINDS)
 COMMON_KINDS = GATHER_KINDS + CONTACT_KINDS + REST_KINDS
 assert len(COMMON_KINDS) == COMMON_SLOTS
@@ -92,6 +106,26 @@ def _contact_state(tab):
 
 
 @njit(cache=True)
+def _recheck_due(auto, dt, steps):
+    """``TissueModel._auto_choice``'s condition to re-evaluate ``critical_dt()`` (done in Python)."""
+    return dt != auto[1] or steps - auto[2] >= AUTO_RECHECK_STEPS or not (auto[0] > 0)
+
+
+@njit(cache=True)
+def _pick_implicit(dt, crit, kc, masses):
+    """``TissueModel._pick`` with ``_contact_rate(kc)``: True if "auto" takes the implicit step."""
+    if not (crit > 0):
+        return True
+    rate = _max_ratio(kc, masses)
+    if not (math.isfinite(rate) and rate > 0):
+        rate = 0.0
+    if rate > 0 and math.isfinite(crit):
+        omega = 2.0 / crit
+        crit = 2.0 / math.sqrt(omega * omega + rate)
+    return not (dt <= DT_SAFETY * crit)
+
+
+@njit(cache=True)
 def _kinetic_energy(vel, masses):
     ke = 0.0
     for i in range(vel.shape[0]):
@@ -112,16 +146,62 @@ def _keep_good_state(total, pos, vel, energy, good_pos, good_vel, clock, snap):
     snap[0] = True
 
 
-# names the template calls; bound per model by specialise() (these placeholders are never called)
-tissue_unpack = tissue_step = tissue_energy = None
+def step_signature():
+    """numba signature of a model's step function (see the module docstring)."""
+    return types.int64(types.int64, types.int64, types.float64, types.int64, types.int64)
 
 
+def energy_signature():
+    """numba signature of a model's energy function (see the module docstring)."""
+    return types.float64(types.int64, types.int64)
+
+
+@njit(cache=True, inline="always")
+def table_at(address, rows):
+    """The (rows, 4) address table at ``address`` (inside a model's step / energy function)."""
+    return carray(_pointer(address, np.int64), (rows, 4))
+
+
+@njit(cache=True, inline="always")
+def step_arrays(tab):
+    """(positions, velocities, contact forces, contact stiffness, integrated_external_forces, auto)
+    from the loop's part of the table, for a model's step function."""
+    return (f8_2(tab, SLOT_REST + 18), f8_2(tab, SLOT_REST + 19), f8_2(tab, SLOT_CONTACT + 10),
+            f8_1(tab, SLOT_CONTACT + 11), f8_2(tab, SLOT_REST + 9), f8_1(tab, SLOT_REST + 20))
+
+
+@intrinsic
+def _call_step(typingctx, fn, address, rows, dt, first, implicit):
+    sig = types.int64(types.int64, types.int64, types.int64, types.float64, types.int64, types.int64)
+
+    def codegen(context, builder, signature, args):
+        i64, f64 = ir.IntType(64), ir.DoubleType()
+        fnty = ir.FunctionType(i64, [i64, i64, f64, i64, i64])
+        return builder.call(builder.inttoptr(args[0], fnty.as_pointer()), list(args[1:]))
+
+    return sig, codegen
+
+
+@intrinsic
+def _call_energy(typingctx, fn, address, rows):
+    sig = types.float64(types.int64, types.int64, types.int64)
+
+    def codegen(context, builder, signature, args):
+        i64 = ir.IntType(64)
+        fnty = ir.FunctionType(ir.DoubleType(), [i64, i64])
+        return builder.call(builder.inttoptr(args[0], fnty.as_pointer()), list(args[1:]))
+
+    return sig, codegen
+
+
+@njit(cache=True, nogil=True)
 def run_substeps(tab, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k, j, count, resume, dt, n, max_speed2,
-                 check_every):
+                 check_every, auto_on, step_fn, energy_fn):
     """``count`` physics steps as MuJoCo steps ``k .. count/n - 1`` of ``n`` tissue steps each (see the
     module docstring; n = 1 is the documented one-to-one loop), starting at tissue step ``j`` of
-    MuJoCo step ``k``. ``resume``: that tissue step is done (after a check in Python): continue
-    with its reaction. counts: [tissue steps, simulation steps, tissue steps taken in this batch];
+    MuJoCo step ``k``. ``resume``: 0, or 1 = that tissue step is done (after a check in Python):
+    continue with its reaction; 2 = Python has just re-evaluated the critical dt for it (integrator
+    "auto", ``auto_on``): do it without asking again. counts: [tissue steps, simulation steps, tissue steps taken in this batch];
     clock: [tissue time, time of the last good state]; energy: [reference, factor, floor].
     Returns (status, MuJoCo step index, tissue step index within it)."""
     gather = _gather_state(tab)
@@ -134,13 +214,17 @@ def run_substeps(tab, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k, j, c
     masses, energy, good_pos, good_vel, snap = (f8_1(tab, at + 12), f8_1(tab, at + 13), f8_2(tab, at + 14),
                                                 f8_2(tab, at + 15), b1_1(tab, at + 16))
     gpos0, pos, vel = f8_2(tab, at + 17), f8_2(tab, at + 18), f8_2(tab, at + 19)
-    tissue = tissue_unpack(tab, COMMON_SLOTS)
+    auto = f8_1(tab, at + 20)
+    address, rows = np.int64(tab.ctypes.data), np.int64(tab.shape[0])
     big_dt = dt * n
     gpos, gmat, gvel, tcom = gather[9], gather[10], gather[11], gather[12]
     forces, stiffness, tool_force, tool_torque = contact[13], contact[14], contact[16], contact[17]
+    touched, node_tool_k, com_copy, pos_copy = contact[3], contact[15], contact[30], contact[31]
     rigid = count // n
     while k < rigid:
-        if j == 0 and not resume:
+        if j == 0 and resume != 1:
+            if resume == 0 and auto_on and _recheck_due(auto, dt, counts[0]):
+                return AUTO_RECHECK, k, 0
             for q in range(ctrl_ids.shape[0]):
                 ctrl[ctrl_ids[q]] = ctrl_values[k, q]
             if moving[0]:
@@ -154,7 +238,9 @@ def run_substeps(tab, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k, j, c
                 for q in range(6):
                     wrench[t, q] = 0.0
         while j < n:
-            if not resume:
+            if resume != 1:
+                if j > 0 and resume == 0 and auto_on and _recheck_due(auto, dt, counts[0]):
+                    return AUTO_RECHECK, k, j
                 if j > 0:
                     _advance_geoms(gpos, gpos0, gvel, j * dt)
                 if contact_kernel_prepared(pos, vel, gpos, gmat, gvel, tcom, contact) != 0:
@@ -164,7 +250,12 @@ def run_substeps(tab, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k, j, c
                 for i in range(forces.shape[0]):
                     for q in range(3):
                         integrated[i, q] = forces[i, q]
-                tissue_step(pos, vel, forces, dt, counts[2] == 0, tissue)
+                implicit = auto_on and _pick_implicit(dt, auto[0], stiffness, masses)
+                auto[3] = 1.0 if implicit else 0.0
+                if _call_step(step_fn, address, rows, dt, 1 if counts[2] == 0 else 0, 1 if implicit else 0):
+                    # the integrator added to the contact force: the tools get the reaction of it too
+                    _attribute_increment(touched, integrated, forces, stiffness, node_tool_k, pos_copy, com_copy,
+                                         tool_force, tool_torque)
                 counts[2] += 1
                 for q in range(fixed_idx.shape[0]):
                     i = fixed_idx[q]
@@ -180,9 +271,9 @@ def run_substeps(tab, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k, j, c
                     ke = _kinetic_energy(vel, masses)
                     if ke > energy[1] * (energy[0] + energy[2]):
                         return GUARD_FAILED, k, j     # nothing updated: Python repeats the check and raises
-                    _keep_good_state(ke + tissue_energy(pos, tissue), pos, vel, energy, good_pos, good_vel, clock,
-                                     snap)
-            resume = False
+                    _keep_good_state(ke + _call_energy(energy_fn, address, rows), pos, vel, energy, good_pos,
+                                     good_vel, clock, snap)
+            resume = 0
             _add_wrench(wrench, tool_force, tool_torque)
             j += 1
         if n > 1:
@@ -198,46 +289,20 @@ def run_substeps(tab, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k, j, c
     return DONE, k, 0
 
 
-_SPECIALISED: dict[str, object] = {}
-
-
-def specialise(name: str, unpack, step, energy):
-    """The loop of :func:`run_substeps` compiled with ``tissue_unpack``/``tissue_step``/``tissue_energy``
-    bound to the given numba functions, as the function ``name`` (a valid identifier, unique per
-    model: it names the numba cache entry). One compiled loop per name."""
-    if name in _SPECIALISED:
-        return _SPECIALISED[name]
-    template = run_substeps
-    scope = dict(template.__globals__, tissue_unpack=unpack, tissue_step=step, tissue_energy=energy)
-    fn = pytypes.FunctionType(template.__code__, scope, name, template.__defaults__, template.__closure__)
-    fn.__qualname__ = name
-    fn.__doc__ = template.__doc__
-    fn.__module__ = template.__module__
-    loop = njit(cache=True, nogil=True)(fn)
-    _SPECIALISED[name] = loop
-    return loop
-
-
 class TissueOps:
-    """What a registered model supplies (see the module docstring): ``name`` of its loop, the
-    numba ``unpack``/``step``/``energy``, ``kinds`` of its table section and ``arrays(tissue, dt)``
-    returning that section's arrays (the model's own, valid until they are replaced), and
-    ``committed(tissue, dt)``: bookkeeping after the loop stepped the model at least once."""
+    """What a registered model supplies (see the module docstring): its ``step`` and ``energy``
+    (numba ``cfunc`` objects of :func:`step_signature` / :func:`energy_signature`), ``kinds`` of its
+    table section and ``arrays(tissue, dt)`` returning that section's arrays (the model's own, valid
+    until they are replaced), and ``committed(tissue, dt)``: bookkeeping after the loop stepped the
+    model at least once."""
 
-    def __init__(self, name, unpack, step, energy, kinds, arrays, committed):
-        self.name, self.kinds, self.arrays, self.committed = name, list(kinds), arrays, committed
-        self._fns = (unpack, step, energy)
-        self._loop = None
-
-    @property
-    def loop(self):
-        if self._loop is None:
-            self._loop = specialise(self.name, *self._fns)
-        return self._loop
+    def __init__(self, step, energy, kinds, arrays, committed):
+        self.step, self.energy = step, energy
+        self.kinds, self.arrays, self.committed = list(kinds), arrays, committed
 
 
 class SubstepsRunner:
-    """Runs a model's specialised loop for one :class:`Simulation` and does the Python side: keeps
+    """Runs the loop with a model's step for one :class:`Simulation` and does the Python side: keeps
     the address table current (rebuilt when an array was replaced, e.g. by reset()), mirrors the
     counters and the guard's state back into the model, the guard and the simulation, and turns the
     hand-backs into the generic loop's checks and errors (the Python check is repeated on the same
@@ -252,13 +317,15 @@ class SubstepsRunner:
         self._energy = np.zeros(3)
         self._snap = np.zeros(1, dtype=np.bool_)
         self._cscal = np.zeros(4)
+        self._auto = np.zeros(5)       # [critical dt, its dt, its step, last step implicit, CG iterations]
         self._scratch = None
         self._contact_key = None
         self._contact_arrays: list = []
         self._gpos0 = np.empty_like(sim._gpos)
         self._kinds = COMMON_KINDS + ops.kinds
         self._table = ArrayTable()
-        self._loop = ops.loop
+        self._loop = run_substeps
+        self._fn_addresses = (ops.step.address, ops.energy.address)
 
     def _contact_section(self) -> list:
         contact = self.contact
@@ -293,7 +360,8 @@ class SubstepsRunner:
         def arrays():
             return [*sim._gather_args, *self._contact_arrays, v["ctrl"], sim._goal, sim._rate, self._moving,
                     v["xfrc_applied"], sim._bodies, sim._wrench, *volatile[:3], self._clock, self._counts,
-                    volatile[3], self._energy, good_pos, good_vel, self._snap, self._gpos0, *volatile[6:]]
+                    volatile[3], self._energy, good_pos, good_vel, self._snap, self._gpos0, volatile[6],
+                    volatile[7], self._auto, *volatile[8:]]
 
         return self._table.update(key, arrays, self._kinds)
 
@@ -310,7 +378,13 @@ class SubstepsRunner:
         max_speed2 = float(guard.max_speed) ** 2
         check_every = guard.check_every
         n = sim.tissue_subcycles
-        k, j, resume = 0, 0, False
+        auto_on = tissue.integrator == "auto"
+        if auto_on:
+            nan = float("nan")
+            self._auto[:3] = (getattr(tissue, "_auto_crit", nan), getattr(tissue, "_auto_dt", nan),
+                              getattr(tissue, "_auto_step", 0))
+        self._auto[4] = -1.0
+        k, j, resume = 0, 0, 0
         done = False
         try:
             while True:
@@ -318,14 +392,20 @@ class SubstepsRunner:
                 self._snap[0] = False
                 tab = self._table_now(dt)
                 status, k, j = self._loop(tab, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k, j, count, resume,
-                                          dt, n, max_speed2, check_every)
+                                          dt, n, max_speed2, check_every, auto_on, *self._fn_addresses)
                 self._sync(dt)
                 if status == DONE:
                     done = True
                     return
                 if status == GUARD_FAILED:
                     guard.check(tissue, dt)    # raises the generic loop's error; else (a rounding tie) go on
-                    resume = True
+                    resume = 1
+                    continue
+                if status == AUTO_RECHECK:     # as TissueModel._auto_choice, on the same state
+                    tissue._auto_crit = float(tissue.critical_dt())
+                    tissue._auto_dt, tissue._auto_step = dt, tissue.steps
+                    self._auto[:3] = (tissue._auto_crit, dt, tissue.steps)
+                    resume = 2
                     continue
                 if status == CONTACT_ERROR:
                     cs = contact.kernel_state()
@@ -355,3 +435,8 @@ class SubstepsRunner:
         if self._counts[2]:
             tissue._last_dt = dt
             self.ops.committed(tissue, dt)
+            if tissue.integrator == "auto":
+                tissue._active = tissue.auto_pair[1] if self._auto[3] else tissue.auto_pair[0]
+        if self._auto[4] >= 0:
+            tissue.last_cg_iterations = int(self._auto[4])
+            self._auto[4] = -1.0
