@@ -42,6 +42,7 @@ def register_compiled_substeps(contact_cls: type, tissue_cls: type, integrator: 
 
 def registered() -> list[tuple[str, str, str]]:
     """(contact class, tissue class, integrator) names of the registered compiled loops."""
+    _register_builtin()
     return [(c.__name__, t.__name__, i) for (c, t, i) in _REGISTRY]
 
 
@@ -58,6 +59,7 @@ def key_of(sim) -> tuple | None:
 
 def compiled_substeps_for(sim):
     """A runner of the compiled loop registered for ``sim``'s scene, or None (generic loop)."""
+    _register_builtin()
     key = key_of(sim)
     factory = _REGISTRY.get(key) if key is not None else None
     if factory is None:
@@ -78,8 +80,12 @@ NO_IDS = np.zeros(0, dtype=np.int64)
 NO_VALUES = np.zeros((0, 0))
 
 
+_BUILTIN_LOADED = False
+
+
 def _register_builtin() -> None:
-    from surgsim_envs.scene import substeps_calibrated, substeps_mass_spring  # noqa: F401  (register themselves)
-
-
-_register_builtin()
+    """Import the built-in registrations on first use (not at import time: they import this module)."""
+    global _BUILTIN_LOADED
+    if not _BUILTIN_LOADED:
+        _BUILTIN_LOADED = True
+        from surgsim_envs.scene import substeps_calibrated, substeps_mass_spring  # noqa: F401  (register themselves)
