@@ -16,9 +16,9 @@ from surgsim_envs.tissue.guard import StabilityGuard
 from surgsim_envs.tissue.mass_spring import MassSpringModel
 
 
-def _pair(task):
+def _pair(task, **config):
     """Two envs of ``task`` in the same state: the first steps compiled, the second generically."""
-    envs = [gym.make(task), gym.make(task)]
+    envs = [gym.make(task, **config), gym.make(task, **config)]
     for e in envs:
         e.reset(seed=3)
     envs[1].unwrapped.sim.compiled_substeps = False
@@ -68,6 +68,61 @@ def test_compiled_substeps_match_the_generic_loop_bit_for_bit(task):
     assert touched > 0, "no contact in the run: the comparison would be vacuous"
 
 
+def _assert_close(s0, s1, rtol=1e-12):
+    t0, t1 = s0.tissue(), s1.tissue()
+    scale = float(np.abs(t1.positions).max())
+    np.testing.assert_allclose(t0.positions, t1.positions, rtol=0, atol=rtol * scale)
+    np.testing.assert_allclose(s0.data.qpos, s1.data.qpos, rtol=0, atol=rtol * max(1.0, np.abs(s1.data.qpos).max()))
+    assert (t0.time, t0.steps, s0.steps) == (t1.time, t1.steps, s1.steps)
+
+
+def test_calibrated_mass_spring_with_auto_integrator_runs_compiled():
+    """mass_spring_calibrated (nodal volume term in its own step) under integrator "auto" as the
+    grasp tasks build it: the compiled loop picks explicit or implicit per step as the generic one
+    does (critical dt re-evaluated in Python every AUTO_RECHECK_STEPS steps), with the same result.
+    Bit for bit when numba compiles the kernels in the process; with kernels loaded from numba's
+    cache the fastmath nodal-volume kernel may round the last bit differently (measured 1e-15
+    relative), hence 1e-12 here (docs/benchmarks.md "Env step: fourth pass")."""
+    envs = _pair("SurgSim/Grasp-v0", model="mass_spring_calibrated")
+    s0, s1 = (e.unwrapped.sim for e in envs)
+    assert type(s0.tissue()).__name__ == "CalibratedMassSpringModel" and s0.tissue().integrator == "auto"
+    assert s0._compiled_runner() is not None and s1._compiled_runner() is None
+    picked = set()
+    for a in _actions(envs[0], 30, seed=1):
+        a[-1] = 1.0                           # close the jaws: contact, and "auto" turns implicit
+        outs = [e.step(a) for e in envs]
+        np.testing.assert_allclose(outs[0][0], outs[1][0], rtol=1e-5, atol=1e-6)    # float32 observations
+        _assert_close(s0, s1)
+        assert s0.tissue()._active == s1.tissue()._active
+        picked.add(s0.tissue()._active)
+    assert picked == {"symplectic", "implicit"}, f"the run should exercise both integrators, got {picked}"
+
+
+def test_mass_spring_implicit_steps_give_the_tools_the_integrated_reaction():
+    """MassSpringModel under "auto" with a step above its explicit limit: every step is implicit,
+    the integrated force differs from the contact force, and the compiled loop attributes the
+    increment to the tools exactly as ContactModel.attribute_increment does (same wrenches, same
+    tool motion), bit for bit."""
+    a, b = _free_scene(1, True, integrator="auto", dt=5e-3), _free_scene(1, False, integrator="auto", dt=5e-3)
+    assert a._compiled_runner() is not None and b._compiled_runner() is None
+    p0 = a.momentum()
+    differs = implicit = 0
+    for _ in range(40):
+        a.step_with_controls([], np.zeros((1, 0)))
+        b.step_with_controls([], np.zeros((1, 0)))
+        for x, y in ((a.tissue().positions, b.tissue().positions), (a.data.qvel, b.data.qvel),
+                     (a.tissue().integrated_external_forces, b.tissue().integrated_external_forces)):
+            np.testing.assert_array_equal(x, y)
+        assert a.tissue()._active == b.tissue()._active
+        implicit += a.tissue()._active == "implicit"
+        c = next(iter(a.contacts.values())).result
+        differs += not np.array_equal(a.tissue().integrated_external_forces, c.forces)
+    assert implicit > 5 and differs > 5, "the implicit increment never acted: the comparison would be vacuous"
+    # the tools got the reaction of what the tissue integrated: momentum is conserved (to the CG
+    # tolerance of the implicit solve, 1e-6 relative; without the increment it leaks 11-14 %)
+    np.testing.assert_allclose(a.momentum(), p0, rtol=0, atol=1e-5 * np.abs(p0).max())
+
+
 def test_the_guard_raises_the_same_error_in_both_loops():
     """Runaway speed (cheap check, every step) and kinetic-energy blow-up (costly check, every
     check_every steps, run inside the kernel) give the generic loop's error and message."""
@@ -102,6 +157,7 @@ def test_non_finite_contact_input_is_refused_with_the_same_message():
 
 def test_models_without_a_registered_loop_keep_the_generic_loop():
     assert ("ContactModel", "MassSpringModel", "symplectic") in registered()
+    assert ("ContactModel", "CalibratedMassSpringModel", "auto") in registered()
     env = gym.make("SurgSim/Palpation-v0")
     env.reset(seed=0)
     sim = env.unwrapped.sim
@@ -144,15 +200,15 @@ def test_step_with_controls_checks_its_schedule():
 
 # ---------------------------------------------------------------------------------------------
 # tissue_subcycles: n tissue + contact steps per MuJoCo step
-def _free_scene(subcycles, compiled):
+def _free_scene(subcycles, compiled, integrator="symplectic", dt=5e-4):
     from surgsim_envs.scene import ProbeConfig, SceneConfig, Simulation, TissueConfig, build_scene
 
     tissue = TissueConfig(name="blob", organ="block", model="mass_spring",
                           material={"preset": "liver", "damping": 0.0}, spacing=0.01, anchors=(),
                           position=(0.0, 0.0, 0.0), volume_options={"size": (0.04, 0.04, 0.02)},
-                          options={"integrator": "symplectic"})
+                          options={"integrator": integrator})
     probe = ProbeConfig(name="probe", drive="free", tip_radius=0.008, position=(0.003, -0.002, 0.0185), mass=0.02)
-    cfg = SceneConfig(name="momentum", tissues=[tissue], probes=[probe], dt=5e-4, gravity=(0.0, 0.0, 0.0),
+    cfg = SceneConfig(name="momentum", tissues=[tissue], probes=[probe], dt=dt, gravity=(0.0, 0.0, 0.0),
                       floor=False, cameras=[])
     sim = Simulation(build_scene(cfg), tissue_subcycles=subcycles, compiled_substeps=compiled)
     sim.data.qvel[sim.tool("probe").dof_adr[2]] = -0.4      # moving down onto the tissue

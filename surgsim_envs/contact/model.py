@@ -147,17 +147,18 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
                     mu, mu_s, k_n, c_n, c_imp, k_t, anchor_local, anchor_on,
                     forces, stiffness, node_tool_k, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv,
                     tool_fn, tool_ft, tool_ftv, contacts, slipping, penetration, last_contact, last_slip,
-                    err):
+                    err, radius, vec3):
     """Contact points p < C are the candidate nodes ``cand[p]``; points p >= C are the surface
     samples ``s = p - C`` at ``sum_j s_w[s, j] x[s_nodes[s, j]]`` whose forces go back to the nodes
     with the same weights. ``touched`` lists every node that can receive a force (zeroed first).
     mu, mu_s (T,) kinetic and static friction per tool; c_imp: 0 (damping from the velocity) or
     c_n / dt (implicit damping: reported as stiffness, module docstring). ``anchor_on[c, g]`` is
-    the contact state (friction.NO_CONTACT / STICKING / SLIDING)."""
+    the contact state (friction.NO_CONTACT / STICKING / SLIDING). Work buffers (the model's own, so
+    the kernel allocates nothing): ``radius`` (G,) the geoms' bounding radii, ``vec3`` (7,3) rows for
+    the bounding box (lo, hi) and the 3-vectors of the signed distance and friction calls."""
     G = kind.shape[0]
     T = tool_force.shape[0]
     # validate geoms and precompute bounding radii
-    radius = np.empty(G)
     for g in range(G):
         if kind[g] < 0 or kind[g] >= 4:
             err[0] = 1
@@ -174,8 +175,11 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
             return
         radius[g] = r
     # axis-aligned box around all geoms' bounding spheres: a cheap first rejection per point
-    blo = np.full(3, np.inf)
-    bhi = np.full(3, -np.inf)
+    blo = vec3[0]
+    bhi = vec3[1]
+    for k in range(3):
+        blo[k] = np.inf
+        bhi[k] = -np.inf
     for g in range(G):
         for k in range(3):
             lo = gpos[g, k] - radius[g]
@@ -207,11 +211,11 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
         stiffness[i] = 0.0
         for t in range(T):
             node_tool_k[i, t] = 0.0
-    nl = np.empty(3)
-    cl = np.empty(3)
-    nrm = np.empty(3)
-    cpt = np.empty(3)
-    ft = np.empty(3)
+    nl = vec3[2]
+    cl = vec3[3]
+    nrm = vec3[4]
+    cpt = vec3[5]
+    ft = vec3[6]
     C = cand.shape[0]
     P = C + s_nodes.shape[0]
     i = 0
@@ -399,11 +403,11 @@ def contact_kernel_prepared(positions, velocities, gpos, gmat, gvel, tool_com, s
     centres are kept for :meth:`ContactModel.attribute_increment` as compute_prepared keeps them."""
     (cand, s_nodes, s_w, touched, kind, tool, size, mu, k_n, c_n, k_t, anchor_local, anchor_on,
      forces, stiffness, node_tool_k, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv, tool_fn, tool_ft, tool_ftv,
-     contacts, slipping, penetration, last0, last1, err, com_copy, pos_copy, mu_s, c_imp) = state
+     contacts, slipping, penetration, last0, last1, err, com_copy, pos_copy, mu_s, c_imp, radius, vec3) = state
     _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel,
                     tool_com, mu, mu_s, k_n, c_n, c_imp, k_t, anchor_local, anchor_on, forces, stiffness, node_tool_k,
                     tool_force, tool_torque, geom_fn, geom_ft, geom_ftv, tool_fn, tool_ft, tool_ftv, contacts,
-                    slipping, penetration, last0, last1, err)
+                    slipping, penetration, last0, last1, err, radius, vec3)
     if err[0] != 0:
         return err[0]
     for t in range(tool_com.shape[0]):
@@ -509,6 +513,7 @@ class ContactModel:
         self._pos = np.zeros((self.n_nodes, 3))
         self._last = np.zeros((2, T), dtype=np.int64)
         self._err = np.zeros(2, dtype=np.int64)
+        self._vec3 = np.zeros((7, 3))          # kernel work rows (bounding box, 3-vectors)
         self._n_geoms = -1
         self._prepared = None
         self._alloc_geoms(0)
@@ -576,6 +581,7 @@ class ContactModel:
         self.result.geom_normal_force = np.zeros(G)
         self.result.geom_tangential_force = np.zeros(G)
         self._geom_ftv = np.zeros((G, 3))
+        self._radius = np.zeros(G)             # kernel work: bounding radius per geom
 
     def reset(self) -> None:
         """Forget all stick anchors (every contact starts fresh) and zero the outputs."""
@@ -648,7 +654,7 @@ class ContactModel:
                         r.tool_force,
                         r.tool_torque, r.geom_normal_force, r.geom_tangential_force, self._geom_ftv,
                         rep.normal_force, rep.tangential_force, self._tool_ftv, rep.contacts, rep.slipping,
-                        rep.penetration, self._last[0], self._last[1], err)
+                        rep.penetration, self._last[0], self._last[1], err, self._radius, self._vec3)
         if err[0] != _OK:
             self._raise_kernel_error(kind, tool, size)
         np.copyto(self._com, com)
@@ -692,8 +698,9 @@ class ContactModel:
         runs :func:`contact_kernel_prepared` itself (the scene's compiled substeps): a tuple of the
         model's own arrays and the prepared constants, in :func:`contact_kernel_prepared` order.
         Valid until the next :meth:`prepare` (or a compute() with another geom count). The static
-        friction and the implicit damping (c_n / dt) are the last two entries, so that compiled callers
-        that index the earlier entries (forces = [13], stiffness = [14], ...) keep their indices."""
+        friction, the implicit damping (c_n / dt) and the kernel's work buffers are the last four
+        entries, so that compiled callers that index the earlier entries (forces = [13], stiffness =
+        [14], ...) keep their indices."""
         if self._prepared is None:
             raise ConfigError("kernel_state() needs prepare(shape_kind, shape_tool, shape_size, dt) first")
         kind, tool, size, k_n, c_n, c_imp, k_t = self._prepared
@@ -703,7 +710,7 @@ class ContactModel:
                 self.node_tool_stiffness, r.tool_force, r.tool_torque, r.geom_normal_force,
                 r.geom_tangential_force, self._geom_ftv, rep.normal_force, rep.tangential_force, self._tool_ftv,
                 rep.contacts, rep.slipping, rep.penetration, self._last[0], self._last[1], self._err,
-                self._com, self._pos, self.tool_static_friction, c_imp)
+                self._com, self._pos, self.tool_static_friction, c_imp, self._radius, self._vec3)
 
     def attribute_increment_prepared(self, integrated_forces) -> None:
         """:meth:`attribute_increment` without the argument check (``integrated_forces`` a
