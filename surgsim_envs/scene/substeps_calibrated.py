@@ -1,10 +1,11 @@
 """Compiled substeps for :class:`CalibratedMassSpringModel` (``mass_spring_calibrated``) against
-:class:`ContactModel`, integrators "symplectic" and "auto": the mass-spring loop
+:class:`ContactModel`, integrator "symplectic" (its "auto" can choose "subcycled", which stays on the
+generic loop): the mass-spring loop
 (:mod:`surgsim_envs.scene.substeps_loop`) with the model's own step
 and energy, which carry its averaged-nodal-volume term instead of the per-tet one.
 
 Step, as ``CalibratedMassSpringModel._advance``: symplectic = the external forces plus the nodal
-volume forces (``nodal_volume_kernels.add_forces_cached``) into the model's ``_fvol``, then the
+volume forces (``nodal_volume_kernels.add_forces``) into the model's ``_fvol``, then the
 mass-spring symplectic step under them; implicit ("auto" picks it) = ``nodal_volume_kernels.
 implicit_step``, which integrates exactly the external forces given (no stiffness term taken out,
 as in the generic step). Energy = springs and Maxwell branches + the nodal volume term.
@@ -38,9 +39,10 @@ def arrays(tissue, dt: float) -> list:
     if scratch is None or scratch.shape != (tissue.n_nodes,):
         scratch = tissue._compiled_energy_scratch = np.zeros(tissue.n_nodes)
     return base + [tissue._fvol, tissue._ntets, tissue.node_rest_volume, tissue.node_bulk, tissue._vbuf,
-                   tissue._vgbuf, scratch, tissue._ngrad, tissue._nc, tissue._nsbuf]
+                   _NO_GRAD, scratch, tissue._ngrad, tissue._nc, tissue._nsbuf]
 
 
+_NO_GRAD = np.zeros((0, 4, 3))             # unused slot (the fused volume pass recomputes its gradients)
 _PARAMS = np.array([CG_TOLERANCE, CG_MAX_ITER], dtype=np.float64)
 _BASE_SLOTS = len(ms.KINDS)
 
@@ -66,7 +68,7 @@ def step(pos, vel, fext, kc, integrated, dt, first, implicit, auto, t):
         for i in range(fext.shape[0]):
             for q in range(3):
                 fvol[i, q] = fext[i, q]
-        nvk.add_forces_cached(pos, ntets, V0n, bulk, vbuf, vgbuf, fvol)
+        nvk.add_forces(pos, ntets, V0n, bulk, vbuf, fvol)
         symplectic_step_work(pos, vel, inv_mass, b0, fvol, gravity, fixed, dt, si, sj, L0, K1, K2, kMg_c, decay_c, s,
                              dl, f_buf, tets, V0, kv, work)
         return False
@@ -108,5 +110,6 @@ def runner(sim, tissue, contact, fns) -> SubstepsRunner:
     return SubstepsRunner(sim, tissue, contact, fns, OPS)
 
 
-for _integrator in ("symplectic", "auto"):
-    register_compiled_substeps(ContactModel, CalibratedMassSpringModel, _integrator, runner)
+# "symplectic" only: this model's "auto" may also pick its "subcycled" integrator (n explicit
+# steps per dt), which this loop does not do, so "auto" and "subcycled" keep the generic loop
+register_compiled_substeps(ContactModel, CalibratedMassSpringModel, "symplectic", runner)
