@@ -189,14 +189,8 @@ def test_active_set_static_solve_is_an_equilibrium_with_rigid_extreme_springs(wa
     assert np.count_nonzero(model.push > 0) > 0
     assert np.all(model.push >= 0)
     f = probe.force()[2]
-    x = model.positions
-    for a in range(3):
-        j = model.nbr[:, 2 * a + 1]
-        ok = np.flatnonzero(j >= 0)
-        lmin = model.lmin[ok, 2 * a + 1]
-        gap = x[j[ok], a] - x[ok, a] - lmin
+    for gap, rigid, lmin in model.link_gaps():
         assert gap.min() > -1e-3 * lmin.max()            # rigid links: penetration < 0.1 % of lmin
-        rigid = model.push[ok, 2 * a + 1] > 0
         assert np.all(np.abs(gap[rigid]) < 1e-3 * lmin.max())
     free = ~model.fixed
     residual = np.abs(model.internal_forces()[free]).max()

@@ -473,7 +473,7 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     if not (isinstance(mu_s, (int, float, np.floating)) and math.isfinite(mu_s) and mu_s >= mu):
         raise ConfigError(f"mu_static must be a static friction coefficient >= mu = {mu!r} (or None = mu), "
                           f"got {mu_static!r}")
-    quasi_static = "quasi_static" in getattr(cls, "capabilities", ())
+    quasi_static = cls.has("quasi_static")
     if dt is None:
         dt = 5e-4 if quasi_static else 5e-5
     _positive(radius=radius, length=length, spacing=spacing, squeeze=squeeze, dt=dt, close_time=close_time,

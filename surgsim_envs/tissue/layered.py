@@ -734,6 +734,19 @@ class LayeredModel(TissueModel):
             bad += int(np.count_nonzero(x[j[ok], a] - x[ok, a] <= 0.0))
         return bad
 
+    def link_gaps(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per axis x, y, z: (gap (K,) m = neighbour distance along the axis minus its extreme length,
+        rigid (K,) bool = the link passes force on (eq. 2.5), extreme lengths (K,) m) over the nodes
+        with a + neighbour. gap < 0 is a pair pushed past its extreme length; a rigid link sits at 0."""
+        x = self.positions
+        out = []
+        for a in range(3):
+            j = self.nbr[:, 2 * a + 1]
+            ok = np.flatnonzero(j >= 0)
+            lmin = self.lmin[ok, 2 * a + 1]
+            out.append((x[j[ok], a] - x[ok, a] - lmin, self.push[ok, 2 * a + 1] > 0, lmin))
+        return out
+
     def describe(self) -> dict:
         out = super().describe()
         out.update({"materials": list(self.volume.material_names), "layers": list(self.volume.layer_names),
