@@ -294,11 +294,14 @@ class TissueOps:
     (numba ``cfunc`` objects of :func:`step_signature` / :func:`energy_signature`), ``kinds`` of its
     table section and ``arrays(tissue, dt)`` returning that section's arrays (the model's own, valid
     until they are replaced), and ``committed(tissue, dt)``: bookkeeping after the loop stepped the
-    model at least once."""
+    model at least once. Optional ``key(tissue, dt)``: a hashable that, with the tissue's
+    ``_array_version``, changes whenever ``arrays(tissue, dt)`` would return other arrays (e.g. the
+    interval its coefficients span); without it the arrays are compared by identity every call."""
 
-    def __init__(self, step, energy, kinds, arrays, committed):
+    def __init__(self, step, energy, kinds, arrays, committed, key=None):
         self.step, self.energy = step, energy
         self.kinds, self.arrays, self.committed = list(kinds), arrays, committed
+        self.key = key
 
 
 class SubstepsRunner:
@@ -347,23 +350,35 @@ class SubstepsRunner:
 
     def _table_now(self, dt: float) -> np.ndarray:
         """The address table, repacked only when an array was replaced: the simulation's and the
-        runner's own arrays never are, the contact's only by a new prepare(); the tissue's and the
-        guard's (reset(), a material change, the first snapshot) are compared by identity."""
-        sim, tissue = self.sim, self.tissue
+        runner's own arrays never are, the contact's only by a new prepare(); the tissue's when its
+        ``_array_version`` moved (every non-scalar attribute assignment bumps it: reset(), a material
+        change, new buffers) or the model's ``ops.key`` changed; the guard's (the first snapshot)
+        are compared by identity. A model without ``ops.key`` has its arrays compared by identity."""
+        tissue = self.tissue
         good_pos, good_vel = self._good_state()
-        volatile = [tissue._fixed_idx, tissue.fixed_targets, tissue.integrated_external_forces, tissue.masses, good_pos,
-                    good_vel, tissue.positions, tissue.velocities, *self.ops.arrays(tissue, dt)]
         self._contact_section()
+        key_of = self.ops.key
+        if key_of is not None:
+            key = (tissue._array_version, id(good_pos), id(good_vel), id(self._contact_key), key_of(tissue, dt))
+            table = self._table
+            if key == table._key:
+                return table.table
+            return table.update(key, lambda: self._arrays(dt, good_pos, good_vel, self.ops.arrays(tissue, dt)),
+                                self._kinds)
+        own = self.ops.arrays(tissue, dt)
+        volatile = [tissue._fixed_idx, tissue.fixed_targets, tissue.integrated_external_forces, tissue.masses, good_pos,
+                    good_vel, tissue.positions, tissue.velocities, *own]
         key = (id(self._contact_key), *map(id, volatile))
+        return self._table.update(key, lambda: self._arrays(dt, good_pos, good_vel, own), self._kinds)
+
+    def _arrays(self, dt: float, good_pos, good_vel, own) -> list:
+        """Every array of the table, in ``COMMON_KINDS`` + ``ops.kinds`` order."""
+        sim, tissue = self.sim, self.tissue
         v = sim._views
-
-        def arrays():
-            return [*sim._gather_args, *self._contact_arrays, v["ctrl"], sim._goal, sim._rate, self._moving,
-                    v["xfrc_applied"], sim._bodies, sim._wrench, *volatile[:3], self._clock, self._counts,
-                    volatile[3], self._energy, good_pos, good_vel, self._snap, self._gpos0, volatile[6],
-                    volatile[7], self._auto, *volatile[8:]]
-
-        return self._table.update(key, arrays, self._kinds)
+        return [*sim._gather_args, *self._contact_arrays, v["ctrl"], sim._goal, sim._rate, self._moving,
+                v["xfrc_applied"], sim._bodies, sim._wrench, tissue._fixed_idx, tissue.fixed_targets,
+                tissue.integrated_external_forces, self._clock, self._counts, tissue.masses, self._energy, good_pos,
+                good_vel, self._snap, self._gpos0, tissue.positions, tissue.velocities, self._auto, *own]
 
     def run(self, count: int, ctrl_ids=NO_IDS, ctrl_values=NO_VALUES) -> None:
         sim, tissue, contact = self.sim, self.tissue, self.contact

@@ -111,7 +111,13 @@ def energy_c(address, rows):
     return energy(step_arrays(tab)[0], unpack(tab, COMMON_SLOTS))
 
 
-OPS = TissueOps(step_c, energy_c, KINDS, arrays, committed)
+def key(tissue, dt: float) -> tuple:
+    """What :func:`arrays` depends on besides the tissue's ``_array_version``: the intervals of the
+    Maxwell coefficients (first step, others) and the CG tolerance."""
+    return (tissue._pending_dt, dt, tissue.cg_tol)
+
+
+OPS = TissueOps(step_c, energy_c, KINDS, arrays, committed, key)
 
 
 def runner(sim, tissue, contact, fns) -> SubstepsRunner:

@@ -59,6 +59,10 @@ def von_mises(sig: np.ndarray) -> np.ndarray:
     return np.sqrt(1.5 * np.einsum("tij,tij->t", dev, dev))
 
 
+#: attribute values that do not bump ``TissueModel._array_version``
+_SCALARS = (int, float, bool, str, type(None), np.generic)
+
+
 class TissueModel(abc.ABC):
     """Base class of all tissue models.
 
@@ -98,6 +102,16 @@ class TissueModel(abc.ABC):
     surface_only: ClassVar[bool] = False
     #: derived from ``capabilities`` ("quasi_static")
     quasi_static: ClassVar[bool] = False
+
+    #: bumped whenever an attribute is set to anything but a scalar (an array, list, dict, object):
+    #: a compiled caller that keeps raw pointers to the model's arrays repacks them when it changes
+    #: (:class:`surgsim_envs.scene.substeps_loop.SubstepsRunner`); in-place writes keep it
+    _array_version: int = 0
+
+    def __setattr__(self, name: str, value) -> None:
+        if not isinstance(value, _SCALARS):
+            object.__setattr__(self, "_array_version", self._array_version + 1)
+        object.__setattr__(self, name, value)
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)

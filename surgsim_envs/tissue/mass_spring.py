@@ -238,7 +238,7 @@ class MassSpringModel(TissueModel):
             self._setup_volume_term(self.volume_stiffness)
         self._build_springs(self._overrides)
         self.inv_mass = 1.0 / self.masses
-        self._coeff_cache.clear()
+        self._coeff_cache = {}     # a new dict (not clear()): bumps _array_version for compiled callers
 
     def _setup_volume_term(self, volume_stiffness) -> None:
         """Per-tet volume stiffness ``volume_kv`` (Pa) and rest volumes ``volume_rest`` (m^3)."""
@@ -291,7 +291,7 @@ class MassSpringModel(TissueModel):
                 ratio = np.where(x > 1e-12, -np.expm1(-x) / np.where(x > 1e-12, x, 1.0), 1.0 - 0.5 * x)
             out = (np.where(self.kM > 0, self.kM * ratio, 0.0), np.where(self.kM > 0, decay, 1.0))
         if len(self._coeff_cache) > 8:
-            self._coeff_cache.clear()
+            self._coeff_cache = {}     # a new dict: bumps _array_version (the arrays it held are replaced)
         self._coeff_cache[h] = out
         return out
 
