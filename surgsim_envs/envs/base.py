@@ -244,6 +244,7 @@ class SurgSimEnv(gym.Env):
         self._viewer = None
         self._sims: dict[Any, Any] = {}
         self.sim = None
+        self._readings_key = None      # tasks may cache their readings per physics state
         self._build()
         self.steps = 0
         self.peak_force = 0.0
@@ -300,12 +301,14 @@ class SurgSimEnv(gym.Env):
 
         Raises ConfigError (a ValueError) on a wrong shape or non-finite entries.
         """
-        if type(action) is np.ndarray and action.dtype.kind == "f" and action.shape == self.action_space.shape:
-            a = action.astype(np.float64)          # a copy: the caller's array is never modified
-            if np.isfinite(a).all():               # fast path of the checks below (same result)
-                np.minimum(a, 1.0, out=a)
-                np.maximum(a, -1.0, out=a)
-                return a
+        if type(action) is np.ndarray and action.ndim == 1 and action.dtype.char in "fd" \
+                and action.shape == self.action_space.shape:
+            # fast path of the checks below (same result): the entries as Python floats (exact for
+            # float32 / float64), finite if their sum is (a sum that overflows takes the checked
+            # path), clipped, into a new float64 array (the caller's array is never modified)
+            vals = action.tolist()
+            if math.isfinite(sum(vals)):
+                return np.array([1.0 if v > 1.0 else (-1.0 if v < -1.0 else v) for v in vals])
         raw = np.asarray(action)
         if raw.dtype.kind not in "iuf":
             raise ConfigError(f"action must be real numbers (float or int) with shape {self.action_space.shape} in "

@@ -332,22 +332,27 @@ class PalpationEnv(SurgSimEnv):
 
     def _apply_action(self, a: np.ndarray) -> None:
         c = self.config
-        xy = self.target[:2] + a[:2] * c.max_xy_step
-        np.minimum(xy, c.xy_limit, out=xy)        # = np.clip(xy, -lim, lim), without its wrapper
-        np.maximum(xy, -c.xy_limit, out=xy)
-        press = (float(a[2]) + 1.0) / 2.0
+        a0, a1, a2 = a.tolist()[:3]
+        tx, ty = self.target.tolist()[:2]
+        lim, step = c.xy_limit, c.max_xy_step
+        x = tx + a0 * step                        # = np.clip(target[:2] + a[:2] * step, -lim, lim), in floats
+        y = ty + a1 * step
+        x = lim if x > lim else (-lim if x < -lim else x)
+        y = lim if y > lim else (-lim if y < -lim else y)
+        press = (a2 + 1.0) / 2.0
         z = self.surface_z + c.tip_radius + c.hover - press * (c.hover + c.max_depth)
-        self.target = np.array([xy[0], xy[1], z])
+        self.target = np.array([x, y, z])
         self.sim.set_tool_target("probe", self.target, speed=c.probe_speed)
         self.sim.step()
 
     def _readings(self):
         """(probe position (3,) m, force on the probe (3,) N, indentation depth m), read once per
         physics state (``_evaluate`` and ``_observe`` of a step share them; do not modify them)."""
-        key = (self.sim, self.sim.steps, self.sim.time, self.steps)
-        if getattr(self, "_readings_key", None) != key:
-            pos = self.sim.tool_position("probe")
-            force = self.sim.tool_force("probe")
+        sim = self.sim
+        key = (sim, sim.steps, self.steps)         # reset() and the unstable path clear the key
+        if self._readings_key != key:
+            pos = sim.tool_position("probe")
+            force = sim.tool_force("probe")
             self._readings_value = (pos, force, indentation_depth(pos[2], self.surface_z, self.config.tip_radius))
             self._readings_key = key
         return self._readings_value
@@ -368,14 +373,17 @@ class PalpationEnv(SurgSimEnv):
     def _evaluate(self, a: np.ndarray):
         c = self.config
         pos, force, depth = self._readings()
-        fmag = _norm(force)
-        self.peak_force = max(self.peak_force, fmag)
-        rt = {"damage": damage_penalty(force, c.damage_force, c.damage_weight), "coverage": 0.0, "shaping": 0.0,
+        fmag = math.sqrt(force.dot(force))        # = _norm(force)
+        if fmag > self.peak_force:
+            self.peak_force = fmag
+        # = damage_penalty(force, ...), on the norm computed once
+        rt = {"damage": -c.damage_weight * max(0.0, fmag - c.damage_force), "coverage": 0.0, "shaping": 0.0,
               "time": -c.time_cost, "press_site": 0.0, "localisation": 0.0}
         k = stiffness_estimate(force[2], depth, c.press_min_depth)
         if k > self.best[2]:
             self.best = (float(pos[0]), float(pos[1]), k)
-        speed = _norm(pos - self.prev_tip) / self.control_dt
+        d = pos - self.prev_tip
+        speed = math.sqrt(d.dot(d)) / self.control_dt   # = _norm(d)
         self.prev_tip = pos.copy()
         if k > 0.0 and speed <= c.sample_max_speed:
             self._record_sample(pos[:2].copy(), k, rt)

@@ -35,6 +35,7 @@ from surgsim_envs.contact import BOX, CAPSULE, CYLINDER, SPHERE, ContactModel, C
 from surgsim_envs.scene.contact_options import contact_params_for, static_friction_ratio
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.builder import Scene
+from surgsim_envs.scene.compiled_substeps import key_of
 from surgsim_envs.scene.config import validate_step
 
 _KIND = {int(mujoco.mjtGeom.mjGEOM_SPHERE): SPHERE, int(mujoco.mjtGeom.mjGEOM_CAPSULE): CAPSULE,
@@ -192,6 +193,7 @@ class Simulation:
         self.compiled_substeps = bool(compiled_substeps)
         self._runner = None
         self._runner_key = None
+        self._target_fast: dict = {}     # set_tool_target fast path: name -> (tool, first actuator, travel)
         self.steps = 0
         self.reset()
         self._check_initial_penetration()
@@ -354,11 +356,11 @@ class Simulation:
         """The compiled loop for the current scene state, or None (generic loop)."""
         if not self.compiled_substeps:
             return None
-        from surgsim_envs.scene.compiled_substeps import compiled_substeps_for, key_of
-
         key = key_of(self)
         if key != self._runner_key:
             self._runner_key = key
+            from surgsim_envs.scene.compiled_substeps import compiled_substeps_for
+
             self._runner = compiled_substeps_for(self) if key is not None else None
         return self._runner
 
@@ -492,6 +494,27 @@ class Simulation:
         world x and y (probes built with ``orientation=True``). The grasper moves only along and
         across its axis within its slide ``travel``.
         """
+        fast = self._target_fast.get(name) if tilt is None else None
+        if fast is not None and type(position) is np.ndarray and position.dtype == np.float64 \
+                and position.shape == (3,):
+            # fast path of the checks below (same arithmetic, same result) for a position-driven tool
+            # with consecutive actuators: finite (d.d finite; an overflow takes the checked path),
+            # within reach, goal rows by slice
+            tool, lo, travel = fast
+            d = position - tool.home
+            if math.isfinite(d.dot(d)):
+                local = tool.frame.T @ d
+                l0, l1, l2 = local.tolist()
+                lim = travel + 1e-12
+                if abs(l0) <= lim and abs(l1) <= lim and abs(l2) <= lim:
+                    self._goal[lo:lo + 3] = local
+                    if speed is not None:
+                        if type(speed) is float and speed > 0:
+                            self._rate[lo:lo + 3] = speed
+                        else:
+                            self._set_rate(tool.actuator_ids[:3], speed)
+                    self._moving = True
+                    return
         tool = self.tool(name)
         if tool.config.drive == "proxy":
             raise ConfigError(f"tool '{name}' is driven by a haptic proxy; move it with set_proxy_pose('{tool.proxy}', ...)")
@@ -517,6 +540,9 @@ class Simulation:
                 raise ConfigError(f"tilt must be two angles in [-1, 1] rad, got {tilt.tolist()}")
             self._goal[tool.actuator_ids[3:5]] = tilt
         self._moving = True
+        act = [int(i) for i in act]
+        if name not in self._target_fast and act == list(range(act[0], act[0] + 3)):
+            self._target_fast[name] = (tool, act[0], float(travel))
 
     def _set_rate(self, actuators, speed) -> None:
         if not (isinstance(speed, (int, float)) and speed > 0):
@@ -595,6 +621,8 @@ class Simulation:
     def tool_force(self, name: str) -> np.ndarray:
         """(3,) N total contact force ON tool ``name`` from all tissues in the last physics step."""
         idx = self._tool_bodies[self.tool(name).name]
+        if len(idx) == 1 and len(self._pairs) == 1:     # one body, one tissue: 0 + its row, as below
+            return self._pairs[0][1].result.tool_force[idx[0]] + 0.0
         out = np.zeros(3)
         for contact in self.contacts.values():
             if len(idx) == 1:            # one body: its row (the sum over one row, without the reduction)
