@@ -106,9 +106,8 @@ class GraspEnv(GraspSceneEnv):
 
     def _clip_target(self, pos: np.ndarray) -> np.ndarray:
         w = self.config.workspace
-        local = self.frame.T @ (pos - self.home)
-        np.minimum(local, w, out=local)            # = np.clip(local, -w, w), without its wrapper
-        np.maximum(local, -w, out=local)
+        local = (self.frame.T @ (pos - self.home)).tolist()
+        local = np.array([w if v > w else (-w if v < -w else v) for v in local])   # = np.clip(local, -w, w)
         return self.home + self.frame @ local
 
     def _apply_action(self, a: np.ndarray) -> None:
@@ -139,7 +138,10 @@ class GraspEnv(GraspSceneEnv):
             if len(nodes):
                 self.slip.start(pos, self.sim.tissue().positions, nodes)
         self.slip_distance = self.slip.distance(pos, self.sim.tissue().positions)
-        self.peak_force = max(self.peak_force, float(np.sum(fn)))
+        f0, f1, f2 = fn.tolist()
+        total = f0 + f1 + f2                       # = np.sum(fn) (three entries: summed in order)
+        if total > self.peak_force:
+            self.peak_force = total
         return grasped
 
     def _evaluate(self, a: np.ndarray):

@@ -147,8 +147,8 @@ class GraspSceneEnv(SurgSimEnv):
         read once per physics state (``_evaluate`` and ``_observe`` of a step share them; do not
         modify them)."""
         sim = self.sim
-        key = (sim, sim.steps, sim.time, self.steps)
-        if getattr(self, "_readings_key", None) != key:
+        key = (sim, sim.steps, self.steps)         # reset() and the unstable path clear the key
+        if self._readings_key != key:
             jaws = sim.jaw_forces(self.tool_name)
             rep = sim.tool_contact_report(self.tool_name)
             self._readings_value = (sim.tool_position(self.tool_name), jaws["normal"], jaws["tangential"], rep)

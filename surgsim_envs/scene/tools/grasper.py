@@ -64,6 +64,9 @@ class GrasperTool(ToolSpec):
         if cached is None or cached[0]() is not sim:    # rows of this sim's contact arrays, looked up once
             cached = self._jaw_rows = (weakref.ref(sim), np.array(sim.geom_rows(self.jaw_geom_ids), dtype=np.int64))
         rows = cached[1]
+        if len(sim.contacts) == 1:                     # 0 + the rows, as the sum below
+            r = next(iter(sim.contacts.values())).result
+            return {"normal": r.geom_normal_force[rows] + 0.0, "tangential": r.geom_tangential_force[rows] + 0.0}
         fn, ft = np.zeros(3), np.zeros(3)
         for contact in sim.contacts.values():
             fn += contact.result.geom_normal_force[rows]
