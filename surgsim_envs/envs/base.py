@@ -280,7 +280,17 @@ class SurgSimEnv(gym.Env):
     @property
     def substeps(self) -> int:
         """Physics steps per control step."""
-        return max(1, int(round(self.control_dt / self.config.dt)))
+        return self._step_counts()[0]
+
+    def _step_counts(self) -> tuple[int, int]:
+        """(substeps, max_episode_steps), recomputed only when the config's timing fields change."""
+        c = self.config
+        key = (c.control_hz, c.dt, c.episode_seconds)
+        memo = self.__dict__.get("_step_counts_memo")
+        if memo is None or memo[0] != key:
+            memo = self._step_counts_memo = (key, (max(1, int(round(self.control_dt / c.dt))),
+                                                   max(1, int(round(c.episode_seconds * c.control_hz)))))
+        return memo[1]
 
     @property
     def observation_names(self) -> list[str]:
@@ -294,7 +304,7 @@ class SurgSimEnv(gym.Env):
 
     @property
     def max_episode_steps(self) -> int:
-        return max(1, int(round(self.config.episode_seconds * self.config.control_hz)))
+        return self._step_counts()[1]
 
     def check_action(self, action) -> np.ndarray:
         """Action as a float array of the action space's shape, clipped to [-1, 1].

@@ -287,6 +287,8 @@ class PalpationEnv(SurgSimEnv):
             ObsTerm("stiffness_contrast_seen", "1", 1, 1.0),
             ObsTerm("stiffness_map", "1", self.n_cells, 0.0, 1.0)])
         self.inclusion = {}
+        self._centre_list = None                 # (inclusion centre array, its list) for the infos
+        self._map_obs = self._cells_sampled = None
 
     # -- episode ----------------------------------------------------------------------------
     def _randomise(self, options: dict[str, Any]) -> None:
@@ -324,6 +326,7 @@ class PalpationEnv(SurgSimEnv):
         self.contrast_seen = 1.0                 # max / median sampled stiffness
         self.cell_k = np.zeros(self.n_cells)     # N/m, max stiffness sample per map cell (0 = none)
         self._map_obs = None                     # the map's observation entries (from cell_k), cached
+        self._cells_sampled = None               # map cells with a sample (from cell_k), cached
         self.phi = 0.0                           # shaping potential of the running estimate
         self.prev_tip = self.sim.tool_position("probe").copy()
         self.report_held = 0                     # consecutive control steps with report > 0
@@ -428,7 +431,7 @@ class PalpationEnv(SurgSimEnv):
         if self.cell_k[cell] == 0.0:
             rt["coverage"] += c.cell_reward
         self.cell_k[cell] = max(self.cell_k[cell], k)
-        self._map_obs = None
+        self._map_obs = self._cells_sampled = None
         median = np.median(buf[1][:n])           # once for the estimate and the contrast
         self.estimate = _weighted_estimate(buf[0][:n], buf[1][:n], median)
         med = float(median)
@@ -453,10 +456,14 @@ class PalpationEnv(SurgSimEnv):
     def _metrics(self) -> dict[str, Any]:
         inc = self.inclusion
         success = self.error is not None and self.error <= self.config.tolerance_mm * 1e-3
-        return {"inclusion_centre_m": inc["centre"].tolist(), "inclusion_radius_m": inc["radius"],
+        if self._cells_sampled is None:          # the map changed: count again
+            self._cells_sampled = int(np.count_nonzero(self.cell_k))
+        centre = self._centre_list
+        if centre is None or centre[0] is not inc["centre"]:
+            centre = self._centre_list = (inc["centre"], inc["centre"].tolist())
+        return {"inclusion_centre_m": list(centre[1]), "inclusion_radius_m": inc["radius"],
                 "stiffness_contrast": inc["contrast"], "press_sites": len(self.sites),
-                "map_cells_sampled": int(np.count_nonzero(self.cell_k)), "success": bool(success),
-                "is_success": bool(success)}
+                "map_cells_sampled": self._cells_sampled, "success": bool(success), "is_success": bool(success)}
 
 
 def palpation_expert(env, grid: int = 5, depth_action: float = 0.6) -> Any:

@@ -58,7 +58,7 @@ from surgsim_envs.scene.mujoco_native import call_model_data, model_data_address
 from surgsim_envs.scene.simulation import (_add_wrench, _advance_geoms, _gather_geoms, _rate_limit, _write_rows,
                                            _zero_rows)
 from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS, DT_SAFETY, _max_ratio
-from surgsim_envs.tissue.guard import first_non_finite, max_speed_squared
+from surgsim_envs.tissue.guard import all_finite, speed_within
 
 # ---------------------------------------------------------------------------------------------
 # address table layout (rows); the model's own section starts at COMMON_SLOTS
@@ -245,7 +245,7 @@ def run_substeps(tab, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k, j, c
                     _advance_geoms(gpos, gpos0, gvel, j * dt)
                 if contact_kernel_prepared(pos, vel, gpos, gmat, gvel, tcom, contact) != 0:
                     return CONTACT_ERROR, k, j
-                if first_non_finite(forces) >= 0 or first_non_finite(stiffness) >= 0:
+                if not (all_finite(forces) and all_finite(stiffness)):
                     return NON_FINITE_INPUT, k, j
                 for i in range(forces.shape[0]):
                     for q in range(3):
@@ -264,8 +264,7 @@ def run_substeps(tab, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k, j, c
                         vel[i, c] = 0.0
                 clock[0] += dt
                 counts[0] += 1
-                v2 = max_speed_squared(pos, vel)
-                if not np.isfinite(v2) or v2 > max_speed2:
+                if not speed_within(pos, vel, max_speed2):
                     return GUARD_FAILED, k, j
                 if counts[0] % check_every == 0:
                     ke = _kinetic_energy(vel, masses)
@@ -329,6 +328,7 @@ class SubstepsRunner:
         self._table = ArrayTable()
         self._loop = run_substeps
         self._fn_addresses = (ops.step.address, ops.energy.address)
+        self._mj_memo = (None, None, 0, 0)      # (model, data, their addresses)
 
     def _contact_section(self) -> list:
         contact = self.contact
@@ -384,7 +384,10 @@ class SubstepsRunner:
         sim, tissue, contact = self.sim, self.tissue, self.contact
         guard = tissue.guard
         dt = sim.dt
-        m_ptr, d_ptr = model_data_addresses(sim.model, sim.data)
+        mem = self._mj_memo
+        if mem[0] is not sim.model or mem[1] is not sim.data:
+            mem = self._mj_memo = (sim.model, sim.data, *model_data_addresses(sim.model, sim.data))
+        m_ptr, d_ptr = mem[2], mem[3]
         step1, step2 = self._fns
         self._moving[0] = sim._moving
         clock, counts, e = self._clock, self._counts, self._energy
@@ -436,8 +439,9 @@ class SubstepsRunner:
     def _sync(self, dt: float) -> None:
         tissue, sim = self.tissue, self.sim
         guard = tissue.guard
-        tissue.time = float(self._clock[0])
-        tissue.steps = int(self._counts[0])
+        state = tissue.__dict__            # scalars: set directly (no array-version bookkeeping needed)
+        state["time"] = float(self._clock[0])
+        state["steps"] = int(self._counts[0])
         sim.steps = int(self._counts[1])
         sim._moving = bool(self._moving[0])
         guard._energy_ref = float(self._energy[0])
@@ -448,7 +452,7 @@ class SubstepsRunner:
                 guard._good_pos, guard._good_vel = self._scratch
                 self._scratch = None
         if self._counts[2]:
-            tissue._last_dt = dt
+            state["_last_dt"] = dt
             self.ops.committed(tissue, dt)
             if tissue.integrator == "auto":
                 tissue._active = tissue.auto_pair[1] if self._auto[3] else tissue.auto_pair[0]

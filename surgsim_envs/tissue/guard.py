@@ -51,6 +51,35 @@ def first_non_finite(a):
     return -1
 
 
+_EXPONENT = np.int64(0x7FF0000000000000)
+
+
+@njit(cache=True, nogil=True)
+def all_finite(a) -> bool:
+    """True if every entry of the C-contiguous float64 array ``a`` is finite (``first_non_finite(a) <
+    0``, without its early exit: the exponent bits of every entry are tested and OR-ed, a loop the
+    compiler vectorises)."""
+    bits = a.reshape(-1).view(np.int64)
+    bad = False
+    for i in range(bits.shape[0]):
+        bad |= (bits[i] & _EXPONENT) == _EXPONENT
+    return not bad
+
+
+@njit(cache=True, nogil=True)
+def speed_within(pos, vel, max_speed2) -> bool:
+    """True if every position and velocity is finite and no node's squared speed exceeds
+    ``max_speed2`` (m^2/s^2): ``not (v2 > max_speed2)`` for ``v2 = max_speed_squared(pos, vel)``, the
+    same decision, as comparisons OR-ed over all nodes (no early exit: vectorised)."""
+    bad = False
+    for i in range(pos.shape[0]):
+        acc = pos[i, 0] + pos[i, 1] + pos[i, 2]
+        v2 = vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1] + vel[i, 2] * vel[i, 2]
+        t = acc + v2
+        bad |= (v2 > max_speed2) | (not (t - t == 0.0))      # t - t is NaN iff t is inf or NaN
+    return not bad
+
+
 if TYPE_CHECKING:
     from surgsim_envs.tissue.base import TissueModel
 
