@@ -44,7 +44,7 @@ from numba import njit
 
 from surgsim_envs.contact.friction import stick_slip
 from surgsim_envs.contact.report import ContactReport
-from surgsim_envs.contact.shapes import N_KINDS, bounding_radius, local_outside, world_sdf
+from surgsim_envs.contact.shapes import BOX, CAPSULE, CYLINDER, N_KINDS, bounding_radius, local_outside, world_sdf
 from surgsim_envs.contact.surface_points import check_surface, subdivisions_for_spacing, surface_samples
 from surgsim_envs.errors import ConfigError
 
@@ -142,6 +142,18 @@ class ContactResult:
 _OK, _BAD_KIND, _BAD_TOOL, _BAD_SIZE = 0, 1, 2, 3
 
 
+@njit(cache=True, inline="always")
+def _local_extents(kind, s0, s1, s2):
+    """Half extents (m) along the local axes of a shape of size (s0, s1, s2) (module ``shapes``)."""
+    if kind == BOX:
+        return s0, s1, s2
+    if kind == CAPSULE:
+        return s0, s0, s1 + s0
+    if kind == CYLINDER:
+        return s0, s0, s1
+    return s0, s0, s0
+
+
 @njit(cache=True, nogil=True)
 def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel, tool_com,
                     mu, mu_s, k_n, c_n, c_imp, k_t, anchor_local, anchor_on,
@@ -174,16 +186,22 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
             err[1] = g
             return
         radius[g] = r
-    # axis-aligned box around all geoms' bounding spheres: a cheap first rejection per point
+    # axis-aligned box around all geoms: a cheap first rejection per point. Each geom's box is that
+    # of its local extents (e0, e1, e2) rotated, half width sum_j |R_kj| e_j along world axis k
+    # (R = gmat, row-major), padded by 1e-9 relative + 1e-12 m (rounding): it contains the whole
+    # shape, so a point outside it is outside every geom (no contact, as the full tests would find)
     blo = vec3[0]
     bhi = vec3[1]
     for k in range(3):
         blo[k] = np.inf
         bhi[k] = -np.inf
     for g in range(G):
+        e0, e1, e2 = _local_extents(kind[g], size[g, 0], size[g, 1], size[g, 2])
         for k in range(3):
-            lo = gpos[g, k] - radius[g]
-            hi = gpos[g, k] + radius[g]
+            h = abs(gmat[g, 3 * k]) * e0 + abs(gmat[g, 3 * k + 1]) * e1 + abs(gmat[g, 3 * k + 2]) * e2
+            h = min(h * (1.0 + 1e-9) + 1e-12, radius[g])     # never wider than the bounding sphere
+            lo = gpos[g, k] - h
+            hi = gpos[g, k] + h
             if lo < blo[k]:
                 blo[k] = lo
             if hi > bhi[k]:
