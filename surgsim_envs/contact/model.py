@@ -154,6 +154,16 @@ def _local_extents(kind, s0, s1, s2):
     return s0, s0, s0
 
 
+@njit(cache=True, inline="always")
+def geom_box_half_width(kind, size, gmat, g, k, radius):
+    """Half width (m) along world axis ``k`` of a box about geom ``g``'s centre that contains the whole
+    shape: its local extents rotated (``sum_j |R_kj| e_j``, R = ``gmat[g]`` row-major), padded by 1e-9
+    relative + 1e-12 m for rounding, and never wider than its bounding sphere ``radius``."""
+    e0, e1, e2 = _local_extents(kind, size[g, 0], size[g, 1], size[g, 2])
+    h = abs(gmat[g, 3 * k]) * e0 + abs(gmat[g, 3 * k + 1]) * e1 + abs(gmat[g, 3 * k + 2]) * e2
+    return min(h * (1.0 + 1e-9) + 1e-12, radius)
+
+
 @njit(cache=True, nogil=True)
 def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel, tool_com,
                     mu, mu_s, k_n, c_n, c_imp, k_t, anchor_local, anchor_on,
@@ -196,10 +206,8 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
         blo[k] = np.inf
         bhi[k] = -np.inf
     for g in range(G):
-        e0, e1, e2 = _local_extents(kind[g], size[g, 0], size[g, 1], size[g, 2])
         for k in range(3):
-            h = abs(gmat[g, 3 * k]) * e0 + abs(gmat[g, 3 * k + 1]) * e1 + abs(gmat[g, 3 * k + 2]) * e2
-            h = min(h * (1.0 + 1e-9) + 1e-12, radius[g])     # never wider than the bounding sphere
+            h = geom_box_half_width(kind[g], size, gmat, g, k, radius[g])
             lo = gpos[g, k] - h
             hi = gpos[g, k] + h
             if lo < blo[k]:
