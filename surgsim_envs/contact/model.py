@@ -176,8 +176,9 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
     mu, mu_s (T,) kinetic and static friction per tool; c_imp: 0 (damping from the velocity) or
     c_n / dt (implicit damping: reported as stiffness, module docstring). ``anchor_on[c, g]`` is
     the contact state (friction.NO_CONTACT / STICKING / SLIDING). Work buffers (the model's own, so
-    the kernel allocates nothing): ``radius`` (G,) the geoms' bounding radii, ``vec3`` (7,3) rows for
-    the bounding box (lo, hi) and the 3-vectors of the signed distance and friction calls."""
+    the kernel allocates nothing): ``radius`` (G,) the geoms' bounding radii, ``vec3`` (7 + G, 3) rows
+    for the bounding box (lo, hi), the 3-vectors of the signed distance and friction calls, and each
+    geom's box half widths (:func:`geom_box_half_width`)."""
     G = kind.shape[0]
     T = tool_force.shape[0]
     # validate geoms and precompute bounding radii
@@ -208,6 +209,7 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
     for g in range(G):
         for k in range(3):
             h = geom_box_half_width(kind[g], size, gmat, g, k, radius[g])
+            vec3[7 + g, k] = h
             lo = gpos[g, k] - h
             hi = gpos[g, k] + h
             if lo < blo[k]:
@@ -277,7 +279,9 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
             dy = x1 - gpos[g, 1]
             dz = x2 - gpos[g, 2]
             rg = radius[g]
-            if dx * dx + dy * dy + dz * dz >= rg * rg:
+            # outside the geom's own box (contains the shape) or its bounding sphere: no contact
+            if abs(dx) > vec3[7 + g, 0] or abs(dy) > vec3[7 + g, 1] or abs(dz) > vec3[7 + g, 2] \
+                    or dx * dx + dy * dy + dz * dz >= rg * rg:
                 anchor_on[c, g] = 0
                 continue
             # cheap exact inside test in the geom frame before the full signed distance
@@ -608,6 +612,7 @@ class ContactModel:
         self.result.geom_tangential_force = np.zeros(G)
         self._geom_ftv = np.zeros((G, 3))
         self._radius = np.zeros(G)             # kernel work: bounding radius per geom
+        self._vec3 = np.zeros((7 + G, 3))      # kernel work rows: bounding box, 3-vectors, per-geom box half widths
 
     def reset(self) -> None:
         """Forget all stick anchors (every contact starts fresh) and zero the outputs."""
