@@ -191,6 +191,13 @@ def _echo_pipe(rfd, wfd):
         os.write(wfd, b"\0")
 
 
+def _echo_eventfd(a, b):
+    while True:
+        if os.eventfd_read(a) > 1:          # main writes 2 to stop
+            return
+        os.eventfd_write(b, 1)
+
+
 def _echo_semaphore(a, b):
     while a.acquire(timeout=60):
         b.release()
@@ -209,13 +216,16 @@ def _echo_connection(r, w):
 
 def signal_roundtrip(workers: int, n: int = 5000, repeats: int = 5, context: str | None = None) -> dict:
     """Median us of one signal round trip to ``workers`` echo processes and back (all signalled,
-    then all awaited), for one byte on an ``os.pipe``, a pair of ``multiprocessing.Semaphore`` and
+    then all awaited), for one byte on an ``os.pipe``, a pair of ``os.eventfd`` counters, a pair of
+    ``multiprocessing.Semaphore`` and
     ``multiprocessing.Connection.send_bytes``/``recv_bytes``. Blocking waits only (no busy-wait)."""
     import multiprocessing as mp
 
     ctx = mp.get_context(context or "fork")
     out = {}
-    for kind in ("pipe_byte", "semaphore", "connection"):
+    kinds = ("pipe_byte", "eventfd", "semaphore", "connection") if hasattr(os, "eventfd") else (
+        "pipe_byte", "semaphore", "connection")
+    for kind in kinds:
         procs, ends = [], []
         for _ in range(workers):
             if kind == "pipe_byte":
@@ -226,6 +236,11 @@ def signal_roundtrip(workers: int, n: int = 5000, repeats: int = 5, context: str
                 os.close(r1)
                 os.close(w2)
                 ends.append((w1, r2))
+            elif kind == "eventfd":
+                a, b = os.eventfd(0), os.eventfd(0)
+                p = ctx.Process(target=_echo_eventfd, args=(a, b), daemon=True)
+                p.start()
+                ends.append((a, b))
             elif kind == "semaphore":
                 a, b = ctx.Semaphore(0), ctx.Semaphore(0)
                 p = ctx.Process(target=_echo_semaphore, args=(a, b), daemon=True)
@@ -245,6 +260,12 @@ def signal_roundtrip(workers: int, n: int = 5000, repeats: int = 5, context: str
                     os.write(w, b"\1")
                 for _, r in ends:
                     os.read(r, 1)
+        elif kind == "eventfd":
+            def once():
+                for a, _ in ends:
+                    os.eventfd_write(a, 1)
+                for _, b in ends:
+                    os.eventfd_read(b)
         elif kind == "semaphore":
             def once():
                 for a, _ in ends:
@@ -271,7 +292,7 @@ def signal_roundtrip(workers: int, n: int = 5000, repeats: int = 5, context: str
             for p in procs:
                 p.kill()
                 p.join(2)
-            if kind == "pipe_byte":
+            if kind in ("pipe_byte", "eventfd"):
                 for w, r in ends:
                     os.close(w)
                     os.close(r)
