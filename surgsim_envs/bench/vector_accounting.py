@@ -12,7 +12,7 @@ Per vector step (us, medians over steps):
 - main: ``actions`` (check and write actions), ``send`` (the step signals), ``wait`` (blocked
   until every worker replied), ``absorb`` (reply payloads), ``copy`` (observations, rewards,
   terminations, truncations), ``infos`` (the info dict);
-- per worker: ``wake`` (main's send to the worker's read returning), ``env`` (its envs' ``step``
+- per worker: ``wake`` (the main process's last send to the worker's read returning), ``env`` (its envs' ``step``
   calls), ``pack`` (the rest of its step: obs/reward writes, info packing, autoreset bookkeeping),
   ``reply`` (the worker's signal to the main process's wait returning, for the last worker),
   ``idle`` (blocked waiting for a command).
@@ -28,6 +28,7 @@ import numpy as np
 
 from surgsim_envs.envs import vector_ipc as ipc
 from surgsim_envs.envs import vector_worker
+from surgsim_envs.errors import ConfigError
 
 _clock = time.perf_counter
 #: per worker per step: wait start, read returned, env time sum, step done, reply sent
@@ -140,6 +141,9 @@ def account(make_vec, actions, warmup: int = 20) -> dict:
     # worker slots by first env index are only known after the vector env splits its envs: the
     # split is np.linspace(0, n, workers + 1), recomputed here from the arguments
     num_envs, workers = make_vec.keywords["num_envs"], make_vec.keywords["workers"]
+    if not 1 <= workers <= 64 or make_vec.keywords.get("in_main"):
+        raise ConfigError(f"the accounting times 1..64 worker processes without in_main, got workers={workers!r}, "
+                          f"in_main={make_vec.keywords.get('in_main')!r}")
     bounds = np.linspace(0, num_envs, workers + 1).round().astype(int)
     for w in range(workers):
         slot_of_lo[int(bounds[w])] = w
