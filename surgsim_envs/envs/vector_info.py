@@ -4,7 +4,8 @@ A worker writes each env's numeric info entries (Python ``bool``/``int``/``float
 scalars, also inside nested dicts such as ``reward_terms``) into its row of a
 ``(num_envs, max_info_keys)`` float64 table plus a presence mask (:class:`InfoWriter`). Slots are
 numbered per worker in the order keys are first seen; a new key is announced once, in that
-step's reply. The main process (:class:`InfoMerger`) maps every worker's slots to one key list
+step's reply. An info dict whose keys and value types match one seen before is written by a
+plan (:class:`_WritePlan`: one ``itemgetter`` per dict level, one numpy assignment). The main process (:class:`InfoMerger`) maps every worker's slots to one key list
 and builds Gymnasium's info dict (``info[key]`` an array over envs, ``info["_key"]`` the mask of
 envs that returned it, nested dicts likewise) with a few numpy operations per step, not a Python
 merge per key and env. Values are stored as float64 and cast back to the type the key had when
