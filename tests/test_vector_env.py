@@ -187,6 +187,50 @@ def test_toy_info_keys_reset_mask_and_calls():
             v.close()
 
 
+class LateKeys(gym.Env):
+    """Info layouts that change after the workers have settled on one (their fast write plan):
+    ``late`` appears at step 5 in the odd-seeded env (and is gone there at steps 13-15) and at
+    step 8 in the other, a nested
+    ``terms/late_sub`` at step 3, ``x`` is missing at step 10, ``est`` turns from None to a list
+    every fourth step. (A key that changes its numeric type is cast to its first type: not here.)"""
+
+    observation_space = spaces.Box(-np.inf, np.inf, (1,), np.float32)
+    action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t, self.odd = 0, bool((seed or 0) % 2)
+        return np.zeros(1, np.float32), {"t": 0}
+
+    def step(self, action):
+        t = self.t = self.t + 1
+        info = {"t": t, "x": float(action[0]) * t,
+                "terms": {"a": 1.0 * t}, "est": None if t % 4 else [t, 1]}
+        if t >= (5 if self.odd else 8) and not (self.odd and 13 <= t <= 15):
+            info["late"] = np.float32(t / 3)
+        if t >= 3:
+            info["terms"]["late_sub"] = t * 0.5
+        if t == 10:
+            del info["x"]
+        return np.full(1, t, np.float32), float(t), False, False, info
+
+
+@pytest.mark.parametrize("info_keys, spin_us", [(None, 0.0), ("all", 200.0)])
+def test_info_keys_appearing_late_match_sync(info_keys, spin_us):
+    """Keys that appear, vanish or change type after many steps of the same layout (the workers
+    write a known layout by a plan, anything else by the general path) give SyncVectorEnv's info
+    every step: values, dtypes and masks, nested dicts too (also when the main process polls
+    for replies before it sleeps, ``spin_us``)."""
+    ours = SurgSimVectorEnv(LateKeys, 3, workers=2, info_keys=info_keys, spin_us=spin_us)
+    sync = SyncVectorEnv([LateKeys] * 3)
+    try:
+        assert_same_run(ours, sync, 17, [2, 3, 4], np.random.default_rng(4), expect_reset=False,
+                        info_filter=numeric_part if info_keys is None else (lambda i: i))
+    finally:
+        ours.close()
+        sync.close()
+
+
 def test_returned_arrays_are_fresh_copies():
     """Arrays a caller keeps are not overwritten by later steps (they are copies of the shared
     memory, not views of it), and writing into them does not reach the next step."""
@@ -265,6 +309,7 @@ def test_hung_worker_times_out_and_close_terminates_it():
     ({"num_envs": 2, "info_keys": "some"}, "info_keys must be None .*'all'.* got 'some'"),
     ({"num_envs": 2, "autoreset_mode": "Later"}, "autoreset_mode must be one of .* got 'Later'"),
     ({"num_envs": 2, "timeout_s": 0}, "timeout_s must be a positive number of seconds, got 0"),
+    ({"num_envs": 2, "spin_us": -1.0}, r"spin_us must be a number of microseconds in \[0, 100000\], got -1.0"),
 ])
 def test_bad_options_raise_config_error_naming_the_value(kwargs, match):
     with pytest.raises(ConfigError, match=match):

@@ -11,6 +11,7 @@ the tissue model's own ``step`` time for the same tissue and forces, same proces
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import statistics
@@ -46,6 +47,13 @@ def add_arguments(parser) -> None:
     parser.add_argument("--spin-us", default="task,300",
                         help="with --vector: stand-in step times, us, comma-separated; 'task' = the task's measured "
                              "step time (default 'task,300')")
+    parser.add_argument("--vector-spin-us", type=float, default=0.0,
+                        help="with --vector: our vector env's spin_us (the main process polls this long for the "
+                             "last replies before it sleeps; default 0)")
+    parser.add_argument("--vector-accounting", action="store_true",
+                        help="where the time of one vector step goes (main-process phases, worker wake-up, env "
+                             "step, packing, reply) for 1 and 4 envs per worker, tasks and a 300 us stand-in "
+                             "(bench/vector_accounting.py)")
     parser.add_argument("--vector-only", action="store_true",
                         help="with --vector: skip the single-process figures except the step time")
     parser.add_argument("--signal-options", action="store_true",
@@ -430,7 +438,8 @@ def vector_row(env_id: str, args, step_us: float | None = None) -> dict:
             except ValueError:
                 raise ConfigError(f"--spin-us takes step times in us or 'task', got {s!r}") from None
     row = {"task": env_id, "task_step_us": step_us}
-    row.update(vector_compare(env_id, args.workers, args.steps, args.repeats, spin, task_info(env_id)))
+    row.update(vector_compare(env_id, args.workers, args.steps, args.repeats, spin, task_info(env_id),
+                              poll_us=getattr(args, "vector_spin_us", 0.0)))
     return row
 
 
@@ -449,16 +458,44 @@ def single_rate_quick(env_id: str, steps: int, repeats: int) -> float:
 
 def print_vector(rows) -> None:
     """The ``--vector`` table: env steps/s and speed-up over one env, same rounds."""
-    names = ("async", "vector", "vector_2x", "vector_in_main")
-    print("speed-up over one env, same rounds")
-    print(f"{'what':34s} {'1 env/s':>8s} " + " ".join(f"{n + ' x':>16s}" for n in names) + "   load before/after")
+    from surgsim_envs.bench.vector_speed import contender_names
+
+    names = contender_names(rows[0]["vector_workers"]) if rows else ()
+    print(f"speed-up over one env, same rounds ({rows[0]['vector_workers'] if rows else '-'} workers; "
+          "vector_n<n>: n envs on them; in_main_n<n>: this process steps one block)")
+    print(f"{'what':34s} {'1 env/s':>8s} " + " ".join(f"{n + ' x':>13s}" for n in names) + "   load before/after")
     for r in rows:
         prefixes = [("vector_", r["task"])] + [(k[: -len("single_steps_per_s")], f"  spin {k[4:].split('_')[0]} us")
                                               for k in r if k.startswith("spin") and k.endswith("single_steps_per_s")]
         for p, label in prefixes:
             print(f"{label:34s} {r[p + 'single_steps_per_s']:8.0f} "
-                  + " ".join(f"{r[p + n + '_speedup']:16.2f}" for n in names)
+                  + " ".join(f"{r[p + n + '_speedup']:13.2f}" for n in names)
                   + f"   {r['load_avg_1min_before']:.1f}/{r['load_avg_1min_after']:.1f}")
+
+
+def _run_accounting(tasks, args) -> int:
+    """``--vector-accounting``: per task and for a 300 us stand-in returning the first task's info."""
+    from surgsim_envs.bench import vector_accounting as acc
+
+    if args.workers < 1:
+        raise ConfigError(f"--vector-accounting needs --workers >= 1, got {args.workers}")
+    counts = (args.workers, 4 * args.workers)
+    spin = getattr(args, "vector_spin_us", 0.0)
+    rows = []
+    load0 = os.getloadavg()[0]
+    for t in tasks:
+        for r in acc.accounting_rows(t, counts, args.workers, args.steps, args.repeats, "Palpation" in t, spin_us=spin):
+            rows.append({"what": t, **r})
+    stand_in = functools.partial(SpinEnv, 300.0, task_info(tasks[0]))
+    for r in acc.accounting_rows(stand_in, counts, args.workers, args.steps, args.repeats, spin_us=spin):
+        rows.append({"what": "stand-in 300 us", **r})
+    out = {"vector_accounting": rows, "load_avg_1min_before": load0, "load_avg_1min_after": os.getloadavg()[0]}
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        acc.print_rows(rows)
+        print(f"load average (1 min) before/after: {load0:.1f}/{out['load_avg_1min_after']:.1f}")
+    return 0
 
 
 def run(args) -> int:
@@ -474,6 +511,8 @@ def run(args) -> int:
     unknown = [t for t in tasks if t not in TASKS]
     if unknown:
         raise ConfigError(f"unknown task(s) {unknown}; known: {list(TASKS)}")
+    if getattr(args, "vector_accounting", False):
+        return _run_accounting(tasks, args)
     rows = []
     vector = getattr(args, "vector", False)
     for t in tasks:

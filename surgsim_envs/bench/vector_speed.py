@@ -111,48 +111,68 @@ def _close_all(contenders: dict) -> None:
         env.close()
 
 
-def task_contenders(env_id: str, workers: int) -> dict:
-    """One env, AsyncVectorEnv(workers envs), SurgSimVectorEnv(workers envs),
-    SurgSimVectorEnv(2 x workers envs on the same workers) and SurgSimVectorEnv(workers envs,
-    ``in_main``: this process steps one block, workers - 1 processes the others)."""
+#: numbers of envs timed, as multiples of the worker count (2 workers: 2, 4 and 8 envs)
+ENV_MULTIPLES = (1, 2, 4)
+
+
+def contender_names(workers: int) -> tuple:
+    """The vector contenders' names, in table order: AsyncVectorEnv(workers envs), ours with
+    ``n`` envs on ``workers`` processes (``vector_n<n>``), ours with the main process stepping one
+    block (``in_main_n<n>``: ``workers - 1`` worker processes)."""
+    ns = [m * workers for m in ENV_MULTIPLES]
+    return ("async", *(f"vector_n{n}" for n in ns), f"in_main_n{ns[0]}", f"in_main_n{ns[-1]}")
+
+
+def _ours(make, workers: int, spin_us: float) -> dict:
+    ns = [m * workers for m in ENV_MULTIPLES]
+    out = {f"vector_n{n}": make(n, in_main=False) for n in ns}
+    out.update({f"in_main_n{n}": make(n, in_main=True) for n in (ns[0], ns[-1])})
+    return out
+
+
+def task_contenders(env_id: str, workers: int, spin_us: float = 0.0) -> dict:
+    """One env, AsyncVectorEnv(workers envs) and :class:`SurgSimVectorEnv` with 1, 2 and 4 envs
+    per worker on ``workers`` processes, and with ``in_main`` (see :func:`contender_names`)."""
     import gymnasium as gym
 
     single = gym.make(env_id)            # first: the workers fork a process that has loaded the task
-    return {"single": single,
-            "async": gym.make_vec(env_id, num_envs=workers, vectorization_mode="async"),
-            "vector": gym.make_vec(env_id, num_envs=workers, workers=workers, timeout_s=STEP_TIMEOUT),
-            "vector_2x": gym.make_vec(env_id, num_envs=2 * workers, workers=workers, timeout_s=STEP_TIMEOUT),
-            "vector_in_main": gym.make_vec(env_id, num_envs=workers, workers=workers, in_main=True,
-                                           timeout_s=STEP_TIMEOUT)}
+
+    def make(n, in_main):
+        return gym.make_vec(env_id, num_envs=n, workers=workers, in_main=in_main, spin_us=spin_us,
+                            timeout_s=STEP_TIMEOUT)
+    return {"single": single, "async": gym.make_vec(env_id, num_envs=workers, vectorization_mode="async"),
+            **_ours(make, workers, spin_us)}
 
 
-def spin_contenders(step_us: float, info: dict | None, workers: int) -> dict:
-    """The same five with :class:`~surgsim_envs.bench.envs_speed.SpinEnv` (busy-waits ``step_us``,
+def spin_contenders(step_us: float, info: dict | None, workers: int, spin_us: float = 0.0) -> dict:
+    """The same with :class:`~surgsim_envs.bench.envs_speed.SpinEnv` (busy-waits ``step_us``,
     returns a deep copy of ``info``)."""
     from gymnasium.vector import AsyncVectorEnv
 
     from surgsim_envs.envs.vector import SurgSimVectorEnv
 
-    make = functools.partial(SpinEnv, step_us, info)
-    return {"single": make(), "async": AsyncVectorEnv([make] * workers),
-            "vector": SurgSimVectorEnv(make, workers, workers=workers, timeout_s=STEP_TIMEOUT),
-            "vector_2x": SurgSimVectorEnv(make, 2 * workers, workers=workers, timeout_s=STEP_TIMEOUT),
-            "vector_in_main": SurgSimVectorEnv(make, workers, workers=workers, in_main=True, timeout_s=STEP_TIMEOUT)}
+    env = functools.partial(SpinEnv, step_us, info)
+
+    def make(n, in_main):
+        return SurgSimVectorEnv(env, n, workers=workers, in_main=in_main, spin_us=spin_us, timeout_s=STEP_TIMEOUT)
+    return {"single": env(), "async": AsyncVectorEnv([env] * workers), **_ours(make, workers, spin_us)}
 
 
-def vector_compare(env_id: str, workers: int, steps: int, repeats: int, spin_us=(), info: dict | None = None) -> dict:
+def vector_compare(env_id: str, workers: int, steps: int, repeats: int, spin_us=(), info: dict | None = None,
+                   poll_us: float = 0.0) -> dict:
     """The task's alternating comparison, then the busy-wait stand-in's for each step time in
-    ``spin_us`` (us; with the task's ``info``). Keys: ``vector_<name>_steps_per_s``,
-    ``vector_<name>_speedup`` and ``spin<us>_<name>_...``; ``load_avg_1min`` before and after."""
-    out = {"vector_workers": workers, "load_avg_1min_before": os.getloadavg()[0]}
-    contenders = task_contenders(env_id, workers)
+    ``spin_us`` (us; with the task's ``info``). ``poll_us``: our vector env's ``spin_us``. Keys:
+    ``vector_<name>_steps_per_s``, ``vector_<name>_speedup`` and ``spin<us>_<name>_...``;
+    ``load_avg_1min`` before and after."""
+    out = {"vector_workers": workers, "vector_spin_us": poll_us, "load_avg_1min_before": os.getloadavg()[0]}
+    contenders = task_contenders(env_id, workers, poll_us)
     try:
         res = alternate(contenders, steps, repeats, palpation="Palpation" in env_id)
     finally:
         _close_all(contenders)
     out.update({f"vector_{k}": v for k, v in res.items()})
     for us in spin_us:
-        contenders = spin_contenders(float(us), info, workers)
+        contenders = spin_contenders(float(us), info, workers, poll_us)
         try:
             res = alternate(contenders, steps, repeats)
         finally:
@@ -169,6 +189,13 @@ def _echo_pipe(rfd, wfd):
         if not b or b == b"q":
             return
         os.write(wfd, b"\0")
+
+
+def _echo_eventfd(a, b):
+    while True:
+        if os.eventfd_read(a) > 1:          # main writes 2 to stop
+            return
+        os.eventfd_write(b, 1)
 
 
 def _echo_semaphore(a, b):
@@ -189,13 +216,16 @@ def _echo_connection(r, w):
 
 def signal_roundtrip(workers: int, n: int = 5000, repeats: int = 5, context: str | None = None) -> dict:
     """Median us of one signal round trip to ``workers`` echo processes and back (all signalled,
-    then all awaited), for one byte on an ``os.pipe``, a pair of ``multiprocessing.Semaphore`` and
+    then all awaited), for one byte on an ``os.pipe``, a pair of ``os.eventfd`` counters, a pair of
+    ``multiprocessing.Semaphore`` and
     ``multiprocessing.Connection.send_bytes``/``recv_bytes``. Blocking waits only (no busy-wait)."""
     import multiprocessing as mp
 
     ctx = mp.get_context(context or "fork")
     out = {}
-    for kind in ("pipe_byte", "semaphore", "connection"):
+    kinds = ("pipe_byte", "eventfd", "semaphore", "connection") if hasattr(os, "eventfd") else (
+        "pipe_byte", "semaphore", "connection")
+    for kind in kinds:
         procs, ends = [], []
         for _ in range(workers):
             if kind == "pipe_byte":
@@ -206,6 +236,11 @@ def signal_roundtrip(workers: int, n: int = 5000, repeats: int = 5, context: str
                 os.close(r1)
                 os.close(w2)
                 ends.append((w1, r2))
+            elif kind == "eventfd":
+                a, b = os.eventfd(0), os.eventfd(0)
+                p = ctx.Process(target=_echo_eventfd, args=(a, b), daemon=True)
+                p.start()
+                ends.append((a, b))
             elif kind == "semaphore":
                 a, b = ctx.Semaphore(0), ctx.Semaphore(0)
                 p = ctx.Process(target=_echo_semaphore, args=(a, b), daemon=True)
@@ -225,6 +260,12 @@ def signal_roundtrip(workers: int, n: int = 5000, repeats: int = 5, context: str
                     os.write(w, b"\1")
                 for _, r in ends:
                     os.read(r, 1)
+        elif kind == "eventfd":
+            def once():
+                for a, _ in ends:
+                    os.eventfd_write(a, 1)
+                for _, b in ends:
+                    os.eventfd_read(b)
         elif kind == "semaphore":
             def once():
                 for a, _ in ends:
@@ -251,7 +292,7 @@ def signal_roundtrip(workers: int, n: int = 5000, repeats: int = 5, context: str
             for p in procs:
                 p.kill()
                 p.join(2)
-            if kind == "pipe_byte":
+            if kind in ("pipe_byte", "eventfd"):
                 for w, r in ends:
                     os.close(w)
                     os.close(r)

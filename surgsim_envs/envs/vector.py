@@ -34,6 +34,12 @@ only for steps that have them); a tuple of key names keeps just those (``()``: n
 One sleep/wake-up less per step for the main process; a crash (not an exception) in a block-0
 env then takes the main process with it.
 
+**spin_us** (default 0): once fewer workers than cores are still busy (the others replied, or
+with ``in_main`` the main process finished its own block), the main process polls for the
+remaining replies without sleeping for up to this many microseconds before it blocks. It saves
+the main process a wake-up per step when a core is free; when the cores are shared with other
+work it takes CPU from them (docs/benchmarks.md "Vector env: second pass (issue 18)").
+
 **Failures**: an exception inside an env is re-raised in the main process with a note naming
 the env index and the worker's traceback (the vector env stays usable after a ``reset``). A
 worker that dies or does not answer within ``timeout_s`` raises
@@ -58,6 +64,10 @@ from surgsim_envs.envs import vector_ipc as ipc
 from surgsim_envs.envs.vector_info import InfoMerger
 from surgsim_envs.envs.vector_worker import _Worker, worker_main
 from surgsim_envs.errors import ConfigError, VectorEnvWorkerError
+
+#: us the main process polls for replies without sleeping once fewer workers than cores are busy
+#: (``spin_us=``; docs/benchmarks.md "Vector env: second pass (issue 18)")
+DEFAULT_SPIN_US = 0.0
 
 #: spaces whose samples are fixed-shape arrays (what the shared memory holds)
 _ARRAY_SPACES = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
@@ -95,7 +105,8 @@ class SurgSimVectorEnv(VectorEnv):
     def __init__(self, env_id: str, num_envs: int = 1, *, workers: int | None = None, info_keys=None,
                  autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP, max_info_keys: int = 64,
                  context: str | None = None, timeout_s: float = 300.0, start_timeout_s: float = 600.0,
-                 close_timeout_s: float = 5.0, in_main: bool = False, **env_kwargs):
+                 close_timeout_s: float = 5.0, in_main: bool = False, spin_us: float = DEFAULT_SPIN_US,
+                 **env_kwargs):
         self._workers: dict = {}                 # block number -> (process, command pipe, reply pipe)
         self._local = None                       # with in_main: block 0, stepped by this process
         self._shm = None
@@ -118,6 +129,11 @@ class SurgSimVectorEnv(VectorEnv):
             if not (isinstance(t, (int, float)) and np.isfinite(t) and t > 0):
                 raise ConfigError(f"{name} must be a positive number of seconds, got {t!r}")
         self.timeout_s, self.close_timeout_s = float(timeout_s), float(close_timeout_s)
+        if not (isinstance(spin_us, (int, float)) and not isinstance(spin_us, bool) and 0 <= spin_us <= 1e5):
+            raise ConfigError(f"spin_us must be a number of microseconds in [0, 100000], got {spin_us!r}")
+        self.spin_us = float(spin_us)
+        self._spin_s = self.spin_us * 1e-6
+        self._cpus = os.cpu_count() or 1
         if not (isinstance(env_id, str) or callable(env_id)):
             raise ConfigError(f"env_id must be a registered task id (str) or a callable returning an env, got {env_id!r}")
         self.env_id = env_id if isinstance(env_id, str) else getattr(env_id, "__name__", repr(env_id))
@@ -240,7 +256,16 @@ class SurgSimVectorEnv(VectorEnv):
         replies: dict = {}
         try:
             while pending:
-                events = self._poller.poll(max(0.0, deadline - time.monotonic()) * 1e3)
+                events = None
+                if self._spin_s and len(pending) < self._cpus:
+                    # a core is free (fewer busy workers than cores): poll without sleeping for a
+                    # while, which spares this process a wake-up when the reply comes soon
+                    end = time.perf_counter() + self._spin_s
+                    events = self._poller.poll(0)
+                    while not events and time.perf_counter() < end:
+                        events = self._poller.poll(0)
+                if not events:
+                    events = self._poller.poll(max(0.0, deadline - time.monotonic()) * 1e3)
                 if not events:
                     late = ", ".join(f"worker {w} ({self._envs_of(w)})" for w in pending.values())
                     self._broken = f"{late} did not answer {what} within {timeout:g} s"

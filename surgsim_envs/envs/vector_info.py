@@ -4,7 +4,8 @@ A worker writes each env's numeric info entries (Python ``bool``/``int``/``float
 scalars, also inside nested dicts such as ``reward_terms``) into its row of a
 ``(num_envs, max_info_keys)`` float64 table plus a presence mask (:class:`InfoWriter`). Slots are
 numbered per worker in the order keys are first seen; a new key is announced once, in that
-step's reply. The main process (:class:`InfoMerger`) maps every worker's slots to one key list
+step's reply. An info dict whose keys and value types match one seen before is written by a
+plan (:class:`_WritePlan`: one ``itemgetter`` per dict level, one numpy assignment). The main process (:class:`InfoMerger`) maps every worker's slots to one key list
 and builds Gymnasium's info dict (``info[key]`` an array over envs, ``info["_key"]`` the mask of
 envs that returned it, nested dicts likewise) with a few numpy operations per step, not a Python
 merge per key and env. Values are stored as float64 and cast back to the type the key had when
@@ -45,17 +46,44 @@ class InfoWriter:
         self.slots: dict = {}
         self.count = 0
         self.new: list = []          # (slot, path, dtype str) not yet announced
+        self._plans: dict = {}       # top-level key tuple -> _WritePlan (see write)
 
     def write(self, values, present, info: dict):
         """Fill one env's row (``values``/``present`` are 1-D views; entries not in ``info`` read 0
-        and absent); return the other entries or None."""
-        present[:] = False
-        values[:] = 0.0
+        and absent); return the other entries or None.
+
+        An info dict with the same keys and value types as one seen before (every step of a task,
+        as a rule) takes a plan made from that one: its numeric values gathered with one
+        ``itemgetter`` per dict level and written with one numpy assignment. Anything else (a new
+        key, a key missing, a value whose type changed) takes the general path, which assigns
+        slots to new keys."""
         if self.keys is not None:
             if not self.keys:
                 return None
             info = {k: info[k] for k in self.keys if k in info}
-        return self._write(values, present, info, self.slots, ())
+        plan = self._plans.get(tuple(info))
+        if plan is not None:
+            vals = plan.gather(info)
+            if vals is not None:
+                if plan.contiguous:
+                    values[:plan.n] = vals
+                    present[:plan.n] = True
+                    if self.count > plan.n:
+                        values[plan.n:self.count] = 0.0
+                        present[plan.n:self.count] = False
+                else:
+                    values[:self.count] = 0.0
+                    values[plan.slots] = vals
+                    present[:self.count] = plan.mask[:self.count]
+                return plan.other(info) if self.keep_other else None
+        present[:] = False
+        values[:] = 0.0
+        other = self._write(values, present, info, self.slots, ())
+        if len(self._plans) < _MAX_PLANS:
+            plan = _WritePlan.make(info, self.slots, self.max_keys, self.keep_other)
+            if plan is not None:
+                self._plans[tuple(info)] = plan
+        return other
 
     def _write(self, values, present, info, slots, path):
         other = None
@@ -97,6 +125,76 @@ class InfoWriter:
     def take_new(self) -> list:
         new, self.new = self.new, []
         return new
+
+
+#: info layouts a writer keeps a plan for (a task has one or two: its step's and its reset's)
+_MAX_PLANS = 8
+
+
+class _WritePlan:
+    """How to write an info dict of one layout (keys and value types at every level) fast:
+    ``gather(info)`` returns its numeric values in slot order, or None if ``info`` does not have
+    this layout; ``other(info)`` its non-numeric entries (nested as in ``info``) or None."""
+
+    __slots__ = ("keys", "types", "get", "nested", "other_keys", "slots", "n", "contiguous", "mask")
+
+    @classmethod
+    def make(cls, info: dict, slots: dict, max_keys: int, keep_other: bool):
+        """The plan for ``info``'s layout, with the writer's ``slots``; None if some numeric entry
+        has no slot (a key whose kind changed, sent as an other entry by the general path)."""
+        plan = cls()
+        order: list = []
+        if not plan._build(info, slots, order, keep_other):
+            return None
+        plan.slots = np.asarray(order, dtype=np.intp)
+        plan.n = len(order)
+        plan.contiguous = order == list(range(len(order)))
+        plan.mask = np.zeros(max_keys, dtype=bool)
+        plan.mask[plan.slots] = True
+        return plan
+
+    def _build(self, info, slots, order, keep_other) -> bool:
+        self.keys = tuple(info)
+        self.types = tuple(map(type, info.values()))
+        numeric, nested, self.nested, self.other_keys = [], [], [], []
+        for key, v in info.items():
+            s = slots.get(key)
+            if is_numeric(v):
+                if type(s) is not int:
+                    return False
+                numeric.append(key)
+                order.append(s)
+            elif type(v) is dict and type(s) is dict:
+                nested.append((key, v, s))
+            elif keep_other:
+                self.other_keys.append(key)
+        for key, v, s in nested:            # after this level's numbers: the order gather returns
+            sub = _WritePlan()
+            if not sub._build(v, s, order, keep_other):
+                return False
+            self.nested.append((key, sub))
+        self.get = (lambda d: ()) if not numeric else (
+            (lambda d, k=numeric[0]: (d[k],)) if len(numeric) == 1 else itemgetter(*numeric))
+        return True
+
+    def gather(self, info: dict):
+        if tuple(info) != self.keys or tuple(map(type, info.values())) != self.types:
+            return None
+        vals = self.get(info)
+        for key, sub in self.nested:
+            more = sub.gather(info[key])
+            if more is None:
+                return None
+            vals += more
+        return vals
+
+    def other(self, info: dict):
+        out = {k: info[k] for k in self.other_keys}
+        for key, sub in self.nested:
+            o = sub.other(info[key])
+            if o:
+                out[key] = o
+        return out or None
 
 
 class InfoMerger:
@@ -172,11 +270,19 @@ class InfoMerger:
             return {}
         if self._plan is None:
             self._build_plan()
+        n_keys = len(self.paths)
+        if rows is None and self._identity and present[:, :n_keys].all():
+            # every env returned every key (the usual step): no per-key masks to compute
+            vals = values.T[self._order]             # (keys, envs), rows in dtype order, a copy
+            value_rows = []
+            for a, b, dt in self._blocks:
+                value_rows.extend(vals[a:b] if dt is None else vals[a:b].astype(dt))
+            return _fill_full(self._plan, value_rows, list(np.ones((n_keys, self.num_envs), dtype=bool)),
+                              self.num_envs)
         if self._identity:
             vals = values.T[self._order]             # (keys, envs), rows in dtype order, a copy
             pres = present.T[self._order]
         else:
-            n_keys = len(self.paths)
             vals = np.zeros((n_keys, self.num_envs))
             pres = np.zeros((n_keys, self.num_envs), dtype=bool)
             for (lo, hi), gidx in zip(self.ranges, self._gidx):
@@ -219,6 +325,15 @@ def _fill_all(level, value_rows, mask_rows, pres) -> dict:
     for key, mkey, sub, leaves in level.nested:
         out[key] = _fill_all(sub, value_rows, mask_rows, pres)
         out[mkey] = pres[leaves].any(axis=0)
+    return out
+
+
+def _fill_full(level, value_rows, mask_rows, n) -> dict:
+    out = dict(zip(level.keys, level.get(value_rows)))
+    out.update(zip(level.mask_keys, level.get(mask_rows)))
+    for key, mkey, sub, _ in level.nested:
+        out[key] = _fill_full(sub, value_rows, mask_rows, n)
+        out[mkey] = np.ones(n, dtype=bool)
     return out
 
 

@@ -57,23 +57,29 @@ class _Worker:
         return None
 
     def step(self):
-        v, lo, writer = self.v, self.lo, self.writer
-        acts, obs_buf, rew, term, trunc = v["actions"], v["obs"], v["rewards"], v["terminations"], v["truncations"]
-        vals, pres = v["info_values"], v["info_present"]
+        """Step every env of the block in one loop (one reply for all): actions copied out of the
+        shared memory once, rewards and flags written once at the end."""
+        v, lo, hi, writer = self.v, self.lo, self.hi, self.writer
+        acts = v["actions"][lo:hi].copy()       # the envs may keep their action: not a view of shared memory
+        obs_buf, vals, pres = v["obs"], v["info_values"], v["info_present"]
+        ended, autoreset, same_step = self.ended, self.autoreset, self.same_step
+        rews, terms, truncs = [0.0] * (hi - lo), [False] * (hi - lo), [False] * (hi - lo)
         other = final_other = None
         for j, env in enumerate(self.envs):
             i = self.current = lo + j
-            if self.ended[j] and self.autoreset == NEXT_STEP:
+            if ended[j] and autoreset == NEXT_STEP:
                 obs, info = env.reset()
-                r, te, tr = 0.0, False, False
+                ended[j] = False
             else:
-                if self.ended[j] and self.autoreset == DISABLED:
+                if ended[j] and autoreset == DISABLED:
                     raise RuntimeError(
                         f"env {i} was stepped after its episode ended, with autoreset_mode=DISABLED: reset it "
                         f"first (reset(options={{'reset_mask': mask}}) with mask[{i}] True)")
-                obs, r, te, tr, info = env.step(acts[i].copy())
-                if self.same_step:
-                    if te or tr:
+                obs, r, te, tr, info = env.step(acts[j])
+                rews[j] = r
+                if te or tr:
+                    terms[j], truncs[j] = bool(te), bool(tr)
+                    if same_step:
                         v["final"][i] = True
                         v["final_obs"][i] = obs
                         o = writer.write(v["final_info_values"][i], v["final_info_present"][i], info)
@@ -82,18 +88,19 @@ class _Worker:
                             final_other[i] = o
                         obs, info = env.reset()
                     else:
-                        v["final"][i] = False
-                        v["final_info_present"][i] = False
-                        v["final_info_values"][i] = 0.0
+                        ended[j] = True
+                if same_step and not (te or tr):
+                    v["final"][i] = False
+                    v["final_info_present"][i] = False
+                    v["final_info_values"][i] = 0.0
             obs_buf[i] = obs
-            rew[i] = r
-            term[i] = te
-            trunc[i] = tr
-            self.ended[j] = bool(te or tr) and self.autoreset != SAME_STEP
             o = writer.write(vals[i], pres[i], info)
             if o:
                 other = other or {}
                 other[i] = o
+        v["rewards"][lo:hi] = rews
+        v["terminations"][lo:hi] = terms
+        v["truncations"][lo:hi] = truncs
         return self._reply(other, final_other)
 
     def reset(self, seeds, options, mask):
