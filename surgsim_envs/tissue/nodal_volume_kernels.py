@@ -123,32 +123,36 @@ def gradient_pattern(tets: np.ndarray, n_nodes: int):
             np.ascontiguousarray(inv.reshape(len(tets), 4, 4), dtype=np.int64))
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def lambda_bound(pos, tets, slot, indptr, cols, c, inv_mass, fixed, G, gi):
     """Cauchy-Schwarz bound (1/s^2) of the largest eigenvalue of M^-1 K_v (see
-    ``CalibratedMassSpringModel.volume_lambda_bound``): G (nnz,3) and gi (N,) are work space."""
+    ``CalibratedMassSpringModel.volume_lambda_bound``): G (nnz,3) and gi (N,) are work space.
+    Indices read as unsigned (no wrap-around code per access, as in :func:`add_forces`)."""
     G[:, :] = 0.0
     g = np.empty((4, 3))
     for t in range(tets.shape[0]):
         _tet_volume_gradient(pos, tets, t, g)
         for q in range(4):
+            gx = 0.25 * g[q, 0]
+            gy = 0.25 * g[q, 1]
+            gz = 0.25 * g[q, 2]
             for p in range(4):
-                k = slot[t, p, q]
-                G[k, 0] += 0.25 * g[q, 0]
-                G[k, 1] += 0.25 * g[q, 1]
-                G[k, 2] += 0.25 * g[q, 2]
+                k = uint64(slot[t, p, q])
+                G[k, 0] += gx
+                G[k, 1] += gy
+                G[k, 2] += gz
     n = indptr.shape[0] - 1
     for i in range(n):
         s = 0.0
-        for k in range(indptr[i], indptr[i + 1]):
-            a = cols[k]
+        for k in range(uint64(indptr[i]), uint64(indptr[i + 1])):
+            a = uint64(cols[k])
             if not fixed[a]:
                 s += (G[k, 0] * G[k, 0] + G[k, 1] * G[k, 1] + G[k, 2] * G[k, 2]) * inv_mass[a]
         gi[i] = c[i] * s
     out = np.zeros(n)
     for i in range(n):
-        for k in range(indptr[i], indptr[i + 1]):
-            out[cols[k]] += gi[i]
+        for k in range(uint64(indptr[i]), uint64(indptr[i + 1])):
+            out[uint64(cols[k])] += gi[i]
     best = 0.0
     for a in range(n):
         if not fixed[a] and out[a] > best:
