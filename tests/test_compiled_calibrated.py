@@ -132,3 +132,26 @@ def test_sliver_mass_scaling_touches_only_sliver_nodes():
     assert make("mass_spring_calibrated", box, "liver", mass_scaling=None).describe()["mass_scaled_nodes"] == 0
     with pytest.raises(ConfigError, match="mass_scaling"):
         make("mass_spring_calibrated", box, "liver", mass_scaling=0.5)
+
+
+def test_subcycled_integrator_runs_compiled_across_its_recheck():
+    """Integrator "subcycled" (n re-evaluated every AUTO_RECHECK_STEPS steps): the compiled runner steps
+    chunk by chunk between the re-evaluations and gives the generic loop's result; the run crosses one."""
+    from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS
+
+    # 3 tissue steps per env step: the re-evaluation at step 100 falls inside an env step (loop call)
+    envs = _pair(dt=2.5e-3, control_hz=400.0 / 3.0, young_scale=(1.0, 1.2), integrator="subcycled")
+    s0, s1 = (e.unwrapped.sim for e in envs)
+    assert s0.tissue().integrator == "subcycled" and s0._compiled_runner() is not None
+    assert s1._compiled_runner() is None
+    assert s0.substeps == 3
+    for a in _press(envs[0], 40):
+        for e in envs:
+            e.step(a)
+        t0, t1 = s0.tissue(), s1.tissue()
+        for x, y in [(t0.positions, t1.positions), (t0.velocities, t1.velocities), (t0._s, t1._s),
+                     (s0.data.qpos, s1.data.qpos)]:
+            _close(x, y)
+        assert (t0.steps, t0._pending_dt, t0._sub_step) == (t1.steps, t1._pending_dt, t1._sub_step)
+    assert t0.steps > AUTO_RECHECK_STEPS and t0._sub_step == AUTO_RECHECK_STEPS, "n not re-evaluated at step 100"
+    assert t0._pending_dt < s0.dt, "never sub-cycled: the case tests nothing"

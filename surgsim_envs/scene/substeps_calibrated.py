@@ -1,5 +1,5 @@
 """Compiled substeps for :class:`CalibratedMassSpringModel` (``mass_spring_calibrated``) against
-:class:`ContactModel`, integrators "symplectic" and "auto": the mass-spring loop
+:class:`ContactModel`, integrators "symplectic", "auto" and "subcycled": the mass-spring loop
 (:mod:`surgsim_envs.scene.substeps_loop`) with the model's own step and energy, which carry its
 averaged-nodal-volume term instead of the per-tet one, and its sub-cycling.
 
@@ -11,14 +11,16 @@ Step, as ``CalibratedMassSpringModel._advance`` with the choice of ``_pick``:
   stiffness): n = ceil(dt / (DT_SAFETY critical_dt)) as ``_pick`` computes it; while n <=
   ``MAX_SUBCYCLES`` and the contact stiffness alone is stable at dt, the same kernel with n steps of
   dt / n ("subcycled"), else ``nodal_volume_kernels.implicit_step`` and the contact stiffness's
-  implicit part taken out of ``integrated_external_forces`` (whose reaction the loop gives the tools).
+  implicit part taken out of ``integrated_external_forces`` (whose reaction the loop gives the tools);
+* integrator "subcycled": n steps of dt / n with n = ``subcycle_count(dt)``, given per chunk by
+  :class:`CalibratedRunner` (third entry of the step state).
 
 The Maxwell-branch coefficients: the first step of a loop call spans the interval since the last
 commit (``symplectic_kernel_state``), every later one the previous step's dt / n; the table carries
-them for dt / 1 .. dt / MAX_SUBCYCLES (rows of ``_branch_coeffs``, so the same numbers the generic
-step uses), and a two-entry state (n of the last step, its kind) that :func:`committed` turns into the
-model's ``_pending_dt`` and the runner into ``active_integrator``. Energy = springs and Maxwell branches
-(at the last step's interval) + the nodal volume term.
+them for dt / 1 .. dt / max(MAX_SUBCYCLES, n) (rows of ``_branch_coeffs``, so the same numbers the generic
+step uses), and a state [n of the last step, its kind, n of "subcycled" or 0] whose first two entries
+:func:`committed` turns into the model's ``_pending_dt`` and the runner into ``active_integrator``.
+Energy = springs and Maxwell branches (at the last step's interval) + the nodal volume term.
 """
 
 from __future__ import annotations
@@ -31,11 +33,11 @@ from numba import cfunc, njit
 from surgsim_envs.contact.model import ContactModel
 from surgsim_envs.scene import substeps_mass_spring as ms
 from surgsim_envs.scene.array_table import f8_1, f8_2, f8_3, i8_2
-from surgsim_envs.scene.compiled_substeps import register_compiled_substeps
+from surgsim_envs.scene.compiled_substeps import NO_IDS, NO_VALUES, register_compiled_substeps
 from surgsim_envs.scene.substeps_loop import (COMMON_SLOTS, SubstepsRunner, TissueOps, energy_signature,
                                               step_arrays, step_signature, table_at)
 from surgsim_envs.tissue import nodal_volume_kernels as nvk
-from surgsim_envs.tissue.base import DT_SAFETY, _max_ratio
+from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS, DT_SAFETY, _max_ratio
 from surgsim_envs.tissue.calibrated_mass_spring import MAX_SUBCYCLES, CalibratedMassSpringModel
 from surgsim_envs.tissue.mass_spring import CG_MAX_ITER, CG_TOLERANCE
 from surgsim_envs.tissue.msd_kernels import elastic_energy
@@ -49,24 +51,24 @@ SYMPLECTIC, IMPLICIT, SUBCYCLED = 0.0, 1.0, 2.0
 _KIND_NAMES = {SYMPLECTIC: "symplectic", IMPLICIT: "implicit", SUBCYCLED: "subcycled"}
 
 
-def _branch_rows(tissue, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """(kMg, decay) of the Maxwell branches over dt / (r + 1), r = 0 .. MAX_SUBCYCLES - 1, as (MAX_SUBCYCLES, E)
-    arrays (the model's ``_branch_coeffs`` rows; rebuilt when dt or the model's coefficients change)."""
+def _branch_rows(tissue, dt: float, rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """(kMg, decay) of the Maxwell branches over dt / (r + 1), r = 0 .. rows - 1, as (rows, E) arrays (the
+    model's ``_branch_coeffs`` rows; rebuilt when dt, the row count or the model's coefficients change)."""
     head = tissue._branch_coeffs(float(dt))[0]
     cached = getattr(tissue, "_compiled_branch_rows", None)
-    if cached is not None and cached[0] == dt and cached[1] is head:
+    if cached is not None and cached[0] == (dt, rows) and cached[1] is head:
         return cached[2], cached[3]
-    rows = [tissue._branch_coeffs(float(dt) / n) for n in range(1, MAX_SUBCYCLES + 1)]
-    kmg = np.ascontiguousarray(np.stack([r[0] for r in rows]))
-    decay = np.ascontiguousarray(np.stack([r[1] for r in rows]))
-    tissue._compiled_branch_rows = (dt, head, kmg, decay)     # keeps ``head`` alive: its identity is the key
+    coeffs = [tissue._branch_coeffs(float(dt) / n) for n in range(1, rows + 1)]
+    kmg = np.ascontiguousarray(np.stack([c[0] for c in coeffs]))
+    decay = np.ascontiguousarray(np.stack([c[1] for c in coeffs]))
+    tissue._compiled_branch_rows = ((dt, rows), head, kmg, decay)   # keeps ``head`` alive: its identity is the key
     return kmg, decay
 
 
 def _state(tissue) -> np.ndarray:
     state = getattr(tissue, "_compiled_step_state", None)
     if state is None:
-        state = tissue._compiled_step_state = np.array([1.0, SYMPLECTIC])
+        state = tissue._compiled_step_state = np.array([1.0, SYMPLECTIC, 0.0])
     return state
 
 
@@ -76,7 +78,7 @@ def arrays(tissue, dt: float) -> list:
     scratch = getattr(tissue, "_compiled_energy_scratch", None)
     if scratch is None or scratch.shape != (tissue.n_nodes,):
         scratch = tissue._compiled_energy_scratch = np.zeros(tissue.n_nodes)
-    kmg_rows, decay_rows = _branch_rows(tissue, dt)
+    kmg_rows, decay_rows = _branch_rows(tissue, dt, max(MAX_SUBCYCLES, int(_state(tissue)[2])))
     return base + [tissue._fvol, tissue._ntets, tissue.node_rest_volume, tissue.node_bulk, tissue._vbuf,
                    kmg_rows, decay_rows, _state(tissue), scratch, tissue._ngrad, tissue._nc, tissue._nsbuf]
 
@@ -120,7 +122,7 @@ def step(pos, vel, fext, kc, integrated, dt, first, implicit, auto, t):
     last = int(state[0]) - 1               # the branches were committed over dt / state[0]
     kMg_c = kMg0 if first else kmg_rows[last]
     decay_c = decay0 if first else decay_rows[last]
-    n = 1
+    n = int(state[2]) if state[2] > 0 else 1    # integrator "subcycled": n set by the runner per chunk
     if implicit:
         n = subcycles_for(dt, auto[0], kc, masses)
         if n == 0:
@@ -140,7 +142,7 @@ def step(pos, vel, fext, kc, integrated, dt, first, implicit, auto, t):
                             kmg_rows[n - 1], decay_rows[n - 1], s, dl, f_buf, fvol, work, tets, V0, kv, ntets, V0n,
                             bulk, vbuf)
     state[0] = float(n)
-    state[1] = SUBCYCLED if implicit else SYMPLECTIC
+    state[1] = SUBCYCLED if (implicit or state[2] > 0) else SYMPLECTIC
     return False
 
 
@@ -183,7 +185,33 @@ OPS = TissueOps(step_c, energy_c, KINDS, arrays, committed)
 
 
 class CalibratedRunner(SubstepsRunner):
-    """:class:`SubstepsRunner` whose "auto" reports the step it took last: symplectic, subcycled or implicit."""
+    """:class:`SubstepsRunner` whose "auto" reports the step it took last (symplectic, subcycled or implicit),
+    and which runs integrator "subcycled" in chunks: n = ``subcycle_count(dt)`` is evaluated in Python where
+    the generic step evaluates it (before the first step and every AUTO_RECHECK_STEPS steps), and each chunk
+    up to the next re-evaluation runs compiled with that n. With ``tissue_subcycles`` > 1 a re-evaluation can
+    fall inside a MuJoCo step, where a loop call cannot stop: such scenes take the generic loop."""
+
+    def run(self, count: int, ctrl_ids=NO_IDS, ctrl_values=NO_VALUES) -> None:
+        tissue = self.tissue
+        if tissue.integrator != "subcycled":
+            super().run(count, ctrl_ids, ctrl_values)
+            return
+        state, dt, per = _state(tissue), self.sim.dt, self.sim.tissue_subcycles
+        if per > 1:      # n may be re-evaluated inside a MuJoCo step, where a loop call cannot stop
+            self.sim._subcycled_steps(count // per, ctrl_ids if len(ctrl_ids) else None,
+                                      ctrl_values if len(ctrl_ids) else None)
+            return
+        done = 0
+        try:
+            while done < count:
+                state[2] = float(tissue.subcycle_count(dt))        # re-evaluates n as _advance would
+                until = max(AUTO_RECHECK_STEPS - (tissue.steps - tissue._sub_step), 1)
+                chunk = min(count - done, until)
+                values = ctrl_values[done:done + chunk] if len(ctrl_ids) else ctrl_values
+                super().run(chunk, ctrl_ids, values)
+                done += chunk
+        finally:
+            state[2] = 0.0
 
     def _sync(self, dt: float) -> None:
         super()._sync(dt)
@@ -196,7 +224,5 @@ def runner(sim, tissue, contact, fns) -> SubstepsRunner:
     return CalibratedRunner(sim, tissue, contact, fns, OPS)
 
 
-# "subcycled" as the integrator itself (not "auto"'s choice) re-evaluates n with stable_dt() on its own
-# schedule inside a control step (CalibratedMassSpringModel.subcycle_count): it keeps the generic loop
-for _integrator in ("symplectic", "auto"):
+for _integrator in ("symplectic", "auto", "subcycled"):
     register_compiled_substeps(ContactModel, CalibratedMassSpringModel, _integrator, runner)
