@@ -66,7 +66,8 @@ def kernel_split_us(model, dt: float, repeats: int) -> tuple[float, float]:
     from surgsim_envs.tissue import msd_kernels as kern
     from surgsim_envs.tissue import nodal_volume_kernels as nvk
 
-    (pos, _, _, _, _, _, si, sj, L0, K1, K2, _, _, kMg, decay, s, dl, f_buf, _, _, _) = model.symplectic_kernel_state(dt)
+    state = model.symplectic_kernel_state(dt)
+    (pos, si, sj, L0, K1, K2), (kMg, decay, s, dl, f_buf) = (state[0], *state[6:11]), state[13:18]
     work = model.spring_work()
     ntets = getattr(model, "_ntets", None)
     calls = [lambda: kern.spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s, dl, False, f_buf, work)]
@@ -140,7 +141,8 @@ def run(args: argparse.Namespace) -> int:
                    us_s[k] * (1e-3 / sdts[k]), us_i[k], builds[k], scale_material_ms(m, 20),
                    *kernel_split_us(m, sdts[k], args.repeats))
             rows.append(row)
-            print("{} | {} | {:.3f} | {:.3f} | {:.1f} | {:.0f} | {:.0f} | {:.1f} | {:.1f} | {:.1f} | {:.1f}".format(*row))
+            print("{} | {} | {:.3f} | {:.3f} | {:.1f} | {:.0f} | {:.0f} | {:.1f} | {:.1f} | {:.1f} | {:.1f}"
+                  .format(*row))
         base, row = rows
         print(f"ratio calibrated/plain: symplectic us per sim ms {row[5] / base[5]:.2f}x, step {row[4] / base[4]:.2f}x, "
               f"critical dt {row[2] / base[2]:.2f}x (exact {row[3] / base[3]:.2f}x), implicit step {row[6] / base[6]:.2f}x")
