@@ -81,8 +81,8 @@ def test_calibrated_mass_spring_runs_compiled():
     it: the compiled loop gives the generic loop's result. Bit for bit when numba compiles the
     kernels in the process; with kernels loaded from numba's cache the fastmath nodal-volume kernel
     may round the last bit differently (measured 1e-15 relative), hence 1e-12 here
-    (docs/benchmarks.md "Env step: fourth pass"). Under "auto" the model may sub-cycle, which only
-    the generic loop does: that key is not registered."""
+    (docs/benchmarks.md "Env step: fourth pass"). "auto" (sub-cycles, implicit steps):
+    tests/test_compiled_calibrated.py."""
     envs = _pair("SurgSim/Palpation-v0", model="mass_spring_calibrated", spacing=0.01, dt=2.5e-4)
     s0, s1 = (e.unwrapped.sim for e in envs)
     assert type(s0.tissue()).__name__ == "CalibratedMassSpringModel" and s0.tissue().integrator == "symplectic"
@@ -91,7 +91,6 @@ def test_calibrated_mass_spring_runs_compiled():
         outs = [e.step(a) for e in envs]
         np.testing.assert_allclose(outs[0][0], outs[1][0], rtol=1e-5, atol=1e-6)    # float32 observations
         _assert_close(s0, s1)
-    assert ("ContactModel", "CalibratedMassSpringModel", "auto") not in registered()
 
 
 def test_mass_spring_implicit_steps_give_the_tools_the_integrated_reaction():

@@ -9,7 +9,8 @@ Per model: springs (left out: those the fit set to 0), critical_dt() (what the "
 against the exact symplectic limit from the largest eigenvalue of M^-1 K (scipy eigsh), wall time
 of one symplectic and one implicit step (median over ``repeats``, after numba compilation; the two
 models stepped in turn so that the machine load hits both alike) and
-compute per simulated ms = step time x steps per ms (symplectic at stable_dt(), implicit at 1 ms), and
+compute per simulated ms = step time x steps per ms (symplectic at stable_dt(), implicit at 1 ms), the
+symplectic step's two force passes timed alone (spring pass, nodal volume term), and
 the cost of a masked ``scale_material`` (what a task's reset does to re-randomise an inclusion:
 the calibrated constants are a linear map of the tets' moduli, no refit).
 """
@@ -58,6 +59,31 @@ def interleaved_step_us(models, dt_of, repeats: int) -> list[float]:
     return [float(np.median(t) * 1e6) for t in times]
 
 
+def kernel_split_us(model, dt: float, repeats: int) -> tuple[float, float]:
+    """Median wall time (us) of the symplectic step's two force passes at the current state: the spring pass
+    (``msd_kernels.spring_forces_passes``, branches not committed) and the nodal volume term
+    (``nodal_volume_kernels.add_forces``; 0 for a model without it)."""
+    from surgsim_envs.tissue import msd_kernels as kern
+    from surgsim_envs.tissue import nodal_volume_kernels as nvk
+
+    state = model.symplectic_kernel_state(dt)
+    (pos, si, sj, L0, K1, K2), (kMg, decay, s, dl, f_buf) = (state[0], *state[6:11]), state[13:18]
+    work = model.spring_work()
+    ntets = getattr(model, "_ntets", None)
+    calls = [lambda: kern.spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s, dl, False, f_buf, work)]
+    if ntets is not None:
+        fvol = np.zeros_like(pos)
+        calls.append(lambda: nvk.add_forces(pos, ntets, model.node_rest_volume, model.node_bulk, model._vbuf, fvol))
+    times = [[] for _ in calls]
+    for _ in range(max(repeats, 10)):
+        for k, call in enumerate(calls):
+            t0 = time.perf_counter()
+            call()
+            times[k].append(time.perf_counter() - t0)
+    us = [float(np.median(t) * 1e6) for t in times]
+    return us[0], (us[1] if len(us) > 1 else 0.0)
+
+
 def scale_material_ms(model, repeats: int) -> float:
     """Median wall time (ms) of a whole-body plus a masked ``scale_material`` (an inclusion re-randomised)."""
     c = model.element_centroids()
@@ -96,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
         fixed = np.isclose(vol.nodes[:, 2], vol.nodes[:, 2].min())
         print(f"\n{label}: {vol.n_nodes} nodes, {len(vol.tets)} tets")
         print("model | springs | critical_dt ms (Gershgorin) | exact ms | symplectic us/step | us per sim ms "
-              "| implicit us/step (1 ms) | build s | scale_material ms")
+              "| implicit us/step (1 ms) | build s | scale_material ms | spring pass us | volume term us")
         kw = {"region_materials": regions} if regions else {}
         names = ("mass_spring", "mass_spring_calibrated")
         built, builds = [], []
@@ -112,9 +138,11 @@ def run(args: argparse.Namespace) -> int:
         rows = []
         for k, (name, m) in enumerate(zip(names, built)):
             row = (name, len(m.springs), m.critical_dt() * 1e3, exact_critical_dt(m) * 1e3, us_s[k],
-                   us_s[k] * (1e-3 / sdts[k]), us_i[k], builds[k], scale_material_ms(m, 20))
+                   us_s[k] * (1e-3 / sdts[k]), us_i[k], builds[k], scale_material_ms(m, 20),
+                   *kernel_split_us(m, sdts[k], args.repeats))
             rows.append(row)
-            print("{} | {} | {:.3f} | {:.3f} | {:.1f} | {:.0f} | {:.0f} | {:.1f} | {:.1f}".format(*row))
+            print("{} | {} | {:.3f} | {:.3f} | {:.1f} | {:.0f} | {:.0f} | {:.1f} | {:.1f} | {:.1f} | {:.1f}"
+                  .format(*row))
         base, row = rows
         print(f"ratio calibrated/plain: symplectic us per sim ms {row[5] / base[5]:.2f}x, step {row[4] / base[4]:.2f}x, "
               f"critical dt {row[2] / base[2]:.2f}x (exact {row[3] / base[3]:.2f}x), implicit step {row[6] / base[6]:.2f}x")

@@ -16,7 +16,7 @@ step (springs + Maxwell branches) with this term in place of the per-tet one.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, uint64
 
 from surgsim_envs.tissue.msd_kernels import (_system_matvec, _tet_volume_gradient, spring_forces, spring_tangents,
                                              symplectic_step_work)
@@ -33,20 +33,23 @@ def node_volumes(pos, tets, out):
             out[tets[t, a]] += q
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy", nogil=True)
 def add_forces(pos, tets, V0, kv, vbuf, f_out):
     """Add the nodal-volume forces (N) to ``f_out`` (N,3); ``vbuf`` (N,) is work space.
 
     Two passes over the tets, written out with scalar locals: the volumes (a triple product per
     tet), then each tet's gradient recomputed and scattered with its mean nodal pressure (recomputing
     3 cross products is cheaper than storing and re-reading a (T,4,3) gradient array: 92 vs 120 us
-    for the 6,144-tet palpation slab)."""
+    for the 6,144-tet palpation slab; structure-of-arrays passes were no faster either). Node indices
+    are read as unsigned: numba then emits no negative-index wrap-around per access (the tets are
+    valid, non-negative node ids): 23 vs 33 us on the 1,200-tet Palpation slab, the same forces bit for bit
+    (docs/benchmarks.md "Calibrated mass-spring: fifth pass")."""
     vbuf[:] = 0.0
     for t in range(tets.shape[0]):
-        a = tets[t, 0]
-        b = tets[t, 1]
-        c = tets[t, 2]
-        d = tets[t, 3]
+        a = uint64(tets[t, 0])
+        b = uint64(tets[t, 1])
+        c = uint64(tets[t, 2])
+        d = uint64(tets[t, 3])
         ax = pos[a, 0]
         ay = pos[a, 1]
         az = pos[a, 2]
@@ -67,10 +70,10 @@ def add_forces(pos, tets, V0, kv, vbuf, f_out):
     for i in range(vbuf.shape[0]):
         vbuf[i] = kv[i] * (vbuf[i] - V0[i]) / V0[i]        # pressure p_i (Pa)
     for t in range(tets.shape[0]):
-        a = tets[t, 0]
-        b = tets[t, 1]
-        c = tets[t, 2]
-        d = tets[t, 3]
+        a = uint64(tets[t, 0])
+        b = uint64(tets[t, 1])
+        c = uint64(tets[t, 2])
+        d = uint64(tets[t, 3])
         p = (vbuf[a] + vbuf[b] + vbuf[c] + vbuf[d]) * (0.25 / 6.0)
         ax = pos[a, 0]
         ay = pos[a, 1]
@@ -120,32 +123,36 @@ def gradient_pattern(tets: np.ndarray, n_nodes: int):
             np.ascontiguousarray(inv.reshape(len(tets), 4, 4), dtype=np.int64))
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def lambda_bound(pos, tets, slot, indptr, cols, c, inv_mass, fixed, G, gi):
     """Cauchy-Schwarz bound (1/s^2) of the largest eigenvalue of M^-1 K_v (see
-    ``CalibratedMassSpringModel.volume_lambda_bound``): G (nnz,3) and gi (N,) are work space."""
+    ``CalibratedMassSpringModel.volume_lambda_bound``): G (nnz,3) and gi (N,) are work space.
+    Indices read as unsigned (no wrap-around code per access, as in :func:`add_forces`)."""
     G[:, :] = 0.0
     g = np.empty((4, 3))
     for t in range(tets.shape[0]):
         _tet_volume_gradient(pos, tets, t, g)
         for q in range(4):
+            gx = 0.25 * g[q, 0]
+            gy = 0.25 * g[q, 1]
+            gz = 0.25 * g[q, 2]
             for p in range(4):
-                k = slot[t, p, q]
-                G[k, 0] += 0.25 * g[q, 0]
-                G[k, 1] += 0.25 * g[q, 1]
-                G[k, 2] += 0.25 * g[q, 2]
+                k = uint64(slot[t, p, q])
+                G[k, 0] += gx
+                G[k, 1] += gy
+                G[k, 2] += gz
     n = indptr.shape[0] - 1
     for i in range(n):
         s = 0.0
-        for k in range(indptr[i], indptr[i + 1]):
-            a = cols[k]
+        for k in range(uint64(indptr[i]), uint64(indptr[i + 1])):
+            a = uint64(cols[k])
             if not fixed[a]:
                 s += (G[k, 0] * G[k, 0] + G[k, 1] * G[k, 1] + G[k, 2] * G[k, 2]) * inv_mass[a]
         gi[i] = c[i] * s
     out = np.zeros(n)
     for i in range(n):
-        for k in range(indptr[i], indptr[i + 1]):
-            out[cols[k]] += gi[i]
+        for k in range(uint64(indptr[i]), uint64(indptr[i + 1])):
+            out[uint64(cols[k])] += gi[i]
     best = 0.0
     for a in range(n):
         if not fixed[a] and out[a] > best:
