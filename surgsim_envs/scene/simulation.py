@@ -17,7 +17,8 @@ No MuJoCo callbacks are used (never ``set_mjcb_passive``); tissue nodes are not 
 
 When a compiled loop is registered for the scene's (contact model, tissue model, integrator)
 (:mod:`surgsim_envs.scene.compiled_substeps`; built in: ContactModel + MassSpringModel
-"symplectic", the tasks' default), all substeps of a step run in one numba call, MuJoCo's C
+"symplectic" (the tasks' default) and "auto", and ContactModel + CalibratedMassSpringModel "symplectic", "auto"
+and "subcycled"), all substeps of a step run in one numba call, MuJoCo's C
 ``mj_step1``/``mj_step2`` included, in exactly this order and bit-for-bit the same result; every
 other scene runs the generic loop below (``Simulation(..., compiled_substeps=False)`` forces it).
 Units: m, s, kg, N, rad.
