@@ -164,12 +164,26 @@ def geom_box_half_width(kind, size, gmat, g, k, radius):
     return min(h * (1.0 + 1e-9) + 1e-12, radius)
 
 
+@njit(cache=True, inline="always")
+def _row_lists(C, S):
+    """Layout of the kernel's ``rows`` buffer for C candidate nodes and S surface samples: [0] the
+    number of node rows written, [1] the number of points left in contact; the node rows from index
+    ``w0`` (at most C + 3S: a point's node, or a sample's 3 nodes, once per point in contact), the
+    points from ``a0`` (at most C + S). Returns (w0, a0)."""
+    return 2, 2 + C + 3 * S
+
+
+def _row_buffer(C: int, S: int) -> np.ndarray:
+    """A zeroed ``rows`` buffer of :func:`_contact_kernel` (empty lists)."""
+    return np.zeros(2 + (C + 3 * S) + (C + S), dtype=np.int64)
+
+
 @njit(cache=True, nogil=True)
 def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel, tool_com,
                     mu, mu_s, k_n, c_n, c_imp, k_t, anchor_local, anchor_on,
                     forces, stiffness, node_tool_k, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv,
                     tool_fn, tool_ft, tool_ftv, contacts, slipping, penetration, last_contact, last_slip,
-                    err, radius, vec3):
+                    err, radius, vec3, rows):
     """Contact points p < C are the candidate nodes ``cand[p]``; points p >= C are the surface
     samples ``s = p - C`` at ``sum_j s_w[s, j] x[s_nodes[s, j]]`` whose forces go back to the nodes
     with the same weights. ``touched`` lists every node that can receive a force (zeroed first).
@@ -178,7 +192,11 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
     the contact state (friction.NO_CONTACT / STICKING / SLIDING). Work buffers (the model's own, so
     the kernel allocates nothing): ``radius`` (G,) the geoms' bounding radii, ``vec3`` (7 + G, 3) rows
     for the bounding box (lo, hi), the 3-vectors of the signed distance and friction calls, and each
-    geom's box half widths (:func:`geom_box_half_width`)."""
+    geom's box half widths (:func:`geom_box_half_width`); ``rows`` (int64, 2 + (C + 3S) + (C + S), layout
+    :func:`_row_lists`) the node rows this kernel wrote and the points whose contact state it left
+    set, so that the next call zeroes only those: every other touched row and every other contact
+    state is already zero (NO_CONTACT), so the outputs are those of zeroing every touched row and
+    writing every rejected point's states (the arrays start zero; ``ContactModel.reset`` zeroes them)."""
     G = kind.shape[0]
     T = tool_force.shape[0]
     # validate geoms and precompute bounding radii
@@ -231,21 +249,45 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
         geom_fn[g] = 0.0
         for k in range(3):
             geom_ftv[g, k] = 0.0
-    for j in range(touched.shape[0]):
-        i = touched[j]
+    C = cand.shape[0]
+    P = C + s_nodes.shape[0]
+    w0, a0 = _row_lists(C, s_nodes.shape[0])
+    # the node rows written last call back to zero (every other touched row is zero: never written)
+    for q in range(w0, w0 + rows[0]):
+        i = rows[q]
         forces[i, 0] = 0.0
         forces[i, 1] = 0.0
         forces[i, 2] = 0.0
         stiffness[i] = 0.0
         for t in range(T):
             node_tool_k[i, t] = 0.0
+    rows[0] = 0
+    # contact states: a point outside the box gets NO_CONTACT on every geom; only the points in
+    # contact after the last call can hold another state, so only theirs are written here (the loop
+    # below skips the box-rejected points; it writes every state of the others)
+    for q in range(a0, a0 + rows[1]):
+        c = rows[q]
+        if c < C:
+            i = cand[c]
+            x0 = positions[i, 0]
+            x1 = positions[i, 1]
+            x2 = positions[i, 2]
+        else:
+            s = c - C
+            a, b, e = s_nodes[s, 0], s_nodes[s, 1], s_nodes[s, 2]
+            wa, wb, we = s_w[s, 0], s_w[s, 1], s_w[s, 2]
+            x0 = wa * positions[a, 0] + wb * positions[b, 0] + we * positions[e, 0]
+            x1 = wa * positions[a, 1] + wb * positions[b, 1] + we * positions[e, 1]
+            x2 = wa * positions[a, 2] + wb * positions[b, 2] + we * positions[e, 2]
+        if (x0 < blo[0] or x0 > bhi[0] or x1 < blo[1] or x1 > bhi[1] or x2 < blo[2] or x2 > bhi[2]):
+            for g in range(G):
+                anchor_on[c, g] = 0
+    rows[1] = 0
     nl = vec3[2]
     cl = vec3[3]
     nrm = vec3[4]
     cpt = vec3[5]
     ft = vec3[6]
-    C = cand.shape[0]
-    P = C + s_nodes.shape[0]
     i = 0
     a = 0
     b = 0
@@ -271,9 +313,8 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
         fz = 0.0
         kk = 0.0
         if (x0 < blo[0] or x0 > bhi[0] or x1 < blo[1] or x1 > bhi[1] or x2 < blo[2] or x2 > bhi[2]):
-            for g in range(G):
-                anchor_on[c, g] = 0
-            continue
+            continue          # its states are NO_CONTACT already (see above)
+        hit = False
         for g in range(G):
             dx = x0 - gpos[g, 0]
             dy = x1 - gpos[g, 1]
@@ -322,6 +363,19 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
             t = tool[g]
             slip = stick_slip(x0, x1, x2, nrm, f_n, mu[t], mu_s[t], k_t, gpos, gmat, g, anchor_local, c,
                               anchor_on[c, g], ft)
+            if not hit:       # listed before its rows and state are written (counts kept current)
+                hit = True
+                rows[a0 + rows[1]] = c
+                rows[1] += 1
+                q = w0 + rows[0]
+                if c < C:
+                    rows[q] = i
+                    rows[0] += 1
+                else:
+                    rows[q] = a
+                    rows[q + 1] = b
+                    rows[q + 2] = e
+                    rows[0] += 3
             anchor_on[c, g] = 2 if slip else 1
             gx = f_n * nrm[0] + ft[0]
             gy = f_n * nrm[1] + ft[1]
@@ -430,20 +484,25 @@ def contact_kernel_prepared(positions, velocities, gpos, gmat, gvel, tool_com, s
     """:meth:`ContactModel.compute_prepared` from compiled code: ``state`` is
     :meth:`ContactModel.kernel_state`. Returns the kernel's status (0 = OK; else call
     ``ContactModel._raise_kernel_error``). Same kernel, same result, and the positions and tool
-    centres are kept for :meth:`ContactModel.attribute_increment` as compute_prepared keeps them."""
+    centres are kept for :meth:`ContactModel.attribute_increment` as compute_prepared keeps them: the
+    positions only of the node rows this call wrote (the rows with a contact stiffness > 0, the only
+    ones :func:`_attribute_increment` reads: every other row's stiffness is zero)."""
     (cand, s_nodes, s_w, touched, kind, tool, size, mu, k_n, c_n, k_t, anchor_local, anchor_on,
      forces, stiffness, node_tool_k, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv, tool_fn, tool_ft, tool_ftv,
-     contacts, slipping, penetration, last0, last1, err, com_copy, pos_copy, mu_s, c_imp, radius, vec3) = state
+     contacts, slipping, penetration, last0, last1, err, com_copy, pos_copy, mu_s, c_imp, radius, vec3,
+     rows) = state
     _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel,
                     tool_com, mu, mu_s, k_n, c_n, c_imp, k_t, anchor_local, anchor_on, forces, stiffness, node_tool_k,
                     tool_force, tool_torque, geom_fn, geom_ft, geom_ftv, tool_fn, tool_ft, tool_ftv, contacts,
-                    slipping, penetration, last0, last1, err, radius, vec3)
+                    slipping, penetration, last0, last1, err, radius, vec3, rows)
     if err[0] != 0:
         return err[0]
     for t in range(tool_com.shape[0]):
         for j in range(3):
             com_copy[t, j] = tool_com[t, j]
-    for i in range(positions.shape[0]):
+    w0 = _row_lists(cand.shape[0], s_nodes.shape[0])[0]
+    for q in range(w0, w0 + rows[0]):
+        i = rows[q]
         for j in range(3):
             pos_copy[i, j] = positions[i, j]
     return 0
@@ -572,6 +631,8 @@ class ContactModel:
         #: factor applied to k_n, c_n and k_t of every contact point (1 / n^2)
         self.point_scale = 1.0 / (n * n)
         self._touched = np.unique(np.concatenate([self.candidate_nodes, self.sample_nodes.reshape(-1)]))
+        #: kernel work: the node rows written and the points left in contact by the last call (_row_lists)
+        self._rows = _row_buffer(len(self.candidate_nodes), len(self.sample_nodes))
 
     @property
     def n_samples(self) -> int:
@@ -619,6 +680,7 @@ class ContactModel:
         self._anchor_on[:] = 0
         self._anchor_local[:] = 0.0
         self.node_tool_stiffness[:] = 0.0
+        self._rows[:2] = 0            # nothing written, nothing in contact
         r = self.result
         for arr in (r.forces, r.stiffness, r.tool_force, r.tool_torque, r.geom_normal_force,
                     r.geom_tangential_force, self.report.normal_force, self.report.tangential_force,
@@ -685,7 +747,7 @@ class ContactModel:
                         r.tool_force,
                         r.tool_torque, r.geom_normal_force, r.geom_tangential_force, self._geom_ftv,
                         rep.normal_force, rep.tangential_force, self._tool_ftv, rep.contacts, rep.slipping,
-                        rep.penetration, self._last[0], self._last[1], err, self._radius, self._vec3)
+                        rep.penetration, self._last[0], self._last[1], err, self._radius, self._vec3, self._rows)
         if err[0] != _OK:
             self._raise_kernel_error(kind, tool, size)
         np.copyto(self._com, com)
@@ -729,7 +791,7 @@ class ContactModel:
         runs :func:`contact_kernel_prepared` itself (the scene's compiled substeps): a tuple of the
         model's own arrays and the prepared constants, in :func:`contact_kernel_prepared` order.
         Valid until the next :meth:`prepare` (or a compute() with another geom count). The static
-        friction, the implicit damping (c_n / dt) and the kernel's work buffers are the last four
+        friction, the implicit damping (c_n / dt) and the kernel's work buffers are the last five
         entries, so that compiled callers that index the earlier entries (forces = [13], stiffness =
         [14], ...) keep their indices."""
         if self._prepared is None:
@@ -741,7 +803,7 @@ class ContactModel:
                 self.node_tool_stiffness, r.tool_force, r.tool_torque, r.geom_normal_force,
                 r.geom_tangential_force, self._geom_ftv, rep.normal_force, rep.tangential_force, self._tool_ftv,
                 rep.contacts, rep.slipping, rep.penetration, self._last[0], self._last[1], self._err,
-                self._com, self._pos, self.tool_static_friction, c_imp, self._radius, self._vec3)
+                self._com, self._pos, self.tool_static_friction, c_imp, self._radius, self._vec3, self._rows)
 
     def attribute_increment_prepared(self, integrated_forces) -> None:
         """:meth:`attribute_increment` without the argument check (``integrated_forces`` a

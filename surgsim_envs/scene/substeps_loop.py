@@ -64,13 +64,13 @@ from surgsim_envs.tissue.guard import all_finite, speed_within
 # address table layout (rows); the model's own section starts at COMMON_SLOTS
 SLOT_GATHER = 0            # 13: the arguments of _gather_geoms
 GATHER_KINDS = ["i8_1"] * 4 + ["f8_2"] * 9
-SLOT_CONTACT = 13          # 33: ContactModel.kernel_state() arrays (scalars in the last one)
+SLOT_CONTACT = 13          # 34: ContactModel.kernel_state() arrays (scalars in the last one)
 CONTACT_KINDS = ["i8_1", "i8_2", "f8_2", "i8_1", "i8_1", "i8_1", "f8_2", "f8_1", "f8_3", "u1_2", "f8_2", "f8_1",
                  "f8_2", "f8_2", "f8_2", "f8_1", "f8_1", "f8_2", "f8_1", "f8_1", "f8_2", "i8_1", "i8_1", "f8_1",
-                 "i8_1", "i8_1", "i8_1", "f8_2", "f8_2", "f8_1", "f8_1", "f8_2", "f8_1"]
+                 "i8_1", "i8_1", "i8_1", "f8_2", "f8_2", "f8_1", "f8_1", "f8_2", "i8_1", "f8_1"]
 #: kernel_state() entries that are arrays, in table order (8, 9, 10, 33 are the scalars k_n, c_n, k_t, c_imp)
-CONTACT_ARRAY_ENTRIES = [0, 1, 2, 3, 4, 5, 6, 7] + list(range(11, 33)) + [34, 35]
-SLOT_REST = 46             # 21: controls, reaction, fixed nodes, counters, guard, sub-cycling, positions, auto
+CONTACT_ARRAY_ENTRIES = [0, 1, 2, 3, 4, 5, 6, 7] + list(range(11, 33)) + [34, 35, 36]
+SLOT_REST = 47             # 21: controls, reaction, fixed nodes, counters, guard, sub-cycling, positions, auto
 REST_KINDS = ["f8_1", "f8_1", "f8_1", "b1_1",      # ctrl, goal, rate, moving
               "f8_2", "i8_1", "f8_2",              # xfrc_applied, bodies, wrench
               "i8_1", "f8_2", "f8_2",              # fixed_idx, fixed_targets, integrated_external_forces
@@ -95,14 +95,14 @@ def _gather_state(tab):
 def _contact_state(tab):
     """``ContactModel.kernel_state()`` rebuilt from the table (the scalars from the last slot)."""
     at = SLOT_CONTACT
-    sc = f8_1(tab, at + 32)
+    sc = f8_1(tab, at + 33)
     return (i8_1(tab, at), i8_2(tab, at + 1), f8_2(tab, at + 2), i8_1(tab, at + 3), i8_1(tab, at + 4),
             i8_1(tab, at + 5), f8_2(tab, at + 6), f8_1(tab, at + 7), sc[0], sc[1], sc[2], f8_3(tab, at + 8),
             u1_2(tab, at + 9), f8_2(tab, at + 10), f8_1(tab, at + 11), f8_2(tab, at + 12), f8_2(tab, at + 13),
             f8_2(tab, at + 14), f8_1(tab, at + 15), f8_1(tab, at + 16), f8_2(tab, at + 17), f8_1(tab, at + 18),
             f8_1(tab, at + 19), f8_2(tab, at + 20), i8_1(tab, at + 21), i8_1(tab, at + 22), f8_1(tab, at + 23),
             i8_1(tab, at + 24), i8_1(tab, at + 25), i8_1(tab, at + 26), f8_2(tab, at + 27), f8_2(tab, at + 28),
-            f8_1(tab, at + 29), sc[3], f8_1(tab, at + 30), f8_2(tab, at + 31))
+            f8_1(tab, at + 29), sc[3], f8_1(tab, at + 30), f8_2(tab, at + 31), i8_1(tab, at + 32))
 
 
 @njit(cache=True)

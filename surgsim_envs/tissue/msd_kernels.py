@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, uint64
 
 
 @njit(cache=True, fastmath=True)
@@ -195,15 +195,18 @@ def spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state,
     :func:`spring_forces`). Measured here: bit for bit the forces of :func:`spring_forces` called on
     its own, and the tasks' trajectories identical to the single-pass kernel's (fastmath lets the
     compiler contract arithmetic differently in other contexts: tests hold the two to 1e-12
-    relative); ~1.8x faster on the tasks' lattices (docs/benchmarks.md "Env step: third pass")."""
+    relative); ~1.8x faster on the tasks' lattices (docs/benchmarks.md "Env step: third pass"). Node
+    indices are read as unsigned (the springs' nodes are valid, non-negative ids): numba then emits
+    no negative-index wrap-around per access, 5-17 % of the call on the tasks' lattices with the same
+    forces bit for bit (docs/benchmarks.md "Env step: sixth pass")."""
     ne = si.shape[0]
     wx = work[0]
     wy = work[1]
     wz = work[2]
     wc = work[3]
     for e in range(ne):
-        i = si[e]
-        j = sj[e]
+        i = uint64(si[e])
+        j = uint64(sj[e])
         wx[e] = pos[j, 0] - pos[i, 0]
         wy[e] = pos[j, 1] - pos[i, 1]
         wz[e] = pos[j, 2] - pos[i, 2]
@@ -237,12 +240,12 @@ def spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state,
         f_out[a, 2] = 0.0
     if ne == 0:
         return
-    cur = si[0]
+    cur = uint64(si[0])
     ax = f_out[cur, 0]
     ay = f_out[cur, 1]
     az = f_out[cur, 2]
     for e in range(ne):
-        i = si[e]
+        i = uint64(si[e])
         if i != cur:
             f_out[cur, 0] = ax
             f_out[cur, 1] = ay
@@ -251,7 +254,7 @@ def spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state,
             ax = f_out[cur, 0]        # what earlier springs (as their j side) added to it
             ay = f_out[cur, 1]
             az = f_out[cur, 2]
-        j = sj[e]
+        j = uint64(sj[e])
         c = wc[e]
         fx = c * wx[e]
         fy = c * wy[e]
