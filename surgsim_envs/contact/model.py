@@ -186,7 +186,8 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
                     err, radius, vec3, rows):
     """Contact points p < C are the candidate nodes ``cand[p]``; points p >= C are the surface
     samples ``s = p - C`` at ``sum_j s_w[s, j] x[s_nodes[s, j]]`` whose forces go back to the nodes
-    with the same weights. ``touched`` lists every node that can receive a force (zeroed first).
+    with the same weights. ``touched`` lists every node that can receive a force (all others stay
+    zero; the kernel zeroes only the touched rows it wrote last call, listed in ``rows``).
     mu, mu_s (T,) kinetic and static friction per tool; c_imp: 0 (damping from the velocity) or
     c_n / dt (implicit damping: reported as stiffness, module docstring). ``anchor_on[c, g]`` is
     the contact state (friction.NO_CONTACT / STICKING / SLIDING). Work buffers (the model's own, so
