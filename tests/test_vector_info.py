@@ -44,3 +44,23 @@ def test_writer_plans_clear_what_the_previous_layout_left():
         assert not values[~present].any(), (k, which)
         assert other == ({"s": info["s"]} if "s" in info else None), (k, which)
     assert len(writer._plans) >= 3, "the layouts were never written by a plan"
+
+
+def test_a_value_whose_type_alternates_is_written_by_two_plans_not_rebuilt(monkeypatch):
+    """Palpation's ``stiffness_estimate_N_per_m`` was a Python float on some steps and a numpy
+    float64 on others: a plan per (keys, value types) keeps both layouts on the fast path (no plan
+    made after the first two writes) and the row still holds exactly the info's numbers."""
+    from surgsim_envs.envs import vector_info
+
+    made = []
+    real_make = vector_info._WritePlan.make.__func__
+    monkeypatch.setattr(vector_info._WritePlan, "make",
+                        classmethod(lambda cls, *a, **k: made.append(1) or real_make(cls, *a, **k)))
+    writer = InfoWriter(4)
+    values, present = np.zeros(4), np.zeros(4, dtype=bool)
+    for k in range(10):
+        x = 0.25 * k
+        info = {"k": x if k % 2 else np.float64(x), "f": 1.0 + k, "terms": {"t": -x}}
+        writer.write(values, present, info)
+        assert values[:3].tolist() == [x, 1.0 + k, -x] and present[:3].all() and not present[3:].any()
+    assert len(made) == 2, f"{len(made)} plans made for two layouts"

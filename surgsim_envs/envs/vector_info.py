@@ -46,7 +46,7 @@ class InfoWriter:
         self.slots: dict = {}
         self.count = 0
         self.new: list = []          # (slot, path, dtype str) not yet announced
-        self._plans: dict = {}       # top-level key tuple -> _WritePlan (see write)
+        self._plans: dict = {}       # (top-level keys, their value types) -> _WritePlan (see write)
 
     def write(self, values, present, info: dict):
         """Fill one env's row (``values``/``present`` are 1-D views; entries not in ``info`` read 0
@@ -61,7 +61,8 @@ class InfoWriter:
             if not self.keys:
                 return None
             info = {k: info[k] for k in self.keys if k in info}
-        plan = self._plans.get(tuple(info))
+        layout = (tuple(info), tuple(map(type, info.values())))
+        plan = self._plans.get(layout)
         if plan is not None:
             vals = plan.gather(info)
             if vals is not None:
@@ -82,7 +83,7 @@ class InfoWriter:
         if len(self._plans) < _MAX_PLANS:
             plan = _WritePlan.make(info, self.slots, self.max_keys, self.keep_other)
             if plan is not None:
-                self._plans[tuple(info)] = plan
+                self._plans[layout] = plan
         return other
 
     def _write(self, values, present, info, slots, path):
