@@ -130,8 +130,9 @@ def test_sliver_mass_scaling_touches_only_sliver_nodes():
     assert 1.0 < scaled.masses.sum() / lumped.sum() < 1.01
     assert _exact_critical_dt(scaled, scaled.masses) > 1.3 * _exact_critical_dt(scaled, lumped)
     assert make("mass_spring_calibrated", box, "liver", mass_scaling=None).describe()["mass_scaled_nodes"] == 0
-    with pytest.raises(ConfigError, match="mass_scaling"):
-        make("mass_spring_calibrated", box, "liver", mass_scaling=0.5)
+    for bad in (0.5, True, float("nan")):
+        with pytest.raises(ConfigError, match="mass_scaling"):
+            make("mass_spring_calibrated", box, "liver", mass_scaling=bad)
 
 
 def test_subcycled_integrator_runs_compiled_across_its_recheck():

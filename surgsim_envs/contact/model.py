@@ -178,6 +178,23 @@ def _row_buffer(C: int, S: int) -> np.ndarray:
     return np.zeros(2 + (C + 3 * S) + (C + S), dtype=np.int64)
 
 
+@njit(cache=True, inline="always")
+def _contact_point(c, C, cand, s_nodes, s_w, positions):
+    """Contact point ``c`` of :func:`_contact_kernel`: (x0, x1, x2, i, a, b, e, wa, wb, we), its position
+    (m), its node ``i`` if it is a candidate node (c < C), else the surface sample's nodes (a, b, e) and
+    weights (wa, wb, we); the entries of the other kind are 0."""
+    if c < C:
+        i = cand[c]
+        return positions[i, 0], positions[i, 1], positions[i, 2], i, 0, 0, 0, 0.0, 0.0, 0.0
+    s = c - C
+    a, b, e = s_nodes[s, 0], s_nodes[s, 1], s_nodes[s, 2]
+    wa, wb, we = s_w[s, 0], s_w[s, 1], s_w[s, 2]
+    x0 = wa * positions[a, 0] + wb * positions[b, 0] + we * positions[e, 0]
+    x1 = wa * positions[a, 1] + wb * positions[b, 1] + we * positions[e, 1]
+    x2 = wa * positions[a, 2] + wb * positions[b, 2] + we * positions[e, 2]
+    return x0, x1, x2, 0, a, b, e, wa, wb, we
+
+
 @njit(cache=True, nogil=True)
 def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel, tool_com,
                     mu, mu_s, k_n, c_n, c_imp, k_t, anchor_local, anchor_on,
@@ -268,18 +285,7 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
     # below skips the box-rejected points; it writes every state of the others)
     for q in range(a0, a0 + rows[1]):
         c = rows[q]
-        if c < C:
-            i = cand[c]
-            x0 = positions[i, 0]
-            x1 = positions[i, 1]
-            x2 = positions[i, 2]
-        else:
-            s = c - C
-            a, b, e = s_nodes[s, 0], s_nodes[s, 1], s_nodes[s, 2]
-            wa, wb, we = s_w[s, 0], s_w[s, 1], s_w[s, 2]
-            x0 = wa * positions[a, 0] + wb * positions[b, 0] + we * positions[e, 0]
-            x1 = wa * positions[a, 1] + wb * positions[b, 1] + we * positions[e, 1]
-            x2 = wa * positions[a, 2] + wb * positions[b, 2] + we * positions[e, 2]
+        x0, x1, x2, i, a, b, e, wa, wb, we = _contact_point(c, C, cand, s_nodes, s_w, positions)
         if (x0 < blo[0] or x0 > bhi[0] or x1 < blo[1] or x1 > bhi[1] or x2 < blo[2] or x2 > bhi[2]):
             for g in range(G):
                 anchor_on[c, g] = 0
@@ -289,26 +295,8 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
     nrm = vec3[4]
     cpt = vec3[5]
     ft = vec3[6]
-    i = 0
-    a = 0
-    b = 0
-    e = 0
-    wa = 0.0
-    wb = 0.0
-    we = 0.0
     for c in range(P):
-        if c < C:
-            i = cand[c]
-            x0 = positions[i, 0]
-            x1 = positions[i, 1]
-            x2 = positions[i, 2]
-        else:
-            s = c - C
-            a, b, e = s_nodes[s, 0], s_nodes[s, 1], s_nodes[s, 2]
-            wa, wb, we = s_w[s, 0], s_w[s, 1], s_w[s, 2]
-            x0 = wa * positions[a, 0] + wb * positions[b, 0] + we * positions[e, 0]
-            x1 = wa * positions[a, 1] + wb * positions[b, 1] + we * positions[e, 1]
-            x2 = wa * positions[a, 2] + wb * positions[b, 2] + we * positions[e, 2]
+        x0, x1, x2, i, a, b, e, wa, wb, we = _contact_point(c, C, cand, s_nodes, s_w, positions)
         fx = 0.0
         fy = 0.0
         fz = 0.0

@@ -92,8 +92,8 @@ class CalibratedMassSpringModel(MassSpringModel):
 
     def __init__(self, volume, material="liver", *, integrator=None, K2=None, b0=None, b1=None,
                  mass_scaling: float | None = MASS_SCALING_RATIO, **base_kwargs):
-        if mass_scaling is not None and not (isinstance(mass_scaling, (int, float)) and math.isfinite(mass_scaling)
-                                             and mass_scaling >= 1):
+        number = isinstance(mass_scaling, (int, float)) and not isinstance(mass_scaling, bool)
+        if mass_scaling is not None and not (number and math.isfinite(mass_scaling) and mass_scaling >= 1):
             raise ConfigError(f"mass_spring_calibrated: mass_scaling={mass_scaling!r} must be a number >= 1 (times the "
                               "median geometric frequency a node may reach before mass is added) or None (off)")
         self.mass_scaling = mass_scaling
