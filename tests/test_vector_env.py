@@ -215,13 +215,14 @@ class LateKeys(gym.Env):
         return np.full(1, t, np.float32), float(t), False, False, info
 
 
-@pytest.mark.parametrize("info_keys, spin_us", [(None, 0.0), ("all", 200.0)])
-def test_info_keys_appearing_late_match_sync(info_keys, spin_us):
+@pytest.mark.parametrize("info_keys, spin_us, worker_spin_us", [(None, 0.0, 0.0), ("all", 200.0, 300.0)])
+def test_info_keys_appearing_late_match_sync(info_keys, spin_us, worker_spin_us):
     """Keys that appear, vanish or change type after many steps of the same layout (the workers
     write a known layout by a plan, anything else by the general path) give SyncVectorEnv's info
     every step: values, dtypes and masks, nested dicts too (also when the main process polls
-    for replies before it sleeps, ``spin_us``)."""
-    ours = SurgSimVectorEnv(LateKeys, 3, workers=2, info_keys=info_keys, spin_us=spin_us)
+    for replies before it sleeps, ``spin_us``, and the workers poll for commands, ``worker_spin_us``)."""
+    ours = SurgSimVectorEnv(LateKeys, 3, workers=2, info_keys=info_keys, spin_us=spin_us,
+                            worker_spin_us=worker_spin_us)
     sync = SyncVectorEnv([LateKeys] * 3)
     try:
         assert_same_run(ours, sync, 17, [2, 3, 4], np.random.default_rng(4), expect_reset=False,
@@ -310,6 +311,8 @@ def test_hung_worker_times_out_and_close_terminates_it():
     ({"num_envs": 2, "autoreset_mode": "Later"}, "autoreset_mode must be one of .* got 'Later'"),
     ({"num_envs": 2, "timeout_s": 0}, "timeout_s must be a positive number of seconds, got 0"),
     ({"num_envs": 2, "spin_us": -1.0}, r"spin_us must be a number of microseconds in \[0, 100000\], got -1.0"),
+    ({"num_envs": 2, "worker_spin_us": True}, r"worker_spin_us must be a number of microseconds in \[0, 100000\], got True"),
+    ({"num_envs": 2, "worker_spin_us": float("nan")}, r"worker_spin_us must be .* got nan"),
 ])
 def test_bad_options_raise_config_error_naming_the_value(kwargs, match):
     with pytest.raises(ConfigError, match=match):

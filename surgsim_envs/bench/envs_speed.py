@@ -50,6 +50,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--vector-spin-us", type=float, default=0.0,
                         help="with --vector: our vector env's spin_us (the main process polls this long for the "
                              "last replies before it sleeps; default 0)")
+    parser.add_argument("--vector-worker-spin-us", type=float, default=0.0,
+                        help="with --vector/--vector-accounting: our vector env's worker_spin_us (a worker polls "
+                             "this long for its next command before it sleeps; default 0)")
+    parser.add_argument("--vector-envs", default=None,
+                        help="with --vector: numbers of envs for our vector env, comma-separated, each >= --workers "
+                             "(default 1, 2 and 4 x --workers)")
     parser.add_argument("--vector-accounting", action="store_true",
                         help="where the time of one vector step goes (main-process phases, worker wake-up, env "
                              "step, packing, reply) for 1 and 4 envs per worker, tasks and a 300 us stand-in "
@@ -438,8 +444,16 @@ def vector_row(env_id: str, args, step_us: float | None = None) -> dict:
             except ValueError:
                 raise ConfigError(f"--spin-us takes step times in us or 'task', got {s!r}") from None
     row = {"task": env_id, "task_step_us": step_us}
+    counts = getattr(args, "vector_envs", None)
+    if counts is not None:
+        try:
+            counts = [int(c) for c in str(counts).split(",") if c.strip()]
+        except ValueError:
+            raise ConfigError(f"--vector-envs takes env counts (integers), comma-separated, got {args.vector_envs!r}") \
+                from None
     row.update(vector_compare(env_id, args.workers, args.steps, args.repeats, spin, task_info(env_id),
-                              poll_us=getattr(args, "vector_spin_us", 0.0)))
+                              poll_us=getattr(args, "vector_spin_us", 0.0),
+                              worker_poll_us=getattr(args, "vector_worker_spin_us", 0.0), counts=counts))
     return row
 
 
@@ -460,8 +474,9 @@ def print_vector(rows) -> None:
     """The ``--vector`` table: env steps/s and speed-up over one env, same rounds."""
     from surgsim_envs.bench.vector_speed import contender_names
 
-    names = contender_names(rows[0]["vector_workers"]) if rows else ()
+    names = contender_names(rows[0]["vector_workers"], rows[0].get("vector_env_counts")) if rows else ()
     print(f"speed-up over one env, same rounds ({rows[0]['vector_workers'] if rows else '-'} workers; "
+          "independent: that many processes, one env each, no exchange (the ceiling); "
           "vector_n<n>: n envs on them; in_main_n<n>: this process steps one block)")
     print(f"{'what':34s} {'1 env/s':>8s} " + " ".join(f"{n + ' x':>13s}" for n in names) + "   load before/after")
     for r in rows:
@@ -481,13 +496,16 @@ def _run_accounting(tasks, args) -> int:
         raise ConfigError(f"--vector-accounting needs --workers >= 1, got {args.workers}")
     counts = (args.workers, 4 * args.workers)
     spin = getattr(args, "vector_spin_us", 0.0)
+    wspin = getattr(args, "vector_worker_spin_us", 0.0)
     rows = []
     load0 = os.getloadavg()[0]
     for t in tasks:
-        for r in acc.accounting_rows(t, counts, args.workers, args.steps, args.repeats, "Palpation" in t, spin_us=spin):
+        for r in acc.accounting_rows(t, counts, args.workers, args.steps, args.repeats, "Palpation" in t, spin_us=spin,
+                                     worker_spin_us=wspin):
             rows.append({"what": t, **r})
     stand_in = functools.partial(SpinEnv, 300.0, task_info(tasks[0]))
-    for r in acc.accounting_rows(stand_in, counts, args.workers, args.steps, args.repeats, spin_us=spin):
+    for r in acc.accounting_rows(stand_in, counts, args.workers, args.steps, args.repeats, spin_us=spin,
+                                 worker_spin_us=wspin):
         rows.append({"what": "stand-in 300 us", **r})
     out = {"vector_accounting": rows, "load_avg_1min_before": load0, "load_avg_1min_after": os.getloadavg()[0]}
     if args.json:

@@ -180,7 +180,8 @@ def account(make_vec, actions, warmup: int = 20) -> dict:
 
 
 def accounting_rows(env, env_counts=(2, 8), workers: int = 2, steps: int = 300, repeats: int = 3,
-                    palpation: bool = False, seed: int = 0, spin_us: float = 0.0) -> list:
+                    palpation: bool = False, seed: int = 0, spin_us: float = 0.0,
+                    worker_spin_us: float = 0.0) -> list:
     """:func:`account` of ``env`` (a task id or a callable returning an env) for each number of
     envs, alternating in ``repeats`` rounds; medians over rounds, one row per number of envs."""
     import functools
@@ -194,7 +195,7 @@ def accounting_rows(env, env_counts=(2, 8), workers: int = 2, steps: int = 300, 
     for _ in range(repeats):
         for n in env_counts:
             make = functools.partial(SurgSimVectorEnv, env, num_envs=n, workers=workers, timeout_s=60.0,
-                                     spin_us=spin_us)
+                                     spin_us=spin_us, worker_spin_us=worker_spin_us)
             runs[n].append(account(make, _actions(_batched(single, n), steps, rng, palpation)))
     return [{k: statistics.median(r[k] for r in rs) for k in rs[0]} for rs in runs.values()]
 

@@ -16,6 +16,7 @@ import time
 import numpy as np
 
 from surgsim_envs.bench.envs_speed import SpinEnv, _actions
+from surgsim_envs.errors import ConfigError
 
 #: s, a vector step that takes longer raises instead of hanging
 STEP_TIMEOUT = 60.0
@@ -32,10 +33,80 @@ def _run_single(env, acts):
 
 def _run_vector(vec, acts):
     """Env steps/s (vector steps x num_envs); the vector env autoresets by itself."""
+    if isinstance(vec, IndependentProcesses):
+        return vec.run(len(acts))
     t0 = time.perf_counter()
     for a in acts:
         vec.step(a)
     return len(acts) * vec.num_envs / (time.perf_counter() - t0)
+
+
+def _independent_child(env_id, seed: int, conn, palpation: bool) -> None:
+    """One env in its own process: steps ``n`` random actions per request, resets when an episode ends."""
+    import gymnasium as gym
+
+    import surgsim_envs.envs  # noqa: F401  (registers the tasks)
+
+    env = gym.make(env_id) if isinstance(env_id, str) else env_id()
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    conn.send(os.getpid())
+    while True:
+        n = conn.recv()
+        if n is None:
+            break
+        for a in _actions(env.action_space, n, rng, palpation):
+            _, _, te, tr, _ = env.step(a)
+            if te or tr:
+                env.reset()
+        conn.send(n)
+    env.close()
+
+
+class IndependentProcesses:
+    """The ceiling of any vector env on this machine: ``workers`` processes, one env each, that
+    step the same number of random actions each, with no exchange between steps (one message at the
+    start and one at the end of a run). Timed by :func:`alternate` like a vector env
+    (``num_envs`` = ``workers``); its rate over one env's in the same round is what the cores give
+    (``independent_speedup`` in ``surgsim bench envs --vector``)."""
+
+    def __init__(self, env_id, workers: int, palpation: bool = False):
+        import multiprocessing as mp
+
+        ctx = mp.get_context("fork")
+        self.num_envs = int(workers)
+        self._conns, self._procs = [], []
+        for w in range(self.num_envs):
+            a, b = ctx.Pipe()
+            p = ctx.Process(target=_independent_child, args=(env_id, 1000 + w, b, palpation), daemon=True)
+            p.start()
+            self._conns.append(a)
+            self._procs.append(p)
+        self.worker_pids = [c.recv() for c in self._conns]
+        self.action_space = None
+
+    def reset(self, seed=None):
+        return None
+
+    def run(self, steps_each: int) -> float:
+        """Env steps/s of all processes together, ``steps_each`` per process."""
+        t0 = time.perf_counter()
+        for c in self._conns:
+            c.send(int(steps_each))
+        for c in self._conns:
+            c.recv()
+        return steps_each * self.num_envs / (time.perf_counter() - t0)
+
+    def close(self):
+        for c in self._conns:
+            try:
+                c.send(None)
+            except OSError:
+                pass
+        for p in self._procs:
+            p.join(5)
+            if p.is_alive():
+                p.kill()
 
 
 def worker_pids(env) -> list:
@@ -79,7 +150,9 @@ def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = Fals
     single = next(k for k, e in contenders.items() if not hasattr(e, "num_envs"))
     for name, env in contenders.items():
         env.reset(seed=seed)
-        if hasattr(env, "num_envs"):
+        if isinstance(env, IndependentProcesses):
+            env.run(10)
+        elif hasattr(env, "num_envs"):
             _run_vector(env, _actions(env.action_space, 10, rng, palpation))
         else:
             _run_single(env, _actions(env.action_space, 10, rng, palpation))
@@ -88,7 +161,9 @@ def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = Fals
     worker_cpu = {k: [] for k in contenders}
     for _ in range(repeats):
         for name, env in contenders.items():
-            if hasattr(env, "num_envs"):
+            if isinstance(env, IndependentProcesses):
+                r, m, w = _timed(_run_vector, env, range(max(1, steps // env.num_envs)))
+            elif hasattr(env, "num_envs"):
                 acts = _actions(env.action_space, max(1, steps // env.num_envs), rng, palpation)
                 r, m, w = _timed(_run_vector, env, acts)
             else:
@@ -115,36 +190,51 @@ def _close_all(contenders: dict) -> None:
 ENV_MULTIPLES = (1, 2, 4)
 
 
-def contender_names(workers: int) -> tuple:
-    """The vector contenders' names, in table order: AsyncVectorEnv(workers envs), ours with
-    ``n`` envs on ``workers`` processes (``vector_n<n>``), ours with the main process stepping one
-    block (``in_main_n<n>``: ``workers - 1`` worker processes)."""
-    ns = [m * workers for m in ENV_MULTIPLES]
-    return ("async", *(f"vector_n{n}" for n in ns), f"in_main_n{ns[0]}", f"in_main_n{ns[-1]}")
+def env_counts(workers: int, counts=None) -> tuple:
+    """The numbers of envs timed: ``counts`` (a sequence of ints >= ``workers``), or ENV_MULTIPLES x workers."""
+    if counts is None:
+        return tuple(m * workers for m in ENV_MULTIPLES)
+    ns = tuple(int(n) for n in counts)
+    if not ns or any(n < workers for n in ns):
+        raise ConfigError(f"--vector-envs needs env counts >= --workers ({workers}), got {list(counts)!r}")
+    return ns
 
 
-def _ours(make, workers: int, spin_us: float) -> dict:
-    ns = [m * workers for m in ENV_MULTIPLES]
+def contender_names(workers: int, counts=None) -> tuple:
+    """The vector contenders' names, in table order: ``workers`` independent processes with one env
+    each (``independent``, the ceiling), AsyncVectorEnv(workers envs), ours with ``n`` envs on
+    ``workers`` processes (``vector_n<n>``), ours with the main process stepping one block
+    (``in_main_n<n>``: ``workers - 1`` worker processes), for the fewest and the most envs."""
+    ns = env_counts(workers, counts)
+    return ("independent", "async", *(f"vector_n{n}" for n in ns), f"in_main_n{ns[0]}", f"in_main_n{ns[-1]}")
+
+
+def _ours(make, workers: int, counts=None) -> dict:
+    ns = env_counts(workers, counts)
     out = {f"vector_n{n}": make(n, in_main=False) for n in ns}
-    out.update({f"in_main_n{n}": make(n, in_main=True) for n in (ns[0], ns[-1])})
+    out.update({f"in_main_n{n}": make(n, in_main=True) for n in dict.fromkeys((ns[0], ns[-1]))})
     return out
 
 
-def task_contenders(env_id: str, workers: int, spin_us: float = 0.0) -> dict:
-    """One env, AsyncVectorEnv(workers envs) and :class:`SurgSimVectorEnv` with 1, 2 and 4 envs
-    per worker on ``workers`` processes, and with ``in_main`` (see :func:`contender_names`)."""
+def task_contenders(env_id: str, workers: int, spin_us: float = 0.0, worker_spin_us: float = 0.0,
+                    counts=None) -> dict:
+    """One env, ``workers`` independent processes, AsyncVectorEnv(workers envs) and
+    :class:`SurgSimVectorEnv` with each number of envs in ``counts`` on ``workers`` processes, and with
+    ``in_main`` (see :func:`contender_names`)."""
     import gymnasium as gym
 
     single = gym.make(env_id)            # first: the workers fork a process that has loaded the task
 
     def make(n, in_main):
         return gym.make_vec(env_id, num_envs=n, workers=workers, in_main=in_main, spin_us=spin_us,
-                            timeout_s=STEP_TIMEOUT)
-    return {"single": single, "async": gym.make_vec(env_id, num_envs=workers, vectorization_mode="async"),
-            **_ours(make, workers, spin_us)}
+                            worker_spin_us=worker_spin_us, timeout_s=STEP_TIMEOUT)
+    return {"single": single, "independent": IndependentProcesses(env_id, workers, "Palpation" in env_id),
+            "async": gym.make_vec(env_id, num_envs=workers, vectorization_mode="async"),
+            **_ours(make, workers, counts)}
 
 
-def spin_contenders(step_us: float, info: dict | None, workers: int, spin_us: float = 0.0) -> dict:
+def spin_contenders(step_us: float, info: dict | None, workers: int, spin_us: float = 0.0,
+                    worker_spin_us: float = 0.0, counts=None) -> dict:
     """The same with :class:`~surgsim_envs.bench.envs_speed.SpinEnv` (busy-waits ``step_us``,
     returns a deep copy of ``info``)."""
     from gymnasium.vector import AsyncVectorEnv
@@ -154,25 +244,29 @@ def spin_contenders(step_us: float, info: dict | None, workers: int, spin_us: fl
     env = functools.partial(SpinEnv, step_us, info)
 
     def make(n, in_main):
-        return SurgSimVectorEnv(env, n, workers=workers, in_main=in_main, spin_us=spin_us, timeout_s=STEP_TIMEOUT)
-    return {"single": env(), "async": AsyncVectorEnv([env] * workers), **_ours(make, workers, spin_us)}
+        return SurgSimVectorEnv(env, n, workers=workers, in_main=in_main, spin_us=spin_us,
+                                worker_spin_us=worker_spin_us, timeout_s=STEP_TIMEOUT)
+    return {"single": env(), "independent": IndependentProcesses(env, workers),
+            "async": AsyncVectorEnv([env] * workers), **_ours(make, workers, counts)}
 
 
 def vector_compare(env_id: str, workers: int, steps: int, repeats: int, spin_us=(), info: dict | None = None,
-                   poll_us: float = 0.0) -> dict:
+                   poll_us: float = 0.0, worker_poll_us: float = 0.0, counts=None) -> dict:
     """The task's alternating comparison, then the busy-wait stand-in's for each step time in
-    ``spin_us`` (us; with the task's ``info``). ``poll_us``: our vector env's ``spin_us``. Keys:
+    ``spin_us`` (us; with the task's ``info``). ``poll_us``/``worker_poll_us``: our vector env's
+    ``spin_us``/``worker_spin_us``; ``counts``: numbers of envs (default ENV_MULTIPLES x workers). Keys:
     ``vector_<name>_steps_per_s``, ``vector_<name>_speedup`` and ``spin<us>_<name>_...``;
     ``load_avg_1min`` before and after."""
-    out = {"vector_workers": workers, "vector_spin_us": poll_us, "load_avg_1min_before": os.getloadavg()[0]}
-    contenders = task_contenders(env_id, workers, poll_us)
+    out = {"vector_workers": workers, "vector_spin_us": poll_us, "vector_worker_spin_us": worker_poll_us,
+           "vector_env_counts": list(env_counts(workers, counts)), "load_avg_1min_before": os.getloadavg()[0]}
+    contenders = task_contenders(env_id, workers, poll_us, worker_poll_us, counts)
     try:
         res = alternate(contenders, steps, repeats, palpation="Palpation" in env_id)
     finally:
         _close_all(contenders)
     out.update({f"vector_{k}": v for k, v in res.items()})
     for us in spin_us:
-        contenders = spin_contenders(float(us), info, workers, poll_us)
+        contenders = spin_contenders(float(us), info, workers, poll_us, worker_poll_us, counts)
         try:
             res = alternate(contenders, steps, repeats)
         finally:

@@ -39,6 +39,10 @@ with ``in_main`` the main process finished its own block), the main process poll
 remaining replies without sleeping for up to this many microseconds before it blocks. It saves
 the main process a wake-up per step when a core is free; when the cores are shared with other
 work it takes CPU from them (docs/benchmarks.md "Vector env: second pass (issue 18)").
+**worker_spin_us** (default 0): the same on the workers' side: after each reply a worker polls its
+command pipe for up to this long (yielding the core between polls) before it sleeps, so that the
+next step's command is read without a wake-up. For a machine with a core per process (``in_main``
+on 2 cores); otherwise the polling workers compete with the main process.
 
 **Failures**: an exception inside an env is re-raised in the main process with a note naming
 the env index and the worker's traceback (the vector env stays usable after a ``reset``). A
@@ -68,6 +72,8 @@ from surgsim_envs.errors import ConfigError, VectorEnvWorkerError
 #: us the main process polls for replies without sleeping once fewer workers than cores are busy
 #: (``spin_us=``; docs/benchmarks.md "Vector env: second pass (issue 18)")
 DEFAULT_SPIN_US = 0.0
+#: us a worker polls for its next command without sleeping after each reply (``worker_spin_us=``)
+DEFAULT_WORKER_SPIN_US = 0.0
 
 #: spaces whose samples are fixed-shape arrays (what the shared memory holds)
 _ARRAY_SPACES = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
@@ -106,7 +112,7 @@ class SurgSimVectorEnv(VectorEnv):
                  autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP, max_info_keys: int = 64,
                  context: str | None = None, timeout_s: float = 300.0, start_timeout_s: float = 600.0,
                  close_timeout_s: float = 5.0, in_main: bool = False, spin_us: float = DEFAULT_SPIN_US,
-                 **env_kwargs):
+                 worker_spin_us: float = DEFAULT_WORKER_SPIN_US, **env_kwargs):
         self._workers: dict = {}                 # block number -> (process, command pipe, reply pipe)
         self._local = None                       # with in_main: block 0, stepped by this process
         self._shm = None
@@ -132,6 +138,10 @@ class SurgSimVectorEnv(VectorEnv):
         if not (isinstance(spin_us, (int, float)) and not isinstance(spin_us, bool) and 0 <= spin_us <= 1e5):
             raise ConfigError(f"spin_us must be a number of microseconds in [0, 100000], got {spin_us!r}")
         self.spin_us = float(spin_us)
+        if not (isinstance(worker_spin_us, (int, float)) and not isinstance(worker_spin_us, bool)
+                and 0 <= worker_spin_us <= 1e5):
+            raise ConfigError(f"worker_spin_us must be a number of microseconds in [0, 100000], got {worker_spin_us!r}")
+        self.worker_spin_us = float(worker_spin_us)
         self._spin_s = self.spin_us * 1e-6
         self._cpus = os.cpu_count() or 1
         if not (isinstance(env_id, str) or callable(env_id)):
@@ -158,7 +168,7 @@ class SurgSimVectorEnv(VectorEnv):
                 rep_r, rep_w = ctx.Pipe(duplex=False)
                 proc = ctx.Process(target=worker_main, name=f"SurgSimVectorEnv-{w}", daemon=True,
                                    args=(env_id, env_kwargs, lo, hi, cmd_r, rep_w, self.autoreset_mode.value,
-                                         keys, keep_other, max_info_keys))
+                                         keys, keep_other, max_info_keys, self.worker_spin_us))
                 proc.start()
                 cmd_r.close()
                 rep_w.close()

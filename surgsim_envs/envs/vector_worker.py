@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import os
 import pickle
+import select
 import signal
+import time
 import traceback
 
 from surgsim_envs.envs import vector_ipc as ipc
@@ -161,11 +163,30 @@ def _error_payload(exc: BaseException, env_index) -> dict:
             "traceback": traceback.format_exc(), "env": env_index}
 
 
-def worker_main(env_id, env_kwargs, lo, hi, cmd, rep, autoreset, info_keys, keep_other, max_info_keys):
+def wait_for_command(poller, spin_s: float) -> None:
+    """Poll the command pipe (registered in ``poller``) without sleeping for up to ``spin_s`` s,
+    yielding the core between polls, so that a command that comes soon is read without a wake-up
+    (and the main process's write finds no sleeper to wake). Returns when a command is there or
+    the time is up (the caller's blocking read follows)."""
+    if poller.poll(0):
+        return
+    end = time.perf_counter() + spin_s
+    while time.perf_counter() < end:
+        os.sched_yield()
+        if poller.poll(0):
+            return
+
+
+def worker_main(env_id, env_kwargs, lo, hi, cmd, rep, autoreset, info_keys, keep_other, max_info_keys,
+                spin_us: float = 0.0):
     """Process entry point. ``cmd``/``rep``: the worker's ends (``multiprocessing.Connection``,
-    used as raw file descriptors) of the command and reply pipes."""
+    used as raw file descriptors) of the command and reply pipes. ``spin_us``: after each reply the
+    worker polls for the next command this long before it sleeps (:func:`wait_for_command`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C goes to the main process, which closes us
     cfd, rfd = cmd.fileno(), rep.fileno()
+    spin_s = float(spin_us) * 1e-6
+    poller = select.poll()
+    poller.register(cfd, select.POLLIN)
     try:
         worker = _Worker(env_id, env_kwargs, lo, hi, autoreset, info_keys, keep_other, max_info_keys)
         ipc.send(rfd, ipc.OK, worker.description())
@@ -174,6 +195,8 @@ def worker_main(env_id, env_kwargs, lo, hi, cmd, rep, autoreset, info_keys, keep
         return
     while True:
         try:
+            if spin_s:
+                wait_for_command(poller, spin_s)
             op, payload = ipc.receive(cfd)
         except (ipc.WorkerGone, OSError):     # the main process is gone
             break

@@ -1,0 +1,39 @@
+"""The vector env benchmark's reference and options (``surgsim bench envs --vector``): the
+independent-process ceiling steps what it is asked, in as many processes, and bad env counts are
+refused naming the value. Behaviour only; the figures are in docs/benchmarks.md."""
+
+from __future__ import annotations
+
+import functools
+import os
+
+import pytest
+
+from surgsim_envs.bench.envs_speed import SpinEnv
+from surgsim_envs.bench.vector_speed import IndependentProcesses, alternate, contender_names, env_counts
+from surgsim_envs.errors import ConfigError
+
+
+def test_independent_processes_step_in_their_own_processes():
+    """Two processes, one stand-in env each: a run of n steps each takes at least n x the step time
+    (every step really ran) and the rate counts both processes' steps; the pids are two others."""
+    ref = IndependentProcesses(functools.partial(SpinEnv, 500.0), 2)
+    try:
+        assert ref.num_envs == 2
+        assert len(set(ref.worker_pids)) == 2 and os.getpid() not in ref.worker_pids
+        rate = ref.run(40)                        # 40 x 500 us = 20 ms per process at least
+        assert 0 < rate <= 2 / 500e-6 * 1.01      # two processes at most double one env's 2,000/s
+        out = alternate({"single": SpinEnv(500.0), "independent": ref}, steps=20, repeats=2)
+        assert out["independent_speedup"] > 0 and out["independent_worker_cpu_us_per_env_step"] > 0
+    finally:
+        ref.close()
+    assert all(not p.is_alive() for p in ref._procs)
+
+
+def test_env_counts_and_contender_names():
+    assert env_counts(2) == (2, 4, 8)
+    assert env_counts(2, [8, 16]) == (8, 16)
+    assert contender_names(2, [8, 16]) == ("independent", "async", "vector_n8", "vector_n16", "in_main_n8",
+                                           "in_main_n16")
+    with pytest.raises(ConfigError, match=r"env counts >= --workers \(2\), got \[1, 8\]"):
+        env_counts(2, [1, 8])
