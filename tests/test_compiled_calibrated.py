@@ -156,3 +156,33 @@ def test_subcycled_integrator_runs_compiled_across_its_recheck():
         assert (t0.steps, t0._pending_dt, t0._sub_step) == (t1.steps, t1._pending_dt, t1._sub_step)
     assert t0.steps > AUTO_RECHECK_STEPS and t0._sub_step == AUTO_RECHECK_STEPS, "n not re-evaluated at step 100"
     assert t0._pending_dt < s0.dt, "never sub-cycled: the case tests nothing"
+
+
+def test_calibrated_table_is_keyed_and_follows_replaced_arrays():
+    """The calibrated loop's address table is keyed (``substeps_calibrated.key`` with the array version),
+    so it is not rebuilt between control steps that replace nothing, and a replaced positions array
+    (a new non-scalar attribute) is repacked and stepped, not the freed old one."""
+    from surgsim_envs.scene.substeps_loop import SLOT_REST
+
+    env = gym.make("SurgSim/Palpation-v0", model="mass_spring_calibrated")
+    try:
+        env.reset(seed=0)
+        sim = env.unwrapped.sim
+        tissue, runner = sim.tissue(), sim._compiled_runner()
+        assert runner is not None and runner.ops.key is not None
+        act = np.array([0.0, 0.0, 0.5, -1.0], np.float32)
+        for _ in range(3):
+            env.step(act)
+        table, key = runner._table.table, runner._table._key
+        env.step(act)
+        assert runner._table._key == key and runner._table.table is table      # nothing replaced: no repack
+        lifted = tissue.positions + np.array([0.0, 0.0, 1e-4])
+        lifted[tissue.fixed] = tissue.positions[tissue.fixed]
+        tissue.positions = lifted
+        before = lifted.copy()
+        env.step(act)
+        assert tissue.positions is lifted
+        assert runner._table.table[SLOT_REST + 18, 0] == lifted.ctypes.data
+        assert not np.array_equal(lifted, before), "the loop did not step the new positions array"
+    finally:
+        env.close()

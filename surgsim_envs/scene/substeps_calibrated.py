@@ -181,7 +181,15 @@ def energy_c(address, rows):
     return energy(step_arrays(tab)[0], unpack(tab, COMMON_SLOTS))
 
 
-OPS = TissueOps(step_c, energy_c, KINDS, arrays, committed)
+def key(tissue, dt: float) -> tuple:
+    """What :func:`arrays` depends on besides the tissue's ``_array_version`` (every buffer, cache and
+    coefficient row it returns is an attribute, so replacing one bumps the version): the mass-spring
+    section's intervals and CG tolerance (``substeps_mass_spring.key``) and the number of Maxwell rows
+    (``_state``'s third entry: n of integrator "subcycled")."""
+    return (tissue._pending_dt, dt, tissue.cg_tol, int(_state(tissue)[2]))
+
+
+OPS = TissueOps(step_c, energy_c, KINDS, arrays, committed, key)
 
 
 class CalibratedRunner(SubstepsRunner):
