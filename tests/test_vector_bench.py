@@ -7,6 +7,7 @@ from __future__ import annotations
 import functools
 import os
 
+import numpy as np
 import pytest
 
 from surgsim_envs.bench.envs_speed import SpinEnv
@@ -34,6 +35,23 @@ def test_env_counts_and_contender_names():
     assert env_counts(2) == (2, 4, 8)
     assert env_counts(2, [8, 16]) == (8, 16)
     assert contender_names(2, [8, 16]) == ("independent", "async", "vector_n8", "vector_n16", "in_main_n8",
-                                           "in_main_n16")
+                                           "in_main_n16", "rollout_n16")
     with pytest.raises(ConfigError, match=r"env counts >= --workers \(2\), got \[1, 8\]"):
         env_counts(2, [1, 8])
+
+
+def test_rollout_contender_counts_every_env_step():
+    """The rollout contender steps num_envs x steps env steps per run (its rate is their count over the
+    wall time), with "report" held at -1 on Palpation-shaped actions."""
+    from surgsim_envs.bench.vector_speed import RolloutRun, UniformPolicy
+    from surgsim_envs.envs.vector import SurgSimVectorEnv
+
+    a = UniformPolicy((4,), palpation=True)(np.zeros((3, 5)))
+    assert a.shape == (3, 4) and np.all(a[:, -1] == -1.0) and np.all(np.abs(a[:, :3]) <= 1.0)
+    run = RolloutRun(SurgSimVectorEnv(functools.partial(SpinEnv, 200.0), 4, workers=2))
+    try:
+        run.reset(seed=0)
+        rate = run.run(25)                      # 25 steps x 200 us = 5 ms per env, 2 envs per worker
+        assert 0 < rate <= 4 / 200e-6 * 1.01
+    finally:
+        run.close()

@@ -386,3 +386,63 @@ def test_spawn_context_matches_sync():
     finally:
         ours.close()
         sync.close()
+
+
+def linear_policy(obs):
+    """A deterministic row-wise policy (module level: picklable for the workers)."""
+    return np.tanh(obs[:, :2] * np.float32(0.7) - np.float32(0.1)).astype(np.float32)
+
+
+@pytest.mark.parametrize("mode, in_main", [(AutoresetMode.NEXT_STEP, False), (AutoresetMode.SAME_STEP, True)])
+def test_rollout_matches_sync_stepping_the_same_policy(mode, in_main):
+    """rollout(policy, T) records what SyncVectorEnv gives when stepped T times with the same policy
+    (observations before each step and after the last, actions, rewards, flags; episodes end and
+    autoreset inside it), and the vector env goes on from there: the next step() matches too, as do
+    info keys first seen during the rollout."""
+    ours = SurgSimVectorEnv(Toy, 5, workers=2, autoreset_mode=mode, in_main=in_main)
+    sync = SyncVectorEnv([Toy] * 5, autoreset_mode=mode)
+    try:
+        o1, _ = ours.reset(seed=11)
+        o2, _ = sync.reset(seed=11)
+        rec = ours.rollout(linear_policy, 20)
+        assert rec["observations"].shape == (21, 5, 3) and rec["actions"].shape == (20, 5, 2)
+        assert np.array_equal(rec["observations"][0], o2)
+        obs = o2
+        for t in range(20):
+            a = linear_policy(obs)
+            assert np.array_equal(rec["actions"][t], a), t
+            obs, r, te, tr, _ = sync.step(a)
+            assert np.array_equal(rec["observations"][t + 1], obs), t
+            assert np.array_equal(rec["rewards"][t], r) and rec["rewards"].dtype == r.dtype, t
+            assert np.array_equal(rec["terminations"][t], te) and np.array_equal(rec["truncations"][t], tr), t
+        assert (rec["terminations"] | rec["truncations"]).sum() >= 3, "no autoreset inside the rollout"
+        a = linear_policy(obs)
+        r1, r2 = ours.step(a), sync.step(a)
+        for x, y in zip(r1[:4], r2[:4]):
+            assert np.array_equal(x, y)
+        assert_info_equal(r1[4], numeric_part(r2[4]), "after the rollout")
+    finally:
+        ours.close()
+        sync.close()
+
+
+def test_rollout_errors_name_the_problem():
+    vec = SurgSimVectorEnv(Toy, 2)
+    try:
+        vec.reset(seed=0)
+        with pytest.raises(ConfigError, match="rollout steps must be an integer >= 1, got 0"):
+            vec.rollout(linear_policy, 0)
+        with pytest.raises(ConfigError, match="rollout policy must be a callable"):
+            vec.rollout("not a policy", 3)
+        with pytest.raises(ValueError, match=r"returned actions of shape \(1, 3\) for 1 observations; expected \(1, 2\)"):
+            vec.rollout(functools.partial(np.zeros_like), 3)       # (1, 3) from (1, 3) observations
+        vec.reset(seed=0)                                          # usable after a policy error
+        assert vec.rollout(linear_policy, 2)["rewards"].shape == (2, 2)
+    finally:
+        vec.close()
+    disabled = SurgSimVectorEnv(Toy, 2, autoreset_mode=AutoresetMode.DISABLED)
+    try:
+        with pytest.raises(ConfigError, match="rollout\\(\\) needs autoreset"):
+            disabled.rollout(linear_policy, 2)
+    finally:
+        disabled.close()

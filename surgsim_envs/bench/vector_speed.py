@@ -33,7 +33,7 @@ def _run_single(env, acts):
 
 def _run_vector(vec, acts):
     """Env steps/s (vector steps x num_envs); the vector env autoresets by itself."""
-    if isinstance(vec, IndependentProcesses):
+    if isinstance(vec, (IndependentProcesses, RolloutRun)):
         return vec.run(len(acts))
     t0 = time.perf_counter()
     for a in acts:
@@ -109,6 +109,42 @@ class IndependentProcesses:
                 p.kill()
 
 
+class UniformPolicy:
+    """A picklable random policy for :meth:`SurgSimVectorEnv.rollout`: uniform actions in [-1, 1]
+    (Palpation: "report" kept at -1, as the other contenders' actions)."""
+
+    def __init__(self, action_shape, palpation: bool = False, seed: int = 0):
+        self.shape, self.palpation = tuple(action_shape), bool(palpation)
+        self.rng = np.random.default_rng(seed)
+
+    def __call__(self, obs):
+        a = self.rng.uniform(-1, 1, (len(obs), *self.shape)).astype(np.float32)
+        if self.palpation:
+            a[..., -1] = -1.0
+        return a
+
+
+class RolloutRun:
+    """Our vector env driven by :meth:`SurgSimVectorEnv.rollout` with a :class:`UniformPolicy`: each
+    worker steps its block ``steps_each`` times on one command (no round trip per step)."""
+
+    def __init__(self, vec, palpation: bool = False):
+        self.vec, self.num_envs = vec, vec.num_envs
+        self.worker_pids = vec.worker_pids
+        self.policy = UniformPolicy(vec.single_action_space.shape, palpation)
+
+    def reset(self, seed=None):
+        return self.vec.reset(seed=seed)
+
+    def run(self, steps_each: int) -> float:
+        t0 = time.perf_counter()
+        self.vec.rollout(self.policy, int(steps_each))
+        return steps_each * self.num_envs / (time.perf_counter() - t0)
+
+    def close(self):
+        self.vec.close()
+
+
 def worker_pids(env) -> list:
     """Process ids of a vector env's workers (ours or Gymnasium's AsyncVectorEnv); [] otherwise."""
     if hasattr(env, "worker_pids"):
@@ -150,7 +186,7 @@ def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = Fals
     single = next(k for k, e in contenders.items() if not hasattr(e, "num_envs"))
     for name, env in contenders.items():
         env.reset(seed=seed)
-        if isinstance(env, IndependentProcesses):
+        if isinstance(env, (IndependentProcesses, RolloutRun)):
             env.run(10)
         elif hasattr(env, "num_envs"):
             _run_vector(env, _actions(env.action_space, 10, rng, palpation))
@@ -161,7 +197,7 @@ def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = Fals
     worker_cpu = {k: [] for k in contenders}
     for _ in range(repeats):
         for name, env in contenders.items():
-            if isinstance(env, IndependentProcesses):
+            if isinstance(env, (IndependentProcesses, RolloutRun)):
                 r, m, w = _timed(_run_vector, env, range(max(1, steps // env.num_envs)))
             elif hasattr(env, "num_envs"):
                 acts = _actions(env.action_space, max(1, steps // env.num_envs), rng, palpation)
@@ -204,15 +240,18 @@ def contender_names(workers: int, counts=None) -> tuple:
     """The vector contenders' names, in table order: ``workers`` independent processes with one env
     each (``independent``, the ceiling), AsyncVectorEnv(workers envs), ours with ``n`` envs on
     ``workers`` processes (``vector_n<n>``), ours with the main process stepping one block
-    (``in_main_n<n>``: ``workers - 1`` worker processes), for the fewest and the most envs."""
+    (``in_main_n<n>``: ``workers - 1`` worker processes), for the fewest and the most envs, and the most
+    envs driven by :meth:`SurgSimVectorEnv.rollout` (``rollout_n<n>``: a random policy in the workers)."""
     ns = env_counts(workers, counts)
-    return ("independent", "async", *(f"vector_n{n}" for n in ns), f"in_main_n{ns[0]}", f"in_main_n{ns[-1]}")
+    return ("independent", "async", *(f"vector_n{n}" for n in ns), f"in_main_n{ns[0]}", f"in_main_n{ns[-1]}",
+            f"rollout_n{ns[-1]}")
 
 
-def _ours(make, workers: int, counts=None) -> dict:
+def _ours(make, workers: int, counts=None, palpation: bool = False) -> dict:
     ns = env_counts(workers, counts)
     out = {f"vector_n{n}": make(n, in_main=False) for n in ns}
     out.update({f"in_main_n{n}": make(n, in_main=True) for n in dict.fromkeys((ns[0], ns[-1]))})
+    out[f"rollout_n{ns[-1]}"] = RolloutRun(make(ns[-1], in_main=False), palpation)
     return out
 
 
@@ -230,7 +269,7 @@ def task_contenders(env_id: str, workers: int, spin_us: float = 0.0, worker_spin
                             worker_spin_us=worker_spin_us, timeout_s=STEP_TIMEOUT)
     return {"single": single, "independent": IndependentProcesses(env_id, workers, "Palpation" in env_id),
             "async": gym.make_vec(env_id, num_envs=workers, vectorization_mode="async"),
-            **_ours(make, workers, counts)}
+            **_ours(make, workers, counts, "Palpation" in env_id)}
 
 
 def spin_contenders(step_us: float, info: dict | None, workers: int, spin_us: float = 0.0,

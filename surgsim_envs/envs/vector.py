@@ -322,6 +322,8 @@ class SurgSimVectorEnv(VectorEnv):
                 return self._local.step()
             if op == ipc.RESET:
                 return self._local.reset(*payload)
+            if op == ipc.ROLLOUT:
+                return self._local.rollout(*payload)
             if op == ipc.CALL:
                 return self._local.call(*payload)
             return self._local.set_attr(*payload)
@@ -433,6 +435,43 @@ class SurgSimVectorEnv(VectorEnv):
     def step(self, actions):
         self.step_async(actions)
         return self.step_wait()
+
+    def rollout(self, policy, steps: int) -> dict:
+        """``steps`` vector steps with actions from ``policy``, each worker stepping its own block
+        without a round trip per step: one command per worker for the whole rollout.
+
+        ``policy``: a picklable callable (it is sent to every worker), called on a block's
+        observations ``(k, *single observation shape)`` and returning ``(k, *single action shape)``
+        actions, e.g. an :class:`~surgsim_envs.policies.npz_policy.NpzPolicy` or a module-level
+        function; it must act on each row alone (blocks differ between worker layouts).
+        Every step is what :meth:`step` does with those actions (autoreset, the same rewards and
+        flags: SyncVectorEnv stepping the same policy gives the same arrays), and the vector env
+        goes on from where the rollout ended. Infos are not recorded.
+
+        Returns ``{"observations": (steps + 1, n, ...), "actions": (steps, n, ...), "rewards",
+        "terminations", "truncations": (steps, n)}``: ``observations[t]`` is what ``actions[t]`` was
+        chosen from (row 0: the observations of the last reset or step)."""
+        from multiprocessing import shared_memory
+
+        self._check_usable()
+        if self.autoreset_mode == AutoresetMode.DISABLED:
+            raise ConfigError("rollout() needs autoreset (autoreset_mode NEXT_STEP or SAME_STEP): with DISABLED an "
+                              "env that ends mid-rollout could not go on")
+        ok = isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and steps >= 1
+        if not ok:
+            raise ConfigError(f"rollout steps must be an integer >= 1, got {steps!r}")
+        if not callable(policy):
+            raise ConfigError(f"rollout policy must be a callable (observations -> actions), got {policy!r}")
+        obs, act = self.single_observation_space, self.single_action_space
+        layout = ipc.RolloutLayout(int(steps), self.num_envs, obs.shape, obs.dtype, act.shape, act.dtype)
+        shm = shared_memory.SharedMemory(create=True, size=layout.nbytes)
+        try:
+            replies = self._broadcast(ipc.ROLLOUT, lambda w: (policy, int(steps), shm.name, layout), "rollout")
+            self._absorb(replies)
+            return {k: a.copy() for k, a in layout.views(shm.buf).items()}
+        finally:
+            shm.close()
+            shm.unlink()
 
     def call(self, name: str, *args, **kwargs) -> tuple:
         """``name(*args, **kwargs)`` on every env (or the attribute's value if not callable)."""

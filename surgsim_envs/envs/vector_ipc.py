@@ -23,7 +23,7 @@ import pickle
 import numpy as np
 
 # commands (main -> worker)
-STEP, RESET, CALL, SET_ATTR, ATTACH, CLOSE = 1, 2, 3, 4, 5, 6
+STEP, RESET, CALL, SET_ATTR, ATTACH, CLOSE, ROLLOUT = 1, 2, 3, 4, 5, 6, 8
 # replies (worker -> main)
 OK, ERROR = 0, 7
 _PAYLOAD = 0x80
@@ -107,6 +107,30 @@ class Layout:
                        ("final_obs", (n, *obs_shape), np.dtype(obs_dtype)),
                        ("final_info_values", (n, k), np.dtype(INFO_DTYPE)),
                        ("final_info_present", (n, k), np.dtype(np.bool_))]
+        self.fields, offset = [], 0
+        for name, shape, dtype in fields:
+            offset = -(-offset // _ALIGN) * _ALIGN
+            self.fields.append((name, tuple(int(s) for s in shape), dtype.str, offset))
+            offset += int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+        self.nbytes = max(offset, 1)
+
+    def views(self, buffer) -> dict:
+        return {name: np.ndarray(shape, dtype=np.dtype(dtype), buffer=buffer, offset=offset)
+                for name, shape, dtype, offset in self.fields}
+
+
+class RolloutLayout:
+    """Byte offsets of a rollout's record (:meth:`SurgSimVectorEnv.rollout`): for ``steps`` steps of
+    ``num_envs`` envs the observations before each step and after the last (``steps + 1`` rows), the
+    actions, rewards, terminations and truncations. A shared-memory block of its own per rollout call."""
+
+    def __init__(self, steps: int, num_envs: int, obs_shape, obs_dtype, act_shape, act_dtype):
+        t, n = int(steps), int(num_envs)
+        fields = [("observations", (t + 1, n, *obs_shape), np.dtype(obs_dtype)),
+                  ("actions", (t, n, *act_shape), np.dtype(act_dtype)),
+                  ("rewards", (t, n), np.dtype(np.float64)),
+                  ("terminations", (t, n), np.dtype(np.bool_)),
+                  ("truncations", (t, n), np.dtype(np.bool_))]
         self.fields, offset = [], 0
         for name, shape, dtype in fields:
             offset = -(-offset // _ALIGN) * _ALIGN

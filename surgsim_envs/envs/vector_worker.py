@@ -13,6 +13,8 @@ import signal
 import time
 import traceback
 
+import numpy as np
+
 from surgsim_envs.envs import vector_ipc as ipc
 from surgsim_envs.envs.vector_info import InfoWriter
 
@@ -104,6 +106,40 @@ class _Worker:
         v["terminations"][lo:hi] = terms
         v["truncations"][lo:hi] = truncs
         return self._reply(other, final_other)
+
+    def rollout(self, policy, steps, name, layout):
+        """``steps`` steps of the block with actions from ``policy`` (called on the block's observations,
+        ``(envs, *obs shape)`` -> ``(envs, *action shape)``), each exactly as :meth:`step` (autoreset,
+        infos), recorded into the rollout's shared memory ``name`` (:class:`~surgsim_envs.envs.vector_ipc.
+        RolloutLayout`). Returns the reply of :meth:`step` with every info key first seen meanwhile."""
+        from multiprocessing import shared_memory
+
+        v, lo, hi = self.v, self.lo, self.hi
+        shm = shared_memory.SharedMemory(name=name)
+        try:
+            rec = layout.views(shm.buf)
+            obs, acts = v["obs"], v["actions"]
+            rec["observations"][0, lo:hi] = obs[lo:hi]
+            new = []
+            for t in range(steps):
+                self.current = f"{lo}..{hi - 1}"
+                a = np.asarray(policy(obs[lo:hi].copy()))
+                if a.shape != acts[lo:hi].shape:
+                    raise ValueError(f"the rollout policy returned actions of shape {a.shape} for {hi - lo} "
+                                     f"observations; expected {acts[lo:hi].shape}")
+                acts[lo:hi] = a
+                rec["actions"][t, lo:hi] = acts[lo:hi]
+                reply = self.step()
+                if reply and reply["new_keys"]:
+                    new.extend(reply["new_keys"])
+                rec["observations"][t + 1, lo:hi] = obs[lo:hi]
+                rec["rewards"][t, lo:hi] = v["rewards"][lo:hi]
+                rec["terminations"][t, lo:hi] = v["terminations"][lo:hi]
+                rec["truncations"][t, lo:hi] = v["truncations"][lo:hi]
+            rec = None                          # no view may outlive the mapping
+        finally:
+            shm.close()
+        return {"new_keys": new, "other": None, "final_other": None} if new else None
 
     def reset(self, seeds, options, mask):
         v, other = self.v, None
@@ -213,6 +249,8 @@ def worker_main(env_id, env_kwargs, lo, hi, cmd, rep, autoreset, info_keys, keep
                 out = worker.step()
             elif op == ipc.RESET:
                 out = worker.reset(*payload)
+            elif op == ipc.ROLLOUT:
+                out = worker.rollout(*payload)
             elif op == ipc.CALL:
                 out = worker.call(*payload)
             elif op == ipc.SET_ATTR:
