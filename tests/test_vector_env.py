@@ -436,6 +436,8 @@ def test_rollout_errors_name_the_problem():
             vec.rollout("not a policy", 3)
         with pytest.raises(ValueError, match=r"returned actions of shape \(1, 3\) for 1 observations; expected \(1, 2\)"):
             vec.rollout(functools.partial(np.zeros_like), 3)       # (1, 3) from (1, 3) observations
+        with pytest.raises(ConfigError, match=r"rollout of 100000000 steps x 2 envs needs .* GiB .* chunks of at most \d+ steps"):
+            vec.rollout(linear_policy, 100_000_000)
         vec.reset(seed=0)                                          # usable after a policy error
         assert vec.rollout(linear_policy, 2)["rewards"].shape == (2, 2)
     finally:

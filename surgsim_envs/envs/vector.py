@@ -75,6 +75,9 @@ DEFAULT_SPIN_US = 0.0
 #: us a worker polls for its next command without sleeping after each reply (``worker_spin_us=``)
 DEFAULT_WORKER_SPIN_US = 0.0
 
+#: bytes of shared memory one rollout() record may take (observations, actions, rewards, flags)
+MAX_ROLLOUT_BYTES = 1 << 30
+
 #: spaces whose samples are fixed-shape arrays (what the shared memory holds)
 _ARRAY_SPACES = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
 
@@ -302,12 +305,12 @@ class SurgSimVectorEnv(VectorEnv):
             out[w] = payload
         return out
 
-    def _broadcast(self, op: int, payload_of, what: str) -> dict:
+    def _broadcast(self, op: int, payload_of, what: str, timeout: float | None = None) -> dict:
         """Send ``op`` to every worker, run it on the main process's own block (``in_main``) in the
-        meantime, and return ``{block: reply payload}``."""
+        meantime, and return ``{block: reply payload}`` (``timeout``: s, default ``timeout_s``)."""
         self._command(op, payload_of)
         local = self._run_local(op, None if payload_of is None else payload_of(0), what)
-        replies = self._gather(ipc.OK, what)
+        replies = self._gather(ipc.OK, what, timeout=timeout)
         if self._local is not None:
             replies[0] = local
         return replies
@@ -450,7 +453,9 @@ class SurgSimVectorEnv(VectorEnv):
 
         Returns ``{"observations": (steps + 1, n, ...), "actions": (steps, n, ...), "rewards",
         "terminations", "truncations": (steps, n)}``: ``observations[t]`` is what ``actions[t]`` was
-        chosen from (row 0: the observations of the last reset or step)."""
+        chosen from (row 0: the observations of the last reset or step). The record must fit in
+        :data:`MAX_ROLLOUT_BYTES` (a ConfigError says how many steps do: call rollout in chunks), and a
+        worker may take ``timeout_s`` per step before it counts as hung."""
         from multiprocessing import shared_memory
 
         self._check_usable()
@@ -464,9 +469,15 @@ class SurgSimVectorEnv(VectorEnv):
             raise ConfigError(f"rollout policy must be a callable (observations -> actions), got {policy!r}")
         obs, act = self.single_observation_space, self.single_action_space
         layout = ipc.RolloutLayout(int(steps), self.num_envs, obs.shape, obs.dtype, act.shape, act.dtype)
+        if layout.nbytes > MAX_ROLLOUT_BYTES:
+            per_step = ipc.RolloutLayout(1, self.num_envs, obs.shape, obs.dtype, act.shape, act.dtype).nbytes
+            raise ConfigError(f"rollout of {steps} steps x {self.num_envs} envs needs {layout.nbytes / 2**30:.1f} GiB of "
+                              f"shared memory, above MAX_ROLLOUT_BYTES ({MAX_ROLLOUT_BYTES / 2**30:.0f} GiB): call "
+                              f"rollout in chunks of at most {MAX_ROLLOUT_BYTES // per_step} steps")
         shm = shared_memory.SharedMemory(create=True, size=layout.nbytes)
         try:
-            replies = self._broadcast(ipc.ROLLOUT, lambda w: (policy, int(steps), shm.name, layout), "rollout")
+            replies = self._broadcast(ipc.ROLLOUT, lambda w: (policy, int(steps), shm.name, layout), "rollout",
+                                      timeout=self.timeout_s * int(steps))
             self._absorb(replies)
             return {k: a.copy() for k, a in layout.views(shm.buf).items()}
         finally:
