@@ -85,7 +85,25 @@ def receive(fd: int):
     return op & ~_PAYLOAD, pickle.loads(body)
 
 
-class Layout:
+class _Fields:
+    """Named arrays laid out one after another in a buffer, each on a 64-byte boundary; the object
+    pickles, so both ends build the same views from it."""
+
+    def _place(self, fields) -> None:
+        """``fields``: ``(name, shape, numpy dtype)`` in buffer order."""
+        self.fields, offset = [], 0
+        for name, shape, dtype in fields:
+            offset = -(-offset // _ALIGN) * _ALIGN
+            self.fields.append((name, tuple(int(s) for s in shape), dtype.str, offset))
+            offset += int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+        self.nbytes = max(offset, 1)
+
+    def views(self, buffer) -> dict:
+        return {name: np.ndarray(shape, dtype=np.dtype(dtype), buffer=buffer, offset=offset)
+                for name, shape, dtype, offset in self.fields}
+
+
+class Layout(_Fields):
     """Byte offsets of the shared arrays for ``num_envs`` envs (see the module docstring).
 
     ``views(buffer)`` returns the numpy arrays over a buffer of ``nbytes`` bytes; main process and
@@ -107,19 +125,10 @@ class Layout:
                        ("final_obs", (n, *obs_shape), np.dtype(obs_dtype)),
                        ("final_info_values", (n, k), np.dtype(INFO_DTYPE)),
                        ("final_info_present", (n, k), np.dtype(np.bool_))]
-        self.fields, offset = [], 0
-        for name, shape, dtype in fields:
-            offset = -(-offset // _ALIGN) * _ALIGN
-            self.fields.append((name, tuple(int(s) for s in shape), dtype.str, offset))
-            offset += int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
-        self.nbytes = max(offset, 1)
-
-    def views(self, buffer) -> dict:
-        return {name: np.ndarray(shape, dtype=np.dtype(dtype), buffer=buffer, offset=offset)
-                for name, shape, dtype, offset in self.fields}
+        self._place(fields)
 
 
-class RolloutLayout:
+class RolloutLayout(_Fields):
     """Byte offsets of a rollout's record (:meth:`SurgSimVectorEnv.rollout`): for ``steps`` steps of
     ``num_envs`` envs the observations before each step and after the last (``steps + 1`` rows), the
     actions, rewards, terminations and truncations. A shared-memory block of its own per rollout call."""
@@ -131,13 +140,4 @@ class RolloutLayout:
                   ("rewards", (t, n), np.dtype(np.float64)),
                   ("terminations", (t, n), np.dtype(np.bool_)),
                   ("truncations", (t, n), np.dtype(np.bool_))]
-        self.fields, offset = [], 0
-        for name, shape, dtype in fields:
-            offset = -(-offset // _ALIGN) * _ALIGN
-            self.fields.append((name, tuple(int(s) for s in shape), dtype.str, offset))
-            offset += int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
-        self.nbytes = max(offset, 1)
-
-    def views(self, buffer) -> dict:
-        return {name: np.ndarray(shape, dtype=np.dtype(dtype), buffer=buffer, offset=offset)
-                for name, shape, dtype, offset in self.fields}
+        self._place(fields)
