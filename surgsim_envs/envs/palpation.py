@@ -53,6 +53,11 @@ from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explic
 from surgsim_envs.errors import ConfigError
 
 
+#: m; with the slab at least this much thicker than ``max_depth`` the probe cannot reach the floor and the
+#: scene runs without MuJoCo's collision detection (``SceneConfig.rigid_contacts``)
+RIGID_CONTACT_CLEARANCE = 0.005
+
+
 @dataclass
 class PalpationConfig:
     """Palpation-v0 settings (SI units). Ranges are (low, high) sampled uniformly per episode."""
@@ -265,6 +270,9 @@ class PalpationEnv(SurgSimEnv):
         p.tip_radius = c.tip_radius
         p.position = (0.0, 0.0, self.surface_z + c.tip_radius + c.hover)
         cfg.dt = c.dt
+        # the probe's deepest commanded tip stays this far above the floor: MuJoCo's collision detection
+        # (probe vs floor, the only rigid pair) has nothing to find and is switched off
+        cfg.rigid_contacts = self.surface_z - c.max_depth < RIGID_CONTACT_CLEARANCE
         require_capabilities(c.model, self.REQUIRES, self.TASK_ID)
         self.sim = Simulation(palpation_scene(cfg), dt=c.dt, substeps=self.substeps)
         stiffest = check_range(c.young_scale, "young_scale")[1] * check_range(c.stiffness_contrast, "contrast")[1]

@@ -187,6 +187,8 @@ def _add_environment(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     spec.option.timestep = float(cfg.dt)
     spec.option.gravity = [float(g) for g in cfg.gravity]
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    if not cfg.rigid_contacts:
+        spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
     spec.visual.global_.offwidth = max(int(cfg.render_width), 640)
     spec.visual.global_.offheight = max(int(cfg.render_height), 480)
     spec.visual.headlight.ambient = [0.35, 0.35, 0.35]

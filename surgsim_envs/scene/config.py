@@ -227,7 +227,10 @@ class SceneConfig:
     ``tools`` (:meth:`tool_configs`).
     dt: s, physics step (validated against :data:`DT_RANGE`); substeps: physics steps per
     control step (:meth:`Simulation.step`). gravity: m/s^2 for the MuJoCo (tool) world; tools are
-    gravity-compensated. seed: seeds ``Simulation.rng``.
+    gravity-compensated. seed: seeds ``Simulation.rng``. rigid_contacts: False turns MuJoCo's
+    collision detection off (``mjDSBL_CONTACT``) for a scene whose tools can never touch a rigid geom
+    (the floor, each other); the tissue contact is ours and is unaffected. It saves ~1.6 us per physics
+    step (~4 % of a Palpation-v0 env step); with it off a tool would pass through the floor.
     """
 
     name: str = "scene"
@@ -242,6 +245,7 @@ class SceneConfig:
     substeps: int = 1
     gravity: Sequence[float] = (0.0, 0.0, -9.81)
     floor: bool = True
+    rigid_contacts: bool = True
     seed: int = 0
     render_width: int = 640
     render_height: int = 480
