@@ -426,6 +426,38 @@ def test_rollout_matches_sync_stepping_the_same_policy(mode, in_main):
         sync.close()
 
 
+class NoisyPolicy:
+    """A stochastic policy with ``reset(seed)`` (as NpzPolicy): uniform actions from its own generator."""
+
+    def __init__(self):
+        self.rng = np.random.default_rng(0)
+
+    def reset(self, seed=None):
+        self.rng = np.random.default_rng(seed)
+
+    def __call__(self, obs):
+        return self.rng.uniform(-1, 1, (len(obs), 2)).astype(np.float32)
+
+
+def test_rollout_seed_gives_each_block_its_own_reproducible_noise():
+    """Without seed every block's copy of a stochastic policy draws the same actions; with seed each
+    block's stream differs (reset(seed + first env index)) and the same seed repeats the rollout."""
+    vec = SurgSimVectorEnv(Toy, 4, workers=2)
+    try:
+        vec.reset(seed=0)
+        same = vec.rollout(NoisyPolicy(), 5)["actions"]
+        assert np.array_equal(same[:, :2], same[:, 2:])
+        vec.reset(seed=0)
+        a = vec.rollout(NoisyPolicy(), 5, seed=7)["actions"]
+        vec.reset(seed=0)
+        b = vec.rollout(NoisyPolicy(), 5, seed=7)["actions"]
+        assert np.array_equal(a, b) and not np.array_equal(a[:, :2], a[:, 2:])
+        with pytest.raises(ConfigError, match=r"rollout\(seed=3\) reseeds the policy .* has none"):
+            vec.rollout(linear_policy, 2, seed=3)
+    finally:
+        vec.close()
+
+
 def test_rollout_errors_name_the_problem():
     vec = SurgSimVectorEnv(Toy, 2)
     try:

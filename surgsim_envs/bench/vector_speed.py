@@ -117,6 +117,10 @@ class UniformPolicy:
         self.shape, self.palpation = tuple(action_shape), bool(palpation)
         self.rng = np.random.default_rng(seed)
 
+    def reset(self, seed=None):
+        """A new stream (``SurgSimVectorEnv.rollout(..., seed=)`` gives each worker its own)."""
+        self.rng = np.random.default_rng(seed)
+
     def __call__(self, obs):
         a = self.rng.uniform(-1, 1, (len(obs), *self.shape)).astype(np.float32)
         if self.palpation:
@@ -132,13 +136,15 @@ class RolloutRun:
         self.vec, self.num_envs = vec, vec.num_envs
         self.worker_pids = vec.worker_pids
         self.policy = UniformPolicy(vec.single_action_space.shape, palpation)
+        self._runs = 0
 
     def reset(self, seed=None):
         return self.vec.reset(seed=seed)
 
     def run(self, steps_each: int) -> float:
+        self._runs += 1
         t0 = time.perf_counter()
-        self.vec.rollout(self.policy, int(steps_each))
+        self.vec.rollout(self.policy, int(steps_each), seed=1000 * self._runs)
         return steps_each * self.num_envs / (time.perf_counter() - t0)
 
     def close(self):

@@ -439,7 +439,7 @@ class SurgSimVectorEnv(VectorEnv):
         self.step_async(actions)
         return self.step_wait()
 
-    def rollout(self, policy, steps: int) -> dict:
+    def rollout(self, policy, steps: int, seed: int | None = None) -> dict:
         """``steps`` vector steps with actions from ``policy``, each worker stepping its own block
         without a round trip per step: one command per worker for the whole rollout.
 
@@ -450,6 +450,11 @@ class SurgSimVectorEnv(VectorEnv):
         Every step is what :meth:`step` does with those actions (autoreset, the same rewards and
         flags: SyncVectorEnv stepping the same policy gives the same arrays), and the vector env
         goes on from where the rollout ended. Infos are not recorded.
+
+        Each worker gets its own (pickled) copy of ``policy``, random state included, so a stochastic
+        policy would draw the same noise in every block; with ``seed`` (an int) and a policy that has
+        ``reset(seed)`` (e.g. ``NpzPolicy``), each block's copy is reset with ``seed`` + its first env
+        index before it acts: distinct, reproducible streams per block.
 
         Returns ``{"observations": (steps + 1, n, ...), "actions": (steps, n, ...), "rewards",
         "terminations", "truncations": (steps, n)}``: ``observations[t]`` is what ``actions[t]`` was
@@ -467,6 +472,13 @@ class SurgSimVectorEnv(VectorEnv):
             raise ConfigError(f"rollout steps must be an integer >= 1, got {steps!r}")
         if not callable(policy):
             raise ConfigError(f"rollout policy must be a callable (observations -> actions), got {policy!r}")
+        if seed is not None:
+            if not (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool)):
+                raise ConfigError(f"rollout seed must be an int or None, got {seed!r}")
+            if not callable(getattr(policy, "reset", None)):
+                raise ConfigError(f"rollout(seed={seed}) reseeds the policy with its reset(seed) method, and "
+                                  f"{type(policy).__name__} has none: drop seed= or give the policy a reset(seed)")
+            seed = int(seed)
         obs, act = self.single_observation_space, self.single_action_space
         layout = ipc.RolloutLayout(int(steps), self.num_envs, obs.shape, obs.dtype, act.shape, act.dtype)
         if layout.nbytes > MAX_ROLLOUT_BYTES:
@@ -476,7 +488,7 @@ class SurgSimVectorEnv(VectorEnv):
                               f"rollout in chunks of at most {MAX_ROLLOUT_BYTES // per_step} steps")
         shm = shared_memory.SharedMemory(create=True, size=layout.nbytes)
         try:
-            replies = self._broadcast(ipc.ROLLOUT, lambda w: (policy, int(steps), shm.name, layout), "rollout",
+            replies = self._broadcast(ipc.ROLLOUT, lambda w: (policy, int(steps), shm.name, layout, seed), "rollout",
                                       timeout=self.timeout_s * int(steps))
             self._absorb(replies)
             return {k: a.copy() for k, a in layout.views(shm.buf).items()}

@@ -107,14 +107,17 @@ class _Worker:
         v["truncations"][lo:hi] = truncs
         return self._reply(other, final_other)
 
-    def rollout(self, policy, steps, name, layout):
+    def rollout(self, policy, steps, name, layout, seed=None):
         """``steps`` steps of the block with actions from ``policy`` (called on the block's observations,
         ``(envs, *obs shape)`` -> ``(envs, *action shape)``), each exactly as :meth:`step` (autoreset,
         infos), recorded into the rollout's shared memory ``name`` (:class:`~surgsim_envs.envs.vector_ipc.
-        RolloutLayout`). Returns the reply of :meth:`step` with every info key first seen meanwhile."""
+        RolloutLayout`). ``seed``: the policy (this worker's copy) is first ``reset(seed + lo)``.
+        Returns the reply of :meth:`step` with every info key first seen meanwhile."""
         from multiprocessing import shared_memory
 
         v, lo, hi = self.v, self.lo, self.hi
+        if seed is not None:
+            policy.reset(seed + lo)
         shm = shared_memory.SharedMemory(name=name)
         try:
             rec = layout.views(shm.buf)
