@@ -139,3 +139,30 @@ def test_scenario_rollout_reseeds_a_stochastic_policy_per_episode(tmp_path):
     assert five.shape == (4, 3)
     assert np.array_equal(five[2:], six[:2])
     assert not np.allclose(five[:2], six[:2])
+
+
+def test_act_batch_is_the_per_observation_policy():
+    """act_batch on k observations = __call__ row by row (deterministic: to float32 rounding; SAC's squashed,
+    clipped head included); stochastic: one noise row per observation, the batch mean of many copies of one
+    observation is the deterministic action; .batched pickles and keeps reset(seed)."""
+    import pickle
+
+    obs = np.random.default_rng(3).normal(size=(6, 4))
+    for p in (ppo_like("deterministic"), sac_like("deterministic")[0]):
+        a = p.act_batch(obs)
+        assert a.shape == (6, 2) and a.dtype == np.float32
+        np.testing.assert_allclose(a, np.stack([p(o) for o in obs]), rtol=0, atol=1e-6)
+    p = ppo_like("stochastic", seed=1)
+    many = p.act_batch(np.tile(OBS, (N, 1)))
+    det = ppo_like("deterministic")(OBS)
+    assert many.std(axis=0)[0] > 0.3                               # sd exp(-1) = 0.37: rows differ
+    np.testing.assert_allclose(many.mean(axis=0), det, atol=4 * np.exp(-1.0) / np.sqrt(N))
+    b = pickle.loads(pickle.dumps(ppo_like("stochastic").batched))
+    b.reset(5)
+    first = b(obs)
+    b.reset(5)
+    assert np.array_equal(first, b(obs))
+    with pytest.raises(ConfigError, match=r"act_batch expects observations of shape \(k, 4\), got \(4,\)"):
+        p.act_batch(OBS)
+    with pytest.raises(ConfigError, match="NaN or inf"):
+        p.act_batch(np.full((2, 4), np.nan))

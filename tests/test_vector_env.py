@@ -480,3 +480,31 @@ def test_rollout_errors_name_the_problem():
             disabled.rollout(linear_policy, 2)
     finally:
         disabled.close()
+
+
+def test_rollout_with_the_shipped_palpation_policy_matches_sync():
+    """The shipped Palpation-v0 policy (NpzPolicy.batched) rolled out in the workers, one env each, over
+    an episode end (15-step episodes, autoreset at step 16), equals SyncVectorEnv stepped with the same
+    policy row by row."""
+    from pathlib import Path
+
+    import surgsim_envs.policies
+    from surgsim_envs.policies.npz_policy import NpzPolicy
+
+    policy = NpzPolicy.load(Path(surgsim_envs.policies.__file__).parent / "palpation_v0.npz")
+    sync = gym.make_vec("SurgSim/Palpation-v0", num_envs=2, vectorization_mode="sync", max_episode_steps=15)
+    ours = gym.make_vec("SurgSim/Palpation-v0", num_envs=2, max_episode_steps=15)
+    try:
+        obs, _ = sync.reset(seed=4)
+        ours.reset(seed=4)
+        rec = ours.rollout(policy.batched, 20)
+        for t in range(20):
+            a = np.concatenate([policy.act_batch(obs[i:i + 1]) for i in range(2)])
+            assert np.array_equal(rec["actions"][t], a), t
+            obs, r, te, tr, _ = sync.step(a)
+            assert np.array_equal(rec["observations"][t + 1], obs) and np.array_equal(rec["rewards"][t], r), t
+            assert np.array_equal(rec["truncations"][t], tr) and np.array_equal(rec["terminations"][t], te), t
+        assert rec["truncations"][14].all()
+    finally:
+        ours.close()
+        sync.close()

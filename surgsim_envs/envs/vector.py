@@ -445,15 +445,16 @@ class SurgSimVectorEnv(VectorEnv):
 
         ``policy``: a picklable callable (it is sent to every worker), called on a block's
         observations ``(k, *single observation shape)`` and returning ``(k, *single action shape)``
-        actions, e.g. an :class:`~surgsim_envs.policies.npz_policy.NpzPolicy` or a module-level
-        function; it must act on each row alone (blocks differ between worker layouts).
+        actions, e.g. ``NpzPolicy.load(path).batched`` (:class:`~surgsim_envs.policies.npz_policy.
+        BatchedPolicy`) or a module-level function; it must act on each row alone (blocks differ between
+        worker layouts).
         Every step is what :meth:`step` does with those actions (autoreset, the same rewards and
         flags: SyncVectorEnv stepping the same policy gives the same arrays), and the vector env
         goes on from where the rollout ended. Infos are not recorded.
 
         Each worker gets its own (pickled) copy of ``policy``, random state included, so a stochastic
         policy would draw the same noise in every block; with ``seed`` (an int) and a policy that has
-        ``reset(seed)`` (e.g. ``NpzPolicy``), each block's copy is reset with ``seed`` + its first env
+        ``reset(seed)`` (e.g. ``NpzPolicy.batched``), each block's copy is reset with ``seed`` + its first env
         index before it acts: distinct, reproducible streams per block.
 
         Returns ``{"observations": (steps + 1, n, ...), "actions": (steps, n, ...), "rewards",

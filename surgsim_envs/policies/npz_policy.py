@@ -252,6 +252,30 @@ class NpzPolicy:
             i += s
         return out
 
+    def act_batch(self, obs) -> np.ndarray:
+        """Actions ``(k, n_L)`` float32 for ``k`` array observations ``(k, n_0)`` in one pass (policies
+        without ``obs_keys``/``action_keys``): what :meth:`__call__` gives row by row, up to the last
+        bits of the matrix products; stochastic mode draws one noise row per observation."""
+        if self.obs_keys is not None or self.action_keys is not None:
+            raise self._bad("act_batch takes array observations and gives array actions; this policy has "
+                            "obs_keys/action_keys: call it per observation")
+        x = np.asarray(obs, dtype=np.float64)
+        if x.ndim != 2 or x.shape[1] != self.obs_size:
+            raise self._bad(f"act_batch expects observations of shape (k, {self.obs_size}), got {x.shape}")
+        if not np.all(np.isfinite(x)):
+            raise self._bad("an observation holds NaN or inf")
+        with np.errstate(over="ignore", invalid="ignore"):
+            a = np.clip(self.action_bias + self.action_scale * self.forward(x), self.action_low, self.action_high)
+        if not np.all(np.isfinite(a)):
+            raise self._bad("the network output overflowed (NaN/inf action); check the weights and scaling")
+        return a.astype(np.float32)
+
+    @property
+    def batched(self) -> "BatchedPolicy":
+        """This policy acting on batches (:meth:`act_batch`), with its ``reset``: what
+        ``SurgSimVectorEnv.rollout`` takes."""
+        return BatchedPolicy(self)
+
     # -- files --------------------------------------------------------------------------------
     def arrays(self) -> dict:
         """The ``.npz`` arrays of this policy."""
@@ -327,3 +351,18 @@ class NpzPolicy:
             if isinstance(exc, ConfigError):
                 raise
             raise ConfigError(f"policy {p}: malformed array ({exc}); see surgsim_envs.policies.npz_policy") from None
+
+
+class BatchedPolicy:
+    """An :class:`NpzPolicy` called on a batch of observations ``(k, n_0)`` -> actions ``(k, n_L)``
+    (:meth:`NpzPolicy.act_batch`); ``reset(seed)`` reseeds it. Picklable (plain arrays), so it can be
+    sent to vector env workers: ``vec.rollout(NpzPolicy.load(path).batched, steps, seed=0)``."""
+
+    def __init__(self, policy: NpzPolicy):
+        self.policy = policy
+
+    def __call__(self, obs) -> np.ndarray:
+        return self.policy.act_batch(obs)
+
+    def reset(self, seed: int | None = None) -> None:
+        self.policy.reset(seed)
