@@ -46,3 +46,17 @@ def test_thin_slab_keeps_the_floor_solid():
         assert _flag(env) == 0
     finally:
         env.close()
+
+
+def test_rigid_contacts_must_be_a_bool():
+    """A string such as "no" would be truthy and silently keep collisions on: refused by name."""
+    import pytest
+
+    from surgsim_envs.errors import ConfigError
+    from surgsim_envs.scene.builder import palpation_config
+    from surgsim_envs.scene.config import validate_scene_config
+
+    cfg = palpation_config()
+    cfg.rigid_contacts = "no"
+    with pytest.raises(ConfigError, match=r"scene 'palpation' rigid_contacts must be True or False, got 'no'"):
+        validate_scene_config(cfg)

@@ -46,7 +46,9 @@ def test_rollout_contender_counts_every_env_step():
     from surgsim_envs.bench.vector_speed import RolloutRun, UniformPolicy
     from surgsim_envs.envs.vector import SurgSimVectorEnv
 
-    a = UniformPolicy((4,), palpation=True)(np.zeros((3, 5)))
+    from gymnasium import spaces
+
+    a = UniformPolicy(spaces.Box(-1.0, 1.0, (4,), np.float32), palpation=True)(np.zeros((3, 5)))
     assert a.shape == (3, 4) and np.all(a[:, -1] == -1.0) and np.all(np.abs(a[:, :3]) <= 1.0)
     run = RolloutRun(SurgSimVectorEnv(functools.partial(SpinEnv, 200.0), 4, workers=2))
     try:

@@ -33,7 +33,7 @@ def _run_single(env, acts):
 
 def _run_vector(vec, acts):
     """Env steps/s (vector steps x num_envs); the vector env autoresets by itself."""
-    if isinstance(vec, (IndependentProcesses, RolloutRun)):
+    if _runs_itself(vec):
         return vec.run(len(acts))
     t0 = time.perf_counter()
     for a in acts:
@@ -83,7 +83,6 @@ class IndependentProcesses:
             self._conns.append(a)
             self._procs.append(p)
         self.worker_pids = [c.recv() for c in self._conns]
-        self.action_space = None
 
     def reset(self, seed=None):
         return None
@@ -110,11 +109,11 @@ class IndependentProcesses:
 
 
 class UniformPolicy:
-    """A picklable random policy for :meth:`SurgSimVectorEnv.rollout`: uniform actions in [-1, 1]
-    (Palpation: "report" kept at -1, as the other contenders' actions)."""
+    """A picklable random policy for :meth:`SurgSimVectorEnv.rollout`: the other contenders' actions
+    (:func:`~surgsim_envs.bench.envs_speed._actions`: uniform in [-1, 1], Palpation's "report" at -1)."""
 
-    def __init__(self, action_shape, palpation: bool = False, seed: int = 0):
-        self.shape, self.palpation = tuple(action_shape), bool(palpation)
+    def __init__(self, action_space, palpation: bool = False, seed: int = 0):
+        self.space, self.palpation = action_space, bool(palpation)
         self.rng = np.random.default_rng(seed)
 
     def reset(self, seed=None):
@@ -122,10 +121,7 @@ class UniformPolicy:
         self.rng = np.random.default_rng(seed)
 
     def __call__(self, obs):
-        a = self.rng.uniform(-1, 1, (len(obs), *self.shape)).astype(np.float32)
-        if self.palpation:
-            a[..., -1] = -1.0
-        return a
+        return _actions(self.space, len(obs), self.rng, self.palpation)
 
 
 class RolloutRun:
@@ -135,7 +131,7 @@ class RolloutRun:
     def __init__(self, vec, palpation: bool = False):
         self.vec, self.num_envs = vec, vec.num_envs
         self.worker_pids = vec.worker_pids
-        self.policy = UniformPolicy(vec.single_action_space.shape, palpation)
+        self.policy = UniformPolicy(vec.single_action_space, palpation)
         self._runs = 0
 
     def reset(self, seed=None):
@@ -149,6 +145,12 @@ class RolloutRun:
 
     def close(self):
         self.vec.close()
+
+
+def _runs_itself(env) -> bool:
+    """A contender that times its own run of ``steps_each`` env steps per env (``run``), without actions
+    from :func:`alternate`: :class:`IndependentProcesses`, :class:`RolloutRun`."""
+    return isinstance(env, (IndependentProcesses, RolloutRun))
 
 
 def worker_pids(env) -> list:
@@ -192,7 +194,7 @@ def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = Fals
     single = next(k for k, e in contenders.items() if not hasattr(e, "num_envs"))
     for name, env in contenders.items():
         env.reset(seed=seed)
-        if isinstance(env, (IndependentProcesses, RolloutRun)):
+        if _runs_itself(env):
             env.run(10)
         elif hasattr(env, "num_envs"):
             _run_vector(env, _actions(env.action_space, 10, rng, palpation))
@@ -203,7 +205,7 @@ def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = Fals
     worker_cpu = {k: [] for k in contenders}
     for _ in range(repeats):
         for name, env in contenders.items():
-            if isinstance(env, (IndependentProcesses, RolloutRun)):
+            if _runs_itself(env):
                 r, m, w = _timed(_run_vector, env, range(max(1, steps // env.num_envs)))
             elif hasattr(env, "num_envs"):
                 acts = _actions(env.action_space, max(1, steps // env.num_envs), rng, palpation)

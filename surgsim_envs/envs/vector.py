@@ -90,6 +90,13 @@ def _positive_int(name, value, upper=None) -> int:
     return int(value)
 
 
+def _spin_microseconds(name, value) -> float:
+    """A polling time option (us) in [0, 100000]: ConfigError naming it otherwise (NaN included)."""
+    if not (isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value <= 1e5):
+        raise ConfigError(f"{name} must be a number of microseconds in [0, 100000], got {value!r}")
+    return float(value)
+
+
 def _info_mode(info_keys):
     """``(keys or None, keep_other)`` from the ``info_keys`` option."""
     if info_keys is None:
@@ -138,13 +145,8 @@ class SurgSimVectorEnv(VectorEnv):
             if not (isinstance(t, (int, float)) and np.isfinite(t) and t > 0):
                 raise ConfigError(f"{name} must be a positive number of seconds, got {t!r}")
         self.timeout_s, self.close_timeout_s = float(timeout_s), float(close_timeout_s)
-        if not (isinstance(spin_us, (int, float)) and not isinstance(spin_us, bool) and 0 <= spin_us <= 1e5):
-            raise ConfigError(f"spin_us must be a number of microseconds in [0, 100000], got {spin_us!r}")
-        self.spin_us = float(spin_us)
-        if not (isinstance(worker_spin_us, (int, float)) and not isinstance(worker_spin_us, bool)
-                and 0 <= worker_spin_us <= 1e5):
-            raise ConfigError(f"worker_spin_us must be a number of microseconds in [0, 100000], got {worker_spin_us!r}")
-        self.worker_spin_us = float(worker_spin_us)
+        self.spin_us = _spin_microseconds("spin_us", spin_us)
+        self.worker_spin_us = _spin_microseconds("worker_spin_us", worker_spin_us)
         self._spin_s = self.spin_us * 1e-6
         self._cpus = os.cpu_count() or 1
         if not (isinstance(env_id, str) or callable(env_id)):
@@ -468,9 +470,7 @@ class SurgSimVectorEnv(VectorEnv):
         if self.autoreset_mode == AutoresetMode.DISABLED:
             raise ConfigError("rollout() needs autoreset (autoreset_mode NEXT_STEP or SAME_STEP): with DISABLED an "
                               "env that ends mid-rollout could not go on")
-        ok = isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and steps >= 1
-        if not ok:
-            raise ConfigError(f"rollout steps must be an integer >= 1, got {steps!r}")
+        steps = _positive_int("rollout steps", steps)
         if not callable(policy):
             raise ConfigError(f"rollout policy must be a callable (observations -> actions), got {policy!r}")
         if seed is not None:
@@ -481,7 +481,7 @@ class SurgSimVectorEnv(VectorEnv):
                                   f"{type(policy).__name__} has none: drop seed= or give the policy a reset(seed)")
             seed = int(seed)
         obs, act = self.single_observation_space, self.single_action_space
-        layout = ipc.RolloutLayout(int(steps), self.num_envs, obs.shape, obs.dtype, act.shape, act.dtype)
+        layout = ipc.RolloutLayout(steps, self.num_envs, obs.shape, obs.dtype, act.shape, act.dtype)
         if layout.nbytes > MAX_ROLLOUT_BYTES:
             per_step = ipc.RolloutLayout(1, self.num_envs, obs.shape, obs.dtype, act.shape, act.dtype).nbytes
             raise ConfigError(f"rollout of {steps} steps x {self.num_envs} envs needs {layout.nbytes / 2**30:.1f} GiB of "
@@ -489,8 +489,8 @@ class SurgSimVectorEnv(VectorEnv):
                               f"rollout in chunks of at most {MAX_ROLLOUT_BYTES // per_step} steps")
         shm = shared_memory.SharedMemory(create=True, size=layout.nbytes)
         try:
-            replies = self._broadcast(ipc.ROLLOUT, lambda w: (policy, int(steps), shm.name, layout, seed), "rollout",
-                                      timeout=self.timeout_s * int(steps))
+            replies = self._broadcast(ipc.ROLLOUT, lambda w: (policy, steps, shm.name, layout, seed), "rollout",
+                                      timeout=self.timeout_s * steps)
             self._absorb(replies)
             return {k: a.copy() for k, a in layout.views(shm.buf).items()}
         finally:

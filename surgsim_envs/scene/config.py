@@ -325,6 +325,9 @@ def validate_scene_config(cfg: SceneConfig) -> None:
         raise ConfigError(f"expected a SceneConfig, got {type(cfg).__name__}")
     validate_step(cfg.dt, cfg.substeps)
     _vec(cfg.gravity, 3, "gravity")
+    for flag in ("floor", "rigid_contacts"):
+        if not isinstance(getattr(cfg, flag), bool):
+            raise ConfigError(f"scene '{cfg.name}' {flag} must be True or False, got {getattr(cfg, flag)!r}")
     names: set[str] = set()
     for group in (cfg.tissues, cfg.tool_configs(), cfg.proxies, cfg.cameras):
         for item in group:
