@@ -1,7 +1,10 @@
 """What a synchronous vector env can reach with 2 workers, from the spread of one task's step times
 (docs/benchmarks.md, "Vector env: the ceiling (seventh 2026-11-23 session)").
 
-    python scripts/vector_sync_ceiling.py [TASK ...] [--envs 16] [--rounds 200]
+    python scripts/vector_sync_ceiling.py [TASK ...] [--envs 16] [--rounds 200] [--option KEY=JSON ...]
+
+``--option`` passes a task option to ``gym.make`` (e.g. ``--option replay_approach=false`` for
+Slippage's full settle at every reset).
 
 Steps ``--envs`` envs of each task round-robin in this process with random actions (Palpation: never
 "report"), timing each step (an autoreset's ``reset`` counted in the step that ends the episode, as a
@@ -13,6 +16,7 @@ as long as the slower block: ``efficiency = mean((A + B) / 2) / mean(max(A, B))`
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import time
 
@@ -24,9 +28,9 @@ import surgsim_envs  # noqa: F401  (registers the tasks)
 TASKS = ("SurgSim/Palpation-v0", "SurgSim/Grasp-v0", "SurgSim/Slippage-v0")
 
 
-def step_times(task: str, n: int, rounds: int, warmup: int = 20, seed: int = 0) -> np.ndarray:
+def step_times(task: str, n: int, rounds: int, warmup: int = 20, seed: int = 0, **options) -> np.ndarray:
     """(rounds, n) wall seconds of each env's step (with its reset when the episode ended)."""
-    envs = [gym.make(task) for _ in range(n)]
+    envs = [gym.make(task, **options) for _ in range(n)]
     for i, e in enumerate(envs):
         e.reset(seed=seed + i)
     rng = np.random.default_rng(seed)
@@ -60,12 +64,24 @@ def main(argv=None) -> int:
     p.add_argument("tasks", nargs="*", default=list(TASKS))
     p.add_argument("--envs", type=int, default=16)
     p.add_argument("--rounds", type=int, default=200)
+    p.add_argument("--option", action="append", default=[], metavar="KEY=JSON",
+                   help="a task option for gym.make, value in JSON (true, 0.5, \"spleen\")")
     a = p.parse_args(argv)
+    options = {}
+    for item in a.option:
+        key, sep, value = item.partition("=")
+        try:
+            options[key] = json.loads(value)
+        except json.JSONDecodeError:
+            sep = ""
+        if not sep or not key:
+            p.error(f"--option {item!r}: write KEY=JSON, e.g. replay_approach=false")
     if a.envs < 2 or a.rounds < 1:
         p.error(f"--envs must be >= 2 and --rounds >= 1, got {a.envs} and {a.rounds}")
-    print(f"load average (1 min) {os.getloadavg()[0]:.2f}; {a.envs} envs, 2 blocks, {a.rounds} rounds")
+    print(f"load average (1 min) {os.getloadavg()[0]:.2f}; {a.envs} envs, 2 blocks, {a.rounds} rounds"
+          + (f"; options {options}" if options else ""))
     for task in a.tasks:
-        t = step_times(task, a.envs, a.rounds)
+        t = step_times(task, a.envs, a.rounds, **options)
         eff = sync_efficiency(t)
         print(f"{task:22s} step median {np.median(t) * 1e6:7.0f} us, p99 {np.percentile(t, 99) * 1e3:6.2f} ms, "
               f"max {t.max() * 1e3:6.1f} ms, std/mean {t.std() / t.mean():.2f}; sync efficiency {eff:.3f} -> "

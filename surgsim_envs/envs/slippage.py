@@ -38,6 +38,7 @@ from surgsim_envs.envs.base import ObsTerm, check_positive, check_range, reward_
 from surgsim_envs.envs.grasp_scene import GraspSceneConfig, GraspSceneEnv
 from surgsim_envs.envs.grasp_common import contact_nodes
 from surgsim_envs.errors import ConfigError
+from surgsim_envs.scene.approach_snapshot import ApproachSnapshot
 
 
 @dataclass
@@ -52,6 +53,7 @@ class SlippageConfig(GraspSceneConfig):
     closing_speed: float = 0.05
     initial_closure: float = 0.7       # action value the jaws close to during the settle
     settle_time: float = 0.4           # s
+    replay_approach: bool = True       # restore the settle's contact-free start from a snapshot (scene/approach_snapshot.py)
     pull_rate: Sequence[float] = (0.03, 0.06)       # N/s
     pull_amplitude: Sequence[float] = (0.0, 0.03)   # N
     pull_frequency: Sequence[float] = (0.5, 2.0)   # Hz
@@ -68,6 +70,8 @@ class SlippageConfig(GraspSceneConfig):
         super().validate()
         for key in ("settle_time", "max_pull", "pull_damping", "max_slip", "slip_tolerance"):
             check_positive(getattr(self, key), f"SlippageConfig.{key}")
+        if not isinstance(self.replay_approach, bool):
+            raise ConfigError(f"SlippageConfig.replay_approach={self.replay_approach!r} must be True or False")
         if not -1.0 <= self.initial_closure <= 1.0:
             raise ConfigError(f"initial_closure={self.initial_closure!r} must lie in [-1, 1]")
         check_range(self.pull_rate, "pull_rate", 0.0, 10.0)
@@ -99,6 +103,11 @@ def slip_penalty(slip_now: float, slip_before: float, weight_per_mm: float) -> f
     return -weight_per_mm * max(0.0, slip_now - slip_before) * 1e3
 
 
+def _no_pull(t: float) -> float:
+    """The settle's pull: none (N)."""
+    return 0.0
+
+
 @njit(cache=True)
 def _schedule(values, jaw, jaw_goal, lim, t, dt, pulling, rate, amplitude, frequency, phase, t0, top):
     """Fill ``values`` (K, 2) with the control schedule of :meth:`SlippageEnv._run`: column 0 the jaw
@@ -127,6 +136,7 @@ class SlippageEnv(GraspSceneEnv):
     OPTIONS = ("organ", "mu", "young_scale", "pull_rate", "pull_amplitude", "pull_frequency")
 
     def _build(self) -> None:
+        self._approach = ApproachSnapshot()
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         self._build_scene()
         self._set_observation_terms(self._observation_terms())
@@ -193,7 +203,7 @@ class SlippageEnv(GraspSceneEnv):
         self.amplitude = sample(rng, options.get("pull_amplitude", c.pull_amplitude), "pull_amplitude", 0.0, 10.0)
         self.frequency = sample(rng, options.get("pull_frequency", c.pull_frequency), "pull_frequency", 0.0, 50.0)
         self.phase = float(rng.uniform(0.0, 2.0 * math.pi))
-        self._run(int(round(c.settle_time / self.sim.dt)), self._closure_ctrl(c.initial_closure), lambda t: 0.0)
+        self._settle(int(round(c.settle_time / self.sim.dt)), self._closure_ctrl(c.initial_closure))
         pos = self.sim.tool_position(self.tool_name)
         nodes = contact_nodes(self.sim)
         if len(nodes) == 0:
@@ -203,6 +213,16 @@ class SlippageEnv(GraspSceneEnv):
         self.pos0 = pos
         self.jaw_goal = self._closure_ctrl(c.initial_closure)
         self.pull = 0.0
+
+    def _settle(self, steps: int, goal: float) -> None:
+        """The reset's grasp: ``steps`` physics steps closing the jaws towards ``goal`` with no pull.
+        With ``replay_approach`` the contact-free first part (the jaws travelling through air) is
+        restored from a snapshot (:mod:`surgsim_envs.scene.approach_snapshot`), not simulated."""
+        def run(n: int) -> None:
+            self._run(n, goal, _no_pull)
+
+        done = self._approach.skip(self.sim, ("settle", goal, steps), run, steps) if self.config.replay_approach else 0
+        run(steps - done)
 
     def _pull_at(self, t: float) -> float:
         """N, the pull motor's control at simulation time ``t`` s (kept as ``self.pull``)."""
