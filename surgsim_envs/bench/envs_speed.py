@@ -6,6 +6,9 @@ episode resets included. ``overhead_ratio``: wall time of one physics substep in
 the tissue model's own ``step`` time for the same tissue and forces, same process. Then ``gym.make_vec(..., vectorization_mode="async")`` with
 ``--workers`` processes (default 2) for the scaling figure. Every figure is the median over
 ``--repeats`` timed runs of ``--steps`` env steps each (after a warm-up that compiles numba).
+After each timed run a fixed reference kernel is timed (bench/reference_kernel.py):
+``reference_kernel_us`` (median) and ``env_step_in_reference_kernels`` (the median env step over it),
+a figure that a slow minute of the shared host moves less than the step time itself.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import time
 
 import numpy as np
 
+from surgsim_envs.bench.reference_kernel import reference_kernel_us
 from surgsim_envs.errors import ConfigError
 
 #: s, an async step that takes longer than this raises instead of hanging
@@ -89,7 +93,7 @@ def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = Fals
     env.reset(seed=0)
     for a in _actions(env.action_space, 20, rng, pal):
         env.step(a)
-    rates, physics_rates = [], []
+    rates, physics_rates, refs = [], [], []
     for r in range(repeats):
         acts = _actions(env.action_space, steps, rng, pal)
         env.reset(seed=r)
@@ -104,6 +108,7 @@ def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = Fals
         wall = time.perf_counter() - t0
         rates.append(steps / wall)
         physics_rates.append(physics / wall)
+        refs.append(reference_kernel_us(calls=100, repeats=1))   # the host's state beside this run
     substep_us, tissue_us = overhead(env, steps, repeats, rng, pal)
     step1_us, step1_flex_us = visual_flex_cost(u.sim, repeats)
     t0 = time.perf_counter()
@@ -115,7 +120,10 @@ def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = Fals
            "reset_ms": reset_ms, "physics_steps_per_s": statistics.median(physics_rates),
            "physics_steps_per_env_step": statistics.median(physics_rates) / statistics.median(rates),
            "substep_us": substep_us, "tissue_step_us": tissue_us, "overhead_ratio": substep_us / tissue_us,
-           "mj_step1_us": step1_us, "mj_step1_with_visual_flex_us": step1_flex_us}
+           "mj_step1_us": step1_us, "mj_step1_with_visual_flex_us": step1_flex_us,
+           "reference_kernel_us": statistics.median(refs),
+           "env_step_in_reference_kernels": 1e6 / statistics.median(rates) / statistics.median(refs),
+           "load_avg_1min": os.getloadavg()[0]}
     out["compiled_substeps"] = u.sim._compiled_runner() is not None
     if compiled_vs:
         out.update(compiled_vs_generic(env, repeats, rng, pal, steps))
@@ -569,14 +577,14 @@ def run(args) -> int:
     if not any("steps_per_s" in r for r in rows):
         return 0
     print(f"{'task':24s} {'steps/s':>8s} {'ctrl Hz':>8s} {'dt ms':>6s} {'sub':>4s} {'nodes':>6s} {'reset ms':>9s}"
-          f" {'async/s':>8s} {'speedup':>8s} {'overhead':>8s}")
+          f" {'async/s':>8s} {'speedup':>8s} {'overhead':>8s} {'ref us':>7s} {'step/ref':>8s}")
     for r in rows:
         if "steps_per_s" not in r:
             continue
         print(f"{r['task']:24s} {r['steps_per_s']:8.0f} {r['control_hz']:8.0f} {r['physics_dt_s'] * 1e3:6.2f} "
               f"{r['substeps']:4d} {r['tissue_nodes']:6d} {r['reset_ms']:9.1f} "
               f"{r.get('async_steps_per_s', float('nan')):8.0f} {r.get('async_speedup', float('nan')):8.2f} "
-              f"{r['overhead_ratio']:8.2f}")
+              f"{r['overhead_ratio']:8.2f} {r['reference_kernel_us']:7.1f} {r['env_step_in_reference_kernels']:8.2f}")
     return 0
 
 
