@@ -23,6 +23,7 @@ def test_neo_hookean_between_frictionless_plates_gives_its_closed_form_law():
     np.testing.assert_allclose(stress, mu * (lam - lam ** -2), rtol=0.03)
 
 
+@pytest.mark.slow      # 18 s (a 7.5 mm FEM block, twice); the frictionless closed-form test above stays in the default run
 def test_bonded_plates_are_stiffer_than_frictionless_ones():
     mat = {"young": 15_000.0, "poisson": 0.499, "density": 1000.0, "damping": 0.0}
     opts = {"corotational": False, "formulation": "anp", "spacing": 0.0075}
