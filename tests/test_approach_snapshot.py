@@ -48,7 +48,7 @@ def test_the_snapshot_is_the_full_runs_rigid_state_before_any_contact(replayed):
         u._run(1, goal, _no_pull)
         if k == kept:
             assert np.array_equal(_state(sim), snap.state)  # bit for bit: time, qpos, qvel, warm start, ctrl, ...
-            assert sim.steps == snap.sim_steps
+            assert sim.steps == snap.steps == k
         if np.any(sim.contacts[next(iter(sim.contacts))].result.forces != 0.0):
             first_contact = k
             break
@@ -68,6 +68,24 @@ def test_the_replayed_settle_is_the_full_settle_up_to_round_off(replayed):
         assert np.array_equal(a.slip.nodes, b.slip.nodes)
         assert a.sim.time == b.sim.time and a.sim.steps == b.sim.steps
         np.testing.assert_allclose(o_rep, o_full, rtol=0, atol=1e-6)
+    full.close()
+
+
+def test_on_another_organ_closure_and_model_the_replay_still_matches():
+    """Parameters the snapshot was not designed on: the liver lobe, a tighter closure, a coarse
+    lattice and the FEM tissue (its first contact, and so the steps kept, differ from the spleen's)."""
+    opts = dict(organ="liver_lobe", initial_closure=0.9, resolution=0.015, model="fem")
+    rep = gym.make("SurgSim/Slippage-v0", **opts)
+    full = gym.make("SurgSim/Slippage-v0", replay_approach=False, **opts)
+    o_rep, _ = rep.reset(seed=21)
+    o_full, _ = full.reset(seed=21)
+    u = rep.unwrapped
+    key, steps = _settle_key(u)
+    assert 0 < u._approach.steps_kept(u.sim, key) < steps
+    assert np.abs(u.sim.tissue().positions - full.unwrapped.sim.tissue().positions).max() < 1e-12
+    assert np.array_equal(u.slip.nodes, full.unwrapped.slip.nodes)
+    np.testing.assert_allclose(o_rep, o_full, rtol=0, atol=1e-6)
+    rep.close()
     full.close()
 
 

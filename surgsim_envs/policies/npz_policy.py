@@ -236,14 +236,20 @@ class NpzPolicy:
             mean = mean + self.noise_scale * np.exp(log_std) * self.rng.standard_normal(mean.shape)
         return np.tanh(mean) if self.output_activation == "tanh" else mean
 
-    def __call__(self, obs):
-        x = self._flatten(obs)
-        if not np.all(np.isfinite(x)):
-            raise self._bad(f"observation holds NaN or inf: {x.tolist()}")
+    def _act(self, x: np.ndarray) -> np.ndarray:
+        """Scaled, clipped actions (float64) for finite flat observations ``x`` (one row or a batch);
+        ConfigError if the network output overflowed."""
         with np.errstate(over="ignore", invalid="ignore"):
             a = np.clip(self.action_bias + self.action_scale * self.forward(x), self.action_low, self.action_high)
         if not np.all(np.isfinite(a)):
             raise self._bad("the network output overflowed (NaN/inf action); check the weights and scaling")
+        return a
+
+    def __call__(self, obs):
+        x = self._flatten(obs)
+        if not np.all(np.isfinite(x)):
+            raise self._bad(f"observation holds NaN or inf: {x.tolist()}")
+        a = self._act(x)
         if self.action_keys is None:
             return a.astype(np.float32)
         out, i = {}, 0
@@ -264,11 +270,7 @@ class NpzPolicy:
             raise self._bad(f"act_batch expects observations of shape (k, {self.obs_size}), got {x.shape}")
         if not np.all(np.isfinite(x)):
             raise self._bad("an observation holds NaN or inf")
-        with np.errstate(over="ignore", invalid="ignore"):
-            a = np.clip(self.action_bias + self.action_scale * self.forward(x), self.action_low, self.action_high)
-        if not np.all(np.isfinite(a)):
-            raise self._bad("the network output overflowed (NaN/inf action); check the weights and scaling")
-        return a.astype(np.float32)
+        return self._act(x).astype(np.float32)
 
     @property
     def batched(self) -> "BatchedPolicy":

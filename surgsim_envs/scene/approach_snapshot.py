@@ -38,9 +38,8 @@ _SPEC = mujoco.mjtState.mjSTATE_INTEGRATION
 
 
 class _Snapshot(NamedTuple):
-    steps: int                 # physics steps the snapshot stands for (0: nothing kept)
+    steps: int                 # physics steps the snapshot stands for (0: nothing kept); Simulation.steps after them
     state: np.ndarray | None   # MuJoCo integration state after them
-    sim_steps: int             # Simulation.steps after them
 
 
 def _tissue_at_rest(sim, rest, tolerance: float) -> bool:
@@ -59,10 +58,9 @@ class ApproachSnapshot:
     """Snapshots of contact-free approaches, per simulation (weakly held) and schedule key."""
 
     def __init__(self, margin_steps: int = 50, chunk_steps: int = 10, tolerance_m: float = 1e-9):
-        for name, v in (("margin_steps", margin_steps), ("chunk_steps", chunk_steps)):
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < (0 if name == "margin_steps" else 1):
-                raise ConfigError(f"ApproachSnapshot: {name}={v!r} must be a whole number of physics steps "
-                                  f"(>= {0 if name == 'margin_steps' else 1})")
+        for name, v, least in (("margin_steps", margin_steps, 0), ("chunk_steps", chunk_steps, 1)):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
+                raise ConfigError(f"ApproachSnapshot: {name}={v!r} must be a whole number of physics steps (>= {least})")
         if not (isinstance(tolerance_m, (int, float)) and np.isfinite(tolerance_m) and tolerance_m > 0):
             raise ConfigError(f"ApproachSnapshot: tolerance_m={tolerance_m!r} must be a positive length in m")
         self.margin_steps = int(margin_steps)
@@ -91,7 +89,7 @@ class ApproachSnapshot:
         if snap.steps == 0 or snap.steps > steps:
             return 0
         mujoco.mj_setState(sim.model, sim.data, snap.state, _SPEC)
-        sim.steps = snap.sim_steps
+        sim.steps = snap.steps          # Simulation.reset set it to 0 and every physics step adds one
         return snap.steps
 
     def _record(self, sim, run, steps: int) -> _Snapshot:
@@ -111,8 +109,8 @@ class ApproachSnapshot:
                 break
             state = np.empty(size)
             mujoco.mj_getState(m, d, state, _SPEC)
-            kept.append(_Snapshot(done, state, sim.steps))
+            kept.append(_Snapshot(done, state))
         sim.reset()                          # the same seed: back to the state the caller reset to
         limit = (steps if failed_at is None else failed_at) - self.margin_steps
         usable = [s for s in kept if s.steps <= limit]
-        return usable[-1] if usable else _Snapshot(0, None, 0)
+        return usable[-1] if usable else _Snapshot(0, None)
