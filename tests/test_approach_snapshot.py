@@ -71,6 +71,7 @@ def test_the_replayed_settle_is_the_full_settle_up_to_round_off(replayed):
     full.close()
 
 
+@pytest.mark.slow          # 37 s (two FEM settles); the spleen tests above stay in the default run
 def test_on_another_organ_closure_and_model_the_replay_still_matches():
     """Parameters the snapshot was not designed on: the liver lobe, a tighter closure, a coarse
     lattice and the FEM tissue (its first contact, and so the steps kept, differ from the spleen's)."""

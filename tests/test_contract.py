@@ -119,7 +119,7 @@ def test_integrated_forces_of_an_explicit_step_are_the_forces_given(name):
     np.testing.assert_array_equal(m.integrated_external_forces, f)
 
 
-@pytest.mark.parametrize("name", ["mass_spring", "fem"])
+@pytest.mark.parametrize("name", ["mass_spring", pytest.param("fem", marks=pytest.mark.slow)])   # fem: 18 s
 def test_integrated_forces_of_an_implicit_step_include_the_stiffness_increment(name):
     m = tissue.make(name, _vol(), ELASTIC, integrator="implicit", cg_tol=1e-12)
     f = np.zeros_like(m.positions)

@@ -35,7 +35,7 @@ def test_env_counts_and_contender_names():
     assert env_counts(2) == (2, 4, 8)
     assert env_counts(2, [8, 16]) == (8, 16)
     assert contender_names(2, [8, 16]) == ("independent", "async", "vector_n8", "vector_n16", "in_main_n8",
-                                           "in_main_n16", "rollout_n16")
+                                           "in_main_n16", "rollout_n16", "one_process_n16")
     with pytest.raises(ConfigError, match=r"env counts >= --workers \(2\), got \[1, 8\]"):
         env_counts(2, [1, 8])
 
@@ -57,3 +57,35 @@ def test_rollout_contender_counts_every_env_step():
         assert 0 < rate <= 4 / 200e-6 * 1.01
     finally:
         run.close()
+
+
+def test_over_one_process_is_the_median_of_same_round_ratios():
+    """Each multi-process contender with n envs over one_process_n<n> in the same round, the median over
+    rounds; contenders with other env counts, and rows without the baseline, get none."""
+    from surgsim_envs.bench.vector_speed import over_one_process
+
+    rates = {"single": [1.0, 1.0, 1.0], "one_process_n4": [100.0, 200.0, 50.0],
+             "vector_n4": [180.0, 340.0, 95.0], "in_main_n4": [150.0, 400.0, 60.0],
+             "rollout_n4": [200.0, 300.0, 100.0], "vector_n2": [500.0, 500.0, 500.0]}
+    out = over_one_process(rates, 4)
+    assert set(out) == {"vector_n4_over_one_process", "in_main_n4_over_one_process", "rollout_n4_over_one_process"}
+    assert out["vector_n4_over_one_process"] == pytest.approx(1.8)     # ratios 1.8, 1.7, 1.9
+    assert out["in_main_n4_over_one_process"] == pytest.approx(1.5)    # 1.5, 2.0, 1.2
+    assert out["rollout_n4_over_one_process"] == pytest.approx(2.0)    # 2.0, 1.5, 2.0
+    assert over_one_process(rates, 8) == {}
+
+
+def test_vector_accounting_rows_and_a_too_short_run():
+    """The accounting of a 200 us stand-in on 2 workers: its env time per round is at least the
+    block's spin time, the counts stay ints over an even number of rounds (a median would give 2.0),
+    and a run no longer than the warm-up is refused naming --steps."""
+    from surgsim_envs.bench.vector_accounting import accounting_rows, print_rows
+
+    env = functools.partial(SpinEnv, 200.0)
+    rows = accounting_rows(env, env_counts=(4,), workers=2, steps=30, repeats=2)
+    (row,) = rows
+    assert type(row["num_envs"]) is int and row["num_envs"] == 4 and row["workers"] == 2
+    assert row["worker_env_us"] >= 2 * 200.0 and row["main_total_us"] >= row["worker_env_us"]
+    print_rows([{"what": "stand-in", **row}])
+    with pytest.raises(ConfigError, match=r"more than 20 steps \(--steps\), got 20"):
+        accounting_rows(env, env_counts=(2,), workers=2, steps=20, repeats=1)

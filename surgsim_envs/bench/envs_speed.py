@@ -59,7 +59,8 @@ def add_arguments(parser) -> None:
                              "this long for its next command before it sleeps; default 0)")
     parser.add_argument("--vector-envs", default=None,
                         help="with --vector: numbers of envs for our vector env, comma-separated, each >= --workers "
-                             "(default 1, 2 and 4 x --workers)")
+                             "(default 1, 2 and 4 x --workers); with --vector-accounting: its env counts (default 1 "
+                             "and 4 x --workers)")
     parser.add_argument("--vector-accounting", action="store_true",
                         help="where the time of one vector step goes (main-process phases, worker wake-up, env "
                              "step, packing, reply) for 1 and 4 envs per worker, tasks and a 300 us stand-in "
@@ -431,6 +432,17 @@ def async_rate(env_id: str, workers: int, steps: int, repeats: int, info_keys=No
     return statistics.median(rates)
 
 
+def _vector_envs_option(args):
+    """``--vector-envs`` as a list of ints (None when not given); ConfigError naming a bad value."""
+    counts = getattr(args, "vector_envs", None)
+    if counts is None:
+        return None
+    try:
+        return [int(c) for c in str(counts).split(",") if c.strip()]
+    except ValueError:
+        raise ConfigError(f"--vector-envs takes env counts (integers), comma-separated, got {counts!r}") from None
+
+
 def vector_row(env_id: str, args, step_us: float | None = None) -> dict:
     """``--vector`` figures of one task (:func:`surgsim_envs.bench.vector_speed.vector_compare`)."""
     from surgsim_envs.bench.vector_speed import vector_compare
@@ -452,13 +464,7 @@ def vector_row(env_id: str, args, step_us: float | None = None) -> dict:
             except ValueError:
                 raise ConfigError(f"--spin-us takes step times in us or 'task', got {s!r}") from None
     row = {"task": env_id, "task_step_us": step_us}
-    counts = getattr(args, "vector_envs", None)
-    if counts is not None:
-        try:
-            counts = [int(c) for c in str(counts).split(",") if c.strip()]
-        except ValueError:
-            raise ConfigError(f"--vector-envs takes env counts (integers), comma-separated, got {args.vector_envs!r}") \
-                from None
+    counts = _vector_envs_option(args)
     row.update(vector_compare(env_id, args.workers, args.steps, args.repeats, spin, task_info(env_id),
                               poll_us=getattr(args, "vector_spin_us", 0.0),
                               worker_poll_us=getattr(args, "vector_worker_spin_us", 0.0), counts=counts))
@@ -478,6 +484,12 @@ def single_rate_quick(env_id: str, steps: int, repeats: int) -> float:
         env.close()
 
 
+def _row_prefixes(r: dict) -> list:
+    """``(key prefix, label)`` of a ``--vector`` row's comparisons: the task's, then each stand-in's."""
+    return [("vector_", r["task"])] + [(k[: -len("single_steps_per_s")], f"  spin {k[4:].split('_')[0]} us")
+                                       for k in r if k.startswith("spin") and k.endswith("single_steps_per_s")]
+
+
 def print_vector(rows) -> None:
     """The ``--vector`` table: env steps/s and speed-up over one env, same rounds."""
     from surgsim_envs.bench.vector_speed import contender_names
@@ -488,12 +500,21 @@ def print_vector(rows) -> None:
           "vector_n<n>: n envs on them; in_main_n<n>: this process steps one block)")
     print(f"{'what':34s} {'1 env/s':>8s} " + " ".join(f"{n + ' x':>13s}" for n in names) + "   load before/after")
     for r in rows:
-        prefixes = [("vector_", r["task"])] + [(k[: -len("single_steps_per_s")], f"  spin {k[4:].split('_')[0]} us")
-                                              for k in r if k.startswith("spin") and k.endswith("single_steps_per_s")]
-        for p, label in prefixes:
+        for p, label in _row_prefixes(r):
             print(f"{label:34s} {r[p + 'single_steps_per_s']:8.0f} "
                   + " ".join(f"{r[p + n + '_speedup']:13.2f}" for n in names)
                   + f"   {r['load_avg_1min_before']:.1f}/{r['load_avg_1min_after']:.1f}")
+    if not rows:
+        return
+    n = rows[0]["vector_env_counts"][-1]
+    multi = (f"vector_n{n}", f"in_main_n{n}", f"rollout_n{n}")
+    print(f"\nspeed-up over one process stepping the same {n} envs (one_process_n{n}: workers=1, in_main=True), "
+          "same rounds")
+    print(f"{'what':34s} " + " ".join(f"{m + ' x':>15s}" for m in multi))
+    for r in rows:
+        for p, label in _row_prefixes(r):
+            print(f"{label:34s} " + " ".join(f"{r.get(p + m + '_over_one_process', float('nan')):15.2f}"
+                                             for m in multi))
 
 
 def _run_accounting(tasks, args) -> int:
@@ -503,6 +524,9 @@ def _run_accounting(tasks, args) -> int:
     if args.workers < 1:
         raise ConfigError(f"--vector-accounting needs --workers >= 1, got {args.workers}")
     counts = (args.workers, 4 * args.workers)
+    if _vector_envs_option(args) is not None:
+        from surgsim_envs.bench.vector_speed import env_counts
+        counts = env_counts(args.workers, _vector_envs_option(args))
     spin = getattr(args, "vector_spin_us", 0.0)
     wspin = getattr(args, "vector_worker_spin_us", 0.0)
     rows = []

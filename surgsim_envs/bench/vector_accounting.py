@@ -135,6 +135,9 @@ def account(make_vec, actions, warmup: int = 20) -> dict:
     keywords, built here after the worker module is patched; not ``in_main``). Returns medians
     in us per vector step; ``worker_*`` are medians over workers and steps."""
     n_steps = len(actions)
+    if n_steps <= warmup:
+        raise ConfigError(f"the accounting times the steps after {warmup} warm-up steps: it needs more than {warmup} "
+                          f"steps (--steps), got {n_steps}")
     ctx = mp.get_context("fork")
     record = ctx.RawArray("d", 64 * n_steps * len(_WFIELDS))
     slot_of_lo: dict = {}
@@ -197,7 +200,9 @@ def accounting_rows(env, env_counts=(2, 8), workers: int = 2, steps: int = 300, 
             make = functools.partial(SurgSimVectorEnv, env, num_envs=n, workers=workers, timeout_s=60.0,
                                      spin_us=spin_us, worker_spin_us=worker_spin_us)
             runs[n].append(account(make, _actions(_batched(single, n), steps, rng, palpation)))
-    return [{k: statistics.median(r[k] for r in rs) for k in rs[0]} for rs in runs.values()]
+    counts = ("num_envs", "workers")          # the same in every round: kept as ints, not medians
+    return [{k: rs[0][k] if k in counts else statistics.median(r[k] for r in rs) for k in rs[0]}
+            for rs in runs.values()]
 
 
 def _batched(space, n):

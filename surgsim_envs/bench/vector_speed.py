@@ -189,7 +189,8 @@ def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = Fals
     env. Warms each up, then ``repeats`` rounds, each timing every contender for ``steps`` env
     steps in turn. Returns per name the median env steps/s, and per vector contender
     ``<name>_speedup``: the median over rounds of its rate over the single env's in the same
-    round (the first contender without ``num_envs`` is the single env)."""
+    round (the first contender without ``num_envs`` is the single env); with a ``one_process_n<n>``
+    contender also ``<name>_over_one_process`` (:func:`over_one_process`)."""
     rng = np.random.default_rng(seed)
     single = next(k for k, e in contenders.items() if not hasattr(e, "num_envs"))
     for name, env in contenders.items():
@@ -222,6 +223,9 @@ def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = Fals
     for k, v in rates.items():
         if k != single:
             out[f"{k}_speedup"] = med(a / b for a, b in zip(v, rates[single]))
+    for k in rates:
+        if k.startswith("one_process_n"):
+            out.update(over_one_process(rates, int(k[len("one_process_n"):])))
     return out
 
 
@@ -248,11 +252,14 @@ def contender_names(workers: int, counts=None) -> tuple:
     """The vector contenders' names, in table order: ``workers`` independent processes with one env
     each (``independent``, the ceiling), AsyncVectorEnv(workers envs), ours with ``n`` envs on
     ``workers`` processes (``vector_n<n>``), ours with the main process stepping one block
-    (``in_main_n<n>``: ``workers - 1`` worker processes), for the fewest and the most envs, and the most
-    envs driven by :meth:`SurgSimVectorEnv.rollout` (``rollout_n<n>``: a random policy in the workers)."""
+    (``in_main_n<n>``: ``workers - 1`` worker processes), for the fewest and the most envs, the most
+    envs driven by :meth:`SurgSimVectorEnv.rollout` (``rollout_n<n>``: a random policy in the workers),
+    and the most envs all stepped by this process (``one_process_n<n>``: ours with ``workers=1,
+    in_main=True``, the same envs, packing and merge with no other process: the one-process baseline
+    of :func:`over_one_process`)."""
     ns = env_counts(workers, counts)
     return ("independent", "async", *(f"vector_n{n}" for n in ns), f"in_main_n{ns[0]}", f"in_main_n{ns[-1]}",
-            f"rollout_n{ns[-1]}")
+            f"rollout_n{ns[-1]}", f"one_process_n{ns[-1]}")
 
 
 def _ours(make, workers: int, counts=None, palpation: bool = False) -> dict:
@@ -260,7 +267,21 @@ def _ours(make, workers: int, counts=None, palpation: bool = False) -> dict:
     out = {f"vector_n{n}": make(n, in_main=False) for n in ns}
     out.update({f"in_main_n{n}": make(n, in_main=True) for n in dict.fromkeys((ns[0], ns[-1]))})
     out[f"rollout_n{ns[-1]}"] = RolloutRun(make(ns[-1], in_main=False), palpation)
+    out[f"one_process_n{ns[-1]}"] = make(ns[-1], in_main=True, workers=1)
     return out
+
+
+def over_one_process(rates: dict, n: int) -> dict:
+    """Per contender with ``n`` envs on several processes (``vector_n<n>``, ``in_main_n<n>``,
+    ``rollout_n<n>``): the median over rounds of its rate over ``one_process_n<n>``'s in the same round,
+    as ``<name>_over_one_process``. ``rates``: name -> the rounds' env steps/s. This is the speed-up a
+    user gets from the workers for the same ``n`` envs (the same round-robin over ``n`` envs, the same
+    packing and info merge, in one process or in several); ``<name>_speedup`` is over a single env."""
+    base = rates.get(f"one_process_n{n}")
+    if not base:
+        return {}
+    return {f"{k}_over_one_process": statistics.median(a / b for a, b in zip(v, base))
+            for k, v in rates.items() if k in (f"vector_n{n}", f"in_main_n{n}", f"rollout_n{n}")}
 
 
 def task_contenders(env_id: str, workers: int, spin_us: float = 0.0, worker_spin_us: float = 0.0,
@@ -272,7 +293,7 @@ def task_contenders(env_id: str, workers: int, spin_us: float = 0.0, worker_spin
 
     single = gym.make(env_id)            # first: the workers fork a process that has loaded the task
 
-    def make(n, in_main):
+    def make(n, in_main, workers=workers):
         return gym.make_vec(env_id, num_envs=n, workers=workers, in_main=in_main, spin_us=spin_us,
                             worker_spin_us=worker_spin_us, timeout_s=STEP_TIMEOUT)
     return {"single": single, "independent": IndependentProcesses(env_id, workers, "Palpation" in env_id),
@@ -290,7 +311,7 @@ def spin_contenders(step_us: float, info: dict | None, workers: int, spin_us: fl
 
     env = functools.partial(SpinEnv, step_us, info)
 
-    def make(n, in_main):
+    def make(n, in_main, workers=workers):
         return SurgSimVectorEnv(env, n, workers=workers, in_main=in_main, spin_us=spin_us,
                                 worker_spin_us=worker_spin_us, timeout_s=STEP_TIMEOUT)
     return {"single": env(), "independent": IndependentProcesses(env, workers),
