@@ -20,6 +20,7 @@ import gymnasium as gym
 import numpy as np
 
 import surgsim_envs  # noqa: F401  (registers the tasks)
+from surgsim_envs.bench.envs_speed import _actions
 
 
 def per_step_us(task: str, counts, rounds: int, steps: int, seed: int = 0) -> dict:
@@ -29,13 +30,11 @@ def per_step_us(task: str, counts, rounds: int, steps: int, seed: int = 0) -> di
         for i, e in enumerate(envs):
             e.reset(seed=seed + i)
         rng = np.random.default_rng(seed)
-        shape = envs[0].action_space.shape
+        space = envs[0].action_space
         times = {k: [] for k in counts}
         for _ in range(rounds + 1):                      # the first round warms up
             for k in counts:
-                acts = rng.uniform(-1, 1, (steps, *shape)).astype(np.float32)
-                if "Palpation" in task:
-                    acts[:, -1] = -1.0
+                acts = _actions(space, steps, rng, "Palpation" in task)
                 t0 = time.thread_time()
                 for j in range(steps):
                     e = envs[j % k]
@@ -57,7 +56,10 @@ def main() -> None:
     p.add_argument("--rounds", type=int, default=12, help="timed rounds (default 12)")
     p.add_argument("--steps", type=int, default=128, help="env steps per count per round (default 128)")
     a = p.parse_args()
-    counts = [int(c) for c in a.envs.split(",")]
+    try:
+        counts = [int(c) for c in a.envs.split(",")]
+    except ValueError:
+        raise SystemExit(f"--envs takes env counts (integers), comma-separated, e.g. 1,4,16; got {a.envs!r}") from None
     if not counts or min(counts) < 1 or a.rounds < 1 or a.steps < 1:
         raise SystemExit(f"--envs needs counts >= 1 and --rounds/--steps >= 1, got {a.envs!r}, {a.rounds}, {a.steps}")
     res = per_step_us(a.task, counts, a.rounds, a.steps)

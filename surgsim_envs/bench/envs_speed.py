@@ -523,10 +523,10 @@ def _run_accounting(tasks, args) -> int:
 
     if args.workers < 1:
         raise ConfigError(f"--vector-accounting needs --workers >= 1, got {args.workers}")
-    counts = (args.workers, 4 * args.workers)
-    if _vector_envs_option(args) is not None:
-        from surgsim_envs.bench.vector_speed import env_counts
-        counts = env_counts(args.workers, _vector_envs_option(args))
+    from surgsim_envs.bench.vector_speed import env_counts
+
+    given = _vector_envs_option(args)
+    counts = (args.workers, 4 * args.workers) if given is None else env_counts(args.workers, given)
     spin = getattr(args, "vector_spin_us", 0.0)
     wspin = getattr(args, "vector_worker_spin_us", 0.0)
     rows = []
