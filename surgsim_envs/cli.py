@@ -37,6 +37,8 @@ BENCH: dict[str, tuple[str, str]] = {
     "diffusion": ("surgsim_envs.bench.diffusion_bench", "diffusion model (paper 000) update time vs the paper's Table 9.1"),
     "growth": ("surgsim_envs.bench.growth_speed", "tissue growth iteration time (paper 004) on a ~10,000-node mesh"),
     "memory": ("surgsim_envs.bench.fractional_memory", "fractional model: error and step cost against short memory L"),
+    "trajectory": ("surgsim_envs.bench.trajectory_check",
+                   "record seeded task trajectories, or compare two records bit for bit"),
     "layers": ("surgsim_envs.bench.layers", "layered model (paper 001) at haptic rate: step time, active nodes, force vs all-node"),
 }
 
