@@ -14,7 +14,7 @@ model's stable dt). Outputs ``accuracy.json`` (the table :func:`surgsim_envs.ben
 and ``accuracy.png`` (log-log, Pareto front marked). Shape error (``shape_rms`` etc., m; chart
 ``accuracy_shape.png``): signed distances of the deformed top surface at the deepest depth to the
 most accurate model's finest surface under the same load (:mod:`surgsim_envs.bench.shape_error`,
-paper 004 sec. 2.2).
+Vandewalle et al. 2003 sec. 2.2).
 
 Baselines, in the same process on the same scene (:func:`surgsim_envs.bench.mujoco_flex.flex_indent`):
 MuJoCo's own 3-D flex with built-in elasticity, ``mujoco_flex_full`` (three dofs per vertex, the

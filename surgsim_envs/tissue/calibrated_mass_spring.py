@@ -82,7 +82,7 @@ class CalibratedMassSpringModel(MassSpringModel):
     """
 
     name: ClassVar[str] = "mass_spring_calibrated"
-    summary: ClassVar[str] = ("mass-spring network (paper 002) with spring constants and a nodal volume term "
+    summary: ClassVar[str] = ("mass-spring network (the grasping simulation paper) with spring constants and a nodal volume term "
                               "identified from linear elasticity (matches FEM at small strain), auto/symplectic/implicit")
     capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "implicit_contact", "viscoelastic"})
     #: "subcycled": the symplectic step split into n = ceil(dt / stable_dt()) equal steps under the same

@@ -1,4 +1,4 @@
-"""Numba kernels of the nonlinear viscoelastic mass-spring-damper model (paper 002).
+"""Numba kernels of the nonlinear viscoelastic mass-spring-damper model (the grasping simulation paper).
 
 Every spring ``e`` joins nodes ``si[e]`` -> ``sj[e]`` with rest length ``L0[e]`` (m). Its axial
 force (N, positive in tension) is
