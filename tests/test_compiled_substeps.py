@@ -1,4 +1,4 @@
-"""The compiled substeps (scene/compiled_substeps.py, issue 18 speed) give exactly what the generic
+"""The compiled substeps (scene/compiled_substeps.py, one numba call per control step) give exactly what the generic
 per-substep loop gives: the same tissue state, contact forces, tool wrenches and MuJoCo state after
 many substeps, bit for bit; and the same errors with the same messages when the guard or the input
 check fails. Models, integrators or guards without a registered loop keep the generic loop."""

@@ -487,7 +487,7 @@ class Simulation:
             for tissue, contact in pairs:
                 res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
                 tissue.step_prevalidated(dt, res.forces, res.stiffness)
-                # CONTRACT (issue 10): an implicit integrator integrates forces + an increment from
+                # CONTRACT (tissue contract v2): an implicit integrator integrates forces + an increment from
                 # the contact stiffness; the tools must get the reaction of exactly
                 # tissue.integrated_external_forces or momentum leaks (11-14 % measured).
                 contact.attribute_increment_prepared(tissue.integrated_external_forces)
