@@ -2,7 +2,8 @@
 
 A speed change must not change the physics. ``--record FILE`` steps each task with seeded random
 actions (Palpation's report held off for the first 100 steps) and writes every reset's and step's
-outputs (observations, rewards, flags, infos) and the final tissue positions to a pickle;
+outputs (observations, rewards, flags, infos) and the final tissue positions (where the task
+runs a Simulation) to a pickle;
 ``--compare A B`` reports, per task, whether two records are identical bit for bit (dtype and
 value; NaN equals NaN) and where they first differ. Record once per tree (e.g. main and a
 branch, each on ``PYTHONPATH``), then compare. Only load records you wrote: they are pickles.
@@ -44,7 +45,8 @@ def record(tasks, steps: int) -> dict:
             rec.append(r)
             if r[2] or r[3]:
                 rec.append(env.reset(seed=i))
-        rec.append(env.unwrapped.sim.tissue().positions.copy())
+        sim = getattr(env.unwrapped, "sim", None)      # a quasi-static task may have no Simulation
+        rec.append(sim.tissue().positions.copy() if sim is not None else None)
         out[task] = rec
         env.close()
     return out
@@ -112,8 +114,10 @@ def run(args) -> int:
         return 0 if all(d is None for d in result.values()) else 1
     if args.steps <= 0:
         raise ConfigError(f"--steps must be a positive integer, got {args.steps}")
-    from surgsim_envs.envs import TASKS
+    from surgsim_envs.envs import QUASI_STATIC_TASKS
+    from surgsim_envs.envs import TASKS as PHYSICS_RATE_TASKS
 
+    TASKS = {**PHYSICS_RATE_TASKS, **QUASI_STATIC_TASKS}
     tasks = list(TASKS) if args.tasks == "all" else [t.strip() for t in args.tasks.split(",") if t.strip()]
     unknown = [t for t in tasks if t not in TASKS]
     if unknown:
