@@ -1,5 +1,5 @@
 """The README picture, docs/img/readme_palpation.png: Palpation-v0's probe pressing the liver slab (a
-rendered frame) beside the force the probe feels (N) against time. ``python scripts/readme_figure.py``."""
+rendered frame, the tissue coloured by displacement with its colour bar) beside the force the probe feels (N) against time. ``python scripts/readme_figure.py``."""
 import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 import gymnasium as gym
@@ -23,7 +23,10 @@ for i in range(60):
 print(f"peak probe force {max(forces):.3f} N; wrote docs/img/readme_palpation.png")
 fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(10, 3.6), gridspec_kw={"width_ratios": [1.4, 1]})
 ax0.imshow(frame); ax0.axis("off"); ax0.set_title("SurgSim/Palpation-v0: probe pressing a liver slab")
+# the slab is coloured by node displacement, 0-4 mm, viridis (the scene's render_field)
+sm = plt.cm.ScalarMappable(cmap="viridis", norm=matplotlib.colors.Normalize(0.0, 4.0))
+fig.colorbar(sm, ax=ax0, fraction=0.046, pad=0.02, label="tissue displacement (mm)")
 t = np.arange(1, len(forces) + 1) * 0.01
-ax1.plot(t, forces, color="tab:red"); ax1.axvline(0.46, color="0.5", ls=":")
+ax1.plot(t, forces, color="tab:red"); ax1.axvline(0.46, color="0.5", ls=":", label="frame shown"); ax1.legend(loc="upper left")
 ax1.set_xlabel("time (s)"); ax1.set_ylabel("probe force (N)"); ax1.set_title("force the probe feels")
 fig.tight_layout(); fig.savefig("docs/img/readme_palpation.png", dpi=100)
