@@ -1,5 +1,5 @@
 """Sphere indentation of ``mass_spring_calibrated`` (and optionally ``fem``) against Dimitriadis et al.
-(2002) on held-out cases and under refinement (issue 16, docs/models/mass_spring_calibrated.md).
+(2002) on held-out cases and under refinement (docs/models/mass_spring_calibrated.md).
 
     python scripts/calibrated_indent_sweep.py --out surgsim-out/calibrated_sweep.json \
         --figure docs/img/mass_spring_calibrated_sweep.png
@@ -92,7 +92,7 @@ def plot(rows, path):
         sel = [r for r in rows if r["set"] == "held_out" and r["radius"] == radius and r["model"] == "mass_spring_calibrated"]
         a1.plot([r["poisson"] for r in sel], [r["error"] for r in sel], "o-",
                 label=f"E {young / 1e3:g} kPa, R {radius * 1e3:g} mm, {thickness * 1e3:g} mm layer")
-    a1.axhline(0.10, color="r", ls=":", label="issue 16 target 10 %")
+    a1.axhline(0.10, color="r", ls=":", label="target 10 %")
     a1.set_xlabel("Poisson ratio")
     a1.set_ylabel("mean |F/F_Dimitriadis - 1|")
     a1.set_title("held-out cases (spacing = contact radius / 2)")

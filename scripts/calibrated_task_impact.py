@@ -1,4 +1,4 @@
-"""Task impact of ``mass_spring_calibrated`` against ``mass_spring`` (issue 16, "on by default"): reset
+"""Task impact of ``mass_spring_calibrated`` against ``mass_spring`` (should it be the tasks' default?): reset
 and env-step wall times of each task (same process, same seeds, random actions, the models run in
 turn per seed so that the machine load hits both alike), the integrator each step took, and a
 stability soak (``--soak``: that many random env steps per task and model, resets on episode end,

@@ -1,4 +1,4 @@
-"""Env steps/s of two source trees, alternated (docs/benchmarks.md, "Env step: third pass").
+"""Env steps/s of two source trees, alternated (CHANGELOG.md, "Env step: three-pass spring kernel, env fast paths, Grasp sub-cycling").
 
 Runs ``surgsim bench envs --json --workers 0`` with ``PYTHONPATH`` set to each tree in turn,
 ``--rounds`` times (A, B, A, B, ...), so both trees see the same machine load; prints per task the

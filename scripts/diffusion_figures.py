@@ -67,7 +67,7 @@ def figure_cases(out: Path) -> dict:
             _draw(ax, m, disps[c], colour, elev, azim, vmax)
             if row == 0:
                 ax.set_title(TITLES[c], fontsize=9)
-    fig.suptitle(f"Diffusion model (paper 000): 10 cm round-cornered cube, {cases['isotropic'].n_nodes} points, "
+    fig.suptitle(f"Diffusion model (Zhong et al. 2016): 10 cm round-cornered cube, {cases['isotropic'].n_nodes} points, "
                  f"{PAPER_FORCE:.1f} N (3 kg) on the +x face; E {FIGURE_MATERIAL['young'] / 1e3:.0f} kPa. "
                  "Colour: |u| (isotropic, anisotropic) or white/grey omega regions", fontsize=9)
     fig.tight_layout()

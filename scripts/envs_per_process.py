@@ -1,5 +1,5 @@
 """What stepping many envs round-robin in one process costs per step, against stepping fewer
-(docs/benchmarks.md, "Ninth 2026-11-23 session"): each env's arrays are evicted from the core's
+(docs/benchmarks.md, "Vector envs"): each env's arrays are evicted from the core's
 cache by the others' steps, so a process with many envs steps each more slowly than one env.
 
     python scripts/envs_per_process.py [TASK] [--envs 1,4,8,16,32,64] [--rounds 12] [--steps 128]

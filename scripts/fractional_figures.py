@@ -1,4 +1,4 @@
-"""Figures and tables of docs/models/fractional.md (paper 003).
+"""Figures and tables of docs/models/fractional.md (the variable-order paper).
 
     python scripts/fractional_figures.py [--out docs/img] [--data ../shared/data/tissue_mechanics]
 

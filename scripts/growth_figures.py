@@ -1,4 +1,4 @@
-"""Figures of docs/models/growth.md (paper 004): Fig. 3 (cube growth vs k), Fig. 4 (iterations vs
+"""Figures of docs/models/growth.md (Vandewalle et al. 2003): Fig. 3 (cube growth vs k), Fig. 4 (iterations vs
 alpha), Fig. 5 (nu, k sweep on the synthetic maxillofacial case), Figs. 6/7 (basic vs growth).
 
     PYTHONPATH=. python scripts/growth_figures.py --out docs/img [--skip-sweep]

@@ -1,4 +1,4 @@
-"""Layered wall force against FEM for the ``layered`` model's stiffness forms (issue 11, accuracy item).
+"""Layered wall force against FEM for the ``layered`` model's stiffness forms.
 
 The comparison of :mod:`surgsim_envs.bench.layers_accuracy` (abdominal wall patch, bottom face
 bonded, rigid flat punch pressed ``depth``, linear models on the same lattice, per-layer

@@ -1,4 +1,4 @@
-"""Reproduce paper 001's Figs. 2.14-2.16 with the layered model; writes docs/img/layered_*.png and
+"""Reproduce Lin et al. 2008's Figs. 2.14-2.16 with the layered model; writes docs/img/layered_*.png and
 prints the numbers as JSON. Usage: PYTHONPATH=. python scripts/layered_figures.py [spacing_m]"""
 
 import json

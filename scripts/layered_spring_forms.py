@@ -1,4 +1,4 @@
-"""Spring forms tried for the layered abdominal wall against FEM (issue 11, accuracy item).
+"""Spring forms tried for the layered abdominal wall against FEM (how close to FEM each form gets).
 
 The comparison of ``surgsim_envs.bench.layers_accuracy`` (8 x 8 cm abdominal wall patch, bottom
 bonded, rigid flat punch of radius 10 mm pressed 1 mm, linear models on the same lattice tets and

@@ -11,7 +11,7 @@ def plot_rows(rows, strains, path) -> None:
     """rows: [(label, {strain: (total m, seconds, model part m)})]; the first row is the symmetry floor.
 
     One group of bars per strain: each model's total RMS (solid) with its model part (hatched,
-    the distance to the symmetrised measurement), the floor as a dashed line, the issue's 1.2 mm
+    the distance to the symmetrised measurement), the floor as a dashed line, the 1.2 mm target
     target as a dotted line."""
     import matplotlib
 
@@ -29,7 +29,7 @@ def plot_rows(rows, strains, path) -> None:
             ax.bar(x, res[s][2] * 1e3, width * 0.9, color=colors[m], hatch="///", edgecolor="k", linewidth=0.3)
         ax.hlines(floor[s][0] * 1e3, g - 0.45, g + 0.45, colors="k", linestyles="--",
                   label="symmetry floor of the data" if g == 0 else None)
-    ax.axhline(1.2, color="r", linestyle=":", label="issue target 1.2 mm")
+    ax.axhline(1.2, color="r", linestyle=":", label="target 1.2 mm")
     top = 3.0 * max(floor[s][0] for s in strains) * 1e3          # off-scale bars (a folded network) get a label
     ax.set_ylim(0, top)
     for g, s in enumerate(strains):

@@ -1,5 +1,5 @@
 """What a synchronous vector env can reach with 2 workers, from the spread of one task's step times
-(docs/benchmarks.md, "Vector env: the ceiling (seventh 2026-11-23 session)").
+(docs/benchmarks.md, "Vector envs": the synchronous ceiling).
 
     python scripts/vector_sync_ceiling.py [TASK ...] [--envs 16] [--rounds 200] [--option KEY=JSON ...]
 

@@ -1,5 +1,5 @@
 """Is an env step slower in a child process, and what do two processes give on the 2 cores?
-(docs/benchmarks.md, "Re-measured on a quiet machine (sixth 2026-11-23 session ...)").
+(CHANGELOG.md, "Re-measured on a quiet machine (16:50 UTC)").
 
     python scripts/worker_step_check.py [TASK] [--steps N] [--rounds R]
 

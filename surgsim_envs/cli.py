@@ -19,8 +19,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fit": ("surgsim_envs.bench.fit", "fit model parameters to measured force data"),
     "teleop": ("surgsim_envs.haptics.teleop", "teleoperate a task with a (simulated) haptic device"),
     "run": ("surgsim_envs.scenarios.cli", "run a trainee scenario file and write a report"),
-    "grow": ("surgsim_envs.planning.grow_cmd", "tissue growth after a bone displacement (paper 004): basic vs growth"),
-    "validate": ("surgsim_envs.bench.validate_cmd", "signed surface distances of a prediction to a reference (paper 004)"),
+    "grow": ("surgsim_envs.planning.grow_cmd", "tissue growth after a bone displacement (Vandewalle et al. 2003): basic vs growth"),
+    "validate": ("surgsim_envs.bench.validate_cmd", "signed surface distances of a prediction to a reference (Vandewalle et al. 2003)"),
 }
 BENCH: dict[str, tuple[str, str]] = {
     "speed": ("surgsim_envs.bench.speed", "tissue model step time per model, integrator, node count"),
@@ -34,10 +34,12 @@ BENCH: dict[str, tuple[str, str]] = {
                         "calibrated vs plain mass-spring: critical dt, step cost per simulated ms"),
     "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
     "soak": ("surgsim_envs.bench.soak", "long random-action runs: NaN, exceptions, force bounds, memory growth"),
-    "diffusion": ("surgsim_envs.bench.diffusion_bench", "diffusion model (paper 000) update time vs the paper's Table 9.1"),
-    "growth": ("surgsim_envs.bench.growth_speed", "tissue growth iteration time (paper 004) on a ~10,000-node mesh"),
+    "diffusion": ("surgsim_envs.bench.diffusion_bench", "diffusion model (Zhong et al. 2016) update time vs the paper's Table 9.1"),
+    "growth": ("surgsim_envs.bench.growth_speed", "tissue growth iteration time (Vandewalle et al. 2003) on a ~10,000-node mesh"),
     "memory": ("surgsim_envs.bench.fractional_memory", "fractional model: error and step cost against short memory L"),
-    "layers": ("surgsim_envs.bench.layers", "layered model (paper 001) at haptic rate: step time, active nodes, force vs all-node"),
+    "trajectory": ("surgsim_envs.bench.trajectory_check",
+                   "record seeded task trajectories, or compare two records bit for bit"),
+    "layers": ("surgsim_envs.bench.layers", "layered model (Lin et al. 2008) at haptic rate: step time, active nodes, force vs all-node"),
 }
 
 

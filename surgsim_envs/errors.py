@@ -44,7 +44,7 @@ class RenderingUnavailableError(SurgSimError, RuntimeError):
 
 
 class GrowthDivergedError(TissueUnstableError):
-    """The tissue-growth iteration (paper 004, section 2.3) diverged: the growth per iteration grew.
+    """The tissue-growth iteration (Vandewalle et al. 2003, section 2.3) diverged: the growth per iteration grew.
 
     Attributes: ``model``, ``alpha`` (the stability factor, 1/Pa), ``alpha_limit`` (1/Pa, the
     largest alpha guaranteed to converge), ``iteration``, ``reason``.

@@ -121,7 +121,7 @@ PRESETS: dict[str, Material] = {
         young=10_000.0, poisson=0.45, density=1054.0, damping=5.0, relax_fraction=0.6, relax_time=1.0,
         nonlinear=3.0, friction=0.6, name="spleen",
         source="E ~ 5-15 kPa: Rosen et al. 2008 (in-vivo porcine spleen compression); "
-        "friction mu 0.6 as paper 002; rho: ICRP 89",
+        "friction mu 0.6 as the grasping simulation paper; rho: ICRP 89",
     ),
     "kidney": Material(
         young=8_000.0, poisson=0.45, density=1050.0, damping=5.0, relax_fraction=0.4, relax_time=1.0,

@@ -125,7 +125,7 @@ def test_indentation_within_10_percent_at_nu_0_3_held_out():
 @pytest.mark.parametrize("young,radius,thickness", [(800.0, 0.003, 0.02), (40_000.0, 0.010, 0.04)])
 @pytest.mark.parametrize("nu", [0.3, 0.4, 0.45, 0.49])
 def test_indentation_within_10_percent_held_out_sweep(young, radius, thickness, nu):
-    """Issue 16: <= 10 % for nu 0.3-0.49 on (E, R, layer) never used while building the method."""
+    """Accuracy target: <= 10 % for nu 0.3-0.49 on (E, R, layer) never used while building the method."""
     err, end = _indent_error(nu, young, radius, thickness)
     assert err < 0.10, (err, end)
 

@@ -1,9 +1,9 @@
 """mass_spring_calibrated under integrator "auto" in the compiled substeps (scene/substeps_calibrated.py,
-issue 16): each step the loop takes is the one the generic loop takes (symplectic, "subcycled" n steps of
+the calibrated model): each step the loop takes is the one the generic loop takes (symplectic, "subcycled" n steps of
 dt / n, or implicit), with the same state, contact forces, tool wrenches, Maxwell-branch interval and
 guard reference. Equal to 1e-12 relative: bit for bit when numba compiles the kernels in the process,
 while a kernel loaded from numba's cache may round the fastmath nodal-volume pass's last bit differently
-(docs/benchmarks.md "Env step: fourth pass")."""
+(CHANGELOG.md "Env step: address table, pluggable tissue step")."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The compiled substeps (scene/compiled_substeps.py, issue 18 speed) give exactly what the generic
+"""The compiled substeps (scene/compiled_substeps.py, one numba call per control step) give exactly what the generic
 per-substep loop gives: the same tissue state, contact forces, tool wrenches and MuJoCo state after
 many substeps, bit for bit; and the same errors with the same messages when the guard or the input
 check fails. Models, integrators or guards without a registered loop keep the generic loop."""
@@ -81,7 +81,7 @@ def test_calibrated_mass_spring_runs_compiled():
     it: the compiled loop gives the generic loop's result. Bit for bit when numba compiles the
     kernels in the process; with kernels loaded from numba's cache the fastmath nodal-volume kernel
     may round the last bit differently (measured 1e-15 relative), hence 1e-12 here
-    (docs/benchmarks.md "Env step: fourth pass"). "auto" (sub-cycles, implicit steps):
+    (CHANGELOG.md "Env step: address table, pluggable tissue step"). "auto" (sub-cycles, implicit steps):
     tests/test_compiled_calibrated.py."""
     envs = _pair("SurgSim/Palpation-v0", model="mass_spring_calibrated", spacing=0.01, dt=2.5e-4)
     s0, s1 = (e.unwrapped.sim for e in envs)

@@ -1,4 +1,4 @@
-"""Contact damping with a quasi-static tissue model (fem_static): implicit damping (issue 16).
+"""Contact damping with a quasi-static tissue model (fem_static): implicit damping.
 
 A quasi-static model's velocities are finite differences of equilibria, so explicit contact
 damping c_n * v acts like a stiffness c_n / dt that lags one step: the sequence of equilibria

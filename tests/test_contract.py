@@ -1,4 +1,4 @@
-"""Tissue contract v2 (issue 10, docs/models.md): capabilities, one safety factor, material
+"""Tissue contract v2 (docs/models.md): capabilities, one safety factor, material
 changes through the model, integrated forces, and a new model joining by registration."""
 
 import math

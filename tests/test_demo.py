@@ -19,7 +19,7 @@ def test_demo_runs_and_summary_shows_the_physics(tmp_path, duration, capsys):
     assert palp["peak_force_above_inclusion_N"] > 1.1 * palp["peak_force_beside_inclusion_N"] > 0
     # the tip stays on the surface: penetration below 10 % of the indentation depth
     assert palp["max_penetration_m"] < 0.1 * palp["indentation_depth_m"]
-    # paper 002: the normal force relaxes while the jaws are held, and the tissue slips at a finite pull
+    # the grasping simulation paper: the normal force relaxes while the jaws are held, and the tissue slips at a finite pull
     assert grasp["normal_force_end_of_hold_N"] < 0.9 * grasp["normal_force_end_of_close_N"]
     assert 0 < grasp["slip_onset_pull_force_N"] < grasp["peak_normal_force_N"]
 

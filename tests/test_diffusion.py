@@ -1,4 +1,4 @@
-"""The chemical-diffusion surface model (paper 000): discretisation against the paper's formulas,
+"""The chemical-diffusion surface model (Zhong et al. 2016): discretisation against the paper's formulas,
 analytic decay on a sphere, load conservation, the paper's qualitative results (Figs. 9.2-9.6),
 scene use and bad input."""
 

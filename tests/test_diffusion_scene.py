@@ -1,4 +1,4 @@
-"""The diffusion model (paper 000) in scenes and tasks through the generic path: a probe presses
+"""The diffusion model (Zhong et al. 2016) in scenes and tasks through the generic path: a probe presses
 the surface of a tet slab (interior nodes unused), and Palpation-v0 runs with model="diffusion"."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Every SurgSim task loads and steps as a dm_control environment (issue 18)."""
+"""Every SurgSim task loads and steps as a dm_control environment."""
 
 import numpy as np
 import pytest

@@ -1,5 +1,5 @@
 """Spaces that mean something: named observation terms with units and physical bounds, reward
-terms in info, max_episode_steps in the registration (issue 18)."""
+terms in info, max_episode_steps in the registration."""
 
 import gymnasium as gym
 import numpy as np

@@ -47,7 +47,7 @@ def test_model_in_task(model, task):
 
 
 def test_layered_serves_every_task():
-    """Issue 11: the layered model (paper 001) has every capability every task asks for, so
+    """The layered model (Lin et al. 2008) has every capability every task asks for, so
     test_model_in_task steps it in each (its NBB comes from the organ lattice, geometry/layered_mesh.py)."""
     caps = tissue.registry.get("layered").capabilities
     for task in sorted(TASKS):

@@ -1,4 +1,4 @@
-"""Export of SB3 Gaussian heads to the .npz format (issue 15): the numpy sampler draws from SB3's
+"""Export of SB3 Gaussian heads to the .npz format: the numpy sampler draws from SB3's
 own action distribution. Needs stable-baselines3 + torch (marker ``train``, skipped without)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Linear / corotational tetrahedral FEM (paper 004 basic model): analytic checks and stability."""
+"""Linear / corotational tetrahedral FEM (Vandewalle et al. 2003 basic model): analytic checks and stability."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""fem_static: quasi-static small-strain FEM with a prefactored stiffness and condensed contact (issue 16).
+"""fem_static: quasi-static small-strain FEM with a prefactored stiffness and condensed contact.
 
 Exactness: a condensed step (cached compliance columns, implicit penalty on the loaded nodes only)
 equals the full sparse solve of (K + K_c) u = f + K_c u^n. Accuracy: sphere indentation within

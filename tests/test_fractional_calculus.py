@@ -1,4 +1,4 @@
-"""Variable-order fractional derivatives (paper 003, eqs. 3-4): accuracy, order, limits, Scott-Blair."""
+"""Variable-order fractional derivatives (the variable-order paper, eqs. 3-4): accuracy, order, limits, Scott-Blair."""
 
 from __future__ import annotations
 

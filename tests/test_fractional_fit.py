@@ -1,4 +1,4 @@
-"""Identification of the variable-order law (paper 003, section III) and the 1-D comparison models."""
+"""Identification of the variable-order law (the variable-order paper, section III) and the 1-D comparison models."""
 
 from __future__ import annotations
 

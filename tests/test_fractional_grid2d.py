@@ -1,4 +1,4 @@
-"""2-D fractional layer (paper 003, eqs. 19-23) against the elastic / Kelvin-Voigt static solution."""
+"""2-D fractional layer (the variable-order paper, eqs. 19-23) against the elastic / Kelvin-Voigt static solution."""
 
 from __future__ import annotations
 

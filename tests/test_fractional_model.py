@@ -1,4 +1,4 @@
-"""3-D fractional tissue model (paper 003 extended to tets): limits, history, equilibrium, stability, contract."""
+"""3-D fractional tissue model (the variable-order paper extended to tets): limits, history, equilibrium, stability, contract."""
 
 from __future__ import annotations
 

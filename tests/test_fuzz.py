@@ -1,4 +1,4 @@
-"""Property-based fuzzing (issue 14) of everything that takes outside input: the UDP pose decoder
+"""Property-based fuzzing of everything that takes outside input: the UDP pose decoder
 and sequence gate, the scenario schema, the legacy VTK reader and the mesh loaders, and env
 actions. No input may crash the process, hang or return NaN; a rejection is a ConfigError (or
 ValueError) whose message names the value. Small ``max_examples`` keep the default run fast. No

@@ -1,4 +1,4 @@
-"""Tissue growth (paper 004, section 2.3): analytic bar, tensile part, volume vs k, errors."""
+"""Tissue growth (Vandewalle et al. 2003, section 2.3): analytic bar, tensile part, volume vs k, errors."""
 
 import numpy as np
 import pytest

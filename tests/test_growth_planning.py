@@ -1,4 +1,4 @@
-"""Paper 004 planning case: distraction, basic vs growth against a synthetic reference, Fig. 5 sweep."""
+"""Vandewalle et al. 2003 planning case: distraction, basic vs growth against a synthetic reference, Fig. 5 sweep."""
 
 import json
 

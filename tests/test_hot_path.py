@@ -1,4 +1,4 @@
-"""The scene's hot path (issue 18 speed) gives exactly what the checked public calls give:
+"""The scene's hot path (prepared contact, pre-validated tissue step) gives exactly what the checked public calls give:
 ContactModel.compute_prepared == compute, TissueModel.step_prevalidated == step, and NaN input
 is still refused with the same error and an untouched state."""
 

@@ -1,4 +1,4 @@
-"""Paper 001: heterogeneous layered volumes (tri-ray snapping) and the layered model."""
+"""Lin et al. 2008: heterogeneous layered volumes (tri-ray snapping) and the layered model."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The layered model's ``stiffness="elastic"`` option (issue 11): elasticity of the snapped cells in
+"""The layered model's ``stiffness="elastic"`` option: elasticity of the snapped cells in
 the paper's constrained static solve (extreme lengths as rigid links, force accumulation)."""
 
 from __future__ import annotations
@@ -119,7 +119,7 @@ def test_elastic_penalty_contact_and_scale_material(wall):
 
 @pytest.mark.slow
 def test_elastic_wall_within_ten_percent_of_fem_on_an_untuned_probe():
-    """Issue 11 accuracy target on a patch and probe not used while developing the option (6 x 6 cm,
+    """The accuracy target on a patch and probe not used while developing the option (6 x 6 cm,
     7 mm punch; the option was developed on the 8 x 8 cm patch and 10 mm punch, where FEM has
     converged at dd 3 mm: 0.146 -> 0.145 N at 2 mm): the elastic layered wall within 10 % of FEM
     (ANP tets) on the same layered volume at dd 3 mm (measured 0.994; the paper's springs 1.19).

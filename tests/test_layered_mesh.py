@@ -1,4 +1,4 @@
-"""The layered model on any snapped organ lattice / tet mesh (issue 11, ``unstructured_mesh``)."""
+"""The layered model on any snapped organ lattice / tet mesh (``unstructured_mesh``)."""
 
 from __future__ import annotations
 

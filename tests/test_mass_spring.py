@@ -1,4 +1,4 @@
-"""Nonlinear viscoelastic mass-spring-damper model (paper 002): physics and bad input."""
+"""Nonlinear viscoelastic mass-spring-damper model (the grasping simulation paper): physics and bad input."""
 
 import math
 

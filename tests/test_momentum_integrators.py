@@ -1,5 +1,5 @@
 """The tool receives the reaction of exactly the force the tissue integrated, for every integrator
-(issue 10): an off-centre, oblique impact with friction conserves the total linear momentum of
+(tissue contract v2): an off-centre, oblique impact with friction conserves the total linear momentum of
 tools plus tissue to 1e-9 (relative), with both models, explicit and implicit.
 
 With an implicit integrator the tissue integrates the contact force plus the increment

@@ -83,7 +83,7 @@ def test_mooney_rivlin_homogeneous_energy():
 @pytest.mark.slow
 def test_truth_cube_rms_below_corotational_fem(shared_data):
     """Kerdok truth cube, 10 mm mesh: measured 0.98 / 1.35 / 1.62 mm RMS (corotational ANP FEM: 0.99 / 1.39 /
-    1.80 mm, docs/benchmarks.md); the issue's 1.2 mm at 12.5 % and 18.25 % is NOT reached."""
+    1.80 mm, docs/benchmarks.md); the 1.2 mm target at 12.5 % and 18.25 % is NOT reached."""
     spec = importlib.util.spec_from_file_location("tc", Path(__file__).resolve().parents[1] / "scripts" / "truthcube.py")
     tc = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tc)

@@ -1,4 +1,4 @@
-"""Per-node scalar fields for display (contract v2) and the surface coloured by one (issue 10)."""
+"""Per-node scalar fields for display (contract v2) and the surface coloured by one."""
 
 import dataclasses
 

@@ -1,4 +1,4 @@
-"""The Gaussian head of the .npz policy format (issue 15): stochastic actions from a seeded numpy
+"""The Gaussian head of the .npz policy format: stochastic actions from a seeded numpy
 sampler, with the distribution the file records (numpy only)."""
 
 from __future__ import annotations

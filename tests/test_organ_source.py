@@ -1,5 +1,5 @@
 """organ= accepts a registered name, a mesh path (STL/OBJ/PLY/VTK) or a Volume; bad meshes say
-what is wrong with them (issue 10)."""
+what is wrong with them."""
 
 import numpy as np
 import pytest

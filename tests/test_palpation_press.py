@@ -1,4 +1,4 @@
-"""SurgSim/PalpationPress-v0 (issue 15): one step = one press; the raster expert far above random."""
+"""SurgSim/PalpationPress-v0: one step = one press; the raster expert far above random."""
 
 from __future__ import annotations
 

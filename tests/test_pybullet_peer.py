@@ -1,4 +1,4 @@
-"""PyBullet's soft body as an accuracy-chart peer (surgsim_envs/bench/pybullet_peer.py, issue 16).
+"""PyBullet's soft body as an accuracy-chart peer (surgsim_envs/bench/pybullet_peer.py).
 
 Behaviour of the scene, not timing: the slab pushes back, more with depth and with stiffness;
 the VTK tet file PyBullet reads holds exactly our mesh. Needs the [peers] extra (pybullet)."""

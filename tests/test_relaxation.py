@@ -1,4 +1,4 @@
-"""Both mechanical models relax like the standard linear solid (issue 10).
+"""Both mechanical models relax like the standard linear solid (tissue contract v2).
 
 A 2 cm cube between two clamped plates is compressed 10 % by a linear ramp of ``t_r = tau / 10``
 and held. The plate force of a model with relax fraction g and time tau must follow the SLS

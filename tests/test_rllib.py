@@ -1,4 +1,4 @@
-"""Ray RLlib creators with per-worker seeding (issue 15). The seeding tests need no Ray; the
+"""Ray RLlib creators with per-worker seeding. The seeding tests need no Ray; the
 local-mode training run is marked ``distributed`` (``pytest -m distributed``, needs the
 [distributed] extra) and skips without Ray."""
 

@@ -1,4 +1,4 @@
-"""Scenarios: schema validation, scoring, the runner and reports, and paper 002's grasp protocol.
+"""Scenarios: schema validation, scoring, the runner and reports, and the grasping simulation paper's grasp protocol.
 
 The mu sweep (close, hold, pull; mu = 0.6, 0.8, 1.0) runs once at a quarter of the paper's
 durations and is shared by the paper-002 tests.
@@ -170,7 +170,7 @@ def test_mu_sweep_runs_and_writes_report(mu_sweep):
 
 
 def test_slip_onset_pull_force_increases_with_mu(mu_sweep):
-    """Paper 002 Fig. 5: slippage occurs at higher pulling forces as friction rises; the normal
+    """The grasping simulation paper Fig. 5: slippage occurs at higher pulling forces as friction rises; the normal
     force (set by the closing) is not affected by mu."""
     _, report, _ = mu_sweep
     onset = [r["slip_onset_pull"] for r in report["runs"]]
@@ -184,7 +184,7 @@ def test_slip_onset_pull_force_increases_with_mu(mu_sweep):
 
 
 def test_hold_phase_shows_stress_relaxation(mu_sweep):
-    """Paper 002 Fig. 4: the normal force rises while the jaws close and falls (relaxation) while
+    """The grasping simulation paper Fig. 4: the normal force rises while the jaws close and falls (relaxation) while
     they are held still."""
     results, _, _ = mu_sweep
     for res in results:

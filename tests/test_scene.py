@@ -136,7 +136,7 @@ def test_same_seed_same_trajectory():
 
 
 def test_grasper_pull_leads_to_gross_slip_at_low_friction_only():
-    """Paper 002: the same pull holds the tissue with high friction and slides off with low friction."""
+    """The grasping simulation paper: the same pull holds the tissue with high friction and slides off with low friction."""
     def pulled(mu):
         cfg = grasp_config()
         cfg.tissues[0].spacing = 0.009

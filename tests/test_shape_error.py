@@ -1,4 +1,4 @@
-"""Shape-error axis of ``surgsim bench accuracy`` (paper 004 validation applied to indentation)."""
+"""Shape-error axis of ``surgsim bench accuracy`` (Vandewalle et al. 2003 validation applied to indentation)."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Shipped .npz policies (issue 15): every task has one, it loads without torch, and it beats a
+"""Shipped .npz policies: every task has one, it loads without torch, and it beats a
 uniform random policy on held-out seeds, reaching its documented success (docs/training.md).
 
 The default run evaluates one policy (PalpationPress-v0, a few seconds); the others run with

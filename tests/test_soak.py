@@ -1,4 +1,4 @@
-"""``surgsim bench soak`` (issue 14): a short soak of a real task finds nothing, and the counters
+"""``surgsim bench soak``: a short soak of a real task finds nothing, and the counters
 count what a deliberately faulty env does."""
 
 from __future__ import annotations

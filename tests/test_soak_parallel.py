@@ -1,4 +1,4 @@
-"""``surgsim bench soak --workers/--out/--resume`` (issue 14): the split, the seeds, the merge,
+"""``surgsim bench soak --workers/--out/--resume``: the split, the seeds, the merge,
 checkpoints and resuming. Tiny step counts: the long soak is a benchmark, not a test."""
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ _SLOW_PRESETS = {("fem", p) for p in PRESETS if p != "liver"}
     pytest.param(m, p, marks=[pytest.mark.slow] if (m, p) in _SLOW_PRESETS else [])
     for m in ("mass_spring", "fem") for p in sorted(PRESETS)])
 def test_presets_stable_at_default_dt(model, preset):
-    # issue 7: every shipped preset is stable at the default dt (1 ms) with the default integrator
+    # every shipped preset is stable at the default dt (1 ms) with the default integrator
     # ("auto": explicit below 0.8 x critical_dt(), implicit above) for 1 s of simulated time
     vol = geometry.make_volume("slab")
     z = vol.nodes[:, 2]

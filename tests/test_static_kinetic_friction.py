@@ -1,4 +1,4 @@
-"""Static and kinetic friction in the contact law (contact/friction.py, issue 16).
+"""Static and kinetic friction in the contact law (contact/friction.py).
 
 A sticking contact point holds up to mu_s f_n and then slides at mu f_n (mu_s >= mu); a sliding
 point sticks again when its stick spring falls back to mu f_n. Exact checks on a uniformly loaded

@@ -1,4 +1,4 @@
-"""Validation procedure of paper 004 (section 2.2): signed surface distances, state files, CLI."""
+"""Validation procedure of Vandewalle et al. 2003 (section 2.2): signed surface distances, state files, CLI."""
 
 import json
 import os

@@ -1,4 +1,4 @@
-"""organ= in the grasp tasks (issue 10): a registered name, a closed mesh file or a Volume."""
+"""organ= in the grasp tasks: a registered name, a closed mesh file or a Volume."""
 
 import gymnasium as gym
 import numpy as np

@@ -1,4 +1,4 @@
-"""Tools start clear of all geometry; at rest the hand feels nothing (issue 18)."""
+"""Tools start clear of all geometry; at rest the hand feels nothing."""
 
 import mujoco
 import numpy as np

@@ -65,7 +65,7 @@ def test_asymmetric_bead_set_and_bad_input_are_rejected():
 def test_measured_floor_exceeds_the_issue_target_at_large_strain(truthcube):
     """The measured field breaks the experiment's symmetry by more than 1.2 mm RMS at 12.5 and
     18.25 % (mostly a lateral shift of the moving-plate side in y): no model with the stated
-    bonded plates can reach the issue's 1.2 mm there. Mirrors alone already give > 1.2 mm."""
+    bonded plates can reach the 1.2 mm target there. Mirrors alone already give > 1.2 mm."""
     tc, rest, measured = truthcube
     for strain in (0.125, 0.1825):
         u = measured[strain] - rest
@@ -153,7 +153,7 @@ def test_the_floor_is_the_moving_plates_sideways_travel_held_out(truthcube):
 
 @pytest.mark.slow
 def test_neo_hookean_with_the_estimated_plate_travel_meets_1p2_mm_on_held_out_beads(truthcube):
-    """The issue's 1.2 mm, on beads the boundary condition never saw: the plate's sideways travel is
+    """The 1.2 mm target, on beads the boundary condition never saw: the plate's sideways travel is
     estimated from the 49 beads next to it (2 numbers per strain), neo_hookean (E, nu from the data
     README) is scored on the other 294 (measured 0.43 / 0.58 / 0.93 mm; stated plates 0.86 / 1.16 / 1.40)."""
     spec = importlib.util.spec_from_file_location("truthcube_variants", REPO / "scripts" / "truthcube_variants.py")

@@ -1,4 +1,4 @@
-"""Teleop recordings (issue 14): videos run at their nominal frame rate (slow rendering duplicates
+"""Teleop recordings: videos run at their nominal frame rate (slow rendering duplicates
 frames instead of fast-forwarding the video); malformed force logs name the line."""
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ model's stable dt). Outputs ``accuracy.json`` (the table :func:`surgsim_envs.ben
 and ``accuracy.png`` (log-log, Pareto front marked). Shape error (``shape_rms`` etc., m; chart
 ``accuracy_shape.png``): signed distances of the deformed top surface at the deepest depth to the
 most accurate model's finest surface under the same load (:mod:`surgsim_envs.bench.shape_error`,
-paper 004 sec. 2.2).
+Vandewalle et al. 2003 sec. 2.2).
 
 Baselines, in the same process on the same scene (:func:`surgsim_envs.bench.mujoco_flex.flex_indent`):
 MuJoCo's own 3-D flex with built-in elasticity, ``mujoco_flex_full`` (three dofs per vertex, the
@@ -53,7 +53,7 @@ QUICK_FLEX_CELLCOUNTS = (1, 2, 4)
 FLEX_COLLISION_SPACING = 0.004               # m, the trilinear flex's (collision) mesh under the sphere
 #: compute per simulated millisecond at which a model runs in real time (us); drawn on the chart
 REAL_TIME_US_PER_MS = 1000.0
-#: force error an "accurate" model must reach (issue 16: <= 5 % at real time); drawn on the chart
+#: force error an "accurate" model must reach (<= 5 % at real time); drawn on the chart
 TARGET_ERROR = 0.05
 
 
@@ -222,7 +222,7 @@ def run(args: argparse.Namespace) -> int:
         tri = models is None or "mujoco_flex_trilinear" in models
         rows += flex_sweep((QUICK_FLEX_SPACINGS if args.quick else FLEX_SPACINGS) if full else (),
                            (QUICK_FLEX_CELLCOUNTS if args.quick else FLEX_CELLCOUNTS) if tri else ())
-        from surgsim_envs.bench import pybullet_peer  # PyBullet's FEM and mass-spring soft bodies (issue 16)
+        from surgsim_envs.bench import pybullet_peer  # PyBullet's FEM and mass-spring soft bodies
 
         rows += pybullet_peer.peer_sweep(pybullet_peer.QUICK_SPACINGS if args.quick else pybullet_peer.SPACINGS, models)
     os.makedirs(args.out, exist_ok=True)

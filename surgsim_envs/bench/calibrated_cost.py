@@ -1,7 +1,6 @@
 """Cost of ``mass_spring_calibrated`` against the plain ``mass_spring`` network, same process, on the
 palpation task's tissue (10 x 10 x 2 cm liver slab with a 20 kPa inclusion, 5 mm lattice, bed fixed)
-and the indentation bench slab (issue 16, docs/benchmarks.md "Calibrated mass-spring (issue 16,
-third pass)").
+and the indentation bench slab (docs/benchmarks.md "Calibrated mass-spring on the chart").
 
     surgsim bench calibrated-cost [--repeats 200]
 

@@ -23,9 +23,9 @@ import numpy as np
 
 from surgsim_envs.errors import ConfigError
 
-#: Table 9.1 of paper 000: points -> computational time (ms) on a Pentium 2.8 GHz
+#: Table 9.1 of Zhong et al. 2016: points -> computational time (ms) on a Pentium 2.8 GHz
 PAPER_TABLE = {261: 4.3, 405: 8.5, 650: 12.4, 900: 24.3, 1100: 39.8}
-#: target of issue 12: a 1,100-point surface at most this many microseconds per update
+#: speed target (haptic rate): a 1,100-point surface at most this many microseconds per update
 TARGET_US = 200.0
 
 

@@ -172,7 +172,7 @@ def overhead(env, steps: int, repeats: int, rng, palpation: bool) -> tuple[float
 
 
 def _checked_physics_step(sim) -> None:
-    """One physics step through the checked public calls (the loop before issue 18's speed work)."""
+    """One physics step through the checked public calls (the loop before the prepared and compiled paths)."""
     import mujoco
 
     from surgsim_envs.scene.simulation import _rate_limit, _write_rows, _zero_rows

@@ -1,4 +1,4 @@
-"""``surgsim fit``: fit a model's material parameters to measured force data (paper 002, eq. 4).
+"""``surgsim fit``: fit a model's material parameters to measured force data (the grasping simulation paper, eq. 4).
 
 Least squares, ``min sum_k (F_model(x_k; p) - F_k)^2`` over the data points (x = depth in m for
 ``indent``, time in s for ``relax``):
@@ -14,7 +14,7 @@ CSV: two columns (x, force in N), optional header line. The plot shows data agai
 
 Constitutive (1-D stress-strain) fits are registered in ``STRESS_STRAIN_FITS`` (model name ->
 module with ``run_cli(args)``): ``--model fractional --test relax|ramp --data FILE.csv`` reads a
-``time_s, strain, stress_Pa`` record instead (paper 003, :mod:`surgsim_envs.bench.fractional_fit`).
+``time_s, strain, stress_Pa`` record instead (the variable-order paper, :mod:`surgsim_envs.bench.fractional_fit`).
 """
 
 from __future__ import annotations

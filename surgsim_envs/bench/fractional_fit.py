@@ -1,4 +1,4 @@
-"""Identification of the variable-order fractional law ``sigma = eta D^q(t) eps`` (paper 003, section III).
+"""Identification of the variable-order fractional law ``sigma = eta D^q(t) eps`` (the variable-order paper, section III).
 
 As in the paper: q is piecewise constant on N equal subintervals of [0, T], and the cost is the
 integrated squared error between measured and estimated stress, ``J = int_0^T (sigma_m -

@@ -1,4 +1,4 @@
-"""``surgsim bench growth``: time of the tissue-growth iteration (paper 004) on a ~10,000-node mesh.
+"""``surgsim bench growth``: time of the tissue-growth iteration (Vandewalle et al. 2003) on a ~10,000-node mesh.
 
 The synthetic maxillofacial case (:mod:`surgsim_envs.planning.maxillofacial`) meshed to about
 ``--nodes`` nodes; per repeat a fresh :class:`~surgsim_envs.tissue.growth.GrowthSolver` (the

@@ -1,4 +1,4 @@
-"""``surgsim bench layers``: the layered model (paper 001) at haptic rate on a large abdominal wall.
+"""``surgsim bench layers``: the layered model (Lin et al. 2008) at haptic rate on a large abdominal wall.
 
 A >= 50,000-node abdominal wall (dd = 2 mm, 12 x 12 cm); a position-controlled 5 mm sphere is
 pressed ``depth`` into it (all-node static solve), then moved along x at ``speed`` m/s in 1 ms

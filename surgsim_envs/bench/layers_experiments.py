@@ -1,4 +1,4 @@
-"""Paper 001's experiments with the ``layered`` model (Figs. 2.14-2.16), as functions tests and
+"""Lin et al. 2008's experiments with the ``layered`` model (Figs. 2.14-2.16), as functions tests and
 ``scripts/layered_figures.py`` share.
 
 A position-controlled spherical probe (:class:`~surgsim_envs.contact.kinematic_probe.KinematicProbe`)

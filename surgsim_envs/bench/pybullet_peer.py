@@ -1,4 +1,4 @@
-"""PyBullet's soft body as a peer on the accuracy chart (issue 16): the same indentation scene.
+"""PyBullet's soft body as a peer on the accuracy chart (another engine's soft bodies on the same indentation scene).
 
 ``pip install 'surgsim_envs[peers]'`` (PyBullet); without it :func:`available` is False and
 ``surgsim bench accuracy`` leaves the peers out with a message.

@@ -1,5 +1,5 @@
 """``surgsim bench sb3-vec``: stable-baselines3 vector env throughput, DummyVecEnv (1 env, in
-process) against SubprocVecEnv with 2, 4, ... worker processes (issue 15: how SB3 training
+process) against SubprocVecEnv with 2, 4, ... worker processes (how SB3 training
 scales on this machine's cores). Env steps per second, median over ``--repeats`` timed blocks
 of ``--steps`` steps each (random actions, after a warm-up), all in one process run so the
 ratios share the machine load. Needs the [train] extra (stable-baselines3).

@@ -1,6 +1,6 @@
 """Shape error for ``surgsim bench accuracy``: the deformed surface against the converged FEM surface.
 
-Next to the force error, every indentation row gets the signed distances (paper 004, section 2.2;
+Next to the force error, every indentation row gets the signed distances (Vandewalle et al. 2003, section 2.2;
 :mod:`surgsim_envs.geometry.surface_error`) of its deformed top surface at the deepest depth to the
 reference surface under the same load: the finest row of the model whose finest row has the
 smallest force error against the analytic reference (the converged continuum solution; in

@@ -17,7 +17,7 @@ Every control step takes a uniformly random action from the action space; every 
   end; ``rss_growth_mb`` is their difference, ``rss_slope_mb_per_100k`` the least-squares slope
   of RSS samples taken every ``--sample-every`` steps.
 
-Zero of each is the target (issue 14). The JSON also records steps/s and the machine load.
+Zero of each is the target (no input may crash, diverge or leak). The JSON also records steps/s and the machine load.
 Timings depend on the machine and its load; tests only run a short soak and check the counts.
 """
 

@@ -1,4 +1,4 @@
-"""``surgsim validate``: signed surface distances of a predicted surface to a reference (paper 004, 2.2).
+"""``surgsim validate``: signed surface distances of a predicted surface to a reference (Vandewalle et al. 2003, 2.2).
 
 Both surfaces are state files (.npz, format surgsim-state-1: ``positions`` + ``surface``, see
 :mod:`surgsim_envs.geometry.state_file`; ``surgsim grow`` writes them) or triangle meshes

@@ -1,5 +1,5 @@
 """Where the time of one :class:`~surgsim_envs.envs.vector.SurgSimVectorEnv` step goes
-(``surgsim bench envs --vector-accounting``, issue 18).
+(``surgsim bench envs --vector-accounting``).
 
 The vector env's own code is timed from outside: the main process's phases by a subclass that
 repeats ``step_async``/``step_wait`` with clock reads in between, the workers' by wrapping, before

@@ -1,4 +1,4 @@
-"""Vector env figures for ``surgsim bench envs --vector`` (issue 18's async target: 2 workers
+"""Vector env figures for ``surgsim bench envs --vector`` (the async aim: 2 workers
 >= 1.7x one process): one env in this process, Gymnasium's AsyncVectorEnv and
 :class:`~surgsim_envs.envs.vector.SurgSimVectorEnv` (``gym.make_vec``'s default for our tasks),
 all built up front and timed **alternately** in rounds (same load for each), for the task and for

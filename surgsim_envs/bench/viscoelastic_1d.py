@@ -1,4 +1,4 @@
-"""One-dimensional viscoelastic stress-strain laws on a uniform time grid (paper 003, sections I-III).
+"""One-dimensional viscoelastic stress-strain laws on a uniform time grid (the variable-order paper, sections I-III).
 
 * variable-order fractional element (eq. 2): ``sigma = eta D^q(t) eps`` (Caputo, L1 scheme;
   equal to Riemann-Liouville for a strain history starting from rest, eps(0) = 0);

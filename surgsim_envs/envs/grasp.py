@@ -1,7 +1,7 @@
 """SurgSim/Grasp-v0: close a three-jaw grasper on an organ tip and retract it to a target.
 
 The organ (spleen by default, or a liver lobe; option ``organ``) is held by its ligaments at one
-end; the grasper starts open around its other tip (paper 002). The agent closes the jaws, then
+end; the grasper starts open around its other tip (the grasping simulation paper). The agent closes the jaws, then
 moves the wrist to a target ``target_offset`` m away (out of and above the organ) without
 crushing (jaw normal force above ``damage_force`` N) or losing the grasp.
 

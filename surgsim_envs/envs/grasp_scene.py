@@ -67,7 +67,7 @@ class GraspSceneConfig:
 
 #: s, the longest MuJoCo step the tasks' grasper takes with sub-cycling: its jaw servo (kp 20 kN/m on
 #: 20 g jaws) is stable at 0.8 ms and unstable from 1.6 ms even without tissue (measured,
-#: docs/benchmarks.md "Env step: third pass")
+#: docs/benchmarks.md "Grasp-v0: why 0.4 ms, and tissue sub-cycles")
 MAX_SUBCYCLED_RIGID_DT = 8e-4
 
 

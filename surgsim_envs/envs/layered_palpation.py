@@ -1,6 +1,6 @@
 """``SurgSim/LayeredPalpation-v0``: find a stiff nodule under the skin of an abdominal wall by pressing.
 
-Tissue: the ``layered`` model (paper 001) of an abdominal wall patch (skin, fat, fascia, muscle,
+Tissue: the ``layered`` model (Lin et al. 2008) of an abdominal wall patch (skin, fat, fascia, muscle,
 peritoneum; :mod:`surgsim_envs.geometry.anatomy`), bottom bonded. Each episode hides a stiff
 nodule in the fat: the tets within ``nodule_radius`` of a random centre get ``nodule_factor`` x
 their Young's modulus, through the tissue contract (``scale_material``), never by model name.

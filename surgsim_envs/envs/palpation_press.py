@@ -1,4 +1,5 @@
-"""SurgSim/PalpationPress-v0: Palpation-v0 with one decision per press (issue 15).
+"""SurgSim/PalpationPress-v0: Palpation-v0 with one decision per press (PPO did not learn
+Palpation-v0's per-millisecond control; one press per step is a problem it can learn).
 
 The same slab, inclusion, randomisation and stiffness estimate as
 :mod:`surgsim_envs.envs.palpation`, but one env step is one whole press: the env lifts the probe

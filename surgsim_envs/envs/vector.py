@@ -13,7 +13,7 @@ truncations and the numeric info entries live in one shared-memory block
 (:mod:`~surgsim_envs.envs.vector_ipc`); a step is one byte down each worker's command pipe and
 one byte back. Gymnasium's AsyncVectorEnv instead pickles each env's action, observation and
 info dict through a ``multiprocessing.Pipe`` and merges the infos key by key in the main process
-(~0.4-0.6 ms per vector step here: docs/benchmarks.md "Vector env (issue 18, async)").
+(~0.4-0.6 ms per vector step here: CHANGELOG.md "Vector env: shared memory instead of pickled steps").
 
 Semantics are Gymnasium 1.x's (:class:`gymnasium.vector.SyncVectorEnv` gives the same numbers for
 the same seeds; tests/test_vector_env.py): ``autoreset_mode`` NEXT_STEP (default), SAME_STEP
@@ -38,7 +38,7 @@ env then takes the main process with it.
 with ``in_main`` the main process finished its own block), the main process polls for the
 remaining replies without sleeping for up to this many microseconds before it blocks. It saves
 the main process a wake-up per step when a core is free; when the cores are shared with other
-work it takes CPU from them (docs/benchmarks.md "Vector env: second pass (issue 18)").
+work it takes CPU from them (CHANGELOG.md "Vector env: accounting, info write plans, bounded spin").
 **worker_spin_us** (default 0): the same on the workers' side: after each reply a worker polls its
 command pipe for up to this long (yielding the core between polls) before it sleeps, so that the
 next step's command is read without a wake-up. For a machine with a core per process (``in_main``
@@ -70,7 +70,7 @@ from surgsim_envs.envs.vector_worker import _Worker, worker_main
 from surgsim_envs.errors import ConfigError, VectorEnvWorkerError
 
 #: us the main process polls for replies without sleeping once fewer workers than cores are busy
-#: (``spin_us=``; docs/benchmarks.md "Vector env: second pass (issue 18)")
+#: (``spin_us=``; CHANGELOG.md "Vector env: accounting, info write plans, bounded spin")
 DEFAULT_SPIN_US = 0.0
 #: us a worker polls for its next command without sleeping after each reply (``worker_spin_us=``)
 DEFAULT_WORKER_SPIN_US = 0.0

@@ -11,7 +11,7 @@ byte; bit 7 set means a pickled payload follows, preceded by its length (4 bytes
 A plain ``step`` is therefore one byte each way: the data travels through shared memory. The
 byte pair costs 15-33 us round trip on this 2-core VM against 17-44 us for a pair of
 ``multiprocessing.Semaphore`` and 48-124 us for ``multiprocessing.Connection.send_bytes``
-(1 and 2 workers, docs/benchmarks.md "Vector env (issue 18, async)"); waiting blocks in
+(1 and 2 workers, CHANGELOG.md "Vector env: shared memory instead of pickled steps"); waiting blocks in
 ``poll``, so idle processes take no CPU.
 """
 

@@ -40,7 +40,7 @@ class InfoKeys(gym.Wrapper):
     rest: an async vector env pickles each step's info in the worker and merges the infos of all
     workers key by key in the main process (Gymnasium's ``VectorEnv._add_info``), serially, and
     with the tasks' ~17 info entries that costs more than the pipe round-trip itself (measured:
-    docs/benchmarks.md, "Env step: third pass"). Keys missing from an info are skipped.
+    CHANGELOG.md, "Env step: three-pass spring kernel, env fast paths, Grasp sub-cycling"). Keys missing from an info are skipped.
 
     ``gym.make_vec("SurgSim/Palpation-v0", num_envs=2, vectorization_mode="async",
     wrappers=[functools.partial(InfoKeys, keys=("is_success",))])``

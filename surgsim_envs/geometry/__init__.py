@@ -6,7 +6,7 @@
 - :func:`spleen_surface`, :func:`liver_lobe_surface`: procedural closed organ surfaces (trimesh).
 - :func:`load_surface` (STL/OBJ/PLY), :func:`load_tet_mesh` (legacy VTK): meshes from files.
 - :func:`lattice_volume`: fill any closed surface with lattice tets, boundary snapped by tri-ray
-  node snapping (paper 001).
+  node snapping (Lin et al. 2008).
 - :func:`add_spherical_inclusion`: label the tets of a spherical inclusion.
 - :func:`embed_points`, :func:`interpolate`: tie a fine visual surface to the tets (rendering).
 """

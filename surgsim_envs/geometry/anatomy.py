@@ -1,4 +1,4 @@
-"""Procedural layered anatomy for the ``layered`` model (paper 001): abdominal wall, thigh section.
+"""Procedural layered anatomy for the ``layered`` model (Lin et al. 2008): abdominal wall, thigh section.
 
 Every value is SI (m, Pa, kg/m^3) and carries its source. Where the literature gives a TENSILE
 modulus for a membrane (fascia, peritoneum: tens of MPa, measured along the sheet) we use a

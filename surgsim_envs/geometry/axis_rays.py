@@ -1,4 +1,4 @@
-"""Axis-aligned ray casting on a regular grid of lines (the tri-dexel of paper 001).
+"""Axis-aligned ray casting on a regular grid of lines (the tri-dexel of Lin et al. 2008).
 
 For one axis ``a`` and a regular 2-D grid of lines parallel to ``a`` (origin ``(u0, v0)`` in the two
 other axes, line pitch ``h``), :func:`axis_line_hits` returns every crossing of every line with a

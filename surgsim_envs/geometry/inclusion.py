@@ -1,6 +1,6 @@
 """Material regions: mark tets of an inclusion with a region label.
 
-Heterogeneous tissue (paper 001) is a volume whose tets carry region labels; a tissue model maps
+Heterogeneous tissue (Lin et al. 2008) is a volume whose tets carry region labels; a tissue model maps
 each label to a material (``region_materials={1: "tumour"}``). A tet belongs to the inclusion when
 its centroid lies inside the inclusion's shape.
 """

@@ -1,6 +1,6 @@
 """Volumetric discretisation of a closed surface: lattice cells, Kuhn tets, tri-ray node snapping.
 
-Algorithm (paper 001's tri-ray lattice, made conforming with tetrahedra):
+Algorithm (Lin et al. 2008's tri-ray lattice, made conforming with tetrahedra):
 
 1. A regular lattice of spacing ``h`` covers the surface's bounding box (one spare layer of nodes
    on every side).

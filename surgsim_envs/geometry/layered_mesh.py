@@ -2,7 +2,7 @@
 tensor grid: the snapped organ lattices of the grasp and slippage tasks (tri-ray snapping of a
 Kuhn lattice inside the organ's surface, :mod:`surgsim_envs.geometry.lattice`) or a user mesh.
 
-The layered model (paper 001) joins each node to its neighbouring bounding box (NBB): one
+The layered model (Lin et al. 2008) joins each node to its neighbouring bounding box (NBB): one
 neighbour per axis direction (Fig. 2.11). On a snapped lattice these are the lattice's axis edges,
 bent where the boundary nodes were snapped; here they are recovered from the mesh's own edges:
 

@@ -1,4 +1,4 @@
-"""Heterogeneous volumes from interface surfaces: tri-ray node snapping (paper 001, section 2.3).
+"""Heterogeneous volumes from interface surfaces: tri-ray node snapping (Lin et al. 2008, section 2.3).
 
 Input: a closed outer ``boundary`` surface, a base material (the region just inside the boundary)
 and an ordered list of :class:`Interface` s, outer to inner. Each interface encloses the region of

@@ -6,7 +6,7 @@ every scene, task and scenario builds its tissue from:
 * a registered name (``"slab"``, ``"block"``, ``"spleen"``, ... :func:`make_volume`);
 * a closed surface file (STL/OBJ/PLY/OFF/glTF): checked (finite vertices, watertight, no
   overlapping shells, no self-intersection), set on its bed (lowest point at z = 0, centred in x
-  and y), filled with snapped lattice tets (:func:`lattice_volume`, paper 001), and given the
+  and y), filled with snapped lattice tets (:func:`lattice_volume`, Lin et al. 2008), and given the
   surface as ``source_surface`` so the scene renders the smooth mesh embedded in the tets;
 * a tet mesh file (legacy ``.vtk``, :func:`load_tet_mesh`), set on its bed;
 * a :class:`Volume` (used as given, after :meth:`Volume.check`).

@@ -169,7 +169,7 @@ def _organ(surface_fn, name):
 
 
 def _layered(kind: str):
-    """Layered anatomy of paper 001 (surgsim_envs.geometry.anatomy), imported on use."""
+    """Layered anatomy of Lin et al. 2008 (surgsim_envs.geometry.anatomy), imported on use."""
     def build(spacing: float, **shape) -> Volume:
         from surgsim_envs.geometry import anatomy
 
@@ -189,7 +189,7 @@ _BUILDERS = {
     "slab_inclusion": _slab_inclusion,
     "spleen": _organ(spleen_surface, "spleen"),
     "liver_lobe": _organ(liver_lobe_surface, "liver_lobe"),
-    "rounded_cube": rounded_cube_volume,   # surface only (no tets): for surface models (paper 000)
+    "rounded_cube": rounded_cube_volume,   # surface only (no tets): for surface models (Zhong et al. 2016)
 }
 
 #: names :func:`make_volume` knows (``block`` is served by :func:`surgsim_envs.geometry.make_volume`)

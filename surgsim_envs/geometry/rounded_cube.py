@@ -1,4 +1,4 @@
-"""A cube with round corners as a surface grid (paper 000, Figs. 9.2-9.5): no tets, only a surface.
+"""A cube with round corners as a surface grid (Zhong et al. 2016, Figs. 9.2-9.5): no tets, only a surface.
 
 The cube's six faces are each an ``n x n`` grid of points (shared along edges and corners, so the
 surface has ``6 n^2 - 12 n + 8`` points: n = 13 gives 866, n = 14 gives 1,016). The grid is pushed

@@ -1,8 +1,8 @@
-"""Tri-ray node snapping (paper 001, section 2.3) with an inversion guard.
+"""Tri-ray node snapping (Lin et al. 2008, section 2.3) with an inversion guard.
 
 Rays are cast along the three lattice axes through the lattice nodes. Where a ray crosses the
 surface, the lattice node closest to the crossing along that ray is snapped onto the crossing if
-it lies within ``max_snap * spacing`` (paper 001 eq. 2.3 uses half the spacing) and it is a
+it lies within ``max_snap * spacing`` (Lin et al. 2008 eq. 2.3 uses half the spacing) and it is a
 boundary node of the kept cells. A node with candidates from several axes takes the nearest one.
 Boundary nodes no ray reached can optionally be projected to the closest surface point (same
 distance limit). Finally :func:`guard_snaps` shrinks (halves, then undoes) the snaps of nodes in

@@ -1,4 +1,4 @@
-"""Signed surface-to-surface distances: the validation procedure of paper 004 (section 2.2).
+"""Signed surface-to-surface distances: the validation procedure of Vandewalle et al. 2003 (section 2.2).
 
 For every vertex p of a *predicted* surface, the closest point q on the *reference* surface and
 the distance |p - q|, signed by the reference's exterior normal at q: positive (green in the

@@ -1,8 +1,8 @@
 """Force extrapolation: a 1 kHz force signal from a slower physics.
 
-The haptic device needs a new force every millisecond (paper 000 sec. 9.6.3: "at least 1000 Hz";
+The haptic device needs a new force every millisecond (Zhong et al. 2016 sec. 9.6.3: "at least 1000 Hz";
 when the simulation cannot keep up, "force extrapolation (Picinbono et al. 2002) ... generating
-the missing forces from the previous time step"). Paper 001 sec. 2.4 computes the haptic force
+the missing forces from the previous time step"). Lin et al. 2008 sec. 2.4 computes the haptic force
 from the spring forces of the contact mass points; here that force arrives from the physics as
 ``coupling_force()`` once per physics update (period ``T``), and the servo (period ``h``, with
 ``T = r h``) fills the ticks in between.
@@ -25,7 +25,7 @@ second time derivatives of the true force, ``v`` the hand speed. Three methods:
     jump is the prediction error ``|F(t_k) - 2 F(t_{k-1}) + F(t_{k-2})| <= F'' T^2``, and never
     more than ``2 F' T`` where the force has a kink, e.g. contact onset).
 
-``stiffness`` — local contact-stiffness model (Picinbono et al. 2002; paper 001's contact
+``stiffness`` — local contact-stiffness model (Picinbono et al. 2002; Lin et al. 2008's contact
 springs)
     ``F(t) = F_k - k n (n . (x(t) - x_k))`` with ``n = F_k / |F_k|`` and ``k`` the local stiffness
     along ``n`` (from ``physics.contact_stiffness()`` when available, else estimated from the

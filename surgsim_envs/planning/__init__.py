@@ -1,4 +1,4 @@
-"""Surgery planning (paper 004): soft-tissue prediction after a planned bone displacement.
+"""Surgery planning (Vandewalle et al. 2003): soft-tissue prediction after a planned bone displacement.
 
 - :mod:`.maxillofacial`: a synthetic maxillofacial-like case (soft-tissue layer over bone, a
   segment moved by distraction), basic vs growth model, skin surfaces for validation.

@@ -1,7 +1,7 @@
 """``surgsim grow``: predict the skin after a bone distraction with the basic and the growth model.
 
 Runs the synthetic maxillofacial case (:mod:`surgsim_envs.planning.maxillofacial`): basic model
-(linear FEM, bone displacement prescribed) and growth model (paper 004, k and alpha), writes both
+(linear FEM, bone displacement prescribed) and growth model (Vandewalle et al. 2003, k and alpha), writes both
 skins as state files (``basic.npz``, ``grown.npz``, format surgsim-state-1; ``surgsim validate``
 reads them) and, unless ``--no-reference``, a synthetic reference skin (the growth model at
 ``--truth-nu/--truth-k`` on a finer mesh; NOT patient data) with the paper's comparison

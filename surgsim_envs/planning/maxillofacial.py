@@ -1,4 +1,4 @@
-"""A maxillofacial-like planning case (paper 004, section 3), synthetic: no patient data ships.
+"""A maxillofacial-like planning case (Vandewalle et al. 2003, section 3), synthetic: no patient data ships.
 
 A soft-tissue layer (``thickness`` m, default 15 mm) over an ``width`` x ``height`` patch of
 bone, curved like a cheek (the layer follows ``z = -x^2 / (2 curvature_radius)``). Its bottom

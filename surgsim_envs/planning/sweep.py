@@ -1,4 +1,4 @@
-"""Parameter sweep of paper 004, Fig. 5: error mu and sigma of the predicted skin against nu and k.
+"""Parameter sweep of Vandewalle et al. 2003, Fig. 5: error mu and sigma of the predicted skin against nu and k.
 
 With no patient data, the reference skin is synthetic: the growth model itself, run at a chosen
 truth (nu*, k*) on a FINER, different mesh (default 2 mm spacing) than the sweep's (4 mm), so the

@@ -1,4 +1,4 @@
-"""Validation reports of paper 004 (section 2.2): colour-coded distance maps and error histograms.
+"""Validation reports of Vandewalle et al. 2003 (section 2.2): colour-coded distance maps and error histograms.
 
 :func:`validation_report` compares a predicted surface with a reference surface
 (:mod:`surgsim_envs.geometry.surface_error`), and writes ``distance_map.png`` (predicted surface

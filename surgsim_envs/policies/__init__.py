@@ -1,4 +1,4 @@
-"""Trained policies shipped with the package, as numpy ``.npz`` MLPs (issue 15).
+"""Trained policies shipped with the package, as numpy ``.npz`` MLPs (no torch needed to run them).
 
 Each file is the ``surgsim-mlp-v1`` format of :mod:`surgsim_envs.policies.npz_policy` (plain
 arrays, loaded with ``allow_pickle=False``; numpy only, no torch): exported from

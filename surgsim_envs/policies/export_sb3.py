@@ -1,5 +1,5 @@
 """Export a stable-baselines3 PPO or SAC MLP policy to the ``.npz`` format of
-:mod:`surgsim_envs.policies.npz_policy` (issue 15). Needs torch + stable-baselines3 (the
+:mod:`surgsim_envs.policies.npz_policy` (so that running a policy needs no torch). Needs torch + stable-baselines3 (the
 ``[train]`` extra) to *export*; the exported file runs with numpy only.
 
 Mapping (deterministic actions, as ``model.predict(obs, deterministic=True)``):

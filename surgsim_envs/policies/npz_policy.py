@@ -32,15 +32,15 @@ key                 shape / type                 meaning
                                                  (a temperature chosen on validation seeds)
 ==================  ===========================  =================================================
 
-Stochastic actions (issue 15): with a Gaussian head, ``mode = stochastic`` samples the
+Stochastic actions (as SB3's Gaussian policies act when not deterministic): with a Gaussian head, ``mode = stochastic`` samples the
 pre-activation output ``h_L ~ N(mean, exp(log_std)^2)`` (then the output activation, e.g. SAC's
 tanh squashing, scaling and clipping, exactly as the deterministic path) from a numpy
 ``Generator``: :meth:`NpzPolicy.reset` ``(seed)`` reseeds it (stream ``(seed, SAMPLER_STREAM)``), so an episode's actions are
 reproducible from (policy file, seed, observations). ``deterministic`` uses the mean.
 
 Every array must be finite; std must be > 0; at most :data:`MAX_LAYERS` layers and
-:data:`MAX_PARAMETERS` numbers. A stable-baselines3 MLP policy maps onto it directly (issue 15
-exports one): its ``mlp_extractor.policy_net`` + ``action_net`` layers, tanh activation, the
+:data:`MAX_PARAMETERS` numbers. A stable-baselines3 MLP policy maps onto it directly
+(:mod:`surgsim_envs.policies.export_sb3` exports one): its ``mlp_extractor.policy_net`` + ``action_net`` layers, tanh activation, the
 VecNormalize mean/std as ``obs_mean``/``obs_std`` and the action space bounds as
 ``action_low``/``action_high``.
 """

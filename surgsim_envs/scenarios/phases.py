@@ -107,7 +107,7 @@ class CloseJaws(Phase):
 
 @dataclass
 class Hold(Phase):
-    """Keep everything where it is (paper 002: 7 s, the tissue relaxes)."""
+    """Keep everything where it is (the grasping simulation paper: 7 s, the tissue relaxes)."""
 
 
 @dataclass

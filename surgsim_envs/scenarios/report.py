@@ -14,7 +14,7 @@
 
 ``forces.png``: normal (top) and tangential (bottom) force against time, one line per run,
 phases shaded, the safety limit dashed, violations in red and slip onsets as red dots
-(paper 002, Figs. 4 and 5).
+(the grasping simulation paper, Figs. 4 and 5).
 """
 
 from __future__ import annotations

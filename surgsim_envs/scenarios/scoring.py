@@ -107,7 +107,7 @@ def slip_events(rec, drop: float = 0.25, min_force: float = 0.05, min_share: flo
 
 
 def slip_onset(rec) -> dict | None:
-    """Paper 002's slip onset (Fig. 5, red points): during pull phases the pull force peaks and then
+    """The grasping simulation paper's slip onset (Fig. 5, red points): during pull phases the pull force peaks and then
     falls as the contact nodes slide along the jaws. Returns {"time" s, "pull_force" N,
     "normal_force" N} at that peak when nodes were slipping there, else None."""
     mask = rec.phase_mask("pull")
@@ -183,7 +183,7 @@ def compute_metrics(rec, safety_limit: float, completed: bool, inclusion_truth=N
 
 
 def grasp_figures(rec) -> dict:
-    """Paper 002 figures of a grasp: normal force (N) at the end of the first close_jaws phase and
+    """The grasping simulation paper figures of a grasp: normal force (N) at the end of the first close_jaws phase and
     of the hold after it, the relaxed fraction, and the linearity (R^2 of a straight-line fit) of
     the normal force against time while the jaws close in contact."""
     spans = rec.phase_spans

@@ -1,8 +1,8 @@
 """An address table: many numpy arrays handed to a numba function as ONE int64 array.
 
 Calling a numba function costs ~0.2 us per array argument (typing and unboxing each one; measured
-16.7 us for a tuple of 80 arrays, 0.18 us for one array: docs/benchmarks.md "Env step: fourth
-pass"). The compiled substeps take ~90 arrays once per control step, so :class:`ArrayTable` packs
+16.7 us for a tuple of 80 arrays, 0.18 us for one array: CHANGELOG.md "Env step: address
+table, pluggable tissue step"). The compiled substeps take ~90 arrays once per control step, so :class:`ArrayTable` packs
 them once (rebuilt only when one of them is replaced) into rows ``[address, shape0, shape1,
 shape2]``, and the compiled side rebuilds each array with ``numba.carray`` from its row
 (:func:`f8_1` ... :func:`u1_2`: float64 / int64 / bool / uint8, 1-3 dimensions). The rebuilt arrays

@@ -332,7 +332,7 @@ def place_grasper_around_tip(tissue_nodes: np.ndarray, grasper: GrasperConfig, m
 
 
 def grasp_config(organ: str = "spleen", model: str = "mass_spring") -> SceneConfig:
-    """Three-jaw grasper (paper 002) around the tip of a spleen held at its other end (ligaments)."""
+    """Three-jaw grasper (the grasping simulation paper) around the tip of a spleen held at its other end (ligaments)."""
     # grasp_scene lifts organ and grasper together if the open jaws would reach into the floor
     tissue = TissueConfig(name="spleen", organ=organ, model=model, material="spleen", spacing=None,
                           anchors=("x_min:0.03",), position=(0.0, 0.0, 0.025),

@@ -116,7 +116,7 @@ class ProbeConfig:
 
 @dataclass
 class GrasperConfig:
-    """The three-jaw large-organ grasper of paper 002.
+    """The three-jaw large-organ grasper of the grasping simulation paper.
 
     Three rigid box jaws at 120 degrees about the tool axis move in parallel and close radially.
     One slide joint (jaw 1) is actuated; jaws 2 and 3 follow through joint-coupling equalities.
@@ -130,7 +130,7 @@ class GrasperConfig:
         radial).
     roll: rad, angle of jaw 1 about the axis, measured from the wrist frame's x axis (for a
         horizontal axis pi/2 puts jaw 1 on top and the other two below at +-120 degrees).
-    closing_speed: m/s, default rate of the jaw opening changes (paper 002 closes in 4 s).
+    closing_speed: m/s, default rate of the jaw opening changes (the grasping simulation paper closes in 4 s).
     kp, jaw_kp: N/m, wrist and jaw position actuator stiffness.
     """
 

@@ -1,5 +1,5 @@
 """``surgsim demo``: a probe palpates a slab with a stiff inclusion, then a three-jaw grasper grasps
-and pulls a spleen (paper 002's close / hold / pull, time-compressed).
+and pulls a spleen (the grasping simulation paper's close / hold / pull, time-compressed).
 
 Writes to ``--out`` (default ./surgsim-out/): ``demo.mp4`` (unless --no-video or no OpenGL),
 ``forces.png`` (normal and tangential force per tool against time) and ``summary.json``;
@@ -100,7 +100,7 @@ def _palpation(sim, runner, duration: float) -> dict:
 
 
 def _grasp(sim, runner, duration: float) -> dict:
-    """Close, hold, pull (paper 002 proportions 4 : 7 : pull, compressed); return key figures."""
+    """Close, hold, pull (the grasping simulation paper proportions 4 : 7 : pull, compressed); return key figures."""
     g = sim.tool("grasper")
     cfg = g.config
     close_t, hold_t = duration * 0.25, duration * 0.375
@@ -125,7 +125,7 @@ def _grasp(sim, runner, duration: float) -> dict:
     sim.set_tool_target("grasper", g.home + axis * pull_dist, speed=pull_dist / pull_t)
     runner.run(pull_t, record)
     pulls = [s for s in runner.samples if s["phase"] == "pull"]
-    # gross slip onset as in paper 002 (Fig. 5, red points): the pull force peaks and then falls
+    # gross slip onset as in the grasping simulation paper (Fig. 5, red points): the pull force peaks and then falls
     # as the contact nodes slide along the jaws
     peak_pull = max(pulls, key=lambda s: s["pull_force"]) if pulls else None
     onset = peak_pull if peak_pull is not None and peak_pull["slipping"] > 0 else None
@@ -171,7 +171,7 @@ def _plot(path: Path, palp: list[dict], grasp: list[dict], grasp_summary: dict) 
     if grasp_summary.get("slip_onset_time_s") is not None:
         ax.plot([grasp_summary["slip_onset_time_s"]], [grasp_summary["slip_onset_pull_force_N"]], "ro",
                 label="gross slip onset")
-    ax.set_title("Three-jaw grasper: close, hold, pull (paper 002, time-compressed)")
+    ax.set_title("Three-jaw grasper: close, hold, pull (the grasping simulation paper, time-compressed)")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("force (N)")
     ax.legend()

@@ -454,7 +454,7 @@ class Simulation:
 
     def _generic_steps(self, count: int) -> None:
         """``count`` physics steps, each in the documented order (module docstring), with a handful
-        of Python calls per step (measured: docs/benchmarks.md "Env step"): every array the loop
+        of Python calls per step (measured: CHANGELOG.md "Env step: per-substep Python out of the physics loop"): every array the loop
         touches is bound once outside it (cached MjData views, the contact buffers), the contact
         arguments were validated once in ``__init__`` (``ContactModel.prepare``) and the tissue
         takes them through ``step_prevalidated`` (NaN/inf still refused, guard still runs); the
@@ -487,7 +487,7 @@ class Simulation:
             for tissue, contact in pairs:
                 res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
                 tissue.step_prevalidated(dt, res.forces, res.stiffness)
-                # CONTRACT (issue 10): an implicit integrator integrates forces + an increment from
+                # CONTRACT (tissue contract v2): an implicit integrator integrates forces + an increment from
                 # the contact stiffness; the tools must get the reaction of exactly
                 # tissue.integrated_external_forces or momentum leaks (11-14 % measured).
                 contact.attribute_increment_prepared(tissue.integrated_external_forces)

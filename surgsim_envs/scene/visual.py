@@ -1,6 +1,6 @@
 """The render-only twin of a scene: the physics model plus the tissue flexes, used only for frames.
 
-Measured (docs/benchmarks.md, "Visual geometry out of the physics step"): a MuJoCo flex of world-body
+Measured (CHANGELOG.md, "Env step: visual geometry out of the physics step"): a MuJoCo flex of world-body
 vertices is recomputed by ``mj_flex`` inside every ``mj_step1``, although those vertices never
 move in MuJoCo: the grasp scene's 2,562-vertex smooth spleen surface made ``mj_step1`` cost
 ~130 us instead of ~8 us. The physics model (``Simulation.model``) therefore has NO flex; this

@@ -41,8 +41,8 @@ LANCZOS_FLOOR = 16.0
 #: Lanczos/bound ratio (the bound, Gershgorin + volume_lambda_bound, costs ~0.1 ms)
 LANCZOS_REFRESH_STEPS = 2000
 #: "auto" sub-cycles the explicit step (integrator "subcycled") up to this many symplectic steps per dt
-#: before it takes the implicit one: one implicit step costs 6-13 symplectic ones here (docs/benchmarks.md
-#: "Calibrated mass-spring: cost and default (issue 16, fourth pass)")
+#: before it takes the implicit one: one implicit step costs 6-13 symplectic ones here (CHANGELOG.md
+#: "Calibrated mass-spring: linear calibration basis, sub-cycled integrator")
 MAX_SUBCYCLES = 4
 #: selective mass scaling (default ``mass_scaling``): a node whose geometric frequency w_a = sum_t |dV_t/dx_a|^2 / V_t
 #: over its nodal volume exceeds this many times the median gets its mass raised to bring it back to that ratio.
@@ -82,7 +82,7 @@ class CalibratedMassSpringModel(MassSpringModel):
     """
 
     name: ClassVar[str] = "mass_spring_calibrated"
-    summary: ClassVar[str] = ("mass-spring network (paper 002) with spring constants and a nodal volume term "
+    summary: ClassVar[str] = ("mass-spring network (the grasping simulation paper) with spring constants and a nodal volume term "
                               "identified from linear elasticity (matches FEM at small strain), auto/symplectic/implicit")
     capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "implicit_contact", "viscoelastic"})
     #: "subcycled": the symplectic step split into n = ceil(dt / stable_dt()) equal steps under the same

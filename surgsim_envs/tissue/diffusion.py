@@ -1,4 +1,4 @@
-"""Chemical diffusion of mechanical load on a surface (paper 000, Zhong et al., chapter 9).
+"""Chemical diffusion of mechanical load on a surface (Zhong et al. 2016, chapter 9).
 
 A surface-only model: a scalar concentration C per surface node (Pa: a load density, the
 strain-energy density of eq. 9.7) is injected where tools press, diffuses over the surface with a
@@ -70,7 +70,7 @@ def surface_view(volume: Volume) -> Volume:
 
 
 class DiffusionModel(TissueModel):
-    """Surface tissue driven by the diffusion of the contact load (paper 000).
+    """Surface tissue driven by the diffusion of the contact load (Zhong et al. 2016).
 
     volume: a Volume; only its surface is used (tets, if any, are dropped; interior nodes stay
         still). material: young (Pa, the bulk under the surface: foundation modulus E/h), density,
@@ -101,7 +101,7 @@ class DiffusionModel(TissueModel):
 
     name: ClassVar[str] = "diffusion"
     summary: ClassVar[str] = ("surface-only: contact load diffuses over the surface (omega per node and direction) "
-                              "and dents it; paper 000, explicit")
+                              "and dents it; Zhong et al. 2016, explicit")
     integrators: ClassVar[tuple[str, ...]] = ("symplectic",)
     capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "surface_only", "static_solve"})
     surface_only: ClassVar[bool] = True

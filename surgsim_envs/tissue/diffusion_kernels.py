@@ -1,4 +1,4 @@
-"""numba kernels of the chemical-diffusion surface model (paper 000): one explicit step.
+"""numba kernels of the chemical-diffusion surface model (Zhong et al. 2016): one explicit step.
 
 Flat arrays only (no Python objects), so the same kernel can later run batched. The operators
 come from :mod:`surgsim_envs.tissue.diffusion_operator`; the model is

@@ -1,4 +1,4 @@
-"""Discrete operators of the chemical-diffusion surface model (paper 000, sections 9.4-9.5).
+"""Discrete operators of the chemical-diffusion surface model (Zhong et al. 2016, sections 9.4-9.5).
 
 Everything here is built once from the rest surface (numpy); the numba step kernel
 (:mod:`surgsim_envs.tissue.diffusion_kernels`) only applies them. All operators are stored as

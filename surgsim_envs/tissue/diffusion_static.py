@@ -1,4 +1,4 @@
-"""Equilibria of the diffusion model (paper 000): the steady concentration under a constant load,
+"""Equilibria of the diffusion model (Zhong et al. 2016): the steady concentration under a constant load,
 the static positions (``static_solve``) and the contact compliance used by indentation
 benchmarks. Functions of a built :class:`~surgsim_envs.tissue.diffusion.DiffusionModel` (its
 operators and coefficients); scipy sparse solves, no state is changed.

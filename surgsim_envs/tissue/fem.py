@@ -1,4 +1,4 @@
-"""Linear / corotational tetrahedral FEM: the "basic model" of paper 004 (section 2.1).
+"""Linear / corotational tetrahedral FEM: the "basic model" of Vandewalle et al. 2003 (section 2.1).
 
 Linear 4-node tets, Hooke's law ``sigma = D eps`` (paper eq. 2), ``eps = B u`` (eq. 3),
 ``K_e = B^T D B V``; the global system ``K U = R`` with Dirichlet nodes. Additions for
@@ -70,7 +70,7 @@ class TetFEMModel(TissueModel):
     """
 
     name = "fem"
-    summary = "Linear tetrahedral FEM (paper 004 basic model): corotational, locking-free ANP, implicit/symplectic"
+    summary = "Linear tetrahedral FEM (Vandewalle et al. 2003 basic model): corotational, locking-free ANP, implicit/symplectic"
     integrators = ("implicit", "symplectic")
     auto_pair = ("symplectic", "implicit")
     default_integrator = "auto"
@@ -712,7 +712,7 @@ class TetFEMModel(TissueModel):
         return out
 
     # ------------------------------------------------------------------------------------------
-    # Growth (paper 004, section 2.3): surgsim_envs.tissue.growth
+    # Growth (Vandewalle et al. 2003, section 2.3): surgsim_envs.tissue.growth
     def grow(self, k: float = 20.0, alpha="auto", **kwargs):
         """Stress-induced tissue growth from the current Dirichlet nodes/targets (bone displacement);
         sets ``positions`` to the grown equilibrium, returns a ``GrowthResult``. See

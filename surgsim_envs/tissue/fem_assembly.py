@@ -1,6 +1,6 @@
 """Linear tetrahedral FEM building blocks: shape gradients, B and D matrices, sparse K assembly.
 
-Notation follows paper 004 (section 2.1): Voigt strain ``eps = [exx, eyy, ezz, gxy, gyz, gzx]``
+Notation follows Vandewalle et al. 2003 (section 2.1): Voigt strain ``eps = [exx, eyy, ezz, gxy, gyz, gzx]``
 with engineering shear strains, Hooke's law ``sigma = D eps`` (eq. 2), ``eps = B u`` with
 ``B = [B_0 B_1 B_2 B_3]`` (eq. 3) and element stiffness ``K_e = B^T D B V`` (the paper's
 ``K^i_mn = B_m^T D^i B_n V^i``). Units: m, Pa, N/m.
@@ -51,7 +51,7 @@ def shape_gradients(nodes: np.ndarray, tets: np.ndarray):
 
 
 def b_matrices(grads: np.ndarray) -> np.ndarray:
-    """Strain-displacement matrices B (T, 6, 12) of paper 004 eq. 3 (gxy row corrected, see module doc)."""
+    """Strain-displacement matrices B (T, 6, 12) of Vandewalle et al. 2003 eq. 3 (gxy row corrected, see module doc)."""
     t = len(grads)
     b = np.zeros((t, 6, 12))
     for a in range(4):
@@ -67,7 +67,7 @@ def b_matrices(grads: np.ndarray) -> np.ndarray:
 
 
 def d_matrices(young, poisson) -> np.ndarray:
-    """Isotropic Hooke matrices D (T, 6, 6) in Pa (paper 004 eq. 2) from per-element E (Pa) and nu."""
+    """Isotropic Hooke matrices D (T, 6, 6) in Pa (Vandewalle et al. 2003 eq. 2) from per-element E (Pa) and nu."""
     young = np.atleast_1d(np.asarray(young, dtype=np.float64))
     poisson = np.broadcast_to(np.asarray(poisson, dtype=np.float64), young.shape)
     if np.any(young <= 0) or np.any(poisson <= -1.0) or np.any(poisson >= 0.5):

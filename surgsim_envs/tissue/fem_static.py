@@ -1,4 +1,5 @@
-"""Quasi-static linear tet FEM with a prefactored stiffness and contact condensation (issue 16).
+"""Quasi-static linear tet FEM with a prefactored stiffness and contact condensation: FEM
+accuracy at the cost of a small dense solve per step.
 
 The elastic body is the ``fem`` model's small-strain one (linear 4-node tets, locking-free
 averaged nodal pressure, ANP, by default), without inertia: every step returns the equilibrium

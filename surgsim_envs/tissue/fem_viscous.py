@@ -7,7 +7,7 @@ Per element ``e`` with relax fraction ``g`` and time ``tau`` (material ``relax_f
 
 with ``sigma0`` the instantaneous elastic stress (modulus E, corotated frame, ANP pressure
 included). A held strain relaxes the stress from ``sigma0`` to ``(1 - g) sigma0`` with time
-constant ``tau``, exactly as each mass-spring spring does (paper 002 eq. 3). Over a step of ``h`` s
+constant ``tau``, exactly as each mass-spring spring does (the grasping simulation paper eq. 3). Over a step of ``h`` s
 with ``sigma0`` varying linearly the update is exact:
 
     h_{n+1} = exp(-h/tau) h_n + gamma (sigma0_{n+1} - sigma0_n),   gamma = tau/h (1 - exp(-h/tau)).

@@ -1,6 +1,6 @@
-"""Variable-order fractional viscoelastic tissue on tetrahedra (paper 003, extended to 3-D).
+"""Variable-order fractional viscoelastic tissue on tetrahedra (the variable-order paper, extended to 3-D).
 
-Paper 003 writes the stress as a fractional derivative of the elastic response (2-D: eqs. 11-13,
+The variable-order paper writes the stress as a fractional derivative of the elastic response (2-D: eqs. 11-13,
 ``sigma = D^q(t) [C eps]`` with C the isotropic elasticity written with alpha, beta, gamma).
 In 3-D, per linear tet, with C Hooke's tensor of the element's (young, poisson)::
 
@@ -68,7 +68,7 @@ class FractionalTetModel(TissueModel):
     memory: short-memory length L (steps of history kept), >= 1. The model remembers L dt
         seconds: beyond that relaxation and creep stall (the truncated branch acts as a spring),
         so for fidelity over the relaxation time use L >= relax_time / dt; the cost per step grows
-        linearly with L (docs/models/fractional.md). Default 100 (the speed target of issue 17).
+        linearly with L (docs/models/fractional.md). Default 100 (1,000 nodes then step in < 1 ms on one core).
     coarse_blocks, coarse_step: two-level memory: beyond the L-step window keep ``coarse_blocks``
         averages of ``coarse_step`` (<= L, default L) end states each, weighted by the exact sum of
         their lags' GL weights; spans L + coarse_blocks x coarse_step steps for L + coarse_blocks
@@ -78,7 +78,7 @@ class FractionalTetModel(TissueModel):
     """
 
     name = "fractional"
-    summary = "Variable-order fractional viscoelastic tets (paper 003): sigma = (1-g) C eps + g tau^q D^q(t) C eps, short memory"
+    summary = "Variable-order fractional viscoelastic tets (the variable-order paper): sigma = (1-g) C eps + g tau^q D^q(t) C eps, short memory"
     integrators = ("symplectic", "implicit")
     auto_pair = ("symplectic", "implicit")
     default_integrator = "auto"
@@ -427,7 +427,7 @@ class FractionalTetModel(TissueModel):
         ``forces`` (N,3) N (+ gravity) and the Dirichlet nodes: ``K_inf u = f``. When every element
         is pure fractional (g = 1) there is no equilibrium under a load (the law creeps as t^q);
         with loads only through the Dirichlet nodes the equilibrium is the elastic one, ``K u = 0``
-        on the free nodes (the relaxation mode of paper 003, eqs. 22-23). Sets ``positions``."""
+        on the free nodes (the relaxation mode of the variable-order paper, eqs. 22-23). Sets ``positions``."""
         if not self.fixed.any():
             raise ConfigError("static_solve needs Dirichlet nodes (the free body has rigid modes); call set_fixed(nodes) first")
         forces = self.external_forces if forces is None else np.asarray(forces, dtype=np.float64)

@@ -1,4 +1,4 @@
-"""Variable-order fractional derivatives on a uniform time grid (paper 003, eqs. 3-4).
+"""Variable-order fractional derivatives on a uniform time grid (the variable-order paper, eqs. 3-4).
 
 Definitions (paper eqs. 3 and 4), order ``0 <= q(t) <= 1`` evaluated at the *current* time t
 (the kernel is ``(t - tau)^(-q(t))``, not ``(t - tau)^(-q(tau))``)::

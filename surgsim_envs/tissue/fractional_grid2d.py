@@ -1,4 +1,4 @@
-"""Two-dimensional fractional tissue layer on a grid (paper 003, sections II-IV, eqs. 10-23).
+"""Two-dimensional fractional tissue layer on a grid (the variable-order paper, sections II-IV, eqs. 10-23).
 
 Stress-strain law (eqs. 11-13), RL derivative of order q(t)::
 

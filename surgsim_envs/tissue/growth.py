@@ -1,4 +1,4 @@
-"""Stress-induced soft-tissue growth (paper 004, Vandewalle et al., section 2.3).
+"""Stress-induced soft-tissue growth (Vandewalle et al. 2003, section 2.3).
 
 The basic model (section 2.1) is the linear FEM ``K u = R`` with Dirichlet conditions: bone
 displacements prescribed, distant tissue fixed, ``R = 0``. Growth adds the load (eqs. 4-7)

@@ -1,4 +1,4 @@
-"""Linear element operators of the growth iteration (paper 004, eqs. 2-7): strain, stress, loads.
+"""Linear element operators of the growth iteration (Vandewalle et al. 2003, eqs. 2-7): strain, stress, loads.
 
 Per tet e (linear 4-node, constant strain): Voigt strain ``eps_e = B_e u`` (engineering shears,
 order xx, yy, zz, xy, yz, zx; paper eq. 3), Voigt stress ``sigma_e = S(eps)_e`` and nodal

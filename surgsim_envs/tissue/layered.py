@@ -1,4 +1,4 @@
-"""Heterogeneous multi-layer tissue with constrained local static integration (paper 001, section 2.4).
+"""Heterogeneous multi-layer tissue with constrained local static integration (Lin et al. 2008, section 2.4).
 
 The volume is a :class:`~surgsim_envs.geometry.layers.LayeredVolume`: a lattice whose nodes carry
 material flags and whose springs join each node to its six direct neighbours (the neighbouring
@@ -62,7 +62,7 @@ def laplace_modulus(young: np.ndarray, poisson: np.ndarray) -> np.ndarray:
 
 
 class LayeredModel(TissueModel):
-    """Paper 001's heterogeneous layered tissue (module docstring).
+    """Lin et al. 2008's heterogeneous layered tissue (module docstring).
 
     Parameters
     ----------
@@ -85,7 +85,7 @@ class LayeredModel(TissueModel):
     """
 
     name: ClassVar[str] = "layered"
-    summary: ClassVar[str] = ("heterogeneous layered tissue (paper 001): NBB springs from material layers, "
+    summary: ClassVar[str] = ("heterogeneous layered tissue (Lin et al. 2008): NBB springs from material layers, "
                               "constrained local static integration on active nodes, force accumulation")
     integrators: ClassVar[tuple[str, ...]] = ("local_static",)
     quasi_static: ClassVar[bool] = True

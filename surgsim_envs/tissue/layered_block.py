@@ -1,4 +1,4 @@
-"""Direct constrained solve of the ``layered`` model on a block of nodes (paper 001, eqs. 2.5-2.9).
+"""Direct constrained solve of the ``layered`` model on a block of nodes (Lin et al. 2008, eqs. 2.5-2.9).
 
 The local static integration of :mod:`surgsim_envs.tissue.layered_kernels` (a projected
 Gauss-Seidel over the active nodes) converges slowly where stiff skin lies over soft fat: a

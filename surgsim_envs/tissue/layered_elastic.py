@@ -1,5 +1,5 @@
 """The ``layered`` model's ``stiffness="elastic"`` option: elasticity of the snapped cells in place of
-the paper's scalar springs, inside the same constrained static solve (paper 001, eqs. 2.5, 2.9).
+the paper's scalar springs, inside the same constrained static solve (Lin et al. 2008, eqs. 2.5, 2.9).
 
 Why (docs/models/layered.md, "Accuracy against FEM"): eq. 2.8's springs are one scalar Laplacian
 for x, y and z; on the abdominal wall the thin stiff skin then acts as a membrane and the confined

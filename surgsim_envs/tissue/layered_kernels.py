@@ -1,4 +1,4 @@
-"""numba kernels of the ``layered`` model: constrained local static integration (paper 001, eqs. 2.5-2.10).
+"""numba kernels of the ``layered`` model: constrained local static integration (Lin et al. 2008, eqs. 2.5-2.10).
 
 Arrays (N nodes, 6 NBB directions -x, +x, -y, +y, -z, +z; direction ``d`` has axis ``d // 2`` and
 sign ``-1`` for even ``d``; its opposite is ``d ^ 1``):

@@ -1,5 +1,5 @@
 """The ``layered`` model's "prefactored" per-step solver: the all-node equilibrium of the springs
-with moving contact nodes, touching only the contact region per step (paper 001, eqs. 2.5, 2.8).
+with moving contact nodes, touching only the contact region per step (Lin et al. 2008, eqs. 2.5, 2.8).
 
 The spring Laplacian ``A`` of every node except the ANCHORS (Dirichlet nodes held at rest when it
 was built: bonded faces, bone) is factorised once. A contact node c held at displacement t_c adds

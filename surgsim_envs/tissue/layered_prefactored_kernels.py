@@ -1,4 +1,4 @@
-"""numba kernels of the ``layered`` model's prefactored contact step (paper 001, eqs. 2.5 and 2.8).
+"""numba kernels of the ``layered`` model's prefactored contact step (Lin et al. 2008, eqs. 2.5 and 2.8).
 
 The springs' scalar Laplacian ``A`` of the free (non-anchor) nodes is factorised once; a node ``c``
 that carries a reaction (a contact node held on the tool, or an end of a rigid extreme-length

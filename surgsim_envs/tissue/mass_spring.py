@@ -1,4 +1,4 @@
-"""Nonlinear viscoelastic mass-spring-damper tissue (paper 002, eqs. 1-3).
+"""Nonlinear viscoelastic mass-spring-damper tissue (the grasping simulation paper, eqs. 1-3).
 
 Mass points sit at the volume's nodes (lumped masses ``m_i`` from the density), springs on the
 tet edges, and every node has an absolute-velocity damper (eq. 2's ``-b_i v_i``). Each spring is
@@ -89,7 +89,7 @@ def _check_scalar(name: str, value: Any, *, positive: bool) -> float:
 
 
 class MassSpringModel(TissueModel):
-    """Nonlinear viscoelastic mass-spring-damper model on the tet edges (paper 002).
+    """Nonlinear viscoelastic mass-spring-damper model on the tet edges (the grasping simulation paper).
 
     Parameters
     ----------
@@ -115,7 +115,7 @@ class MassSpringModel(TissueModel):
     """
 
     name: ClassVar[str] = "mass_spring"
-    summary: ClassVar[str] = ("nonlinear viscoelastic mass-spring-damper on tet edges (paper 002): "
+    summary: ClassVar[str] = ("nonlinear viscoelastic mass-spring-damper on tet edges (the grasping simulation paper): "
                               "cubic springs + Maxwell branches (+ optional volume term), auto/symplectic/implicit")
     integrators: ClassVar[tuple[str, ...]] = ("symplectic", "implicit")
     auto_pair: ClassVar[tuple[str, str] | None] = ("symplectic", "implicit")

@@ -1,4 +1,4 @@
-"""Numba kernels of the nonlinear viscoelastic mass-spring-damper model (paper 002).
+"""Numba kernels of the nonlinear viscoelastic mass-spring-damper model (the grasping simulation paper).
 
 Every spring ``e`` joins nodes ``si[e]`` -> ``sj[e]`` with rest length ``L0[e]`` (m). Its axial
 force (N, positive in tension) is
@@ -195,10 +195,10 @@ def spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state,
     :func:`spring_forces`). Measured here: bit for bit the forces of :func:`spring_forces` called on
     its own, and the tasks' trajectories identical to the single-pass kernel's (fastmath lets the
     compiler contract arithmetic differently in other contexts: tests hold the two to 1e-12
-    relative); ~1.8x faster on the tasks' lattices (docs/benchmarks.md "Env step: third pass"). Node
+    relative); ~1.8x faster on the tasks' lattices (CHANGELOG.md "Env step: three-pass spring kernel, env fast paths, Grasp sub-cycling"). Node
     indices are read as unsigned (the springs' nodes are valid, non-negative ids): numba then emits
     no negative-index wrap-around per access, 5-17 % of the call on the tasks' lattices with the same
-    forces bit for bit (docs/benchmarks.md "Env step: sixth pass")."""
+    forces bit for bit (CHANGELOG.md "Env step: unsigned spring indices, lazy contact zeroing")."""
     ne = si.shape[0]
     wx = work[0]
     wy = work[1]

@@ -43,7 +43,7 @@ def add_forces(pos, tets, V0, kv, vbuf, f_out):
     for the 6,144-tet palpation slab; structure-of-arrays passes were no faster either). Node indices
     are read as unsigned: numba then emits no negative-index wrap-around per access (the tets are
     valid, non-negative node ids): 23 vs 33 us on the 1,200-tet Palpation slab, the same forces bit for bit
-    (docs/benchmarks.md "Calibrated mass-spring: fifth pass")."""
+    (CHANGELOG.md "Calibrated mass-spring: compiled \"auto\", selective mass scaling")."""
     vbuf[:] = 0.0
     for t in range(tets.shape[0]):
         a = uint64(tets[t, 0])

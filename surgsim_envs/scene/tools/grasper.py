@@ -1,4 +1,4 @@
-"""The three-jaw large-organ grasper of paper 002. One tool kind = this module + registration.
+"""The three-jaw large-organ grasper of the grasping simulation paper. One tool kind = this module + registration.
 
 The wrist body's local +z axis points from the jaw tips back towards the handle, i.e. ``-axis``.
 The wrist slides along its local x, y (across) and z (along the axis). Jaw i sits at angle
@@ -94,7 +94,7 @@ def validate(g: GrasperConfig) -> None:
 
 
 def build(spec: mujoco.MjSpec, cfg: GrasperConfig) -> ToolSpec:
-    """Add the three-jaw grasper (paper 002) to ``spec``; return its :class:`ToolSpec`."""
+    """Add the three-jaw grasper (the grasping simulation paper) to ``spec``; return its :class:`ToolSpec`."""
     name = cfg.name
     axis = np.asarray(cfg.axis, dtype=float)
     axis /= np.linalg.norm(axis)

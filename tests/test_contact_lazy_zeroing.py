@@ -1,6 +1,6 @@
-"""Env step, sixth pass (issue 18): the contact kernel zeroes only the node rows it wrote last call
-and writes the contact states only of the points that were in contact, instead of every touched
-row and every rejected point (docs/benchmarks.md "Env step: sixth pass"). The outputs must be
+"""The contact kernel zeroes only the node rows it wrote last call and writes the contact states
+only of the points that were in contact, instead of every touched row and every rejected point
+(cheaper per substep). The outputs must be
 those of zeroing everything every call, bit for bit: checked here call by call against the same
 kernel told that every row and every point was written (which makes it zero all of them), and
 through the compiled and the generic substep loops after a contact ends."""

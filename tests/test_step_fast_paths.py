@@ -1,4 +1,4 @@
-"""The fifth speed pass (issue 18) kept every result: fast paths give what the checked paths give,
+"""The step's fast paths keep every result: fast paths give what the checked paths give,
 the vectorised guard checks make the same decisions, the contact kernel's tighter rejection box
 contains every geom, and the compiled loop's address table follows replaced tissue arrays."""
 

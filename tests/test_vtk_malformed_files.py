@@ -1,4 +1,4 @@
-"""Legacy VTK reader on malformed files (issue 14): errors name the file and the line, and no
+"""Legacy VTK reader on malformed files: errors name the file and the line, and no
 declared count can make the reader loop or burn time beyond the file size."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Stability guard (issue 14): the critical dt quoted comes from the last good state, and
+"""Stability guard: the critical dt quoted comes from the last good state, and
 non-finite external inputs are refused as bad input before they reach the state."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Scenario files are data (issue 14): code-loading policies are opt-in and confined to the
+"""Scenario files are data: code-loading policies are opt-in and confined to the
 scenario's folder; .npz data policies; every bad value is caught at load/--check with its line."""
 
 from __future__ import annotations

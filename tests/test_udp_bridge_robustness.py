@@ -1,4 +1,4 @@
-"""UDP bridge hardening (issue 14): overflowing quaternions, the sequence window and session
+"""UDP bridge robustness: overflowing quaternions, the sequence window and session
 restarts, bounded reads under a garbage flood, zero force before the first pose."""
 
 from __future__ import annotations

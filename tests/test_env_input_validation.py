@@ -1,4 +1,5 @@
-"""Issue 14, env items: each test reproduced the failure before the fix."""
+"""Env input validation: bad actions, control rates and display settings fail with a clear error,
+and a failed reset leaves the env usable. Each test reproduced the failure before the fix."""
 
 import os
 import subprocess

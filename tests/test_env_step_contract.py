@@ -1,4 +1,4 @@
-"""Issue 18, third speed pass: the per-step fast paths keep the env's contract (actions checked and
+"""The per-step fast paths keep the env's contract (actions checked and
 clipped without touching the caller's array, fresh observation and info objects every step), the
 InfoKeys wrapper, and Grasp-v0's sub-cycling default with the grasper stability limit behind it."""
 
