@@ -33,6 +33,8 @@ BENCH: dict[str, tuple[str, str]] = {
     "calibrated-cost": ("surgsim_envs.bench.calibrated_cost",
                         "calibrated vs plain mass-spring: critical dt, step cost per simulated ms"),
     "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
+    "task-accuracy": ("surgsim_envs.bench.task_accuracy",
+                      "probe forces in each task's own scene, every model against converged fem"),
     "soak": ("surgsim_envs.bench.soak", "long random-action runs: NaN, exceptions, force bounds, memory growth"),
     "diffusion": ("surgsim_envs.bench.diffusion_bench", "diffusion model (paper 000) update time vs the paper's Table 9.1"),
     "growth": ("surgsim_envs.bench.growth_speed", "tissue growth iteration time (paper 004) on a ~10,000-node mesh"),
