@@ -19,6 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fit": ("surgsim_envs.bench.fit", "fit model parameters to measured force data"),
     "teleop": ("surgsim_envs.haptics.teleop", "teleoperate a task with a (simulated) haptic device"),
     "run": ("surgsim_envs.scenarios.cli", "run a trainee scenario file and write a report"),
+    "record": ("surgsim_envs.integrations.minari_datasets", "record demonstrations of a task as a Minari dataset"),
     "grow": ("surgsim_envs.planning.grow_cmd", "tissue growth after a bone displacement (paper 004): basic vs growth"),
     "validate": ("surgsim_envs.bench.validate_cmd", "signed surface distances of a prediction to a reference (paper 004)"),
 }

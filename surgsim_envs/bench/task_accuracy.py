@@ -81,7 +81,12 @@ PROBE_SETS: dict[str, tuple[ProbeSet, ProbeSet]] = {
 }
 
 
-def _make(task: str, model: str, spacing: float, material=None):
+#: the reference's physics step at lattice spacing h: dt = h x this (s/m), at most the task's dt (an
+#: explicit FEM's critical step shrinks with h; 0.5 ms at 5 mm keeps it at half its critical step)
+REFERENCE_DT_PER_M = 0.1
+
+
+def _make(task: str, model: str, spacing: float, material=None, dt: float | None = None):
     import gymnasium as gym
 
     import surgsim_envs.envs  # noqa: F401  (registers the tasks)
@@ -89,6 +94,8 @@ def _make(task: str, model: str, spacing: float, material=None):
     kwargs = {"model": model, "resolution": float(spacing)}
     if material is not None:
         kwargs["material"] = material
+    if dt is not None:
+        kwargs["dt"] = float(dt)
     return gym.make(task, disable_env_checker=True, **kwargs).unwrapped
 
 
@@ -144,19 +151,28 @@ def _mirror(xy) -> tuple[float, float]:
     return (-float(xy[0]), -float(xy[1]))
 
 
-def measure(task: str, model: str, spacing: float, probes: ProbeSet) -> dict:
-    """One row: the presses of ``probes`` with ``model`` at ``spacing`` in ``task``'s scene."""
+def measure(task: str, model: str, spacing: float, probes: ProbeSet, dt: float | None = None) -> dict:
+    """One row: the presses of ``probes`` with ``model`` at ``spacing`` in ``task``'s scene (its
+    physics step ``dt``, default the task's). A model the task refuses, or one that goes unstable,
+    gives a row saying so instead of numbers."""
+    from surgsim_envs.tissue import TissueUnstableError
+
+    head = {"task": task, "model": model, "spacing": float(spacing)}
     try:
-        env = _make(task, model, spacing)
+        env = _make(task, model, spacing, dt=dt)
     except ConfigError as exc:
-        return {"task": task, "model": model, "spacing": spacing, "refused": str(exc).split("\n")[0]}
+        return {**head, "refused": str(exc).split("\n")[0]}
     presser = _Presser(env, probes.hold)
     forces = {}
-    for i, inc in enumerate(probes.inclusions):
-        for site in ("over", "mirror"):
-            xy = inc.position if site == "over" else _mirror(inc.position)
-            for depth in probes.depths:
-                forces[f"{i}/{site}/{depth * 1e3:g}mm"] = presser.press(inc, xy, depth)
+    try:
+        for i, inc in enumerate(probes.inclusions):
+            for site in ("over", "mirror"):
+                xy = inc.position if site == "over" else _mirror(inc.position)
+                for depth in probes.depths:
+                    forces[f"{i}/{site}/{depth * 1e3:g}mm"] = presser.press(inc, xy, depth)
+    except TissueUnstableError as exc:
+        env.close()
+        return {**head, "refused": "unstable in the task's scene: " + str(exc).split("\n")[0]}
     row = {"task": task, "model": model, "spacing": float(spacing), "nodes": int(len(env.sim.tissue().positions)),
            "forces_N": forces, "max_tensile_N": presser.max_tensile,
            "us_per_env_step": float(np.median(presser.step_us)),
@@ -164,16 +180,15 @@ def measure(task: str, model: str, spacing: float, probes: ProbeSet) -> dict:
     env.close()
     # frictionless path independence at the middle depth over the first inclusion
     try:
-        flat = _make(task, model, spacing, material=_frictionless(env.config.material))
-    except ConfigError as exc:
-        row["path_note"] = str(exc).split("\n")[0]
-    else:
+        flat = _make(task, model, spacing, material=_frictionless(env.config.material), dt=dt)
         p = _Presser(flat, probes.hold)
         inc, depth = probes.inclusions[0], probes.depths[len(probes.depths) // 2]
         straight = p.press(inc, inc.position, depth)
         slid = p.press(inc, inc.position, depth, approach=(inc.position[0] - 0.006, inc.position[1]))
         row["path_difference"] = abs(slid - straight) / max(abs(straight), 1e-12)
         flat.close()
+    except (ConfigError, TissueUnstableError) as exc:
+        row["path_note"] = str(exc).split("\n")[0]
     row["us_per_ms"] = row["us_per_env_step"] / (row["control_dt"] * 1e3)
     return row
 
@@ -211,12 +226,24 @@ def compare(row: dict, reference: dict, probes: ProbeSet) -> dict:
             "scene": row["task"], "integrator": "default"}
 
 
+def _reference_dt(task: str, spacing: float) -> float:
+    import gymnasium as gym
+
+    import surgsim_envs.envs  # noqa: F401
+
+    import importlib
+
+    module, name = gym.spec(task).entry_point.split(":")
+    task_dt = float(getattr(importlib.import_module(module), name).config_cls().dt)
+    return min(task_dt, REFERENCE_DT_PER_M * float(spacing))
+
+
 def converged_reference(task: str, probes: ProbeSet, progress: Callable[[str], None] = print) -> dict:
     """``fem`` rows at the reference spacings until two successive ones differ by under 1 %."""
     prev = None
     for spacing in probes.reference_spacings:
         progress(f"reference fem at {spacing * 1e3:.3g} mm")
-        row = measure(task, "fem", spacing, probes)
+        row = measure(task, "fem", spacing, probes, dt=_reference_dt(task, spacing))
         if "refused" in row:
             raise ConfigError(f"{task}: the reference model fem is refused ({row['refused']})")
         if prev is not None:
