@@ -19,6 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fit": ("surgsim_envs.bench.fit", "fit model parameters to measured force data"),
     "teleop": ("surgsim_envs.haptics.teleop", "teleoperate a task with a (simulated) haptic device"),
     "run": ("surgsim_envs.scenarios.cli", "run a trainee scenario file and write a report"),
+    "record": ("surgsim_envs.integrations.minari_datasets", "record demonstrations of a task as a Minari dataset"),
     "grow": ("surgsim_envs.planning.grow_cmd", "tissue growth after a bone displacement (Vandewalle et al. 2003): basic vs growth"),
     "validate": ("surgsim_envs.bench.validate_cmd", "signed surface distances of a prediction to a reference (Vandewalle et al. 2003)"),
 }
@@ -33,6 +34,8 @@ BENCH: dict[str, tuple[str, str]] = {
     "calibrated-cost": ("surgsim_envs.bench.calibrated_cost",
                         "calibrated vs plain mass-spring: critical dt, step cost per simulated ms"),
     "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
+    "task-accuracy": ("surgsim_envs.bench.task_accuracy",
+                      "probe forces in each task's own scene, every model against converged fem"),
     "soak": ("surgsim_envs.bench.soak", "long random-action runs: NaN, exceptions, force bounds, memory growth"),
     "diffusion": ("surgsim_envs.bench.diffusion_bench", "diffusion model (Zhong et al. 2016) update time vs the paper's Table 9.1"),
     "growth": ("surgsim_envs.bench.growth_speed", "tissue growth iteration time (Vandewalle et al. 2003) on a ~10,000-node mesh"),

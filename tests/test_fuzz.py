@@ -21,7 +21,7 @@ from surgsim_envs.errors import ConfigError  # noqa: E402
 from surgsim_envs.haptics.udp_bridge import (  # noqa: E402
     POSE_STRUCT,
     MalformedPacketError,
-    SequenceGate,
+    SessionGate,
     decode_pose,
     encode_pose,
 )
@@ -56,7 +56,7 @@ def test_fuzz_decode_pose_random_bytes(data):
        st.tuples(any_float, any_float, any_float, any_float), st.integers(0, 2**32 - 1),
        st.floats(width=32, allow_nan=True, allow_infinity=True))
 def test_fuzz_decode_pose_every_field(seq, ts, pos, quat, buttons, grip):
-    raw = POSE_STRUCT.pack(b"SSHP", 1, 1, seq, ts, *pos, *quat, buttons, grip)
+    raw = POSE_STRUCT.pack(b"SSHP", 2, 1, 99, seq, ts, *pos, *quat, buttons, grip)
     try:
         p = decode_pose(raw)
     except MalformedPacketError as exc:
@@ -74,18 +74,20 @@ def test_fuzz_decode_pose_every_field(seq, ts, pos, quat, buttons, grip):
 
 
 @FAST
-@given(st.lists(st.tuples(st.integers(0, 2**32 - 1), st.sampled_from(["a", "b", "c"]),
+@given(st.lists(st.tuples(st.sampled_from([1, 2, 3]), st.integers(0, 2**32 - 1), st.sampled_from(["a", "b", "c"]),
                           st.floats(0.0, 0.1)), max_size=60))
-def test_fuzz_sequence_gate_never_raises_and_only_admits_in_window_or_restarts(packets):
-    g = SequenceGate()
+def test_fuzz_session_gate_never_raises_and_admits_only_its_session_or_a_takeover(packets):
+    g = SessionGate()
     t = 0.0
-    for seq, addr, dt in packets:
+    for session, seq, addr, dt in packets:
         t += dt
-        last, resyncs = g.last_seq, g.resyncs
-        if g.admit(seq, addr, t):
-            in_window = last is None or 0 < ((seq - last) & 0xFFFFFFFF) <= g.window
-            assert in_window or g.resyncs == resyncs + 1
-            assert g.last_seq == seq
+        before = (g.session, g.addr, g.last_seq, g.last_time)
+        if g.admit(session, seq, addr, t):
+            assert (g.session, g.addr, g.last_seq) == (session, addr, seq)
+            if before[0] is not None and (session, addr) == before[:2]:
+                assert 0 < ((seq - before[2]) & 0xFFFFFFFF) <= g.window  # ahead within the window
+            elif before[0] is not None:
+                assert t - before[3] > g.session_timeout  # another stream only after silence
 
 
 # -- scenario schema ----------------------------------------------------------------------------

@@ -134,7 +134,7 @@ def test_self_intersecting_surface_is_refused(tmp_path):
     assert clean == 0 and self_intersections(bad) > 0
     path = tmp_path / "folded.ply"
     bad.export(path)
-    with pytest.raises(ConfigError, match="intersects itself"):
+    with pytest.raises(ConfigError, match="intersects or touches itself"):
         organ_volume(path)
 
 
@@ -152,3 +152,42 @@ def test_scene_takes_a_mesh_path_or_a_volume(kidney_stl, kind):
     assert (lo + hi)[2] / 2 == pytest.approx(0.02, abs=1e-9)     # bounding-box centre at position
     assert t.fixed.any()                                           # anchored on its bed ("bottom")
     assert scene.bindings["kidney"].smooth                         # rendered with the mesh's own surface
+
+
+def test_a_large_self_intersecting_surface_is_checked_whole():
+    m = trimesh.creation.icosphere(subdivisions=5, radius=0.02)   # 20,480 faces
+    assert len(m.faces) > 20_000 and self_intersections(m) == 0
+    v = m.vertices.copy()
+    v[int(np.argmax(v[:, 2]))] = [0.001, 0.001, -0.03]           # the north pole through the south cap
+    bad = trimesh.Trimesh(v, m.faces, process=False)
+    assert self_intersections(bad) > 0
+    from surgsim_envs.geometry import check_surface_mesh
+    with pytest.raises(ConfigError, match="intersects or touches itself"):
+        check_surface_mesh(bad)
+
+
+def test_a_surface_that_touches_itself_without_crossing_is_refused():
+    m = trimesh.creation.icosphere(subdivisions=2, radius=0.02)
+    v = m.vertices.copy()
+    top = int(np.argmax(v[:, 2]))
+    far = [i for i, f in enumerate(m.faces) if top not in f and v[f, 2].max() < -0.015][0]
+    v[top] = v[m.faces[far]].mean(axis=0)        # the pole pulled onto a face of the south cap
+    touched = trimesh.Trimesh(v, m.faces, process=False)
+    assert self_intersections(touched) > 0
+    # two shells that only touch (a cube standing on another's face) are refused as well
+    from surgsim_envs.geometry import check_surface_mesh
+    a = trimesh.creation.box(extents=(0.02, 0.02, 0.02))
+    b = trimesh.creation.box(extents=(0.01, 0.01, 0.01)).apply_translation([0.0, 0.0, 0.015])
+    with pytest.raises(ConfigError, match="overlap or touch"):
+        check_surface_mesh(trimesh.util.concatenate([a, b]))
+
+
+def test_many_separate_shells_pass_and_a_nested_one_is_found():
+    from surgsim_envs.geometry import check_surface_mesh
+    s = trimesh.creation.icosphere(subdivisions=1, radius=0.004)
+    parts = [s.copy().apply_translation([0.01 * (i % 10), 0.01 * (i // 10 % 10), 0.01 * (i // 100)])
+             for i in range(1000)]
+    check_surface_mesh(trimesh.util.concatenate(parts))
+    inner = trimesh.creation.icosphere(subdivisions=1, radius=0.001).apply_translation([0.05, 0.05, 0.05])
+    with pytest.raises(ConfigError, match="overlap"):
+        check_surface_mesh(trimesh.util.concatenate(parts + [inner]))

@@ -14,6 +14,7 @@ from surgsim_envs.haptics import DeviceLimits, ServoLoop, SpringWallPhysics
 from surgsim_envs.haptics.udp_bridge import (
     FORCE_SIZE,
     POSE_SIZE,
+    OPEN_PACKETS,
     MalformedPacketError,
     UdpDevice,
     UdpHapticClient,
@@ -25,14 +26,15 @@ from surgsim_envs.haptics.udp_bridge import (
 
 
 def test_packet_round_trip_and_documented_sizes():
-    assert (POSE_SIZE, FORCE_SIZE) == (82, 43)
-    raw = encode_pose(7, 1.25, (0.01, -0.02, 0.03), (0.0, 1.0, 0.0, 0.0), buttons=5, grip=0.5)
-    assert len(raw) == POSE_SIZE and raw[:4] == b"SSHP" and raw[4] == 1
+    assert (POSE_SIZE, FORCE_SIZE) == (90, 51)
+    raw = encode_pose(7, 1.25, (0.01, -0.02, 0.03), (0.0, 1.0, 0.0, 0.0), buttons=5, grip=0.5, session=2**64 - 3)
+    assert len(raw) == POSE_SIZE and raw[:4] == b"SSHP" and raw[4] == 2
+    assert struct.unpack_from("<Q", raw, 6)[0] == 2**64 - 3 and struct.unpack_from("<I", raw, 14)[0] == 7
     p = decode_pose(raw)
-    assert (p.seq, p.timestamp, p.position, p.quaternion, p.buttons, p.grip) == (
-        7, 1.25, (0.01, -0.02, 0.03), (0.0, 1.0, 0.0, 0.0), 5, 0.5)
-    f = decode_force(encode_force(3, 0.5, (1.0, -2.0, 0.25), saturated=True))
-    assert (f.seq, f.timestamp, f.force, f.saturated) == (3, 0.5, (1.0, -2.0, 0.25), True)
+    assert (p.session, p.seq, p.timestamp, p.position, p.quaternion, p.buttons, p.grip) == (
+        2**64 - 3, 7, 1.25, (0.01, -0.02, 0.03), (0.0, 1.0, 0.0, 0.0), 5, 0.5)
+    f = decode_force(encode_force(3, 0.5, (1.0, -2.0, 0.25), saturated=True, session=11))
+    assert (f.session, f.seq, f.timestamp, f.force, f.saturated) == (11, 3, 0.5, (1.0, -2.0, 0.25), True)
 
 
 def _malformed():
@@ -41,7 +43,7 @@ def _malformed():
     yield good[:-1]
     yield good + b"\x00"
     yield b"XXXX" + good[4:]
-    yield good[:4] + bytes([2]) + good[5:]  # version 2
+    yield good[:4] + bytes([1]) + good[5:]  # version 1 (no session id)
     yield good[:5] + bytes([2]) + good[6:]  # a force type on the pose port
     yield encode_pose(1, 0.0, (math.nan, 0, 0))
     yield encode_pose(1, math.inf, (0, 0, 0))
@@ -77,6 +79,8 @@ def test_loopback_round_trip_poses_in_forces_out_malformed_rejected():
         phys = SpringWallPhysics(start_position=(0, 0, 0.0))
         loop = ServoLoop(dev, phys)
         depths = np.linspace(0.0, 0.004, 40)
+        for _ in range(OPEN_PACKETS - 1):  # the stream opens on its third counting pose
+            client.send_pose(0.0, (0.0, 0.0, 0.0), grip=0.25)
         for i, d in enumerate(depths):
             client.send_pose(i * 1e-3, (0.0, 0.0, -d), grip=0.25)
             if i % 10 == 3:  # interleave garbage: counted, never fatal
@@ -103,9 +107,9 @@ def test_loopback_round_trip_poses_in_forces_out_malformed_rejected():
         assert fz[-1] > 0.5 and np.all(np.abs(fz) <= 5.0)  # pushing into the wall is felt, limited
 
         # an older sequence number is stale, not applied
-        stale = encode_pose(0, 0.0, (0.0, 0.0, 0.05))
+        stale = encode_pose(0, 0.0, (0.0, 0.0, 0.05), session=client.session)
         client.send_raw(stale)
-        assert _poll_until(dev, lambda: dev.stats.stale == 1)
+        assert _poll_until(dev, lambda: dev.stats.stale == OPEN_PACKETS - 1 + 1)
         assert dev.read(1.0).position[2] == pytest.approx(-depths[-1])
     finally:
         if client is not None:
@@ -130,7 +134,8 @@ def test_bridge_validates_endpoint_and_requires_connect():
 def test_force_packet_flags_saturation():
     dev = UdpDevice(port=0, limits=DeviceLimits(max_force=1.0))
     with dev, UdpHapticClient(dev.address) as client:
-        client.send_pose(0.0, (0, 0, 0))
+        for _ in range(OPEN_PACKETS):
+            client.send_pose(0.0, (0, 0, 0))
         assert _poll_until(dev, lambda: dev.stats.accepted == 1)
         dev.send_force((0.0, 0.0, 3.0), 0.0)
         got = []
@@ -139,4 +144,4 @@ def test_force_packet_flags_saturation():
             if got:
                 break
         assert got and got[0].saturated and got[0].force[2] == pytest.approx(1.0)
-    assert struct.calcsize("<4sBBIddddB") == FORCE_SIZE
+    assert struct.calcsize("<4sBBQIddddB") == FORCE_SIZE

@@ -23,7 +23,8 @@ import numpy as np
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.loaders import SURFACE_SUFFIXES, TET_SUFFIXES, load_tet_mesh, unit_scale
 from surgsim_envs.geometry.volume import Volume
-from surgsim_envs.geometry.self_intersection import self_intersections  # noqa: F401 (re-exported)
+from surgsim_envs.geometry.nested_shells import nested_shell
+from surgsim_envs.geometry.self_intersection import meeting_pairs, self_intersections  # noqa: F401 (re-exported)
 
 #: options that go to the lattice filling of a surface file
 LATTICE_OPTIONS = ("snap", "max_snap", "min_quality")
@@ -128,7 +129,8 @@ def check_surface_mesh(mesh, what: str = "surface"):
 
     Raises ConfigError if a vertex is NaN/inf, the surface is not closed, it consists of several
     shells that overlap (one inside or through another: the lattice fill would be a hollow or
-    doubled lattice), or triangles of one shell intersect each other."""
+    doubled lattice), or triangles of one shell cross or touch each other (other than neighbours
+    sharing a vertex). Every check runs in about n log n, so large meshes are checked whole."""
     import trimesh
 
     v = np.asarray(mesh.vertices, dtype=np.float64)
@@ -141,26 +143,23 @@ def check_surface_mesh(mesh, what: str = "surface"):
         raise ConfigError(f"{what} is not closed ({len(m.faces)} faces with open edges or holes): a closed surface "
                           "is needed to tell inside from outside. Repair it (trimesh.repair.fill_holes, "
                           "trimesh.repair.fix_winding, or MeshLab/Blender) and save a closed mesh")
-    shells = m.split(only_watertight=False)
-    if len(shells) > 1:
-        for i, a in enumerate(shells):
-            for b in shells[i + 1:]:
-                if _boxes_overlap(a.bounds, b.bounds) and (b.contains(a.vertices).any() or a.contains(b.vertices).any()):
-                    raise ConfigError(
-                        f"{what} has {len(shells)} shells and two of them overlap (one lies inside or cuts through "
-                        "another): filling it would give a hollow or doubled lattice. Merge the shells into one "
-                        "closed surface (a boolean union) or keep one organ per file")
+    labels = trimesh.graph.connected_component_labels(m.face_adjacency, node_count=len(m.faces))
+    n_shells = int(labels.max()) + 1
+    within, across = meeting_pairs(m, labels)
+    overlap = ConfigError(
+        f"{what} has {n_shells} shells and two of them overlap or touch (one lies inside, cuts through or "
+        "touches another): "
+        "filling it would give a hollow or doubled lattice. Merge the shells into one closed surface (a boolean "
+        "union) or keep one organ per file")
+    if across or nested_shell(m, labels) is not None:
+        raise overlap
+    if within:
+        raise ConfigError(f"{what} intersects or touches itself ({within} pairs of triangles that cross or touch "
+                          "without sharing a vertex): inside and outside are ambiguous. Repair the mesh (e.g. "
+                          "MeshLab 'Select self-intersecting faces', or a boolean union of its parts) and save it "
+                          "again")
     if not m.is_winding_consistent:
         trimesh.repair.fix_winding(m)
     if m.volume < 0:
         m.invert()
-    n_self = self_intersections(m)
-    if n_self:
-        raise ConfigError(f"{what} intersects itself ({n_self} pairs of crossing triangles): inside and outside are "
-                          "ambiguous. Repair the mesh (e.g. MeshLab 'Select self-intersecting faces', or a boolean "
-                          "union of its parts) and save it again")
     return m
-
-
-def _boxes_overlap(a, b) -> bool:
-    return bool(np.all(a[0] <= b[1]) and np.all(b[0] <= a[1]))

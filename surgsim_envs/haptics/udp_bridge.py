@@ -1,49 +1,20 @@
 """A network bridge for remote haptic devices: pose packets in, force packets out, over UDP.
 
-By default the simulator binds ``127.0.0.1`` (loopback only; pass another host deliberately to
-accept poses from the network — there is no authentication). All numbers little-endian.
+The wire format (session ids, sequence numbers, optional HMAC-SHA256 tags) is in
+:mod:`~surgsim_envs.haptics.pose_protocol`; which packets move the tool is decided by
+:class:`~surgsim_envs.haptics.session_gate.SessionGate`. This module holds the sockets.
 
-Pose packet (device -> simulator), 82 bytes, ``struct`` format ``<4sBBI8dIf``:
-
-======  =====  ========  ==================================================
-offset  size   type      field
-======  =====  ========  ==================================================
-0       4      bytes     magic ``b"SSHP"``
-4       1      uint8     version (``1``)
-5       1      uint8     type ``1`` (pose)
-6       4      uint32    sequence number (wraps; newer = larger modulo 2^32)
-10      8      float64   timestamp, s (sender clock)
-18      24     3 x f64   position, m (device frame)
-42      32     4 x f64   orientation quaternion ``w, x, y, z``
-74      4      uint32    buttons bit mask
-78      4      float32   grip in [0, 1]
-======  =====  ========  ==================================================
-
-Force packet (simulator -> device), 43 bytes, ``<4sBBIddddB``: magic, version, type ``2``,
-sequence, timestamp (s, servo clock), force x, y, z (N, on the hand, already limited), flags
-(bit 0: saturated).
+By default the simulator binds ``127.0.0.1`` (loopback only). Binding any other interface needs
+a key: pass ``key=`` (bytes or hex, at least 16 bytes) or let :class:`UdpDevice` draw one
+(:attr:`UdpDevice.key`); the device side passes the same key to :class:`UdpHapticClient`. Every
+packet then carries an HMAC-SHA256 tag and untagged or forged packets are dropped.
 
 A datagram is *malformed* (counted in ``stats.malformed`` and dropped; the bridge never raises
-for it) when its length, magic, version or type is wrong, a number is non-finite, the quaternion
-has zero length (after scaling by its largest component, so ``1e300`` components that overflow
-when squared are still normalised correctly) or grip is outside [0, 1]. A decoded quaternion is
-always unit length. Forces go back to the address of the last valid pose packet.
-
-Sequence window and session restart
------------------------------------
-A pose is *in window* when its sequence number is ahead of the last accepted one by 1 to
-:data:`SEQ_WINDOW` (65,536, about 65 s of packets at 1 kHz) modulo 2^32; only in-window poses are
-applied. Every other valid pose (older, repeated, or far ahead) is counted in ``stats.stale`` and
-dropped, so one stray packet with a far-ahead number cannot lock genuine packets out.
-A *session restart* (a device client that restarts at sequence 0, or jumps) is adopted when
-either
-
-* :data:`RESYNC_PACKETS` (3) consecutive out-of-window poses arrive from one address, each in
-  window of the one before (a live, counting stream), with no in-window pose between them; or
-* no pose was accepted for :data:`SESSION_TIMEOUT_S` (0.5 s): the next valid pose starts a new
-  session whatever its number.
-
-Restarts are counted in ``stats.resyncs``.
+for it) when its length, magic, version, type or tag is wrong, a number is non-finite, the
+quaternion has zero length (after scaling by its largest component, so ``1e300`` components that
+overflow when squared are still normalised correctly) or grip is outside [0, 1]. A valid pose
+that the session gate does not apply is counted in ``stats.stale``. Forces go back to the
+address of the last applied pose, carrying its session id.
 
 Flooding
 --------
@@ -52,19 +23,15 @@ One :meth:`UdpDevice.poll` (once per servo tick) reads at most ``max_drain`` dat
 garbage cannot starve the 1 kHz servo; the rest stays queued in the kernel (which drops what
 overflows its buffer). Datagrams of the wrong length are rejected before any decoding.
 
-Trust model
------------
-The bridge has no authentication and no encryption: any process that can reach the port can
-move the proxy. It binds loopback (``127.0.0.1``) by default; bind another interface only on a
-network you trust. Until the first valid pose arrives the device reports *no pose*
+Until a stream has opened (three counting packets) the device reports *no pose*
 (:attr:`UdpDevice.has_pose` is False) and the servo renders zero force.
 """
 
 from __future__ import annotations
 
+import ipaddress
 import math
 import socket
-import struct
 import time
 from dataclasses import dataclass
 
@@ -72,140 +39,45 @@ import numpy as np
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.haptics.device import DeviceLimits, DeviceState, HapticDevice
-from surgsim_envs.haptics.quaternion import unit_quaternion
+from surgsim_envs.haptics.pose_protocol import (  # noqa: F401  (the codec, re-exported for device-side code)
+    FORCE_SIZE,
+    FORCE_STRUCT,
+    MAGIC,
+    POSE_SIZE,
+    POSE_STRUCT,
+    PROTOCOL_VERSION,
+    TAG_SIZE,
+    TYPE_FORCE,
+    TYPE_POSE,
+    ForcePacket,
+    MalformedPacketError,
+    PosePacket,
+    check_key,
+    decode_force,
+    decode_pose,
+    encode_force,
+    encode_pose,
+    new_session_id,
+    new_session_key,
+)
+from surgsim_envs.haptics.session_gate import (  # noqa: F401
+    OPEN_PACKETS,
+    SEQ_WINDOW,
+    SESSION_TIMEOUT_S,
+    SessionGate,
+)
 
-MAGIC = b"SSHP"
-PROTOCOL_VERSION = 1
-TYPE_POSE, TYPE_FORCE = 1, 2
-POSE_STRUCT = struct.Struct("<4sBBI8dIf")
-FORCE_STRUCT = struct.Struct("<4sBBIddddB")
-POSE_SIZE, FORCE_SIZE = POSE_STRUCT.size, FORCE_STRUCT.size  # 82, 43
 DEFAULT_HOST = "127.0.0.1"
-#: poses ahead of the last accepted one by 1..SEQ_WINDOW (mod 2^32) are applied
-SEQ_WINDOW = 1 << 16
-#: consecutive counting out-of-window poses from one address that restart the session
-RESYNC_PACKETS = 3
-#: a pose arriving after this long without an accepted pose starts a new session (s)
-SESSION_TIMEOUT_S = 0.5
 
 
-class MalformedPacketError(ConfigError):
-    """A datagram that is not a valid packet of this protocol."""
-
-
-@dataclass(frozen=True)
-class PosePacket:
-    seq: int
-    timestamp: float
-    position: tuple
-    quaternion: tuple
-    buttons: int
-    grip: float
-
-
-@dataclass(frozen=True)
-class ForcePacket:
-    seq: int
-    timestamp: float
-    force: tuple
-    saturated: bool
-
-
-def encode_pose(seq: int, timestamp: float, position, quaternion=(1.0, 0.0, 0.0, 0.0), buttons: int = 0,
-                grip: float = 0.0) -> bytes:
-    """Pack a pose packet (no validation of finiteness: senders may test rejection)."""
-    p = [float(v) for v in position]
-    q = [float(v) for v in quaternion]
-    if len(p) != 3 or len(q) != 4:
-        raise ConfigError(f"pose needs 3 position and 4 quaternion values, got {len(p)} and {len(q)}")
-    return POSE_STRUCT.pack(MAGIC, PROTOCOL_VERSION, TYPE_POSE, int(seq) & 0xFFFFFFFF, float(timestamp), *p, *q,
-                            int(buttons) & 0xFFFFFFFF, float(grip))
-
-
-def _check_header(data: bytes, size: int, ptype: int, what: str) -> tuple:
-    if not isinstance(data, (bytes, bytearray, memoryview)):
-        raise MalformedPacketError(f"{what} packet must be bytes, got {type(data).__name__}")
-    if len(data) != size:
-        raise MalformedPacketError(f"{what} packet must be {size} bytes, got {len(data)}")
-    st = POSE_STRUCT if ptype == TYPE_POSE else FORCE_STRUCT
-    fields = st.unpack(bytes(data))
-    if fields[0] != MAGIC:
-        raise MalformedPacketError(f"bad magic {fields[0]!r}, expected {MAGIC!r}")
-    if fields[1] != PROTOCOL_VERSION:
-        raise MalformedPacketError(f"protocol version {fields[1]} not supported (this build speaks {PROTOCOL_VERSION})")
-    if fields[2] != ptype:
-        raise MalformedPacketError(f"packet type {fields[2]}, expected {ptype} ({what})")
-    return fields
-
-
-def decode_pose(data: bytes) -> PosePacket:
-    """Unpack and validate a pose packet; raises :class:`MalformedPacketError`."""
-    f = _check_header(data, POSE_SIZE, TYPE_POSE, "pose")
-    seq, ts, pos, quat, buttons, grip = f[3], f[4], f[5:8], f[8:12], f[12], f[13]
-    nums = (ts, *pos, *quat, grip)
-    if not all(math.isfinite(v) for v in nums):
-        raise MalformedPacketError(f"pose packet holds a non-finite number: {nums}")
-    unit = unit_quaternion(quat)
-    if unit is None:
-        raise MalformedPacketError(f"pose quaternion {tuple(quat)} has zero length")
-    if not (0.0 <= grip <= 1.0):
-        raise MalformedPacketError(f"grip {grip} outside [0, 1]")
-    return PosePacket(seq, ts, tuple(pos), unit, buttons, grip)
-
-
-def encode_force(seq: int, timestamp: float, force, saturated: bool = False) -> bytes:
-    """Pack a force packet."""
-    f = [float(v) for v in force]
-    if len(f) != 3:
-        raise ConfigError(f"force needs 3 values (N), got {len(f)}")
-    return FORCE_STRUCT.pack(MAGIC, PROTOCOL_VERSION, TYPE_FORCE, int(seq) & 0xFFFFFFFF, float(timestamp), *f,
-                             1 if saturated else 0)
-
-
-def decode_force(data: bytes) -> ForcePacket:
-    """Unpack and validate a force packet; raises :class:`MalformedPacketError`."""
-    f = _check_header(data, FORCE_SIZE, TYPE_FORCE, "force")
-    if not all(math.isfinite(v) for v in f[4:8]):
-        raise MalformedPacketError("force packet holds a non-finite number")
-    return ForcePacket(f[3], f[4], tuple(f[5:8]), bool(f[8] & 1))
-
-
-class SequenceGate:
-    """The sequence window and session-restart rule of the module docstring (no I/O, testable).
-
-    ``admit(seq, addr, now)`` returns True when the pose must be applied (and records it)."""
-
-    def __init__(self, window: int = SEQ_WINDOW, resync_packets: int = RESYNC_PACKETS,
-                 session_timeout: float = SESSION_TIMEOUT_S):
-        self.window, self.resync_packets, self.session_timeout = int(window), int(resync_packets), float(session_timeout)
-        self.last_seq: int | None = None
-        self.last_time = -math.inf
-        self.resyncs = 0
-        self._run_addr = None
-        self._run_seq: int | None = None
-        self._run_len = 0
-
-    def _in_window(self, seq: int, ref: int | None) -> bool:
-        return ref is None or 0 < ((seq - ref) & 0xFFFFFFFF) <= self.window
-
-    def admit(self, seq: int, addr, now: float) -> bool:
-        restart = False
-        if self.last_seq is not None and now - self.last_time > self.session_timeout:
-            restart = True
-        elif not self._in_window(seq, self.last_seq):
-            if self._run_len and addr == self._run_addr and self._in_window(seq, self._run_seq):
-                self._run_len += 1
-            else:
-                self._run_len = 1
-            self._run_addr, self._run_seq = addr, seq
-            if self._run_len < self.resync_packets:
-                return False
-            restart = True
-        if restart:
-            self.resyncs += 1
-        self.last_seq, self.last_time = seq, now
-        self._run_len, self._run_seq, self._run_addr = 0, None, None
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` names the loopback interface only."""
+    if host == "localhost":
         return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 @dataclass
@@ -214,7 +86,7 @@ class BridgeStats:
     accepted: int = 0
     malformed: int = 0
     stale: int = 0
-    resyncs: int = 0
+    takeovers: int = 0
     polls_truncated: int = 0
     forces_sent: int = 0
     send_errors: int = 0
@@ -231,18 +103,27 @@ class UdpDevice(HapticDevice):
     """Simulator side: receives pose packets on ``host:port``, sends force packets back.
 
     ``read`` drains queued datagrams without blocking (at most ``max_drain`` datagrams and
-    ``max_poll_s`` s per call) and returns the newest valid pose (the handle stays where it was
+    ``max_poll_s`` s per call) and returns the newest applied pose (the handle stays where it was
     if nothing new arrived). Before the first pose it reports the workspace centre with
     :attr:`has_pose` False; the servo renders zero force until a pose arrives. ``port=0`` binds
     a free port: see :attr:`address` after ``connect()``.
+
+    ``key``: the per-session secret (bytes or hex, >= 16 bytes) that authenticates every packet.
+    Required for any bind other than loopback; when it is not given there, a fresh one is drawn
+    (:attr:`key`: hand it to the device side). To run the device in a servo process, draw the
+    key in the parent (``new_session_key()``) and pass it in the device factory.
     """
 
     name = "udp"
 
     def __init__(self, port: int = 0, host: str = DEFAULT_HOST, limits: DeviceLimits | None = None,
-                 max_drain: int = 32, max_poll_s: float = 2e-4):
+                 max_drain: int = 32, max_poll_s: float = 2e-4, key: bytes | str | None = None):
         super().__init__(limits)
         _check_endpoint(host, port)
+        key = check_key(key)
+        if key is None and not is_loopback(host):
+            key = new_session_key()
+        self.key: bytes | None = key
         if not (isinstance(max_drain, int) and max_drain >= 1):
             raise ConfigError(f"max_drain must be an integer >= 1 datagram per poll, got {max_drain!r}")
         if not (isinstance(max_poll_s, (int, float)) and math.isfinite(max_poll_s) and max_poll_s > 0):
@@ -253,7 +134,8 @@ class UdpDevice(HapticDevice):
         self.stats = BridgeStats()
         self._sock: socket.socket | None = None
         self._peer = None
-        self._gate = SequenceGate()
+        self._gate = SessionGate(authenticated=key is not None)
+        self._session_out = 0
         self._seq_out = 0
         centre = 0.5 * (np.asarray(self.limits.workspace_min) + np.asarray(self.limits.workspace_max))
         self._state = DeviceState(time=0.0, position=centre, quaternion=np.array([1.0, 0.0, 0.0, 0.0]))
@@ -282,6 +164,10 @@ class UdpDevice(HapticDevice):
             self._sock = None
 
     @property
+    def _pose_bytes(self) -> int:
+        return POSE_SIZE + (TAG_SIZE if self.key is not None else 0)
+
+    @property
     def has_pose(self) -> bool:
         """True once a valid pose has been accepted."""
         return self.last_packet is not None
@@ -304,20 +190,20 @@ class UdpDevice(HapticDevice):
             except OSError:  # e.g. ICMP port unreachable reported on a later recv
                 continue
             self.stats.received += 1
-            if len(data) != POSE_SIZE:
+            if len(data) != self._pose_bytes:
                 self.stats.malformed += 1
                 continue
             try:
-                pkt = decode_pose(data)
+                pkt = decode_pose(data, self.key)
             except MalformedPacketError:
                 self.stats.malformed += 1
                 continue
-            resyncs = self._gate.resyncs
-            if not self._gate.admit(pkt.seq, addr, time.monotonic()):
+            takeovers = self._gate.takeovers
+            if not self._gate.admit(pkt.session, pkt.seq, addr, time.monotonic()):
                 self.stats.stale += 1
                 continue
-            self.stats.resyncs += self._gate.resyncs - resyncs
-            self._peer = addr
+            self.stats.takeovers += self._gate.takeovers - takeovers
+            self._peer, self._session_out = addr, pkt.session
             self.last_packet = pkt
             self._state = DeviceState(time=pkt.timestamp, position=np.array(pkt.position),
                                       quaternion=np.array(pkt.quaternion), buttons=pkt.buttons, grip=pkt.grip)
@@ -333,7 +219,8 @@ class UdpDevice(HapticDevice):
         if self._peer is None or self._sock is None:
             return
         try:
-            packet = encode_force(self._seq_out, t if math.isfinite(t) else 0.0, force, self.last_saturated)
+            packet = encode_force(self._seq_out, t if math.isfinite(t) else 0.0, force, self.last_saturated,
+                                  session=self._session_out, key=self.key)
             self._sock.sendto(packet, self._peer)
             self._seq_out += 1
             self.stats.forces_sent += 1
@@ -344,10 +231,17 @@ class UdpDevice(HapticDevice):
 class UdpHapticClient:
     """Device side (a remote hand, or a test): sends pose packets, receives force packets.
 
-    Use as a context manager; sockets are always closed on exit."""
+    Each client is one session: it draws a random session id (``session``) and numbers its
+    poses from 0. ``key`` is the simulator's per-session secret when it requires one (any bind
+    other than loopback): poses are then tagged, and force packets that do not verify or that
+    answer another session are dropped (counted in :attr:`malformed`). Use as a context manager;
+    sockets are always closed on exit."""
 
-    def __init__(self, server: tuple[str, int], host: str = DEFAULT_HOST, port: int = 0):
+    def __init__(self, server: tuple[str, int], host: str = DEFAULT_HOST, port: int = 0,
+                 key: bytes | str | None = None, session: int | None = None):
         _check_endpoint(host, port)
+        self.key = check_key(key)
+        self.session = new_session_id() if session is None else int(session) & 0xFFFFFFFFFFFFFFFF
         _check_endpoint(server[0], server[1])
         self.server = (server[0], int(server[1]))
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -372,7 +266,8 @@ class UdpHapticClient:
                   grip: float = 0.0) -> int:
         """Send one pose; returns its sequence number."""
         seq = self._seq
-        self._sock.sendto(encode_pose(seq, timestamp, position, quaternion, buttons, grip), self.server)
+        self._sock.sendto(encode_pose(seq, timestamp, position, quaternion, buttons, grip, session=self.session,
+                                      key=self.key), self.server)
         self._seq += 1
         return seq
 
@@ -398,9 +293,14 @@ class UdpHapticClient:
                 finally:
                     self._sock.setblocking(False)
                 try:
-                    out.append(decode_force(data))
+                    packet = decode_force(data, self.key)
                 except MalformedPacketError:
                     self.malformed += 1
+                    continue
+                if packet.session != self.session:
+                    self.malformed += 1
+                    continue
+                out.append(packet)
         finally:
             self._sock.setblocking(False)
         return out

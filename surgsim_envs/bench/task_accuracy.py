@@ -1,0 +1,385 @@
+"""Forces in the scenes users meet, against a converged reference: ``surgsim bench task-accuracy``.
+
+For a task, a fixed scripted probe set drives the task's own scene (built by ``gym.make``, with
+the task's material, friction, time step and probe): presses straight down at several depths over
+an inclusion and at its mirror site, for two inclusions. Each press starts from a fresh reset
+(same seed and options), so presses do not see each other's history. Every registered model the
+task accepts runs the same set at each candidate lattice spacing, and so does the reference:
+``fem`` refined until the forces of two successive spacings differ by under 1 % (or the finest
+spacing is reached; the table then states the remaining change).
+
+Per task x model x spacing it reports:
+
+* **force error** against the reference, median and 95th percentile over the presses;
+* **inclusion contrast**: force over the inclusion / force at the mirror site at the deepest
+  press, ours and the reference's (a stiff lump must feel stiffer);
+* **monotone in depth**: whether the force rises with depth at every site;
+* **unilateral**: the largest pulling (tensile) force on the probe seen during any press, N;
+* **path independence**, frictionless: the same pose reached straight down and by a pressed slide
+  from 6 mm away (relative difference);
+* **cost**: median wall time of one env control step while pressing (us), and per simulated ms.
+
+Rows carry ``scene`` = the task id, ``error`` (the 95th percentile) and ``us_per_ms``, so
+:func:`surgsim_envs.tissue.resolution.choose` picks a task's cheapest model within its tolerance
+from the table this writes. Figures: ``docs/task_accuracy.md`` (table) and
+``docs/img/task_accuracy.png`` (error against cost, one panel per task).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable
+
+import numpy as np
+
+from surgsim_envs.errors import ConfigError
+
+#: relative change of the reference's forces between two spacings taken as converged
+REFERENCE_CHANGE = 0.01
+
+
+@dataclass(frozen=True)
+class Inclusion:
+    name: str
+    position: tuple[float, float]   # m, centre (x, y)
+    depth: float                    # m, centre below the top surface
+    radius: float                   # m
+    contrast: float                 # E_inclusion / E_tissue
+
+    def options(self) -> dict:
+        return {"inclusion_position": self.position, "inclusion_depth": (self.depth, self.depth),
+                "inclusion_radius": (self.radius, self.radius), "stiffness_contrast": (self.contrast, self.contrast),
+                "young_scale": (1.0, 1.0)}
+
+
+@dataclass(frozen=True)
+class ProbeSet:
+    """A task's scripted presses: inclusions, depths (m), hold (s) and the spacings (m) tried."""
+
+    inclusions: tuple[Inclusion, ...]
+    depths: tuple[float, ...]
+    hold: float
+    spacings: tuple[float, ...]
+    reference_spacings: tuple[float, ...]
+
+
+PALPATION_FULL = ProbeSet(
+    inclusions=(Inclusion("5x lump, r 7 mm, 11 mm deep", (0.02, 0.0), 0.011, 0.007, 5.0),
+                Inclusion("3x lump, r 9 mm, 9 mm deep", (-0.015, 0.01), 0.009, 0.009, 3.0)),
+    depths=(0.003, 0.005, 0.007), hold=0.5, spacings=(0.01, 0.0075, 0.005),
+    reference_spacings=(0.005, 0.004, 0.0033, 0.0025))
+PALPATION_QUICK = ProbeSet(inclusions=PALPATION_FULL.inclusions[:1], depths=(0.004, 0.007), hold=0.3,
+                           spacings=(0.01,), reference_spacings=(0.0075, 0.005))
+
+#: task id -> (full probe set, quick probe set); tasks not listed are reported as not covered
+PROBE_SETS: dict[str, tuple[ProbeSet, ProbeSet]] = {
+    "SurgSim/Palpation-v0": (PALPATION_FULL, PALPATION_QUICK),
+}
+
+
+#: the reference's physics step at lattice spacing h: dt = h x this (s/m), at most the task's dt (an
+#: explicit FEM's critical step shrinks with h; 0.5 ms at 5 mm keeps it at half its critical step)
+REFERENCE_DT_PER_M = 0.1
+
+
+def _make(task: str, model: str, spacing: float, material=None, dt: float | None = None):
+    import gymnasium as gym
+
+    import surgsim_envs.envs  # noqa: F401  (registers the tasks)
+
+    kwargs = {"model": model, "resolution": float(spacing)}
+    if material is not None:
+        kwargs["material"] = material
+    if dt is not None:
+        kwargs["dt"] = float(dt)
+    return gym.make(task, disable_env_checker=True, **kwargs).unwrapped
+
+
+class _Presser:
+    """Drives the probe of a palpation env's scene: each press from a fresh reset."""
+
+    def __init__(self, env, hold: float):
+        self.env, self.hold = env, float(hold)
+        self.sim = env.sim
+        c = env.config
+        self.top = env.surface_z + c.tip_radius          # tip centre z touching the rest surface
+        self.hover = self.top + c.hover
+        self.speed = c.probe_speed
+        self.control_dt = env.control_dt
+        self.step_us: list[float] = []
+        self.max_tensile = 0.0
+
+    def _run(self, seconds: float, record: list | None = None) -> None:
+        for _ in range(max(1, int(round(seconds / self.control_dt)))):
+            t0 = time.perf_counter()
+            self.sim.step()
+            self.step_us.append((time.perf_counter() - t0) * 1e6)
+            fz = float(self.sim.tool_force("probe")[2])
+            self.max_tensile = max(self.max_tensile, -fz)
+            if record is not None:
+                record.append(fz)
+
+    def _go(self, target) -> None:
+        target = np.asarray(target, dtype=float)
+        self.sim.set_tool_target("probe", target, speed=self.speed)
+        dist = float(np.linalg.norm(target - self.sim.tool_position("probe")))
+        self._run(dist / self.speed + 0.02)
+
+    def press(self, inclusion: Inclusion, xy, depth: float, approach=None) -> float:
+        """Mean force (N, +z: the tissue pushing the probe up) over the last 0.1 s of the hold at
+        ``depth`` m below the rest surface at ``xy``; ``approach`` (2,) m: reach the pose by a
+        pressed slide from there instead of straight down."""
+        self.env.reset(seed=0, options=inclusion.options())
+        start = np.asarray(xy if approach is None else approach, dtype=float)
+        self._go([start[0], start[1], self.hover])
+        self._go([start[0], start[1], self.top - depth])
+        if approach is not None:
+            self._go([xy[0], xy[1], self.top - depth])
+        record: list[float] = []
+        self._run(self.hold, record)
+        window = max(1, int(round(0.1 / self.control_dt)))
+        force = float(np.mean(record[-window:]))
+        self._go([xy[0], xy[1], self.hover])              # retract: a tensile pull would show here
+        return force
+
+
+def _mirror(xy) -> tuple[float, float]:
+    return (-float(xy[0]), -float(xy[1]))
+
+
+def measure(task: str, model: str, spacing: float, probes: ProbeSet, dt: float | None = None) -> dict:
+    """One row: the presses of ``probes`` with ``model`` at ``spacing`` in ``task``'s scene (its
+    physics step ``dt``, default the task's). A model the task refuses, or one that goes unstable,
+    gives a row saying so instead of numbers."""
+    from surgsim_envs.tissue import TissueUnstableError
+
+    head = {"task": task, "model": model, "spacing": float(spacing)}
+    try:
+        env = _make(task, model, spacing, dt=dt)
+    except ConfigError as exc:
+        return {**head, "refused": str(exc).split("\n")[0]}
+    presser = _Presser(env, probes.hold)
+    forces = {}
+    try:
+        for i, inc in enumerate(probes.inclusions):
+            for site in ("over", "mirror"):
+                xy = inc.position if site == "over" else _mirror(inc.position)
+                for depth in probes.depths:
+                    forces[f"{i}/{site}/{depth * 1e3:g}mm"] = presser.press(inc, xy, depth)
+    except TissueUnstableError as exc:
+        env.close()
+        return {**head, "refused": "unstable in the task's scene: " + str(exc).split("\n")[0]}
+    row = {"task": task, "model": model, "spacing": float(spacing), "nodes": int(len(env.sim.tissue().positions)),
+           "forces_N": forces, "max_tensile_N": presser.max_tensile,
+           "us_per_env_step": float(np.median(presser.step_us)),
+           "control_dt": float(env.control_dt), "dt": float(env.sim.dt)}
+    env.close()
+    # frictionless path independence at the middle depth over the first inclusion
+    try:
+        flat = _make(task, model, spacing, material=_frictionless(env.config.material), dt=dt)
+        p = _Presser(flat, probes.hold)
+        inc, depth = probes.inclusions[0], probes.depths[len(probes.depths) // 2]
+        straight = p.press(inc, inc.position, depth)
+        slid = p.press(inc, inc.position, depth, approach=(inc.position[0] - 0.006, inc.position[1]))
+        row["path_difference"] = abs(slid - straight) / max(abs(straight), 1e-12)
+        flat.close()
+    except (ConfigError, TissueUnstableError) as exc:
+        row["path_note"] = str(exc).split("\n")[0]
+    row["us_per_ms"] = row["us_per_env_step"] / (row["control_dt"] * 1e3)
+    return row
+
+
+def _frictionless(material):
+    if isinstance(material, str):
+        return {"preset": material, "friction": 0.0}
+    return {**dict(material), "friction": 0.0}
+
+
+def monotone(forces: dict, depths: Iterable[float]) -> bool:
+    """Whether the force rises with depth at every (inclusion, site) of a row's ``forces``."""
+    depths = list(depths)
+    sites = sorted({k.rsplit("/", 1)[0] for k in forces})
+    return all(all(forces[f"{s}/{a * 1e3:g}mm"] < forces[f"{s}/{b * 1e3:g}mm"] for a, b in zip(depths, depths[1:]))
+               for s in sites)
+
+
+def contrast(forces: dict, n_inclusions: int, depth: float) -> list[float]:
+    """Force over each inclusion / force at its mirror site, at ``depth``."""
+    key = f"{depth * 1e3:g}mm"
+    return [forces[f"{i}/over/{key}"] / max(forces[f"{i}/mirror/{key}"], 1e-12) for i in range(n_inclusions)]
+
+
+def compare(row: dict, reference: dict, probes: ProbeSet) -> dict:
+    """``row`` with its errors and contrasts against ``reference`` (same presses)."""
+    if "forces_N" not in row:
+        return row
+    f, ref = row["forces_N"], reference["forces_N"]
+    err = np.array([abs(f[k] - ref[k]) / max(abs(ref[k]), 1e-9) for k in ref])
+    n, deep = len(probes.inclusions), probes.depths[-1]
+    return {**row, "error_median": float(np.median(err)), "error_p95": float(np.percentile(err, 95)),
+            "error": float(np.percentile(err, 95)), "contrast": contrast(f, n, deep),
+            "contrast_reference": contrast(ref, n, deep), "monotone": monotone(f, probes.depths),
+            "scene": row["task"], "integrator": "default"}
+
+
+def _reference_dt(task: str, spacing: float) -> float:
+    import gymnasium as gym
+
+    import surgsim_envs.envs  # noqa: F401
+
+    import importlib
+
+    module, name = gym.spec(task).entry_point.split(":")
+    task_dt = float(getattr(importlib.import_module(module), name).config_cls().dt)
+    return min(task_dt, REFERENCE_DT_PER_M * float(spacing))
+
+
+def converged_reference(task: str, probes: ProbeSet, progress: Callable[[str], None] = print) -> dict:
+    """``fem`` rows at the reference spacings until two successive ones differ by under 1 %."""
+    prev = None
+    for spacing in probes.reference_spacings:
+        progress(f"reference fem at {spacing * 1e3:.3g} mm")
+        row = measure(task, "fem", spacing, probes, dt=_reference_dt(task, spacing))
+        if "refused" in row:
+            raise ConfigError(f"{task}: the reference model fem is refused ({row['refused']})")
+        if prev is not None:
+            change = max(abs(row["forces_N"][k] - prev["forces_N"][k]) / max(abs(row["forces_N"][k]), 1e-9)
+                         for k in row["forces_N"])
+            row["reference_change"] = float(change)
+            row["reference_converged"] = bool(change < REFERENCE_CHANGE)
+            if change < REFERENCE_CHANGE:
+                return row
+        prev = row
+    return row  # the finest spacing, with the change it still made
+
+
+def build_table(tasks: Iterable[str], models: Iterable[str], quick: bool = False,
+        progress: Callable[[str], None] = print) -> dict:
+    """The table: ``{"rows": [...], "references": {task: row}, "not_covered": [...]}``."""
+    rows, references, not_covered = [], {}, []
+    for task in tasks:
+        if task not in PROBE_SETS:
+            not_covered.append(task)
+            continue
+        probes = PROBE_SETS[task][1 if quick else 0]
+        reference = converged_reference(task, probes, progress)
+        references[task] = reference
+        for model in models:
+            for spacing in probes.spacings:
+                progress(f"{task}: {model} at {spacing * 1e3:.3g} mm")
+                rows.append(compare(measure(task, model, spacing, probes), reference, probes))
+    return {"rows": rows, "references": references, "not_covered": not_covered, "quick": bool(quick)}
+
+
+def markdown(table: dict) -> str:
+    """The table as markdown (one block per task)."""
+    out = []
+    for task, ref in table["references"].items():
+        out.append(f"### {task}\n")
+        state = "converged" if ref.get("reference_converged") else "not converged"
+        out.append(f"Reference: `fem` at {ref['spacing'] * 1e3:.3g} mm ({ref['nodes']} nodes), {state}: last "
+                   f"refinement changed the forces by {100 * ref.get('reference_change', math.nan):.2g} %.\n")
+        out.append("| model | spacing mm | nodes | error median % | error p95 % | contrast (ref) | rises with depth "
+                   "| max pull N | path diff % | us / env step |")
+        out.append("|---|---|---|---|---|---|---|---|---|---|")
+        for r in table["rows"]:
+            if r["task"] != task:
+                continue
+            if "refused" in r:
+                out.append(f"| {r['model']} | {r['spacing'] * 1e3:.3g} | refused: {r['refused'][:80]} |||||||")
+                continue
+            con = ", ".join(f"{a:.2f} ({b:.2f})" for a, b in zip(r["contrast"], r["contrast_reference"]))
+            path = f"{100 * r['path_difference']:.1f}" if "path_difference" in r else "-"
+            out.append(f"| {r['model']} | {r['spacing'] * 1e3:.3g} | {r['nodes']} | {100 * r['error_median']:.1f} | "
+                       f"{100 * r['error_p95']:.1f} | {con} | {'yes' if r['monotone'] else 'NO'} | "
+                       f"{r['max_tensile_N']:.3g} | {path} | {r['us_per_env_step']:.0f} |")
+        out.append("")
+    if table["not_covered"]:
+        out.append("Tasks without a probe set yet: " + ", ".join(table["not_covered"]) + ".\n")
+    return "\n".join(out)
+
+
+def chart(table: dict, path: str | Path) -> None:
+    """Error (p95) against cost per env step, one panel per task."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tasks = list(table["references"])
+    fig, axes = plt.subplots(1, max(1, len(tasks)), figsize=(6 * max(1, len(tasks)), 4.5), squeeze=False)
+    for ax, task in zip(axes[0], tasks):
+        for r in table["rows"]:
+            if r["task"] != task or "error" not in r:
+                continue
+            ax.scatter(r["us_per_env_step"], 100 * r["error"], s=30)
+            ax.annotate(f"{r['model']} {r['spacing'] * 1e3:.3g} mm", (r["us_per_env_step"], 100 * r["error"]),
+                        fontsize=7, xytext=(3, 3), textcoords="offset points")
+        ax.set_xscale("log")
+        ax.set_xlabel("wall time per env step (us)")
+        ax.set_ylabel("force error against converged fem, p95 (%)")
+        ax.set_title(task)
+        ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write(table: dict, out: str | Path) -> dict[str, Path]:
+    """``task_accuracy.json``, ``task_accuracy.md`` and ``task_accuracy.png`` in ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"json": out / "task_accuracy.json", "md": out / "task_accuracy.md", "png": out / "task_accuracy.png"}
+    paths["json"].write_text(json.dumps(table, indent=1))
+    paths["md"].write_text(markdown(table))
+    chart(table, paths["png"])
+    return paths
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--tasks", default=",".join(PROBE_SETS),
+                        help=f"comma-separated task ids (default: those with a probe set: {', '.join(PROBE_SETS)})")
+    parser.add_argument("--models", default=None, help="comma-separated model names (default: all registered)")
+    parser.add_argument("--quick", action="store_true",
+                        help="one inclusion, two depths, the task's default spacing, a two-step reference")
+    parser.add_argument("--out", default="surgsim-out/task-accuracy", help="output directory (JSON, markdown, PNG)")
+    parser.add_argument("--json", action="store_true", help="also print the table as JSON")
+
+
+def _names(text: str, known: Iterable[str], what: str) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in known]
+    if not names or unknown:
+        raise ConfigError(f"--{what} {text!r}: unknown {unknown or 'empty list'}; choose from {sorted(known)}")
+    return names
+
+
+def run(args) -> int:
+    import gymnasium as gym
+
+    import surgsim_envs.envs  # noqa: F401
+    from surgsim_envs import tissue
+
+    task_ids = [k for k in gym.registry if k.startswith("SurgSim/")]
+    tasks = _names(args.tasks, task_ids, "tasks")
+    models = tissue.names() if args.models is None else _names(args.models, tissue.names(), "models")
+    from tqdm import tqdm
+
+    bar = tqdm(total=None, desc="task-accuracy", unit="run", leave=False)
+
+    def progress(text: str) -> None:
+        bar.set_postfix_str(text)
+        bar.update(1)
+
+    table = build_table(tasks, models, quick=args.quick, progress=progress)
+    bar.close()
+    paths = write(table, args.out)
+    print(markdown(table))
+    if args.json:
+        print(json.dumps(table, indent=1))
+    print(f"wrote {paths['json']}, {paths['md']} and {paths['png']}")
+    return 0

@@ -1,0 +1,1 @@
+"""Glue to other libraries' formats and frameworks (Minari datasets)."""

@@ -1,0 +1,55 @@
+"""Demonstrations recorded as Minari datasets (`surgsim record`): what they hold, that a recording
+replays exactly from its seeds, and the refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("minari", reason="Minari is in the [test] and [data] extras")
+
+from surgsim_envs.errors import ConfigError  # noqa: E402
+from surgsim_envs.integrations import minari_datasets as md  # noqa: E402
+
+
+def test_an_expert_recording_holds_forces_in_newtons_and_replays_from_its_seeds(tmp_path):
+    import gymnasium as gym
+
+    ds = md.record("SurgSim/Grasp-v0", "expert", episodes=2, seed=7, out=tmp_path, max_steps=40)
+    assert ds.total_episodes == 2 and ds.spec.dataset_id == "surgsim/grasp/expert-v0"
+    description = ds.storage.metadata["description"]
+    assert "seed 7" in description and "surgsim_envs" in description
+    env = gym.make("SurgSim/Grasp-v0")
+    for k, ep in enumerate(ds.iterate_episodes()):
+        n = len(ep.actions)
+        assert n == 40 and ep.observations.shape[0] == n + 1 and ep.truncations[-1]
+        forces = ep.infos["tool_force_N"]
+        assert set(forces) == set(env.unwrapped.sim.tools)
+        for f in forces.values():
+            assert f.shape == (n + 1, 3) and np.all(np.isfinite(f))
+        assert np.abs(np.concatenate(list(forces.values()))).max() > 0.05      # the jaws closed on the organ
+        assert set(ep.infos["reward_terms"]) and all(v.shape == (n + 1,) for v in ep.infos["reward_terms"].values())
+        obs, _ = env.reset(seed=7 + k)
+        np.testing.assert_array_equal(obs, ep.observations[0])
+        for t in range(n):                                     # the recorded actions give the recorded run
+            obs, reward, *_ = env.step(ep.actions[t])
+            np.testing.assert_array_equal(obs, ep.observations[t + 1])
+            assert reward == ep.rewards[t]
+    env.close()
+    with pytest.raises(ConfigError, match="already exists"):
+        md.record("SurgSim/Grasp-v0", "expert", episodes=1, out=tmp_path, max_steps=2)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"device": "joystick"}, "joystick"),
+    ({"device": "policy:nowhere.npz"}, "nowhere.npz"),
+    ({"episodes": 0}, "episodes=0"),
+    ({"episodes": 10**9}, "episodes"),
+    ({"seed": -1}, "seed=-1"),
+    ({"task": "SurgSim/Nope-v0"}, "Nope"),
+])
+def test_bad_recordings_are_refused_with_the_value(tmp_path, kwargs, match):
+    args = {"task": "SurgSim/Grasp-v0", "device": "expert", "episodes": 1, "out": tmp_path, **kwargs}
+    with pytest.raises(ConfigError, match=match):
+        md.record(**args)
+    assert not list(tmp_path.iterdir())
