@@ -5,8 +5,9 @@ peritoneum; :mod:`surgsim_envs.geometry.anatomy`), bottom bonded. Each episode h
 nodule in the fat: the tets within ``nodule_radius`` of a random centre get ``nodule_factor`` x
 their Young's modulus, through the tissue contract (``scale_material``), never by model name.
 
-Each step presses a position-controlled 5 mm sphere (:class:`KinematicProbe`) at a point of the
-patch to a depth and solves the equilibrium (quasi-static: one press per step).
+Each step presses a position-controlled 5 mm sphere (:class:`UnilateralProbe`: frictionless,
+push-only contact) at a point of the patch to a depth and solves the equilibrium (quasi-static:
+one press per step); the force depends on the pose only, not on the presses before.
 Action (4,) in [-1, 1]: x, y over the patch, depth over (0, max_depth], commit (> 0 ends the
 episode with the guess "the nodule is under this press"). Observation (4,): x (m), y (m),
 depth (m), probe force (N). Reward: -press_cost per press; on commit ``1 - distance / size_scale``
@@ -46,7 +47,7 @@ class LayeredPalpationEnv(gym.Env):
     metadata = {"render_modes": []}
 
     def __init__(self, config: LayeredPalpationConfig | None = None, render_mode=None):
-        from surgsim_envs.contact.kinematic_probe import KinematicProbe
+        from surgsim_envs.contact.unilateral_probe import UnilateralProbe
         from surgsim_envs.geometry.anatomy import abdominal_wall_volume
         from surgsim_envs.tissue import make
 
@@ -65,7 +66,7 @@ class LayeredPalpationEnv(gym.Env):
             else None
         self.top = np.flatnonzero(vol.neighbours[:, 5] < 0)
         self.z_top = float(vol.nodes[self.top, 2].max())
-        self.probe = KinematicProbe(self.tissue, self.top, cfg.probe_radius)
+        self.probe = UnilateralProbe(self.tissue, self.top, cfg.probe_radius)
         self.centroids = self.tissue.element_centroids()
         fat = vol.layer_names.index("fat")
         self._fat_z = self.centroids[vol.labels == fat, 2]
@@ -93,8 +94,7 @@ class LayeredPalpationEnv(gym.Env):
         a = np.clip(np.asarray(action, dtype=np.float64).reshape(4), -1.0, 1.0)
         x, y = a[0] * 0.5 * cfg.size[0], a[1] * 0.5 * cfg.size[1]
         depth = (a[2] + 1.0) / 2.0 * cfg.max_depth
-        self.probe.move_to((x, y, self.z_top + cfg.probe_radius - depth))
-        self.tissue.static_solve()
+        self.probe.press((x, y, self.z_top + cfg.probe_radius - depth), self.tissue.static_solve)
         force = float(self.probe.force()[2])
         self.presses += 1
         reward = -cfg.press_cost
