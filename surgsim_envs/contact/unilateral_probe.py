@@ -83,7 +83,7 @@ class UnilateralProbe(KinematicProbe):
         """Place the sphere's centre at ``centre`` (3,) m and solve the unilateral contact; ``solve()``
         brings the model to equilibrium with its current Dirichlet nodes (e.g. ``model.static_solve``).
         ``warm``: start the active set from the nodes held now and the ones the sphere's surface
-        is above now (fewer solves for a probe that moves a little) instead of from the rest
+        is above now (it can save solves when the probe moves a little; not when it jumps) instead of from the rest
         surface the sphere covers; the solution is the same. Returns the contact nodes;
         ``force()`` is then the force on the probe (N)."""
         if not (isinstance(max_iterations, (int, np.integer)) and not isinstance(max_iterations, bool)
