@@ -124,3 +124,33 @@ def test_rgb_array_renders_the_pressed_wall():
 
 def test_default_config_validates():
     LayeredPalpationConfig().validate()
+
+
+hypothesis = pytest.importorskip("hypothesis", reason="hypothesis is in the [test] extra")
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+from hypothesis.extra import numpy as hnp  # noqa: E402
+
+_ACTIONS = st.one_of(
+    hnp.arrays(st.sampled_from([np.float32, np.float64, np.int64, np.int8]), st.integers(0, 6)),
+    hnp.arrays(np.float64, hnp.array_shapes(max_dims=3, max_side=5)),
+    hnp.arrays(st.sampled_from([np.complex128, np.bool_, np.str_]), st.integers(1, 5)),
+    st.lists(st.one_of(st.floats(), st.integers(-10**30, 10**30), st.text(max_size=2)), max_size=5),
+)
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
+                                                                  HealthCheck.too_slow])
+@given(action=_ACTIONS)
+def test_any_action_is_a_finite_step_or_a_config_error(env, action):
+    """Property: whatever the action (any shape, dtype, NaN/inf, huge integers, strings), a step
+    either returns observations inside the space and a finite reward, or raises ConfigError."""
+    if env.presses >= env.config.max_presses - 1:
+        env.reset(seed=0)
+    try:
+        obs, r, term, trunc, _ = env.step(action)
+    except ConfigError:
+        return
+    assert env.observation_space.contains(obs) and math.isfinite(r)
+    if term or trunc:
+        env.reset(seed=0)
