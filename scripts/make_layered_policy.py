@@ -22,7 +22,6 @@ network against the expert on every observation of the training rollouts.
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import sys
 

@@ -32,7 +32,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from surgsim_envs.envs.base import ObsTerm, SurgSimEnv, apply_overrides, check_positive, observation_space_of
+from surgsim_envs.envs.base import ObsTerm, SurgSimEnv, apply_overrides, observation_space_of
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 
 #: wall thickness of the default abdominal wall (m): presses stay well inside it
