@@ -27,20 +27,38 @@ from __future__ import annotations
 
 import collections
 import functools
+import re
 
 import numpy as np
 
 from surgsim_envs.errors import ConfigError
 
-#: short name -> Gymnasium task id (the one task registry, surgsim_envs.envs.TASKS)
-def _names() -> dict[str, str]:
-    from surgsim_envs.envs import TASKS
+def _short(task_id: str) -> str:
+    """"SurgSim/PalpationPress-v0" -> "palpationpress"."""
+    return task_id.split("/")[-1].split("-")[0].lower()
 
-    return {tid.split("/")[-1].split("-")[0].lower(): tid for tid in TASKS}
+
+def _snake(task_id: str) -> str:
+    """"SurgSim/PalpationPress-v0" -> "palpation_press"."""
+    return re.sub(r"(?<!^)(?=[A-Z])", "_", task_id.split("/")[-1].split("-")[0]).lower()
+
+
+#: short name -> Gymnasium task id (the one task registry: every registered SurgSim task)
+def _names() -> dict[str, str]:
+    from surgsim_envs.envs import QUASI_STATIC_TASKS, TASKS
+
+    return {_short(tid): tid for tid in {**TASKS, **QUASI_STATIC_TASKS}}
+
+
+def _aliases() -> dict[str, str]:
+    """Every name :func:`load` accepts: the short names and their snake_case spellings."""
+    table = _names()
+    return {**{_snake(tid): tid for tid in table.values()}, **table}
 
 
 def names() -> list[str]:
-    """Short names :func:`load` accepts ("palpation", "grasp", "slippage")."""
+    """Short names of every task, one each ("palpation", "grasp", "slippage", "palpationpress",
+    "layeredpalpation"); :func:`load` also accepts snake_case ("layered_palpation")."""
     return sorted(_names())
 
 
@@ -59,7 +77,7 @@ def load(name: str, task_kwargs: dict | None = None, environment_kwargs: dict | 
     task_kwargs: config overrides of the task (as ``gym.make`` keywords, e.g. ``{"model": "fem"}``)
     plus ``random`` (an int seed for the episodes); environment_kwargs: extra keywords of
     ``control.Environment`` (e.g. ``flat_observation=True``)."""
-    table = _names()
+    table = _aliases()
     if name not in table:
         raise ConfigError(f"unknown SurgSim task {name!r} for dm_control; choose one of {sorted(table)}")
     _, control = _require_dm_control()

@@ -12,7 +12,8 @@ FAST = {"palpation": {"spacing": 0.02, "episode_seconds": 0.05, "min_report_seco
                       "max_episode_steps": 5},
         "grasp": {"resolution": 0.015, "episode_seconds": 0.1, "max_episode_steps": 5},
         "slippage": {"resolution": 0.015, "episode_seconds": 0.1, "max_episode_steps": 5},
-        "palpationpress": {"spacing": 0.02, "max_presses": 3, "max_episode_steps": 3}}
+        "palpationpress": {"spacing": 0.02, "max_presses": 3, "max_episode_steps": 3},
+        "layeredpalpation": {"spacing": 0.01, "max_presses": 3, "max_episode_steps": 3}}
 
 
 @pytest.mark.parametrize("name", dm_control_suite.names())
@@ -51,3 +52,16 @@ def test_unknown_name_and_render():
     except Exception as exc:  # no OpenGL here
         pytest.skip(f"no OpenGL for rendering: {exc}")
     assert frame.shape == (96, 128, 3) and frame.std() > 5       # a scene, not a blank image
+
+
+def test_layered_palpation_loads_by_its_snake_case_name():
+    """``load("layered_palpation")`` is LayeredPalpation-v0; its dm_control clock runs one nominal
+    press period per step and the scene's wall mirrors the task's pressed wall."""
+    env = dm_control_suite.load("layered_palpation", task_kwargs={"spacing": 0.01, "max_presses": 2, "random": 1})
+    u = env.physics.env
+    assert type(u).__name__ == "LayeredPalpationEnv"
+    env.reset()
+    ts = env.step(np.array([0.0, 0.0, 1.0, -1.0], dtype=np.float32))   # over a node of the 1 cm lattice
+    assert ts.observation["probe_force"][0] > 0
+    assert env.physics.time() == pytest.approx(u.control_dt)
+    np.testing.assert_allclose(u.sim.tissue("wall").positions, u.tissue.positions)

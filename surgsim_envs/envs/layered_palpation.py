@@ -5,28 +5,67 @@ peritoneum; :mod:`surgsim_envs.geometry.anatomy`), bottom bonded. Each episode h
 nodule in the fat: the tets within ``nodule_radius`` of a random centre get ``nodule_factor`` x
 their Young's modulus, through the tissue contract (``scale_material``), never by model name.
 
-Each step presses a position-controlled 5 mm sphere (:class:`KinematicProbe`) at a point of the
-patch to a depth and solves the equilibrium (quasi-static: one press per step).
-Action (4,) in [-1, 1]: x, y over the patch, depth over (0, max_depth], commit (> 0 ends the
+Each step presses a position-controlled sphere (:class:`UnilateralProbe`: frictionless,
+push-only contact) at a point of the patch to a depth and solves the equilibrium (quasi-static:
+one press per step); the force depends on the pose only, not on the presses before.
+Action (4,) in [-1, 1]: x, y over the patch, depth over [0, max_depth], commit (> 0 ends the
 episode with the guess "the nodule is under this press"). Observation (4,): x (m), y (m),
-depth (m), probe force (N). Reward: -press_cost per press; on commit ``1 - distance / size_scale``
-(clipped at -1). The episode also ends after ``max_presses``. Forces in newtons.
+depth (m), probe force (N, >= 0). Reward: -press_cost per press; on commit
+``1 - distance / size_scale`` (clipped at -1). The episode also ends after ``max_presses``.
+``info["success"]``: committed within ``nodule_radius`` of the nodule's centre (in x, y).
+
+Checks as the other tasks (:mod:`surgsim_envs.envs.base`): config fields by name, bound and fix
+(ConfigError), keyword overrides in ``gym.make``, actions by ``SurgSimEnv.check_action`` (shape,
+dtype, NaN), reset options. Rendering (``render_mode="rgb_array"``) and the dm_control loader
+(and ``"human"``, a MuJoCo viewer where a display exists) use a MuJoCo scene of the same wall (:mod:`surgsim_envs.envs.layered_scene`), built on first use;
+its clock runs ``1 / control_hz`` s per press (a nominal press rate: the physics is quasi-static).
+Forces in newtons, lengths in metres.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from surgsim_envs.errors import ConfigError
+from surgsim_envs.envs.base import ObsTerm, SurgSimEnv, apply_overrides, observation_space_of
+from surgsim_envs.errors import ConfigError, TissueUnstableError
+
+#: wall thickness of the default abdominal wall (m): presses stay well inside it
+MAX_DEPTH_LIMIT = 0.02
+#: largest lattice the task builds (nodes): a direct solve per press must stay interactive
+MAX_NODES = 60_000
+#: lattice spacing range (m)
+SPACING_RANGE = (0.002, 0.01)
+#: patch side range (m)
+SIZE_RANGE = (0.02, 0.3)
+CAMERAS = ("overview", "top", "side")
+
+
+def _finite_number(value, what: str, lo: float, hi: float, hint: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(float(value)) or not lo <= float(value) <= hi:
+        raise ConfigError(f"LayeredPalpationConfig.{what}={value!r} must be a finite number in [{lo:g}, {hi:g}]; "
+                          f"{hint}")
+    return float(value)
+
+
+def _integer(value, what: str, lo: int, hi: int, hint: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= int(value) <= hi:
+        raise ConfigError(f"LayeredPalpationConfig.{what}={value!r} must be an integer in [{lo}, {hi}]; {hint}")
+    return int(value)
 
 
 @dataclass
 class LayeredPalpationConfig:
     """size (x, y) m of the wall patch; spacing m of its lattice; max_depth m; nodule radius m and
-    Young's modulus factor; press_cost per press; size_scale m of the commit reward; max_presses."""
+    Young's modulus factor; press_cost per press; size_scale m of the commit reward; max_presses;
+    probe_radius m; control_hz presses per second of the nominal clock (render fps, dm_control
+    timestep); render_width/height px and camera ("overview", "top", "side") of rgb_array frames."""
 
     size: tuple = (0.08, 0.06)
     spacing: float = 0.005
@@ -37,47 +76,151 @@ class LayeredPalpationConfig:
     size_scale: float = 0.03
     max_presses: int = 30
     probe_radius: float = 0.005
+    control_hz: float = 1.0
+    render_width: int = 480
+    render_height: int = 480
+    camera: str = "overview"
+
+    @property
+    def episode_seconds(self) -> float:
+        """s of the nominal clock in a full episode (``max_presses / control_hz``)."""
+        return self.max_presses / self.control_hz
+
+    def validate(self) -> None:
+        """ConfigError naming the field, its bound and the fix."""
+        size = self.size
+        if isinstance(size, (str, bytes)) or not hasattr(size, "__len__") or len(size) != 2:
+            raise ConfigError(f"LayeredPalpationConfig.size={size!r} must be a pair (x, y) of lengths in m, "
+                              "e.g. (0.08, 0.06)")
+        for k, v in enumerate(size):
+            _finite_number(v, f"size[{k}]", *SIZE_RANGE, "a patch side in m, e.g. 0.08")
+        spacing = _finite_number(self.spacing, "spacing", *SPACING_RANGE, "the lattice spacing in m, e.g. 0.005")
+        _finite_number(self.max_depth, "max_depth", 1e-4, MAX_DEPTH_LIMIT,
+                       "the deepest press in m (the wall is 29 mm thick), e.g. 0.008")
+        nod = _finite_number(self.nodule_radius, "nodule_radius", 1e-3, 0.05, "a radius in m, e.g. 0.008")
+        if min(size) <= 2 * nod:
+            raise ConfigError(f"LayeredPalpationConfig.nodule_radius={nod!r} m does not fit the patch {tuple(size)!r} "
+                              "m: every side must exceed 2 x nodule_radius; enlarge size or shrink the nodule")
+        _finite_number(self.nodule_factor, "nodule_factor", 1e-3, 1e4,
+                       "the nodule's Young's modulus factor, e.g. 30 (stiffer) or 0.2 (softer)")
+        _finite_number(self.press_cost, "press_cost", 0.0, 1e3, "a reward cost >= 0 per press, e.g. 0.01")
+        _finite_number(self.size_scale, "size_scale", 1e-3, 1.0, "the commit reward's length scale in m, e.g. 0.03")
+        _integer(self.max_presses, "max_presses", 1, 10_000, "presses per episode, e.g. 30")
+        _finite_number(self.probe_radius, "probe_radius", 1e-3, 0.05, "the probe tip radius in m, e.g. 0.005")
+        _finite_number(self.control_hz, "control_hz", 1e-3, 1e3, "nominal presses per second, e.g. 1")
+        _integer(self.render_width, "render_width", 16, 4096, "pixels, e.g. 480")
+        _integer(self.render_height, "render_height", 16, 4096, "pixels, e.g. 480")
+        if self.camera not in CAMERAS:
+            raise ConfigError(f"LayeredPalpationConfig.camera={self.camera!r}; choose one of {list(CAMERAS)}")
+        nodes = (size[0] / spacing + 1) * (size[1] / spacing + 1) * (0.029 / spacing + 1)
+        if nodes > MAX_NODES:
+            raise ConfigError(f"LayeredPalpationConfig: size {tuple(size)!r} m at spacing {spacing:g} m gives about "
+                              f"{nodes:,.0f} lattice nodes (limit {MAX_NODES:,}): each press solves them all; "
+                              "coarsen spacing or shrink size")
 
 
 _VOLUMES: dict = {}
 
 
 class LayeredPalpationEnv(gym.Env):
-    metadata = {"render_modes": []}
+    """See the module docstring. config: a :class:`LayeredPalpationConfig` (None = defaults);
+    render_mode: None, "rgb_array" or "human"; **overrides: config fields to replace."""
 
-    def __init__(self, config: LayeredPalpationConfig | None = None, render_mode=None):
-        from surgsim_envs.contact.kinematic_probe import KinematicProbe
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 1}
+    config_cls = LayeredPalpationConfig
+    OPTIONS: tuple = ()
+    #: the shape/dtype/NaN checks of every other task
+    check_action = SurgSimEnv.check_action
+
+    def __init__(self, config: LayeredPalpationConfig | None = None, render_mode: str | None = None, **overrides):
+        from surgsim_envs.contact.unilateral_probe import UnilateralProbe
         from surgsim_envs.geometry.anatomy import abdominal_wall_volume
         from surgsim_envs.tissue import make
 
-        self.config = cfg = config or LayeredPalpationConfig()
-        if render_mode is not None:
-            raise ConfigError("SurgSim/LayeredPalpation-v0 has no render mode yet; use render_mode=None")
-        if not (0 < cfg.max_depth < 0.02 and cfg.max_presses >= 1 and cfg.nodule_factor > 0):
-            raise ConfigError(f"LayeredPalpation: bad config {cfg}")
-        key = (tuple(cfg.size), cfg.spacing)
+        if config is None:
+            config = LayeredPalpationConfig()
+        if not isinstance(config, LayeredPalpationConfig):
+            raise ConfigError(f"config must be a LayeredPalpationConfig, got {type(config).__name__}")
+        self.config = cfg = apply_overrides(config, overrides) if overrides else dataclasses.replace(config)
+        cfg.validate()
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ConfigError(f"render_mode={render_mode!r} is not supported by SurgSim/LayeredPalpation-v0; use "
+                              f"one of {self.metadata['render_modes']} or None")
+        if render_mode == "human":
+            from surgsim_envs.scene.display import require_display
+
+            require_display("render_mode='human'")   # raises here; MuJoCo would exit the process later
+        self.render_mode = render_mode
+        self.metadata = dict(self.metadata, render_fps=max(1, int(round(cfg.control_hz))))
+        key = (tuple(float(v) for v in cfg.size), float(cfg.spacing))
         if key not in _VOLUMES:
-            _VOLUMES[key] = abdominal_wall_volume(cfg.spacing, size=cfg.size)
+            _VOLUMES[key] = abdominal_wall_volume(cfg.spacing, size=key[0])
         vol = _VOLUMES[key]
         bottom = vol.face_nodes(4)  # no node below: the whole bottom face
         self.tissue = make("layered", vol, fixed=bottom)
-        self.tissue.require("quasi_static", task="SurgSim/LayeredPalpation-v0") if hasattr(self.tissue, "require") \
-            else None
         self.top = np.flatnonzero(vol.neighbours[:, 5] < 0)
         self.z_top = float(vol.nodes[self.top, 2].max())
-        self.probe = KinematicProbe(self.tissue, self.top, cfg.probe_radius)
+        self.probe = UnilateralProbe(self.tissue, self.top, cfg.probe_radius)
         self.centroids = self.tissue.element_centroids()
         fat = vol.layer_names.index("fat")
         self._fat_z = self.centroids[vol.labels == fat, 2]
+        hx, hy = 0.5 * float(cfg.size[0]), 0.5 * float(cfg.size[1])
         self.action_space = gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (4,), np.float32)
+        self.observation_terms = [ObsTerm("press_x", "m", 1, -hx, hx), ObsTerm("press_y", "m", 1, -hy, hy),
+                                  ObsTerm("press_depth", "m", 1, 0.0, float(cfg.max_depth)),
+                                  ObsTerm("probe_force", "N", 1, 0.0, math.inf)]
+        self.observation_space, self._obs_names = observation_space_of(self.observation_terms)
         self.nodule = np.zeros(3)
         self.presses = 0
+        self.steps = 0
+        self._centre = np.array([0.0, 0.0, self.z_top + 0.03])
+        self._scene = None
+        self._renderer = None
+        self._viewer = None
+        self._reset_done = False
 
-    def reset(self, *, seed=None, options=None):
+    # -- properties the other tasks have --------------------------------------------------------
+    @property
+    def observation_names(self) -> list[str]:
+        """Index -> "name [unit]" of every observation entry."""
+        return list(self._obs_names)
+
+    @property
+    def control_dt(self) -> float:
+        """s per press on the nominal clock."""
+        return 1.0 / self.config.control_hz
+
+    @property
+    def max_episode_steps(self) -> int:
+        return int(self.config.max_presses)
+
+    @property
+    def sim(self):
+        """The MuJoCo scene mirroring the wall and the probe (built on first use; see module docstring)."""
+        if self._scene is None:
+            from surgsim_envs.envs.layered_scene import PressScene
+
+            cfg = self.config
+            self._scene = PressScene(self.tissue, cfg.spacing, cfg.size, cfg.probe_radius, cfg.render_width,
+                                     cfg.render_height)
+            self._show()
+        return self._scene.sim
+
+    def _show(self) -> None:
+        if self._scene is not None:
+            self._scene.show(self.tissue, self._centre, self.presses * self.control_dt)
+
+    # -- Gymnasium API ------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        if options is not None and not isinstance(options, dict):
+            raise ConfigError(f"reset options must be a dict or None, got {type(options).__name__}")
+        unknown = sorted(set(options or {}) - set(self.OPTIONS))
+        if unknown:
+            raise ConfigError(f"unknown reset option(s) {unknown} for LayeredPalpationEnv; it accepts none "
+                              "(the nodule is placed from the seed)")
         super().reset(seed=seed)
         cfg = self.config
-        self.probe.move_to((1e3, 1e3, 1e3))
+        self.probe.move_to((1e3, 1e3, 1e3))    # lifted: every node free
         self.tissue.reset()
         hx, hy = 0.5 * cfg.size[0] - cfg.nodule_radius, 0.5 * cfg.size[1] - cfg.nodule_radius
         z = float(np.clip(np.median(self._fat_z), self._fat_z.min() + cfg.nodule_radius / 2, self._fat_z.max()))
@@ -85,24 +228,91 @@ class LayeredPalpationEnv(gym.Env):
         mask = np.linalg.norm(self.centroids - self.nodule, axis=1) < cfg.nodule_radius
         self.tissue.scale_material("young", 1.0)
         self.tissue.scale_material("young", cfg.nodule_factor, mask=mask)
-        self.presses = 0
-        return np.zeros(4, dtype=np.float32), {"nodule_tets": int(mask.sum())}
+        self.presses = self.steps = 0
+        self._centre = np.array([0.0, 0.0, self.z_top + 0.03])
+        self._reset_done = True
+        self._show()
+        if self.render_mode == "human":
+            self.render()
+        return np.zeros(4, dtype=np.float32), {"nodule_tets": int(mask.sum()), "nodule_centre": self.nodule.copy()}
 
     def step(self, action):
+        if not self._reset_done:
+            raise ConfigError("call reset() before step()")
+        a = self.check_action(action)
         cfg = self.config
-        a = np.clip(np.asarray(action, dtype=np.float64).reshape(4), -1.0, 1.0)
         x, y = a[0] * 0.5 * cfg.size[0], a[1] * 0.5 * cfg.size[1]
         depth = (a[2] + 1.0) / 2.0 * cfg.max_depth
-        self.probe.move_to((x, y, self.z_top + cfg.probe_radius - depth))
-        self.tissue.static_solve()
+        self._centre = np.array([x, y, self.z_top + cfg.probe_radius - depth])
+        self.probe.press(self._centre, self.tissue.static_solve)
         force = float(self.probe.force()[2])
+        if not math.isfinite(force):
+            raise TissueUnstableError("layered", 0.0, math.inf, f"the static solve gave a non-finite probe force "
+                                      f"{force!r} at press ({x:.4g}, {y:.4g}) m, depth {depth:.4g} m")
+        force = max(force, 0.0)   # reactions are compressive; a round-off below 0 reads 0
         self.presses += 1
-        reward = -cfg.press_cost
+        self.steps += 1
         dist = float(np.hypot(x - self.nodule[0], y - self.nodule[1]))
         terminated = bool(a[3] > 0.0)
+        terms = {"press_cost": -float(cfg.press_cost)}
         if terminated:
-            reward += max(1.0 - dist / cfg.size_scale, -1.0)
+            terms["commit"] = max(1.0 - dist / cfg.size_scale, -1.0)
+        reward = float(sum(terms.values()))
         truncated = self.presses >= cfg.max_presses and not terminated
+        self._show()
+        if self.render_mode == "human":
+            self.render()
         obs = np.array([x, y, depth, force], dtype=np.float32)
-        return obs, reward, terminated, truncated, {"force_N": force, "distance_m": dist,
-                                                    "nodule_centre": self.nodule.copy()}
+        success = bool(terminated and dist <= cfg.nodule_radius)
+        return obs, reward, terminated, truncated, {
+            "force_N": force, "distance_m": dist, "nodule_centre": self.nodule.copy(), "presses": self.presses,
+            "contact_nodes": int(len(self.probe.nodes)), "active_set_iterations": int(self.probe.last_iterations),
+            "reward_terms": terms, "success": success, "is_success": success}
+
+    # -- rendering ----------------------------------------------------------------------------
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without render_mode; pass render_mode='rgb_array' to gym.make")
+            return None
+        if self.render_mode == "rgb_array":
+            return self.render_rgb()
+        self._render_human()
+        return None
+
+    def _render_human(self) -> None:
+        sim = self.sim
+        if self._viewer is None:
+            from surgsim_envs.errors import RenderingUnavailableError
+
+            try:
+                import mujoco.viewer
+
+                self._viewer = mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual())
+            except Exception as exc:  # no display, or not the main thread on macOS
+                raise RenderingUnavailableError(
+                    f"render_mode='human' needs a display for mujoco.viewer ({exc}); use render_mode='rgb_array' "
+                    "on headless machines") from exc
+        sim.sync_visual()
+        self._viewer.sync()
+
+    def render_rgb(self, width: int | None = None, height: int | None = None, camera: str | None = None) -> np.ndarray:
+        """(H, W, 3) uint8 frame of the wall and the probe at the last press."""
+        from surgsim_envs.scene.render import SceneRenderer
+
+        sim = self.sim
+        w, h = int(width or self.config.render_width), int(height or self.config.render_height)
+        if self._renderer is None or (self._renderer.width, self._renderer.height) != (w, h):
+            if self._renderer is not None:
+                self._renderer.close()
+            self._renderer = SceneRenderer(sim, w, h)
+        return self._renderer.render(camera or self.config.camera)
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        if self._viewer is not None:
+            from surgsim_envs.scene.display import close_viewer
+
+            close_viewer(self._viewer)
+            self._viewer = None

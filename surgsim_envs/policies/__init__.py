@@ -2,8 +2,9 @@
 
 Each file is the ``surgsim-mlp-v1`` format of :mod:`surgsim_envs.policies.npz_policy` (plain
 arrays, loaded with ``allow_pickle=False``; numpy only, no torch): exported from
-stable-baselines3 by ``scripts/train_sb3.py --export-npz`` (:mod:`.export_sb3`). Their training
-and evaluation are in docs/training.md.
+stable-baselines3 by ``scripts/train_sb3.py --export-npz`` (:mod:`.export_sb3`), except
+LayeredPalpation-v0's: a scripted raster-and-threshold expert written as an exact network by
+``scripts/make_layered_policy.py``. Their training and evaluation are in docs/training.md.
 
 >>> from surgsim_envs.policies import load_shipped
 >>> policy = load_shipped("SurgSim/PalpationPress-v0")     # doctest: +SKIP
@@ -27,6 +28,7 @@ SHIPPED = {
     "SurgSim/Grasp-v0": "grasp_v0.npz",
     "SurgSim/Slippage-v0": "slippage_v0.npz",
     "SurgSim/Palpation-v0": "palpation_v0.npz",
+    "SurgSim/LayeredPalpation-v0": "layered_palpation_v0.npz",
 }
 
 
