@@ -5,7 +5,7 @@
 1. records ``--episodes`` expert episodes as a Minari dataset (``surgsim record``, seeds 0..n-1);
 2. fits a small MLP (numpy, tanh hidden layers, Adam, mean-squared error on the actions, inputs
    standardised) to the (observation, action) pairs;
-3. evaluates the cloned policy and uniform random actions on held-out seeds (not in the data)
+3. evaluates the cloned policy, uniform random actions and the expert itself on held-out seeds
    and writes ``bc_learning_curve.png`` (training loss), ``bc_policy.npz`` (weights and input
    scaling) and ``bc_eval.json`` (return and success per seed, both policies).
 
@@ -39,7 +39,8 @@ def _forward(params, x):
 def fit(obs, act, hidden=(64, 64), iters=3000, batch=256, lr=3e-3, seed=0):
     """MLP weights (list of (W, b)), input mean and scale, and the loss per iteration."""
     rng = np.random.default_rng(seed)
-    mean, scale = obs.mean(axis=0), obs.std(axis=0) + 1e-8
+    mean, std = obs.mean(axis=0), obs.std(axis=0)
+    scale = np.where(std > 1e-9, std, 1.0)   # an entry constant in the data is only centred
     x_all = (obs - mean) / scale
     params = _init([obs.shape[1], *hidden, act.shape[1]], rng)
     m = [(np.zeros_like(w), np.zeros_like(b)) for w, b in params]
@@ -116,8 +117,18 @@ def main(argv=None) -> int:
         return np.clip(y, -1, 1).astype(np.float32)
 
     seeds = range(a, b)
+    from surgsim_envs.integrations.minari_datasets import action_source
+
+    expert_factory, experts = action_source(args.task, "expert"), {}
+
+    def expert(env, o):   # a fresh scripted expert per episode (it keeps a step counter)
+        if env.unwrapped.steps == 0 or id(env) not in experts:
+            experts[id(env)] = expert_factory(env)
+        return experts[id(env)](o)
+
     result = {"bc": evaluate(args.task, bc, seeds),
-              "random": evaluate(args.task, lambda env, o: env.action_space.sample(), seeds)}
+              "random": evaluate(args.task, lambda env, o: env.action_space.sample(), seeds),
+              "expert": evaluate(args.task, expert, seeds)}
     (out / "bc_eval.json").write_text(json.dumps(result, indent=1))
     for name, rows in result.items():
         r = np.array([x["return"] for x in rows])
