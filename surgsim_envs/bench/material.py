@@ -421,8 +421,9 @@ class SlipResult:
                 "model": self.model}
 
 
-#: s, the longest pull :func:`slip` ramps before it reports that the grasp never slid
-MAX_PULL_TIME = 5.0
+#: s, the shortest pull :func:`slip` records, and the longest it ramps before it reports that the
+#: grasp never slid
+PULL_TIME, MAX_PULL_TIME = 0.6, 5.0
 #: s of pull recorded after the onset (the sliding that follows it)
 AFTER_ONSET = 0.1
 
@@ -463,7 +464,7 @@ def _jaw_frames():
 def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length: float = 0.04,
          spacing: float = 0.003, squeeze: float = 0.0005, dt: float | None = None, contact_stiffness: float = 60.0,
          contact_damping: float = 0.02, handle_stiffness: float = 100.0, handle_speed: float = 0.01,
-         close_time: float = 0.15, settle_time: float = 0.1, pull_time: float = 0.6, onset_slide: float = 2.5e-3,
+         close_time: float = 0.15, settle_time: float = 0.1, pull_time: float = PULL_TIME, onset_slide: float = 2.5e-3,
          volume=None, onset: str = "contact", mu_static: float | None = None, handle: str = "auto",
          max_pull_time: float = MAX_PULL_TIME, after_onset: float = AFTER_ONSET, slip_distance: float = SLIP_DISTANCE,
          slid_share: float = SLID_SHARE, progress=None, **opts) -> SlipResult:
