@@ -376,10 +376,10 @@ class SlipResult:
     ``slip_onset_normal`` (N) the jaws' normal force at that instant; ``held_pull`` (N) the largest
     pull up to the onset, the most the grasp held, and ``held_normal`` (N) the jaws' normal force at
     the instant it was reached (Coulomb bounds the held force by mu_static times it);
-    ``normal_start`` (N) the jaws' normal force when the pull began. ``node_slip`` (K, n) m: each
-    node's slip along the jaws (:class:`~surgsim_envs.bench.slip_onset.AnchorSlip`) and
-    ``node_normal`` (K, n) N its normal force, every 0.05 s of pull (``node_slip_time``, s), and
-    ``node_z`` (n,) m the nodes' axial rest coordinates: where on the grip the slip starts."""
+    ``normal_start`` (N) the jaws' normal force when the pull began. ``node_slip`` (K, S) m: each
+    surface node's slip along the jaws (:class:`~surgsim_envs.bench.slip_onset.AnchorSlip`) and
+    ``node_normal`` (K, S) N its normal force, every 0.05 s of pull (``node_slip_time``, s), and
+    ``node_z`` (S,) m the surface nodes' axial rest coordinates: where on the grip the slip starts."""
 
     time: np.ndarray
     pull: np.ndarray
@@ -536,8 +536,10 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     clamp = _end_clamp(tissue, radius, spacing) if handle == "clamp" else None
     params = ContactParams(stiffness=contact_stiffness, damping=contact_damping)
     cm = ContactModel(tissue.n_nodes, tissue.surface_nodes, [float(mu)], params, tool_static_friction=[float(mu_s)])
-    anchors = AnchorSlip(tissue.n_nodes, params.tangential_stiffness or cm.stiffness_for(dt), slip_distance)
     er, mats = _jaw_frames()
+    surf = np.asarray(tissue.surface_nodes)             # the contact candidates, each facing one jaw
+    facing = er[np.argmax(tissue.rest_positions[surf, :2] @ er[:, :2].T, axis=1)]
+    anchors = AnchorSlip(len(surf), params.tangential_stiffness or cm.stiffness_for(dt), slip_distance)
     jaw_half = np.array([0.002, 0.003, 0.5 * length + 0.015])
     kind, tool = np.full(3, BOX), np.zeros(3, dtype=int)
     size = np.tile(jaw_half, (3, 1))
@@ -585,11 +587,11 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
             else:           # the clamp holds the tissue while the jaws slide back: its reaction is the pull
                 pull = float(tissue.reaction_forces()[:, 2].sum())
             f = res.forces
-            jaw = np.argmax(x[:, :2] @ er[:, :2].T, axis=1)
-            f_n = np.maximum(-np.einsum("ij,ij->i", f, er[jaw]), 0.0) * np.any(f != 0.0, axis=1)
-            slid = anchors.update(x[:, 2], f[:, 2], f_n, jaw_z)
-            touching = f_n > 0.0
-            speed = float(tissue.velocities[touching, 2].mean()) - jaw_vz if touching.any() else 0.0
+            fs = f[surf]
+            f_n = np.maximum(-(fs * facing).sum(axis=1), 0.0)       # the jaw faces are parallel to the pull
+            slid = anchors.update(x[surf, 2], fs[:, 2], f_n, jaw_z)
+            touching = surf[f_n > 0.0]
+            speed = float(tissue.velocities[touching, 2].mean()) - jaw_vz if len(touching) else 0.0
             share = float(res.report.slipping[0]) / max(int(res.report.contacts[0]), 1)
             fn = float(res.report.normal_force[0])
             mobilised = float(res.report.tangential_force[0]) / (mu * fn) if mu * fn > 0 else 0.0
@@ -628,4 +630,4 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
                       cls.name, share, speed, mobilised, onset, float(mu_s), slid, float(pull[held]),
                       float(normal[held]), float(normal[0]), np.array([q[1] for q in snaps]),
                       np.array([q[2] for q in snaps]), np.array([q[0] for q in snaps]),
-                      tissue.rest_positions[:, 2].copy())
+                      tissue.rest_positions[surf, 2].copy())
