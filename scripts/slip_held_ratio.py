@@ -10,8 +10,9 @@ the instant it was reached and over mu x the normal force when the pull began; t
 force's drop by then; the friction's share of its cap at the onset (|sum f_t| / (mu sum f_n));
 the ratio while sliding (the ``after_onset`` record); the held ratio for other slid-share
 thresholds (0.8, 0.95), read from the same run; and each contact point's slip against its normal
-force when a quarter of the points have slid and at the onset. ``--distances`` reruns some mu with other slip distances. Writes the
-figure and a JSON file next to it.
+force when a quarter of the points have slid and at the onset. ``--distances`` reruns some mu
+with other slip distances. Writes the figure and a JSON file next to it (``--replot`` redraws
+the figure from it).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from surgsim_envs.bench.slip_onset import SLIP_DISTANCE, gross_slip_index
 MUS = (0.1, 0.2, 0.3, 0.5, 0.75, 1.0, 1.25, 1.5)
 
 
-def r_slip_distance(kw: dict) -> float:
+def _slip_distance(kw: dict) -> float:
     return kw.get("slip_distance", SLIP_DISTANCE)
 
 
@@ -55,7 +56,7 @@ def measure(model: str, mu: float, **kw) -> dict:
     part = None
     for q in range(len(r.node_slip_time)):
         touch = r.node_normal[q] > 0
-        slid = touch & (r.node_slip[q] >= r_slip_distance(kw))
+        slid = touch & (r.node_slip[q] >= _slip_distance(kw))
         if touch.any() and slid.sum() >= 0.25 * touch.sum():
             part = q
             break
@@ -65,7 +66,7 @@ def measure(model: str, mu: float, **kw) -> dict:
             continue
         touch = r.node_normal[q] > 0
         n, sl = r.node_normal[q][touch], r.node_slip[q][touch]
-        slid = sl >= r_slip_distance(kw)
+        slid = sl >= _slip_distance(kw)
         profiles[name] = {"t": float(r.node_slip_time[q]), "z": r.node_z[touch].tolist(), "slip": sl.tolist(),
                           "normal": n.tolist(), "count_share": float(slid.mean()),
                           "normal_share": float(n[slid].sum() / n.sum()),

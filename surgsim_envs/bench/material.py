@@ -521,7 +521,8 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     if not (isinstance(after_onset, (int, float)) and after_onset >= 0):
         raise ConfigError(f"after_onset must be >= 0 s of pull recorded after the onset, got {after_onset!r}")
     if not (isinstance(slid_share, (int, float)) and 0 < slid_share <= 1):
-        raise ConfigError(f"slid_share must be in (0, 1] (share of the normal force on slid points), got {slid_share!r}")
+        raise ConfigError(f"slid_share must be in (0, 1] (share of the normal force on slid points), "
+                          f"got {slid_share!r}")
     if onset not in ("contact", "slide"):
         raise ConfigError(f"onset={onset!r} must be 'contact' (from the contact state) or 'slide' (a slide distance)")
     if handle not in ("auto", "spring", "clamp"):

@@ -108,7 +108,8 @@ def run(args: argparse.Namespace) -> int:
         res = mt.slip(args.model, mat if args.set else None, mu=args.mu, progress=_slip_progress(), **opts)
         out = {"pull": res.pull.tolist(), "normal_sum": res.normal_sum.tolist(), "slip_onset_pull": res.slip_onset_pull,
                "slip_onset_normal": res.slip_onset_normal, "held_pull": res.held_pull,
-               "held_normal": res.held_normal, "normal_start": res.normal_start, "mu": res.mu, "mu_static": res.mu_static}
+               "held_normal": res.held_normal, "normal_start": res.normal_start, "mu": res.mu,
+               "mu_static": res.mu_static}
         text = (f"{res.model}: slip onset at pull {res.slip_onset_pull:.4g} N (held {res.held_pull:.4g} N) after "
                 f"{res.time[int(np.argmax(res.pull == res.slip_onset_pull))]:.3g} s of pull; mu * sum(N) there = "
                 f"{res.mu * res.slip_onset_normal:.4g} N; held / (mu sum N), both at the same instant, "
