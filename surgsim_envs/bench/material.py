@@ -13,7 +13,8 @@ results can be compared with the closed forms of :mod:`surgsim_envs.bench.refere
 * :func:`relax` -- a block between two bonded plates, compressed at constant rate, then held:
   force on the top plate against time, stepped with the model's own integrator.
 * :func:`slip` -- three flat jaws squeeze a tissue cylinder, then a soft handle spring pulls it
-  along its axis; the pull, the summed jaw normal force and the pull at slip onset (the rig of
+  along its axis until the grasp slides; the pull, the summed jaw normal force and the pull at
+  slip onset, read from how far the contact points slid along the jaws (the rig of
   ``tests/test_grasp_slip.py``, for any model).
 """
 
@@ -30,6 +31,7 @@ import scipy.optimize as so
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from surgsim_envs.bench.slip_onset import SLID_SHARE, SLIP_DISTANCE
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.materials import Material, get_material
 
@@ -369,9 +371,15 @@ def relax(model, material="liver", *, strain: float = 0.05, ramp_time: float = 0
 @dataclass
 class SlipResult:
     """Grasp-and-pull record from the start of the pull: ``time`` (s), ``pull`` (N), ``normal_sum``
-    (N, summed jaw normal force), ``slide`` (m, axial motion of the tissue's centre of mass);
-    ``slip_onset_pull`` (N): pull at gross slip (see :func:`slip`'s ``onset``); ``slip_onset_normal``
-    (N) the jaws' normal force at that instant (both None if the grasp held for the whole pull)."""
+    (N, summed jaw normal force), ``slide`` (m, axial motion of the tissue's centre of mass relative
+    to the jaws); ``slip_onset_pull`` (N): pull at gross slip (see :func:`slip`'s ``onset``);
+    ``slip_onset_normal`` (N) the jaws' normal force at that instant; ``held_pull`` (N) the largest
+    pull up to the onset, the most the grasp held, and ``held_normal`` (N) the jaws' normal force at
+    the instant it was reached (Coulomb bounds the held force by mu_static times it);
+    ``normal_start`` (N) the jaws' normal force when the pull began. ``node_slip`` (K, S) m: each
+    surface node's slip along the jaws (:class:`~surgsim_envs.bench.slip_onset.AnchorSlip`) and
+    ``node_normal`` (K, S) N its normal force, every 0.05 s of pull (``node_slip_time``, s), and
+    ``node_z`` (S,) m the surface nodes' axial rest coordinates: where on the grip the slip starts."""
 
     time: np.ndarray
     pull: np.ndarray
@@ -391,15 +399,33 @@ class SlipResult:
     onset: str = "slide"
     #: static friction coefficient of the jaws (= mu unless set; the onset reference is mu_static * N)
     mu_static: float = math.nan
+    #: share of the jaws' normal force on contact points that have slid ``slip_distance`` since the
+    #: pull began, per sample (the onset criterion, :mod:`surgsim_envs.bench.slip_onset`)
+    slid_share: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    held_pull: float | None = None
+    held_normal: float | None = None
+    normal_start: float | None = None
+    node_slip: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    node_normal: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    node_slip_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    node_z: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def as_dict(self) -> dict:
         return {"pull": [float(v) for v in self.pull], "normal_sum": [float(v) for v in self.normal_sum],
                 "slip_onset_pull": self.slip_onset_pull, "slip_onset_normal": self.slip_onset_normal,
                 "time": [float(v) for v in self.time], "slide": [float(v) for v in self.slide],
                 "slip_share": [float(v) for v in self.slip_share], "patch_speed": [float(v) for v in self.patch_speed],
-                "mobilised": [float(v) for v in self.mobilised],
-                "onset": self.onset, "mu": self.mu, "nodes": self.nodes, "model": self.model}
+                "mobilised": [float(v) for v in self.mobilised], "slid_share": [float(v) for v in self.slid_share],
+                "held_pull": self.held_pull, "held_normal": self.held_normal, "normal_start": self.normal_start,
+                "onset": self.onset, "mu": self.mu, "mu_static": self.mu_static, "nodes": self.nodes,
+                "model": self.model}
 
+
+#: s, the shortest pull :func:`slip` records, and the longest it ramps before it reports that the
+#: grasp never slid
+PULL_TIME, MAX_PULL_TIME = 0.6, 5.0
+#: s of pull recorded after the onset (the sliding that follows it)
+AFTER_ONSET = 0.1
 
 SLIP_MATERIAL = Material(young=20_000.0, poisson=0.45, density=1000.0, damping=10.0, name="gel")
 
@@ -438,19 +464,28 @@ def _jaw_frames():
 def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length: float = 0.04,
          spacing: float = 0.003, squeeze: float = 0.0005, dt: float | None = None, contact_stiffness: float = 60.0,
          contact_damping: float = 0.02, handle_stiffness: float = 100.0, handle_speed: float = 0.01,
-         close_time: float = 0.15, settle_time: float = 0.1, pull_time: float = 0.6, onset_slide: float = 2.5e-3,
+         close_time: float = 0.15, settle_time: float = 0.1, pull_time: float = PULL_TIME, onset_slide: float = 2.5e-3,
          volume=None, onset: str = "contact", mu_static: float | None = None, handle: str = "auto",
-         **opts) -> SlipResult:
+         max_pull_time: float = MAX_PULL_TIME, after_onset: float = AFTER_ONSET, slip_distance: float = SLIP_DISTANCE,
+         slid_share: float = SLID_SHARE, progress=None, **opts) -> SlipResult:
     """Three flat jaws (120 degrees apart, longer than the tissue) close radially by ``squeeze`` (m)
     on a tissue cylinder (``radius``, ``length`` m) over ``close_time`` s, hold for ``settle_time`` s,
     then a handle spring (``handle_stiffness`` N/m, far end moving at ``handle_speed`` m/s) pulls the
-    tissue along its axis (as a body force spread by mass) for ``pull_time`` s.
+    tissue along its axis (as a body force spread by mass) for at least ``pull_time`` s.
 
     Coulomb friction ``mu`` on the jaws (kinetic; ``mu_static`` >= mu the static coefficient, None =
-    mu); penalty contact ``contact_stiffness`` N/m per node. Gross slip (reference: mu_static * sum(N)): ``onset="contact"`` (default) reads it from the contact
-    state (:func:`surgsim_envs.bench.slip_onset.gross_slip_index`: the share of contact points
-    sliding and the motion of the contact patch); ``onset="slide"`` when the tissue has slid
-    ``onset_slide`` m (the earlier rule, which lands on a stick-slip dip at low mu).
+    mu); penalty contact ``contact_stiffness`` N/m per node. Gross slip: ``onset="contact"``
+    (default) is the first sample at which the contact points that have slid ``slip_distance`` (m)
+    along the jaws carry ``slid_share`` of the normal force (:mod:`surgsim_envs.bench.slip_onset`,
+    read from the friction anchors, not from the friction force); ``onset="slide"`` when the
+    tissue's centre of mass has moved ``onset_slide`` m relative to the jaws (tissue stretch
+    included; it lands on a stick-slip dip at low mu).
+
+    The pull goes on past ``pull_time`` until the grasp slides (and ``after_onset`` s more, so that
+    the record shows the sliding), up to ``max_pull_time`` s of pull; a grasp that has not slid by
+    then, or that holds a pull above twice mu_static times the jaws' normal force (no friction grip
+    can), raises :class:`ConfigError` naming the largest pull reached. ``progress(t, pull,
+    mu_static_times_normal)`` (s, N, N), if given, is called every 0.05 s of pull.
     ``material`` defaults to a 20 kPa gel. ``tests/test_grasp_slip.py`` asserts the Coulomb behaviour of this rig.
 
     ``handle``: ``"spring"`` pulls through the handle spring as a body force spread by mass (a body
@@ -463,6 +498,7 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     capability and ``"spring"`` otherwise. ``dt`` (s) defaults to 5e-5, and to 5e-4 for a
     quasi-static model, whose steps are equilibria, so that ``dt`` only sets the sampling.
     """
+    from surgsim_envs.bench.slip_onset import AnchorSlip
     from surgsim_envs.contact import BOX, ContactModel, ContactParams
 
     cls = model_class(model)
@@ -478,7 +514,15 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
         dt = 5e-4 if quasi_static else 5e-5
     _positive(radius=radius, length=length, spacing=spacing, squeeze=squeeze, dt=dt, close_time=close_time,
               settle_time=settle_time, pull_time=pull_time, handle_stiffness=handle_stiffness,
-              handle_speed=handle_speed, onset_slide=onset_slide)
+              handle_speed=handle_speed, onset_slide=onset_slide, slip_distance=slip_distance)
+    if not (isinstance(max_pull_time, (int, float)) and max_pull_time >= pull_time):
+        raise ConfigError(f"max_pull_time must be >= pull_time = {pull_time} s (the ramp only extends), "
+                          f"got {max_pull_time!r}")
+    if not (isinstance(after_onset, (int, float)) and after_onset >= 0):
+        raise ConfigError(f"after_onset must be >= 0 s of pull recorded after the onset, got {after_onset!r}")
+    if not (isinstance(slid_share, (int, float)) and 0 < slid_share <= 1):
+        raise ConfigError(f"slid_share must be in (0, 1] (share of the normal force on slid points), "
+                          f"got {slid_share!r}")
     if onset not in ("contact", "slide"):
         raise ConfigError(f"onset={onset!r} must be 'contact' (from the contact state) or 'slide' (a slide distance)")
     if handle not in ("auto", "spring", "clamp"):
@@ -491,10 +535,12 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     if handle == "auto":
         handle = "clamp" if quasi_static else "spring"
     clamp = _end_clamp(tissue, radius, spacing) if handle == "clamp" else None
-    cm = ContactModel(tissue.n_nodes, tissue.surface_nodes, [float(mu)],
-                      ContactParams(stiffness=contact_stiffness, damping=contact_damping),
-                      tool_static_friction=[float(mu_s)])
+    params = ContactParams(stiffness=contact_stiffness, damping=contact_damping)
+    cm = ContactModel(tissue.n_nodes, tissue.surface_nodes, [float(mu)], params, tool_static_friction=[float(mu_s)])
     er, mats = _jaw_frames()
+    surf = np.asarray(tissue.surface_nodes)             # the contact candidates, each facing one jaw
+    facing = er[np.argmax(tissue.rest_positions[surf, :2] @ er[:, :2].T, axis=1)]
+    anchors = AnchorSlip(len(surf), params.tangential_stiffness or cm.stiffness_for(dt), slip_distance)
     jaw_half = np.array([0.002, 0.003, 0.5 * length + 0.015])
     kind, tool = np.full(3, BOX), np.zeros(3, dtype=int)
     size = np.tile(jaw_half, (3, 1))
@@ -510,12 +556,20 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     rows = []
     res = None
     jaw_z = 0.0                                         # axial jaw travel (clamp mode: the jaws move, not the clamp)
-    for i in range(int(round((close_time + settle_time + pull_time) / dt))):
+    start = close_time + settle_time
+    n_min = int(round((start + pull_time) / dt))
+    n_max = int(round((start + max_pull_time) / dt))
+    report_every = max(1, int(round(0.05 / dt)))
+    n_stop = n_min
+    hit_k = None
+    snaps = []
+    i = 0
+    while i < n_stop:
         t = i * dt
         s = min(t / close_time, 1.0)                    # smooth radial closing, then held
         rho = radius + clearance - travel * s * s * (3 - 2 * s)
         gvel[:, 3:] = -er * travel * (6 * s * (1 - s) / close_time if t < close_time else 0.0)
-        pulling = t >= close_time + settle_time
+        pulling = i >= int(round(start / dt))
         jaw_vz = -handle_speed if (clamp is not None and pulling) else 0.0
         if pulling and t0 is not None and clamp is not None:
             jaw_z = -handle_speed * (t - t0)
@@ -525,34 +579,56 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
         res = cm.compute(tissue.positions, tissue.velocities, kind, tool, size, centres, mats, gvel, com, dt)
         pull = 0.0
         if pulling:
-            zc = weights @ tissue.positions[:, 2]
+            x = tissue.positions
+            zc = weights @ x[:, 2]
             if z0 is None:
                 z0, t0 = zc, t
             if clamp is None:
                 pull = max(handle_stiffness * (handle_speed * (t - t0) - (zc - z0)), 0.0)
             else:           # the clamp holds the tissue while the jaws slide back: its reaction is the pull
                 pull = float(tissue.reaction_forces()[:, 2].sum())
-            touching = np.any(res.forces != 0.0, axis=1)
-            speed = float(tissue.velocities[touching, 2].mean()) - jaw_vz if touching.any() else 0.0
+            f = res.forces
+            fs = f[surf]
+            f_n = np.maximum(-(fs * facing).sum(axis=1), 0.0)       # the jaw faces are parallel to the pull
+            slid = anchors.update(x[surf, 2], fs[:, 2], f_n, jaw_z)
+            touching = surf[f_n > 0.0]
+            speed = float(tissue.velocities[touching, 2].mean()) - jaw_vz if len(touching) else 0.0
             share = float(res.report.slipping[0]) / max(int(res.report.contacts[0]), 1)
             fn = float(res.report.normal_force[0])
             mobilised = float(res.report.tangential_force[0]) / (mu * fn) if mu * fn > 0 else 0.0
-            rows.append((t - t0, pull, fn, zc - z0 - jaw_z, share, speed, mobilised))
+            rows.append((t - t0, pull, fn, zc - z0 - jaw_z, share, speed, mobilised, slid))
+            if hit_k is None:
+                found = slid >= slid_share if onset == "contact" else zc - z0 - jaw_z > onset_slide
+                if found:
+                    hit_k = len(rows) - 1
+                    n_stop = min(max(n_min, i + 1 + int(round(after_onset / dt))), n_max)
+                elif i + 1 == n_stop:
+                    n_stop = n_max
+                if pull > 2.0 * mu_s * fn > 0.0 and hit_k is None:
+                    raise ConfigError(
+                        f"slip: the grasp holds a pull of {pull:.4g} N, more than twice mu_static * sum(N) = "
+                        f"{mu_s * fn:.4g} N, after {t - t0:.3g} s without sliding: something other than friction "
+                        f"holds the tissue ({cls.name} resists the pull itself or the jaws catch it); "
+                        "this rig measures friction grips only")
+            if (len(rows) - 1) % report_every == 0:
+                snaps.append((t - t0, anchors.slip.copy(), f_n))
+                if progress is not None:
+                    progress(t - t0, pull, mu_s * fn)
         np.copyto(forces, res.forces)
         if clamp is None:
             forces[:, 2] += pull * weights
         tissue.step(dt, forces, res.stiffness)
+        i += 1
     if res is None or res.report.contacts[0] == 0:
         raise ConfigError("slip: the jaws never touched the tissue; increase squeeze")
-    tt, pull, normal, slide, share, speed, mobilised = np.array(rows).T
-    if onset == "contact":
-        from surgsim_envs.bench.slip_onset import gross_slip_index
-
-        k = gross_slip_index(share, mobilised, speed, handle_speed)
-        hit = np.array([k]) if k is not None else np.zeros(0, dtype=int)
-    else:
-        hit = np.flatnonzero(slide > onset_slide)
-    onset_pull = float(pull[hit[0]]) if len(hit) else None
-    onset_normal = float(normal[hit[0]]) if len(hit) else None
-    return SlipResult(tt, pull, normal, slide, onset_pull, onset_normal, float(mu), vol.n_nodes, cls.name,
-                      share, speed, mobilised, onset, float(mu_s))
+    tt, pull, normal, slide, share, speed, mobilised, slid = np.array(rows).T
+    if hit_k is None:
+        raise ConfigError(f"slip: the grasp did not slide within max_pull_time = {max_pull_time} s of pull "
+                          f"(largest pull {pull.max():.4g} N, {pull.max() / max(mu_s * normal.max(), 1e-30):.3g} x "
+                          f"mu_static * sum(N)); raise max_pull_time or handle_speed")
+    held = int(np.argmax(pull[:hit_k + 1]))
+    return SlipResult(tt, pull, normal, slide, float(pull[hit_k]), float(normal[hit_k]), float(mu), vol.n_nodes,
+                      cls.name, share, speed, mobilised, onset, float(mu_s), slid, float(pull[held]),
+                      float(normal[held]), float(normal[0]), np.array([q[1] for q in snaps]),
+                      np.array([q[2] for q in snaps]), np.array([q[0] for q in snaps]),
+                      tissue.rest_positions[surf, 2].copy())

@@ -4,12 +4,19 @@
         --depth 0.003 --thickness 0.03 --json
     surgsim material relax --model mass_spring --material liver --strain 0.05 --json
     surgsim material slip --model mass_spring --mu 0.6 --json
+
+``slip`` pulls until the grasp slides (docs/material_tests.md, "Slip onset") and prints progress on
+stderr while a slow model pulls.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
+import time
+
+import numpy as np
 
 from surgsim_envs.errors import ConfigError
 
@@ -51,6 +58,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     r.add_argument("--hold-time", type=float, default=3.0, help="s")
     s = sub.add_parser("slip", parents=[common], help="three-jaw grasp, then a ramped pull")
     s.add_argument("--mu", type=float, default=0.6, help="jaw friction coefficient")
+    s.add_argument("--max-pull-time", type=float, default=None,
+                   help="s, longest pull before the rig reports that the grasp never slid (default 5)")
+
+
+def _slip_progress(every_s: float = 10.0):
+    """progress callback for :func:`surgsim_envs.bench.material.slip`: a line on stderr every
+    ``every_s`` seconds of wall time (a slow model's pull can take minutes)."""
+    start = last = time.perf_counter()
+
+    def report(t: float, pull: float, cap: float) -> None:
+        nonlocal last
+        now = time.perf_counter()
+        if now - last >= every_s:
+            last = now
+            print(f"slip: {t:.2f} s of pull, pull {pull:.4g} N, mu_static * sum(N) {cap:.4g} N "
+                  f"({now - start:.0f} s)", file=sys.stderr, flush=True)
+
+    return report
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,18 +102,19 @@ def run(args: argparse.Namespace) -> int:
                 f"({res.force[-1] / max(res.force.max(), 1e-30):.3f} of peak) after {res.time[-1]:.3g} s")
         xy, labels = (res.time, res.force), ("time (s)", "force (N)")
     else:
-        if args.set:
-            opts_mat = mat
-        else:
-            opts_mat = None
-        res = mt.slip(args.model, opts_mat, mu=args.mu, **opts)
-        out = {"pull": res.pull.tolist(), "normal_sum": res.normal_sum.tolist(), "slip_onset_pull": res.slip_onset_pull}
-        if res.slip_onset_pull is None:
-            text = (f"{res.model}: no gross slip: the grasp held for the whole pull (max pull "
-                    f"{res.pull.max():.4g} N); lengthen pull_time or lower mu")
-        else:
-            text = (f"{res.model}: slip onset at pull {res.slip_onset_pull:.4g} N; mu * sum(N) there = "
-                    f"{res.mu * res.slip_onset_normal:.4g} N")
+        if args.max_pull_time is not None:      # the ramp runs at least PULL_TIME unless told less
+            opts["max_pull_time"] = args.max_pull_time
+            opts["pull_time"] = min(mt.PULL_TIME, args.max_pull_time)
+        res = mt.slip(args.model, mat if args.set else None, mu=args.mu, progress=_slip_progress(), **opts)
+        out = {"pull": res.pull.tolist(), "normal_sum": res.normal_sum.tolist(), "slip_onset_pull": res.slip_onset_pull,
+               "slip_onset_normal": res.slip_onset_normal, "held_pull": res.held_pull,
+               "held_normal": res.held_normal, "normal_start": res.normal_start, "mu": res.mu,
+               "mu_static": res.mu_static}
+        text = (f"{res.model}: slip onset at pull {res.slip_onset_pull:.4g} N (held {res.held_pull:.4g} N) after "
+                f"{res.time[int(np.argmax(res.pull == res.slip_onset_pull))]:.3g} s of pull; mu * sum(N) there = "
+                f"{res.mu * res.slip_onset_normal:.4g} N; held / (mu sum N), both at the same instant, "
+                f"{res.held_pull / (res.mu * res.held_normal):.3f}; sum(N) before the pull "
+                f"{res.normal_start:.4g} N")
         xy, labels = (res.time, res.pull), ("time since pull start (s)", "pull (N)")
     if args.plot:
         import matplotlib

@@ -109,7 +109,14 @@ def slip_events(rec, drop: float = 0.25, min_force: float = 0.05, min_share: flo
 def slip_onset(rec) -> dict | None:
     """The grasping simulation paper's slip onset (Fig. 5, red points): during pull phases the pull force peaks and then
     falls as the contact nodes slide along the jaws. Returns {"time" s, "pull_force" N,
-    "normal_force" N} at that peak when nodes were slipping there, else None."""
+    "normal_force" N} at that peak when nodes were slipping there, else None.
+
+    A scene records node counts only (its contact points include surface samples), so this is the
+    pull peak with sliding nodes, not the grasp-and-pull rig's onset from each point's slip
+    (:mod:`surgsim_envs.bench.slip_onset`). Both read the contact state, neither a threshold on
+    friction / (mu N); in the rig the two agree where the pull peaks before the grasp slides
+    (mass_spring mu 1.0: onset 0.439 s, peak 0.435 s), while at low mu the pull can still rise
+    after the onset, to the sliding friction (docs/material_tests.md, "Slip onset")."""
     mask = rec.phase_mask("pull")
     if not mask.any():
         return None
