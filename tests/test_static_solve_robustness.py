@@ -1,4 +1,4 @@
-"""mass_spring.static_solve does not sit on a knife edge: rounding-level perturbations converge.
+"""Static solves do not sit on a knife edge: rounding-level perturbations converge, failures say so.
 
 The truth-cube plate compression (18.25 %) passes through the spring network's buckling strain:
 the symmetric path turns into a saddle and the solve must leave it downhill. Which of the two
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from surgsim_envs.errors import SurgSimError
-from surgsim_envs.tissue.mass_spring import StaticSolveError
+from surgsim_envs.errors import StaticSolveError
 
 STRAIN = 0.1825
 TOL = 1e-8          # static_solve's default relative residual
@@ -115,3 +115,22 @@ def test_a_solve_that_cannot_converge_raises_static_solve_error_naming_the_step(
     with pytest.raises(StaticSolveError, match=r"load step .* max_iter") as info:
         model.static_solve(max_iter=1)
     assert isinstance(info.value, SurgSimError)
+
+
+def test_fem_corotational_static_solve_reports_non_convergence_and_bad_tol():
+    from surgsim_envs.errors import ConfigError
+    from surgsim_envs.geometry import box_volume
+    from surgsim_envs.tissue.fem import TetFEMModel
+
+    vol = box_volume((0.02, 0.02, 0.02), 0.01)
+    z = vol.nodes[:, 2]
+    bottom, top = np.isclose(z, z.min()), np.isclose(z, z.max())
+    model = TetFEMModel(vol, "liver", corotational=True, fixed=bottom)
+    model.set_fixed(top, vol.nodes[top] + [0.008, 0.0, -0.004])        # 40 % shear: rotations matter
+    with pytest.raises(StaticSolveError, match=r"max_iter=1 .* last update"):
+        model.static_solve(max_iter=1)
+    x = model.static_solve()                                          # the default converges
+    assert model.static_iterations < 50 and np.all(np.isfinite(x))
+    for bad in (0.0, 1.0, float("nan")):
+        with pytest.raises(ConfigError, match="tol"):
+            model.static_solve(tol=bad)

@@ -50,7 +50,7 @@ def test_mass_spring_static_solve_converges_to_a_stable_equilibrium_under_plate_
     # the plate targets carry a 1e-15 relative perturbation (the first draw of default_rng(1)), a
     # rounding-level change of the kind another CPU's SIMD width makes: it sends the 18.25 % solve
     # through the network's buckling saddle, where the solver used to give up at load step
-    # 0.7997 -> 0.8 (tests/test_mass_spring_static.py has 20 such starts under -m slow)
+    # 0.7997 -> 0.8 (tests/test_static_solve_robustness.py has 20 such starts under -m slow)
     wobble = 1.0 + 1e-15 * np.random.default_rng(1).standard_normal((len(top), 3))
     for strain in (0.125, 0.1825):
         model.reset()

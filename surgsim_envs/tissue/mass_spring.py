@@ -29,7 +29,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numba import njit
 
-from surgsim_envs.errors import ConfigError, SurgSimError
+from surgsim_envs.errors import ConfigError, StaticSolveError
 from surgsim_envs.tissue import msd_kernels as kern
 from surgsim_envs.tissue.base import TissueModel
 
@@ -61,10 +61,6 @@ ARMIJO = 1e-4
 #: relative rounding level of the summed energy: a predicted decrease below this many ulps of
 #: the energy scale is judged on the residual norm instead (the energy cannot see it)
 ENERGY_NOISE_ULPS = 1e4
-
-
-class StaticSolveError(SurgSimError, RuntimeError):
-    """:meth:`MassSpringModel.static_solve` found no equilibrium (Newton failed at the smallest load step)."""
 
 
 @njit(cache=True, nogil=True)
