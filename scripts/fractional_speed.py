@@ -1,6 +1,9 @@
 """Same-process step timings of the fractional model (docs/benchmarks.md, docs/models/fractional.md).
 
-    python scripts/fractional_speed.py [--nodes 1000] [--repeats 9] [--steps 100]
+    PYTHONPATH=. python scripts/fractional_speed.py [--nodes 1000] [--repeats 9] [--steps 100]
+
+(from the repository root: without PYTHONPATH=. the script imports whichever surgsim_envs is
+installed, not this tree's)
 
 Two tables, medians over repeats of wall-clock and stepping-thread CPU time per step, with the
 load average (the machine is shared: prefer the CPU column and the ratios):
