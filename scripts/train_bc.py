@@ -40,7 +40,9 @@ def fit(obs, act, hidden=(64, 64), iters=3000, batch=256, lr=3e-3, seed=0):
     """MLP weights (list of (W, b)), input mean and scale, and the loss per iteration."""
     rng = np.random.default_rng(seed)
     mean, std = obs.mean(axis=0), obs.std(axis=0)
-    scale = np.where(std > 1e-9, std, 1.0)   # an entry constant in the data is only centred
+    # SI entries that barely vary in the demonstrations (the wrist's y) must not turn a 1 mm drift
+    # in a rollout into a huge input: scales are floored at 1e-3 (1 mm, 1 mN)
+    scale = np.maximum(std, 1e-3)
     x_all = (obs - mean) / scale
     params = _init([obs.shape[1], *hidden, act.shape[1]], rng)
     m = [(np.zeros_like(w), np.zeros_like(b)) for w, b in params]
@@ -104,16 +106,32 @@ def main(argv=None) -> int:
         raise ConfigError(f"--eval-seeds {args.eval_seeds!r} must be held out: A >= --episodes ({args.episodes}) and A < B")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    dataset = record(args.task, "expert", episodes=args.episodes, seed=0, out=out / "data")
+    try:
+        dataset = record(args.task, "expert", episodes=args.episodes, seed=0, out=out / "data")
+    except ConfigError as exc:
+        if "already exists" not in str(exc):
+            raise
+        import os
+
+        import minari
+
+        os.environ["MINARI_DATASETS_PATH"] = str((out / "data").resolve())
+        short = args.task.split("/")[1].lower().replace("-v0", "")
+        dataset = minari.load_dataset(f"surgsim/{short}/expert-v0")   # recorded by an earlier run
     obs = np.concatenate([ep.observations[:-1] for ep in dataset.iterate_episodes()]).astype(np.float64)
     act = np.concatenate([ep.actions for ep in dataset.iterate_episodes()]).astype(np.float64)
     print(f"{len(obs)} (observation, action) pairs from {dataset.total_episodes} expert episodes")
     params, mean, scale, losses = fit(obs, act, iters=args.iters)
-    np.savez(out / "bc_policy.npz", mean=mean, scale=scale,
+    np.savez(out / "bc_policy.npz", mean=mean, scale=scale, fixed=np.ptp(act, axis=0) == 0.0, fixed_value=act[0],
              **{f"w{i}": w for i, (w, _) in enumerate(params)}, **{f"b{i}": b for i, (_, b) in enumerate(params)})
+
+    # an action entry the expert never varies (Grasp's jaw command) is that constant, not a fit that
+    # drifts from it as the rollout leaves the demonstrated states
+    fixed = np.ptp(act, axis=0) == 0.0
 
     def bc(env, o):
         y = _forward(params, (np.asarray(o, dtype=np.float64) - mean) / scale)[-1]
+        y = np.where(fixed, act[0], y)
         return np.clip(y, -1, 1).astype(np.float32)
 
     seeds = range(a, b)

@@ -68,6 +68,11 @@ class GrowthDivergedError(TissueUnstableError):
         return (type(self), (self.model, self.alpha, self.alpha_limit, self.iteration, self.reason))
 
 
+class StaticSolveError(SurgSimError, RuntimeError):
+    """A static (equilibrium) solve found no equilibrium within its iteration and load-step limits;
+    the message names where it stopped, the residual or update it reached, and what to change."""
+
+
 class GrowthNotConvergedError(SurgSimError, RuntimeError):
     """The tissue-growth iteration did not reach its threshold within ``max_iter`` iterations."""
 

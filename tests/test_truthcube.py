@@ -47,9 +47,16 @@ def test_mass_spring_static_solve_converges_to_a_stable_equilibrium_under_plate_
     tc, rest, measured = truthcube
     model, vol, bottom, top = tc.cube_model("mass_spring", 0.016)
     free = ~np.isin(np.arange(vol.n_nodes), np.concatenate([bottom, top]))
+    # the plate targets carry a 1e-15 relative perturbation (the first draw of default_rng(1)), a
+    # rounding-level change of the kind another CPU's SIMD width makes: it sends the 18.25 % solve
+    # through the network's buckling saddle, where the solver used to give up at load step
+    # 0.7997 -> 0.8 (tests/test_static_solve_robustness.py has 20 such starts under -m slow)
+    wobble = 1.0 + 1e-15 * np.random.default_rng(1).standard_normal((len(top), 3))
     for strain in (0.125, 0.1825):
         model.reset()
-        x = tc.compress(model, bottom, top, strain)
+        model.set_fixed(bottom)
+        model.set_fixed(top, (model.rest_positions[top] - [0.0, 0.0, strain * tc.CUBE]) * wobble)
+        x = model.static_solve()
         assert np.all(np.isfinite(x))
         assert np.allclose(x[top, 2], vol.nodes[top, 2] - strain * tc.CUBE)
         f = model.spring_forces()                  # branches relaxed after static_solve

@@ -49,7 +49,8 @@ def creep_error(memories, *, nodes: int = 250, duration: float = 2.0, dt: float 
         raise ConfigError(f"duration / dt must give >= 2 steps, got duration={duration}, dt={dt}")
 
     def run(mem):
-        m = FractionalTetModel(vol, material, order=order, memory=mem, integrator="implicit", fixed=bottom)
+        m = FractionalTetModel(vol, material, order=order, memory=mem, coarse_blocks=0, integrator="implicit",
+                              fixed=bottom)
         forces = np.zeros((m.n_nodes, 3))
         forces[top, 2] = -0.5 / top.sum()
         out = np.empty(steps)
@@ -80,7 +81,7 @@ def step_cost(memories, *, nodes: int = 1000, repeats: int = 7, steps: int = 100
     vol, bottom, top = _block(nodes)
     out, cpu_out = {}, {}
     for mem in tqdm(list(memories), desc="memory cost", file=sys.stderr, disable=not progress):
-        m = FractionalTetModel(vol, "liver", memory=int(mem), integrator=integrator, fixed=bottom)
+        m = FractionalTetModel(vol, "liver", memory=int(mem), coarse_blocks=0, integrator=integrator, fixed=bottom)
         dt = 1e-3 if integrator == "implicit" else min(1e-3, 0.5 * m.critical_dt())
         forces = np.zeros((m.n_nodes, 3))
         forces[top, 2] = -0.5 / top.sum()

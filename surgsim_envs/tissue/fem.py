@@ -35,7 +35,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 import numba
 
-from surgsim_envs.errors import ConfigError
+from surgsim_envs.errors import ConfigError, StaticSolveError
 from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue import fem_kernels as kern
 from surgsim_envs.tissue import fem_viscous as visc
@@ -638,7 +638,8 @@ class TetFEMModel(TissueModel):
     def static_solve(self, forces: np.ndarray | None = None, *, max_iter: int = 50, tol: float = 1e-9) -> np.ndarray:
         """Equilibrium positions (N,3) m under external ``forces`` (N,3) N (+ gravity) and the
         current Dirichlet nodes/targets: solves K u = R (linear) or iterates with the warped
-        stiffness R K R^T until the update is below ``tol`` times the body size (corotational).
+        stiffness R K R^T until the update is below ``tol`` times the body size (corotational;
+        :class:`~surgsim_envs.errors.StaticSolveError` if ``max_iter`` iterations do not get there).
         Viscoelastic materials give the long-term (relaxed) equilibrium, moduli x (1 - relax_fraction),
         as the mass-spring model's static_solve; the branches are left fully relaxed there.
         Updates ``positions`` (velocities are zeroed) and returns a copy.
@@ -670,6 +671,8 @@ class TetFEMModel(TissueModel):
             raise ConfigError(f"forces must be a finite array of shape {self.positions.shape}, got {forces.shape}")
         if not (isinstance(max_iter, (int, np.integer)) and max_iter >= 1):
             raise ConfigError(f"max_iter must be a positive integer, got {max_iter!r}")
+        if not (isinstance(tol, (int, float)) and math.isfinite(tol) and 0 < tol < 1):
+            raise ConfigError(f"fem.static_solve: tol={tol!r} must lie in (0, 1) (update / body size), e.g. 1e-9")
         load = forces + self.masses[:, None] * self.gravity[None, :]
         free = ~self.fixed
         free3 = np.repeat(free, 3)
@@ -693,6 +696,13 @@ class TetFEMModel(TissueModel):
             self.static_iterations = it + 1
             if np.max(np.abs(dx)) < tol * size:
                 break
+        else:
+            if self.corotational:
+                raise StaticSolveError(
+                    f"fem.static_solve (corotational) did not converge in max_iter={max_iter} iterations: the last "
+                    f"update was {np.max(np.abs(dx)):.3g} m, above tol x body size = {tol:g} x {size:.3g} m. Raise "
+                    "max_iter or tol, or apply the load/displacement in smaller steps (the rotations follow the "
+                    "deformation by fixed-point iteration)")
         self.positions = x
         self.velocities = np.zeros_like(x)
         return x.copy()

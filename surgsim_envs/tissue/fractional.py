@@ -17,13 +17,14 @@ In 3-D, per linear tet, with C Hooke's tensor of the element's (young, poisson):
 
 Discretisation: linear tets, small strain (``K_e = B^T D B V``); Grunwald-Letnikov in time with
 the short-memory principle: ``D^q y(t_n) ~ dt^-q sum_{k=0}^{L} w_k y_{n-k}`` (L = ``memory``
-steps, default 100). The history is the nodal displacement d = x - X of the last L steps
+steps, default 100) plus, by default, block averages of the older states out to 10,000 steps. The history is the nodal displacement d = x - X of the last L steps
 (a ring buffer, L x 3N numbers): because the element strain is linear in d (eps_e = B_e d_e),
 the weighted sum of the element strain histories equals the strain of the weighted sum of
 displacements, so ``sum_e B_e^T V_e C_e sum_k w_k eps_e,n-k = K_f sum_k w_k d_{n-k}`` exactly:
 keeping the history per node is the per-element strain history, in 3N instead of 6T numbers per
-step (1,000-node box: 3,000 vs 26,244). Optionally a second ring keeps block averages of older
-states (two-level memory, ``coarse_blocks``/``coarse_step``). Nodal forces::
+step (1,000-node box: 3,000 vs 26,244). A second ring keeps block averages of older states
+(two-level memory, ``coarse_blocks``/``coarse_step``; by default it spans 10,000 steps, every
+task's longest episode: plain truncation at 100 steps stalls creep and relaxation after 0.1 s). Nodal forces::
 
     f = f_ext + m g_grav - K_inf d_n - dt^-q K_f s_n,   s_n = sum_{k=0}^{L} w_k^{(q_n)} d_{n-k}
     K_inf = sum_e (1 - g_e) K_e,   K_f = sum_e g_e tau_e^q K_e
@@ -55,6 +56,10 @@ from surgsim_envs.tissue.fem_kernels import count_inverted
 
 DEFAULT_ORDER = 0.3
 DEFAULT_MEMORY = 100
+#: steps of history the default two-level memory spans (fine window + block averages): at least
+#: every task's longest episode in physics steps (Palpation-v0 6 s at 1 ms = 6,000; Grasp-v0 and
+#: Slippage-v0 3 s at 0.4 ms = 7,500), so no task's creep or relaxation stalls at L dt
+DEFAULT_SPAN_STEPS = 10_000
 #: the history ring may not exceed this many bytes (2 (L + 1) x 3N doubles)
 MAX_HISTORY_BYTES = 2 * 1024 ** 3
 
@@ -65,14 +70,15 @@ class FractionalTetModel(TissueModel):
     Parameters (besides those of :class:`TissueModel`)
     ----------
     order: q in [0, 1): a number or a PiecewiseOrder of simulated time (s).
-    memory: short-memory length L (steps of history kept), >= 1. The model remembers L dt
-        seconds: beyond that relaxation and creep stall (the truncated branch acts as a spring),
-        so for fidelity over the relaxation time use L >= relax_time / dt; the cost per step grows
-        linearly with L (docs/models/fractional.md). Default 100 (1,000 nodes then step in < 1 ms on one core).
+    memory: short-memory length L (steps of history kept in full), >= 1. With plain truncation
+        (``coarse_blocks=0``) the model remembers L dt seconds: beyond that relaxation and creep
+        stall (the truncated branch acts as a spring); the cost per step grows linearly with L
+        (docs/models/fractional.md). Default 100, with the two-level memory below spanning
+        DEFAULT_SPAN_STEPS.
     coarse_blocks, coarse_step: two-level memory: beyond the L-step window keep ``coarse_blocks``
-        averages of ``coarse_step`` (<= L, default L) end states each, weighted by the exact sum of
-        their lags' GL weights; spans L + coarse_blocks x coarse_step steps for L + coarse_blocks
-        rows of work (default 0: plain truncation).
+        averages of ``coarse_step`` (<= L, default L // 2) end states each, weighted by the exact sum
+        of their lags' GL weights; spans L + coarse_blocks x coarse_step steps for L + coarse_blocks
+        rows of work (default: enough blocks to span DEFAULT_SPAN_STEPS; 0 gives plain truncation).
     branch_fraction: None (use the material's ``relax_fraction`` per element) or a number in
         [0, 1] for every element; 1.0 = the paper's law alone.
     """
@@ -87,14 +93,16 @@ class FractionalTetModel(TissueModel):
     node_field_names = ("displacement", "stress", "order")
 
     def __init__(self, volume, material="liver", *, integrator=None, order=None, memory: int = DEFAULT_MEMORY,
-                 coarse_blocks: int = 0, coarse_step: int | None = None,
+                 coarse_blocks: int | None = None, coarse_step: int | None = None,
                  branch_fraction: float | None = None, **base_kwargs):
         if not (isinstance(memory, (int, np.integer)) and not isinstance(memory, bool) and memory >= 1):
             raise ConfigError(f"memory (short-memory length L in steps) must be an integer >= 1, got {memory!r}")
         self.memory = int(memory)
         if coarse_step is None:
-            coarse_step = self.memory
-        if not (isinstance(coarse_blocks, (int, np.integer)) and coarse_blocks >= 0):
+            coarse_step = max(1, self.memory // 2)
+        if coarse_blocks is None and isinstance(coarse_step, (int, np.integer)) and coarse_step >= 1:
+            coarse_blocks = max(0, -(-(DEFAULT_SPAN_STEPS - self.memory) // int(coarse_step)))
+        if not (isinstance(coarse_blocks, (int, np.integer)) and not isinstance(coarse_blocks, bool) and coarse_blocks >= 0):
             raise ConfigError(f"coarse_blocks (block averages kept beyond the memory) must be an integer >= 0, got {coarse_blocks!r}")
         if not (isinstance(coarse_step, (int, np.integer)) and 1 <= coarse_step <= self.memory):
             raise ConfigError(f"coarse_step (steps per block average) must be an integer in [1, memory={self.memory}], "
@@ -103,10 +111,11 @@ class FractionalTetModel(TissueModel):
         self._branch_override = branch_fraction
         if branch_fraction is not None and not (isinstance(branch_fraction, (int, float)) and 0.0 <= branch_fraction <= 1.0):
             raise ConfigError(f"branch_fraction must be None (material relax_fraction) or a number in [0, 1], got {branch_fraction!r}")
-        ring = 2 * (self.memory + 1) * 3 * volume.n_nodes * 8
+        ring = 2 * (self.memory + 1 + self.coarse_blocks) * 3 * volume.n_nodes * 8
         if ring > MAX_HISTORY_BYTES:
-            raise ConfigError(f"memory={memory} steps on {volume.n_nodes} nodes needs a {ring / 1024 ** 3:.1f} GB history "
-                              f"ring (limit {MAX_HISTORY_BYTES / 1024 ** 3:.0f} GB); use a shorter memory or a coarser mesh")
+            raise ConfigError(f"memory={memory} steps + coarse_blocks={self.coarse_blocks} on {volume.n_nodes} nodes "
+                              f"needs a {ring / 1024 ** 3:.1f} GB history ring (limit {MAX_HISTORY_BYTES / 1024 ** 3:.0f} "
+                              "GB); use a shorter memory, fewer coarse blocks or a coarser mesh")
         super().__init__(volume, material, integrator=integrator, **base_kwargs)
         if order is None:
             order = self.material.extra.get("fractional_order", DEFAULT_ORDER)
@@ -452,5 +461,7 @@ class FractionalTetModel(TissueModel):
 
     def describe(self) -> dict:
         out = super().describe()
-        out.update(order=list(self.order.values), order_breaks_s=list(self.order.breaks), memory=self.memory)
+        out.update(order=list(self.order.values), order_breaks_s=list(self.order.breaks), memory=self.memory,
+                   coarse_blocks=self.coarse_blocks, coarse_step=self.coarse_step,
+                   memory_span_steps=self.memory + self.coarse_blocks * self.coarse_step)
         return out

@@ -29,7 +29,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numba import njit
 
-from surgsim_envs.errors import ConfigError, SurgSimError
+from surgsim_envs.errors import ConfigError, StaticSolveError
 from surgsim_envs.tissue import msd_kernels as kern
 from surgsim_envs.tissue.base import TissueModel
 
@@ -50,10 +50,17 @@ NETWORK_LAMBDA_FACTOR = NETWORK_YOUNG_FACTOR * NETWORK_POISSON / ((1.0 + NETWORK
 CG_TOLERANCE = 1e-6
 #: iteration cap of the implicit step's conjugate gradients
 CG_MAX_ITER = 500
-
-
-class StaticSolveError(SurgSimError, RuntimeError):
-    """:meth:`MassSpringModel.static_solve` found no equilibrium (Newton failed at the smallest load step)."""
+#: static solve: Newton iterations per load increment the increment control aims at (the next
+#: increment grows by up to 2x when fewer were needed, shrinks by up to 2x when more)
+STATIC_TARGET_ITERATIONS = 6
+#: static solve: smallest load increment (fraction of the load) before it reports failure
+STATIC_MIN_INCREMENT = 1.0 / 4096
+#: static solve: Armijo constant of the line search (energy, or residual norm where the energy's
+#: rounding cannot resolve the predicted decrease)
+ARMIJO = 1e-4
+#: relative rounding level of the summed energy: a predicted decrease below this many ulps of
+#: the energy scale is judged on the residual norm instead (the energy cannot see it)
+ENERGY_NOISE_ULPS = 1e4
 
 
 @njit(cache=True, nogil=True)
@@ -506,19 +513,23 @@ class MassSpringModel(TissueModel):
 
         Load stepping from the rest state (so the result does not depend on the current state
         and stays on the branch connected to it): the fixed nodes move from their rest positions
-        to their targets, and the loads grow from 0, in increments of at most a quarter of the
+        to their targets, and the loads grow from 0, the first increment at most a quarter of the
         shortest spring; each increment is solved by Newton's method with the full tangent (plus
-        a diagonal shift while it gives no descent direction) and an Armijo line search on the
-        potential energy, then checked for stability: at a saddle (negative lowest tangent
-        eigenvalue) it steps along that mode downhill and re-converges, so the result is an
-        energy minimum. An increment that does not converge in ``max_iter`` iterations, or that
-        turns more tets inside out, is halved. (One jump to an 18 % plate compression of a cube
-        lands on a folded equilibrium with the whole top tet layer inverted.)
-        Converged means |residual force on free nodes| <= ``tol`` * (load + support reaction scale).
+        a diagonal shift while it gives no descent direction) and a backtracking Armijo line
+        search on the potential energy (on the residual norm where the predicted decrease is below
+        the energy's rounding level), then checked for stability: at a saddle (negative lowest
+        tangent eigenvalue) it moves to the lowest energy along that mode and re-converges, so the
+        result is an energy minimum. Increment control: a converged increment sets the next one
+        to ds x clip(sqrt(STATIC_TARGET_ITERATIONS / Newton iterations), 0.5, 2); one that does
+        not converge in ``max_iter`` iterations, or that turns more tets inside out, is halved.
+        (One jump to an 18 % plate compression of a cube lands on a folded equilibrium with the
+        whole top tet layer inverted.) Converged means |residual force on free nodes| <= ``tol``
+        * max(|load|, |internal forces|) (docs/numerics.md).
         The Maxwell branches are taken as fully relaxed (zero force); the state is left at the
         solution with zero velocity. ``static_increments`` / ``static_iterations`` record the
         work, ``static_lowest_eigenvalue`` (N/m) the stability check of the last increment.
-        Raises :class:`StaticSolveError` if the increment falls below 1/4096 of the load.
+        Raises :class:`StaticSolveError` if the increment falls below STATIC_MIN_INCREMENT
+        (1/4096) of the load.
         """
         if not self.fixed.any():
             raise ConfigError("mass_spring.static_solve needs fixed nodes (set fixed=... or call set_fixed) "
@@ -547,6 +558,7 @@ class MassSpringModel(TissueModel):
             trial = x.copy()
             trial[fixed] = start[fixed] + s_try * (goal - start[fixed])
             ok, sol, iters = self._newton(trial, s_try * F, tol, max_iter)
+            newton_iters = iters
             if ok:
                 ok, sol, extra, self.static_lowest_eigenvalue = self._escape_saddle(sol, s_try * F, tol, max_iter)
                 iters += extra
@@ -555,14 +567,16 @@ class MassSpringModel(TissueModel):
             if ok and (inv <= inverted or ds < 1.0 / 256):
                 x, s, inverted = sol, s_try, inv
                 self.static_increments += 1
-                ds = min(2.0 * ds, 1.0)
+                # increment control: aim at STATIC_TARGET_ITERATIONS Newton iterations per increment
+                ds = min(1.0, ds * min(2.0, max(0.5, math.sqrt(STATIC_TARGET_ITERATIONS / max(newton_iters, 1)))))
                 continue
             ds *= 0.5
-            if ds < 1.0 / 4096:
+            if ds < STATIC_MIN_INCREMENT:
                 raise StaticSolveError(
-                    f"mass_spring.static_solve did not converge: load step {s:.4f} -> {s_try:.4f} failed after "
-                    f"bisecting the increment 12 times (Newton iterations {iters}, inverted tets {inv}). "
-                    "Reduce the prescribed displacement/load, or raise max_iter/tol")
+                    f"mass_spring.static_solve did not converge: load step {s:.4f} -> {s_try:.4f} failed with the "
+                    f"increment bisected to {ds:.2e} of the load (minimum {STATIC_MIN_INCREMENT:.2e}; Newton "
+                    f"iterations {iters}, inverted tets {inv}). Reduce the prescribed displacement/load, or raise "
+                    "max_iter/tol")
         x[fixed] = goal
         self.positions = np.ascontiguousarray(x)
         self.velocities = np.zeros_like(self.positions)
@@ -574,17 +588,27 @@ class MassSpringModel(TissueModel):
 
     def _relaxed_energy(self, x: np.ndarray, F: np.ndarray) -> float:
         """Potential (J) of the relaxed springs and the volume term minus the work of the loads F at positions x."""
+        return self._relaxed_energy_terms(x, F)[0]
+
+    def _relaxed_energy_terms(self, x: np.ndarray, F: np.ndarray) -> tuple[float, float]:
+        """(potential J, magnitude J of its terms: the scale its rounding error is relative to)."""
         dl = np.linalg.norm(x[self.sj] - x[self.si], axis=1) - self.rest_lengths
         d2 = dl * dl
-        return float(np.sum(0.5 * self.K1 * d2 + 0.25 * self.K2 * d2 * d2) + self.volume_energy(x)
-                     - np.sum(F[~self.fixed] * x[~self.fixed]))
+        stored = float(np.sum(0.5 * self.K1 * d2 + 0.25 * self.K2 * d2 * d2) + self.volume_energy(x))
+        work = float(np.sum(F[~self.fixed] * x[~self.fixed]))
+        return stored - work, abs(stored) + float(np.sum(np.abs(F[~self.fixed] * x[~self.fixed])))
 
     def _newton(self, x: np.ndarray, F: np.ndarray, tol: float, max_iter: int, shift: float = 0.0):
         """Modified Newton for the relaxed equilibrium (an energy minimum) with the fixed nodes as in
         ``x``: direction from (K + shift I) dx = R with the full tangent K; the shift (N/m) grows
-        tenfold whenever K + shift I gives no descent direction or the Armijo line search on the
-        energy fails, and shrinks tenfold after every full step. Returns (converged, positions,
-        iterations)."""
+        tenfold whenever K + shift I gives no descent direction or the line search fails, and
+        shrinks tenfold after every full step. Line search: backtracking (halving) with the Armijo
+        condition on the energy, ``E(x + a dx) <= E(x) - ARMIJO a dx.R``; where the predicted
+        decrease ``a dx.R`` is below the energy's rounding level (ENERGY_NOISE_ULPS ulps of its
+        terms: near convergence the energy cannot resolve the step, and whether a rounding-level
+        change passes would depend on the CPU's summation order) the condition is taken on the
+        residual norm instead, ``|R(x + a dx)| <= (1 - ARMIJO a) |R(x)|``. Converged when
+        |R| <= tol x max(|F|, |internal forces|). Returns (converged, positions, iterations)."""
         import scipy.sparse as sp
         import scipy.sparse.linalg as spla
 
@@ -594,6 +618,7 @@ class MassSpringModel(TissueModel):
         buf = np.empty_like(x)
         eye = sp.identity(int(free.sum()), format="csc")
         k_scale = float(self.K1.mean()) + 1e-300
+        eps = np.finfo(float).eps
 
         def residual(pos):
             kern.spring_forces(pos, self.si, self.sj, self.rest_lengths, self.K1, self.K2, zeros_e, zeros_e,
@@ -604,7 +629,7 @@ class MassSpringModel(TissueModel):
 
         x = np.ascontiguousarray(x)
         R, scale = residual(x)
-        energy = self._relaxed_energy(x, F)
+        energy, e_mag = self._relaxed_energy_terms(x, F)
         it = 0
         while it < max_iter:
             rnorm = float(np.linalg.norm(R))
@@ -614,31 +639,36 @@ class MassSpringModel(TissueModel):
                 return True, x, it
             it += 1
             K = self._tangent(x, True, False)[free][:, free].tocsc()
-            dx = None
+            accepted = None
             while shift < 1e3 * k_scale:
                 try:
                     cand = spla.splu((K + shift * eye) if shift > 0 else K).solve(R)
                 except RuntimeError:  # exactly singular factor
                     cand = None
                 if cand is not None and np.all(np.isfinite(cand)) and float(cand @ R) > 0.0:
-                    slope = -float(cand @ R)          # directional derivative of the energy (< 0)
-                    slack = 1e-12 * (abs(energy) + 1e-300)
+                    decrease = float(cand @ R)        # -(directional derivative of the energy) > 0
+                    noise = ENERGY_NOISE_ULPS * eps * e_mag
                     step = 1.0
-                    for _ in range(20):
+                    for _ in range(30):
                         trial = x.copy()
                         trial.reshape(-1)[free] += step * cand
-                        e_t = self._relaxed_energy(trial, F)
-                        if e_t <= energy + 1e-4 * step * slope + slack:
-                            dx = cand
+                        e_t, mag_t = self._relaxed_energy_terms(trial, F)
+                        if step * decrease > noise:
+                            good = e_t <= energy - ARMIJO * step * decrease
+                        else:
+                            r_t = residual(trial)
+                            good = math.isfinite(e_t) and float(np.linalg.norm(r_t[0])) <= (1.0 - ARMIJO * step) * rnorm
+                        if good:
+                            accepted = (trial, e_t, mag_t, step)
                             break
                         step *= 0.5
-                if dx is not None:
+                if accepted is not None:
                     break
                 shift = max(10.0 * shift, 1e-3 * k_scale)
-            if dx is None:
+            if accepted is None:
                 return False, x, it
+            x, energy, e_mag, step = accepted
             shift = 0.1 * shift if (step == 1.0 and shift > 1e-6 * k_scale) else (0.0 if step == 1.0 else shift)
-            x, energy = trial, e_t
             R, scale = residual(x)
         rnorm = float(np.linalg.norm(R))
         return rnorm <= tol * scale, x, max_iter
@@ -660,23 +690,24 @@ class MassSpringModel(TissueModel):
         return float(w[0]), mode.reshape(-1, 3)
 
     def _escape_saddle(self, x: np.ndarray, F: np.ndarray, tol: float, max_iter: int):
-        """From an equilibrium x, follow negative-curvature modes downhill to a stable equilibrium.
-        Returns (converged, positions, iterations, lowest eigenvalue)."""
+        """From an equilibrium x, follow negative-curvature modes downhill to a stable equilibrium:
+        the lowest-energy point along the mode (both signs, geometric steps) starts a shifted Newton
+        solve. Returns (converged, positions, iterations, lowest eigenvalue)."""
         iters = 0
         lam, mode = self._lowest_mode(x)
         for _ in range(6):
             if mode is None or lam >= -1e-9 * float(self.K1.mean()):
                 return True, x, iters, lam
-            step = 0.25 * float(self.rest_lengths.min()) / float(np.max(np.linalg.norm(mode, axis=1)))
+            # lowest energy along +-mode over steps of a quarter of the shortest spring / 2^k: the
+            # first Newton iterate starts well down the slope instead of at the saddle's rim
+            t_max = 0.25 * float(self.rest_lengths.min()) / float(np.max(np.linalg.norm(mode, axis=1)))
             e0, best = self._relaxed_energy(x, F), None
             for sign in (1.0, -1.0):
-                for _ in range(12):
-                    trial = x + sign * step * mode
+                for k in range(16):
+                    trial = x + sign * t_max * 0.5 ** k * mode
                     e_t = self._relaxed_energy(trial, F)
                     if e_t < e0 and (best is None or e_t < best[0]):
                         best = (e_t, trial)
-                        break
-                    step *= 0.5
             if best is None:
                 return True, x, iters, lam
             ok, x, n_it = self._newton(best[1], F, tol, max_iter, shift=2.0 * abs(lam))
