@@ -2,7 +2,10 @@
 
     python scripts/train_bc.py [--episodes 50] [--eval-seeds 10000:10020] [--out surgsim-out/bc]
 
-1. records ``--episodes`` expert episodes as a Minari dataset (``surgsim record``, seeds 0..n-1);
+1. records ``--episodes`` expert episodes as a Minari dataset (``surgsim record``, seeds 0..n-1)
+   with Gaussian noise on the applied actions (``--noise``, default 0.3), so the data shows how
+   the expert acts in states off its own path; the labels are its clean actions
+   (``infos["source_action"]``): behaviour cloning without it fails under the covariate shift;
 2. fits a small MLP (numpy, tanh hidden layers, Adam, mean-squared error on the actions, inputs
    standardised) to the (observation, action) pairs;
 3. evaluates the cloned policy, uniform random actions and the expert itself on held-out seeds
@@ -93,6 +96,8 @@ def main(argv=None) -> int:
     ap.add_argument("--episodes", type=int, default=50)
     ap.add_argument("--eval-seeds", default="10000:10020", help="held-out seeds A:B (default 10000:10020)")
     ap.add_argument("--iters", type=int, default=3000)
+    ap.add_argument("--noise", type=float, default=0.3,
+                    help="action noise while recording (the expert's clean actions are the labels; default 0.3)")
     ap.add_argument("--out", default="surgsim-out/bc")
     args = ap.parse_args(argv)
     from surgsim_envs.errors import ConfigError
@@ -107,7 +112,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     try:
-        dataset = record(args.task, "expert", episodes=args.episodes, seed=0, out=out / "data")
+        dataset = record(args.task, "expert", episodes=args.episodes, seed=0, out=out / "data", noise=args.noise)
     except ConfigError as exc:
         if "already exists" not in str(exc):
             raise
@@ -119,7 +124,8 @@ def main(argv=None) -> int:
         short = args.task.split("/")[1].lower().replace("-v0", "")
         dataset = minari.load_dataset(f"surgsim/{short}/expert-v0")   # recorded by an earlier run
     obs = np.concatenate([ep.observations[:-1] for ep in dataset.iterate_episodes()]).astype(np.float64)
-    act = np.concatenate([ep.actions for ep in dataset.iterate_episodes()]).astype(np.float64)
+    # labels: the expert's own action at each observation (with --noise the applied one was perturbed)
+    act = np.concatenate([ep.infos["source_action"][:-1] for ep in dataset.iterate_episodes()]).astype(np.float64)
     print(f"{len(obs)} (observation, action) pairs from {dataset.total_episodes} expert episodes")
     params, mean, scale, losses = fit(obs, act, iters=args.iters)
     np.savez(out / "bc_policy.npz", mean=mean, scale=scale, fixed=np.ptp(act, axis=0) == 0.0, fixed_value=act[0],

@@ -6,7 +6,9 @@ step in ``infos``:
 
 * ``tool_force_N``: for every tool of the scene, the contact force on it from the tissue, (3,) N;
 * ``reward_terms``: the task's weighted reward terms (the same names as ``info["reward_terms"]``;
-  zeros at reset).
+  zeros at reset);
+* ``source_action``: the action the device chose at this observation (zeros at the last one); it
+  differs from the recorded action when ``--noise`` perturbs the applied actions.
 
 Sources (``--device``): ``expert`` (the task's scripted expert), ``random`` (uniform actions from
 the action space), ``policy:FILE.npz`` (a saved :class:`~surgsim_envs.policies.NpzPolicy`).
@@ -95,9 +97,15 @@ def _term_names(task: str, make_env) -> tuple:
 
 
 def record(task: str, device: str = "expert", episodes: int = 10, seed: int = 0, out: str | Path = "surgsim-data",
-           max_steps: int | None = None, progress: Callable[[int], None] | None = None, **env_kwargs):
+           max_steps: int | None = None, progress: Callable[[int], None] | None = None, noise: float = 0.0,
+           **env_kwargs):
     """Record ``episodes`` episodes of ``task`` driven by ``device`` into a Minari dataset under
-    ``out``; returns the loaded :class:`minari.MinariDataset`."""
+    ``out``; returns the loaded :class:`minari.MinariDataset`.
+
+    noise: standard deviation of Gaussian noise added to every action entry before it is applied
+    (clipped to the action space); the recorded ``actions`` are the applied ones, and
+    ``infos["source_action"]`` holds the device's own action at each observation (zeros at the
+    last), so imitation learning sees how the expert recovers from states it would not reach."""
     try:
         import minari
     except ImportError:
@@ -112,6 +120,9 @@ def record(task: str, device: str = "expert", episodes: int = 10, seed: int = 0,
         raise ConfigError(f"episodes={episodes!r} must be an integer in 1..{MAX_EPISODES}")
     if not (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed < 2**31):
         raise ConfigError(f"seed={seed!r} must be an integer in [0, 2^31)")
+    if isinstance(noise, bool) or not isinstance(noise, (int, float)) or not 0.0 <= noise <= 1.0:
+        raise ConfigError(f"noise={noise!r} must be a standard deviation in [0, 1] (actions span [-1, 1])")
+    rng = np.random.default_rng(seed)
     factory = action_source(task, device)
     make_env = lambda: gym.make(task, **env_kwargs)  # noqa: E731
     names = _term_names(task, make_env)
@@ -133,7 +144,12 @@ def record(task: str, device: str = "expert", episodes: int = 10, seed: int = 0,
             observations, actions, rewards, terms, truncs = [obs], [], [], [], []
             infos = [_step_info(env, info, names)]
             for _ in range(limit if limit else 10**6):
-                action = np.asarray(policy(obs), dtype=env.action_space.dtype)
+                chosen = np.asarray(policy(obs), dtype=env.action_space.dtype)
+                infos[-1]["source_action"] = chosen
+                action = chosen
+                if noise > 0.0:
+                    action = np.clip(chosen + rng.normal(0.0, noise, chosen.shape), env.action_space.low,
+                                     env.action_space.high).astype(env.action_space.dtype)
                 obs, reward, terminated, truncated, info = env.step(action)
                 observations.append(obs)
                 actions.append(action)
@@ -143,6 +159,7 @@ def record(task: str, device: str = "expert", episodes: int = 10, seed: int = 0,
                 infos.append(_step_info(env, info, names))
                 if terminated or truncated:
                     break
+            infos[-1]["source_action"] = np.zeros_like(actions[-1])
             truncs[-1] = truncs[-1] or not terms[-1]   # an episode cut by max_steps ends truncated
             buffers.append(EpisodeBuffer(id=k, seed=seed + k, observations=np.stack(observations),
                                          actions=np.stack(actions), rewards=rewards, terminations=terms,
@@ -155,20 +172,21 @@ def record(task: str, device: str = "expert", episodes: int = 10, seed: int = 0,
 
         with warnings.catch_warnings():   # Minari's reminders to name a public code address and e-mail
             warnings.filterwarnings("ignore", message=r"`(code_permalink|author_email)` is set to None")
-            dataset = _create(minari, dataset_id, buffers, env, task, device, episodes, seed, source)
+            dataset = _create(minari, dataset_id, buffers, env, task, device, episodes, seed, source, noise)
     finally:
         env.close()
     return dataset
 
 
-def _create(minari, dataset_id, buffers, env, task, device, episodes, seed, source):
+def _create(minari, dataset_id, buffers, env, task, device, episodes, seed, source, noise):
     import surgsim_envs
 
     return minari.create_dataset_from_buffers(
         dataset_id=dataset_id, buffer=buffers, env=env.spec, eval_env=env.spec, algorithm_name=f"surgsim {source}",
         author="surgsim_envs", action_space=env.action_space, observation_space=env.observation_space,
-        description=(f"{task} driven by {device}, {episodes} episodes, episode k reset with seed {seed} + k; "
-                     f"surgsim_envs {surgsim_envs.__version__}; infos: tool_force_N (N per tool), reward_terms"))
+        description=(f"{task} driven by {device}, {episodes} episodes, episode k reset with seed {seed} + k, action "
+                     f"noise {noise:g}; surgsim_envs {surgsim_envs.__version__}; infos: tool_force_N (N per tool), "
+                     "reward_terms, source_action"))
 
 
 def returns(dataset) -> np.ndarray:
@@ -181,6 +199,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--device", default="expert", help="expert | random | policy:FILE.npz (default expert)")
     parser.add_argument("--episodes", type=int, default=10, help="episodes to record (default 10)")
     parser.add_argument("--seed", type=int, default=0, help="episode k is reset with seed + k (default 0)")
+    parser.add_argument("--noise", type=float, default=0.0,
+                        help="std of Gaussian noise added to the applied actions (default 0; the device's own "
+                             "actions go to infos['source_action'])")
     parser.add_argument("--out", default="surgsim-data", help="folder of the Minari datasets (default ./surgsim-data)")
 
 
@@ -188,7 +209,7 @@ def run(args) -> int:
     from tqdm import tqdm
 
     bar = tqdm(total=args.episodes, desc=f"recording {args.task}", unit="episode")
-    dataset = record(args.task, args.device, args.episodes, args.seed, args.out,
+    dataset = record(args.task, args.device, args.episodes, args.seed, args.out, noise=args.noise,
                      progress=lambda k: bar.update(k - bar.n))
     bar.close()
     r = returns(dataset)
