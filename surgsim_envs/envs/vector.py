@@ -64,6 +64,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from surgsim_envs import validate
 from surgsim_envs.envs import vector_ipc as ipc
 from surgsim_envs.envs.vector_info import InfoMerger
 from surgsim_envs.envs.vector_worker import _Worker, worker_main
@@ -80,6 +81,10 @@ MAX_ROLLOUT_BYTES = 1 << 30
 
 #: spaces whose samples are fixed-shape arrays (what the shared memory holds)
 _ARRAY_SPACES = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
+
+
+#: envs one vector env may hold: each task env takes tens of MB, so 1024 of them fill a large machine
+MAX_ENVS = 1024
 
 
 def _positive_int(name, value, upper=None) -> int:
@@ -106,6 +111,9 @@ def _info_mode(info_keys):
             return None, True
         raise ConfigError(f"info_keys must be None (numeric entries), 'all' or a sequence of key names, "
                           f"got {info_keys!r}")
+    if not isinstance(info_keys, (list, tuple, set, frozenset)):
+        raise ConfigError(f"info_keys must be None (numeric entries), 'all' or a sequence of key names, got "
+                          f"{info_keys!r} of type {type(info_keys).__name__}")
     keys = tuple(info_keys)
     if not all(isinstance(k, str) for k in keys):
         raise ConfigError(f"info_keys must be None, 'all' or a sequence of key names (str), got {info_keys!r}")
@@ -129,7 +137,7 @@ class SurgSimVectorEnv(VectorEnv):
         self.closed = False
         self._broken: str | None = None
         self._waiting = False
-        self.num_envs = _positive_int("num_envs", num_envs)
+        self.num_envs = _positive_int("num_envs", num_envs, MAX_ENVS)
         n_workers = min(self.num_envs, os.cpu_count() or 1) if workers is None else workers
         n_workers = _positive_int("workers", n_workers, self.num_envs)
         try:
@@ -153,6 +161,9 @@ class SurgSimVectorEnv(VectorEnv):
             raise ConfigError(f"env_id must be a registered task id (str) or a callable returning an env, got {env_id!r}")
         self.env_id = env_id if isinstance(env_id, str) else getattr(env_id, "__name__", repr(env_id))
 
+        if context is not None:
+            validate.choice(context, "SurgSimVectorEnv context", mp.get_all_start_methods(),
+                            fix="a multiprocessing start method, or None for the platform default")
         ctx = mp.get_context(context)
         if ctx.get_start_method() == "fork":
             # one resource tracker for all processes: a worker that attaches the shared memory must
@@ -173,7 +184,7 @@ class SurgSimVectorEnv(VectorEnv):
                 rep_r, rep_w = ctx.Pipe(duplex=False)
                 proc = ctx.Process(target=worker_main, name=f"SurgSimVectorEnv-{w}", daemon=True,
                                    args=(env_id, env_kwargs, lo, hi, cmd_r, rep_w, self.autoreset_mode.value,
-                                         keys, keep_other, max_info_keys, self.worker_spin_us))
+                                         keys, keep_other, max_info_keys, self.worker_spin_us, os.getpid()))
                 proc.start()
                 cmd_r.close()
                 rep_w.close()
@@ -413,6 +424,9 @@ class SurgSimVectorEnv(VectorEnv):
         self._check_usable()
         acts = self._v["actions"]
         a = np.asarray(actions)
+        if a.dtype.kind not in "iuf":
+            raise ConfigError(f"actions must be real numbers (float or int) of shape {acts.shape}, got dtype "
+                              f"{a.dtype} (bool, complex, string and object actions are refused)")
         if a.shape != acts.shape:
             raise ConfigError(f"actions must have shape {acts.shape} (num_envs x action shape), got {a.shape}")
         acts[...] = a
