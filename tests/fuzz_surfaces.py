@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import io
+import json
 import math
 import tempfile
 import zipfile
@@ -172,7 +173,7 @@ def _toml_value(v) -> str:
         return '""'
     if isinstance(v, complex):
         return f'"{v}"'
-    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+    return json.dumps(str(v), ensure_ascii=False)   # a TOML basic string (JSON escapes are TOML escapes)
 
 
 ROLLOUT = """[scenario]
@@ -193,10 +194,14 @@ type = "press"
 duration = 0.5
 depth = 0.004
 [scoring.criteria.peak_force]
-target = 1.0
-limit = 3.0
-{key} = {value}
+{criterion}
 """
+
+
+def phases_text(key: str, value: str) -> str:
+    """The PHASES scenario with criterion key ``key`` set to TOML ``value`` (others: defaults)."""
+    crit = {"target": "1.0", "limit": "3.0", "weight": "1.0", key: value}
+    return PHASES.format(criterion="\n".join(f"{k} = {v}" for k, v in crit.items()))
 
 
 def scenario_case():
@@ -212,7 +217,8 @@ def run_scenario_check(case):
     from surgsim_envs.scenarios.schema import loads_scenario
 
     which, key, value = case
-    text = (ROLLOUT if which == "rollout" else PHASES).format(key=key, value=_toml_value(value))
+    text = ROLLOUT.format(key=key, value=_toml_value(value)) if which == "rollout" else \
+        phases_text(key, _toml_value(value))
     sc = loads_scenario(text, "<fuzz>", folder=Path(tempfile.gettempdir()))
     return [len(sc.runs())]
 
