@@ -36,13 +36,14 @@ MAX_RATE_HZ = 10_000.0
 MAX_NODES = 10_000_000
 
 
-def _fmt(value: Any) -> str:
+def short_repr(value: Any) -> str:
+    """``repr(value)`` cut to 80 characters, for error messages (a 400-digit int stays readable)."""
     text = repr(value)
     return text if len(text) <= 80 else text[:77] + "..."
 
 
 def _label(name: str, value: Any, unit: str) -> str:
-    return f"{name}={_fmt(value)}" + (f" {unit}" if unit else "")
+    return f"{name}={short_repr(value)}" + (f" {unit}" if unit else "")
 
 
 def _hint(fix: str) -> str:
@@ -128,7 +129,7 @@ def boolean(value: Any, name: str, fix: str = "") -> bool:
     """``value`` if it is exactly True or False (numpy bools included)."""
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
-    raise ConfigError(f"{name}={_fmt(value)} must be True or False, not {type(value).__name__}{_hint(fix)}")
+    raise ConfigError(f"{name}={short_repr(value)} must be True or False, not {type(value).__name__}{_hint(fix)}")
 
 
 def choice(value: Any, name: str, options: Iterable[Any], fix: str = "") -> Any:
@@ -137,13 +138,13 @@ def choice(value: Any, name: str, options: Iterable[Any], fix: str = "") -> Any:
     for o in opts:
         if type(value) is type(o) and value == o:
             return value
-    raise ConfigError(f"{name}={_fmt(value)} is not one of {opts}{_hint(fix)}")
+    raise ConfigError(f"{name}={short_repr(value)} is not one of {opts}{_hint(fix)}")
 
 
 def text(value: Any, name: str, fix: str = "") -> str:
     """A non-empty string."""
     if not isinstance(value, str) or not value:
-        raise ConfigError(f"{name}={_fmt(value)} must be a non-empty string{_hint(fix)}")
+        raise ConfigError(f"{name}={short_repr(value)} must be a non-empty string{_hint(fix)}")
     return value
 
 
@@ -151,7 +152,7 @@ def path(value: Any, name: str, *, must_exist: bool = True, kind: str = "file", 
     """``value`` as a Path (str or os.PathLike); if ``must_exist``, an existing ``kind`` ("file"
     or "dir")."""
     if not isinstance(value, (str, os.PathLike)) or not str(value):
-        raise ConfigError(f"{name}={_fmt(value)} must be a path (a non-empty string){_hint(fix)}")
+        raise ConfigError(f"{name}={short_repr(value)} must be a path (a non-empty string){_hint(fix)}")
     p = Path(value)
     if must_exist:
         ok = p.is_file() if kind == "file" else p.is_dir()
@@ -170,7 +171,8 @@ def grid_nodes(extent, spacing: float, what: str, *, hi: int = MAX_NODES, fix: s
     counted before anything is allocated; ConfigError above ``hi``."""
     nodes = 1.0
     for e in extent:
-        nodes *= math.floor(float(e) / float(spacing)) + 1.0
+        per_axis = float(e) / float(spacing)          # inf for a denormal spacing: refused below
+        nodes *= (math.floor(per_axis) if math.isfinite(per_axis) else per_axis) + 1.0
     if nodes > hi:
         raise ConfigError(f"{what}: a lattice spacing of {spacing:g} m over {[float(e) for e in extent]} m gives about "
                           f"{nodes:.3g} nodes, above the limit of {hi:,}"

@@ -166,14 +166,15 @@ def _toml_value(v) -> str:
     if isinstance(v, float):
         return "nan" if math.isnan(v) else ("inf" if v == math.inf else ("-inf" if v == -math.inf else repr(v)))
     if isinstance(v, int):
-        return str(v) if abs(v) < 2**63 else repr(float(v))
+        return str(v)     # tomllib reads integers of any size
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     if v is None:
         return '""'
     if isinstance(v, complex):
         return f'"{v}"'
-    return json.dumps(str(v), ensure_ascii=False)   # a TOML basic string (JSON escapes are TOML escapes)
+    # a TOML basic string: JSON escapes are TOML escapes, and TOML also refuses a raw DEL
+    return json.dumps(str(v), ensure_ascii=False).replace("\x7f", "\\u007f")
 
 
 ROLLOUT = """[scenario]
@@ -277,3 +278,48 @@ def run_npz(case):
     with tempfile.TemporaryDirectory() as tmp:
         policy = NpzPolicy.load(make_npz(case, Path(tmp)))
         return policy(np.zeros(policy.obs_size))
+
+
+# -- vector env options and actions -------------------------------------------------------------
+VECTOR_OPTIONS = ("num_envs", "workers", "info_keys", "autoreset_mode", "context", "timeout_s", "spin_us",
+                  "worker_spin_us", "in_main", "max_info_keys", "actions")
+
+
+def vector_case():
+    return st.tuples(st.sampled_from(VECTOR_OPTIONS), hostile_value)
+
+
+def run_vector(case):
+    """A 2-env PalpationPress-v0 vector env (one worker) with one hostile option, or hostile actions
+    (every entry of the (2, 3) action array set to the drawn value), reset and stepped."""
+    from surgsim_envs.envs.vector import SurgSimVectorEnv
+
+    key, value = case
+    kwargs = {"num_envs": 2, "workers": 1, "timeout_s": 60.0}
+    if key != "actions":
+        kwargs[key] = value
+        if key == "num_envs":
+            kwargs.pop("workers")
+    if kwargs.get("num_envs") is not None and validate_int(kwargs["num_envs"]) > 4:
+        kwargs["num_envs"] = 4 if kwargs["num_envs"] <= 1024 else kwargs["num_envs"]   # keep valid runs small
+    vec = SurgSimVectorEnv("SurgSim/PalpationPress-v0", **kwargs)
+    try:
+        vec.reset(seed=0)
+        actions = np.zeros((vec.num_envs, 3), dtype=np.float32)
+        if key == "actions":
+            actions = np.empty((vec.num_envs, 3), dtype=object)
+            for i in np.ndindex(actions.shape):
+                actions[i] = value
+            try:
+                actions = actions.astype(np.asarray(value).dtype)
+            except (TypeError, ValueError, OverflowError):
+                pass
+        obs, reward, *_ = vec.step(actions)
+        return obs, reward
+    finally:
+        vec.close()
+
+
+def validate_int(value) -> int:
+    """``value`` if it is a plain int (not bool), else 0."""
+    return value if isinstance(value, int) and not isinstance(value, bool) else 0

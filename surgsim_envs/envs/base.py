@@ -71,9 +71,9 @@ def check_range(value, what: str, lo: float = -math.inf, hi: float = math.inf) -
             raise TypeError
         a, b = (float(v) for v in value)
     except (TypeError, ValueError, OverflowError):
-        raise ConfigError(f"{what} must be a (low, high) pair of numbers, got {value!r}") from None
+        raise ConfigError(f"{what} must be a (low, high) pair of numbers, got {validate.short_repr(value)}") from None
     if not (math.isfinite(a) and math.isfinite(b) and lo <= a <= b <= hi):
-        raise ConfigError(f"{what}={value!r} must satisfy {lo:g} <= low <= high <= {hi:g}")
+        raise ConfigError(f"{what}={validate.short_repr(value)} must satisfy {lo:g} <= low <= high <= {hi:g}")
     return a, b
 
 
@@ -154,7 +154,7 @@ def check_control_rate(config, what: str) -> None:
     if not lo * (1 - 1e-9) <= hz <= hi * (1 + 1e-9):
         raise ConfigError(f"{what}.control_hz={hz!r} Hz is outside its physical range [{lo:.4g}, {hi:.4g}] Hz: the "
                           f"control period must be at least one physics step (dt={dt:g} s), at most "
-                          f"{SUBSTEPS_RANGE[1]} steps and at most the episode ({episode:g} s); e.g. 50 Hz")
+                          f"{SUBSTEPS_RANGE[1]} steps and at most the episode (episode_seconds={episode:g} s); e.g. 50 Hz")
 
 
 def sphere_mask(centroids: np.ndarray, centre, radius: float) -> np.ndarray:

@@ -72,8 +72,9 @@ class GraspConfig(GraspSceneConfig):
             check_positive(getattr(self, key), f"GraspConfig.{key}")
         check_weights(self, ("force_weight", "slip_weight", "progress_weight", "contact_weight", "drop_penalty",
                              "success_bonus"), "GraspConfig")
-        check_range(self.target_offset_x, "target_offset_x", -self.workspace, self.workspace)
-        check_range(self.target_offset_z, "target_offset_z", -self.workspace, self.workspace)
+        within = f"(within +-workspace={self.workspace:g} m)"
+        check_range(self.target_offset_x, f"target_offset_x {within}", -self.workspace, self.workspace)
+        check_range(self.target_offset_z, f"target_offset_z {within}", -self.workspace, self.workspace)
 
 
 class GraspEnv(GraspSceneEnv):

@@ -83,6 +83,12 @@ MAX_ROLLOUT_BYTES = 1 << 30
 _ARRAY_SPACES = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
 
 
+#: s, the longest a vector env waits for its workers (a day: "wait forever" is a hang, not a timeout)
+MAX_TIMEOUT_S = 86_400.0
+#: s, the shortest: a worker cannot even answer a command in less
+MIN_TIMEOUT_S = 1e-3
+#: numeric info entries per env the shared memory may hold (a task has a few dozen)
+MAX_INFO_KEYS = 4096
 #: envs one vector env may hold: each task env takes tens of MB, so 1024 of them fill a large machine
 MAX_ENVS = 1024
 
@@ -147,11 +153,17 @@ class SurgSimVectorEnv(VectorEnv):
                               f"got {autoreset_mode!r}") from None
         keys, keep_other = _info_mode(info_keys)
         self.info_keys = info_keys
-        max_info_keys = _positive_int("max_info_keys", max_info_keys)
+        max_info_keys = validate.integer(max_info_keys, "SurgSimVectorEnv max_info_keys", lo=1, hi=MAX_INFO_KEYS,
+                                         fix="the number of numeric info entries shared per env, e.g. 64")
         for name, t in (("timeout_s", timeout_s), ("start_timeout_s", start_timeout_s),
                         ("close_timeout_s", close_timeout_s)):
-            if not (isinstance(t, (int, float)) and np.isfinite(t) and t > 0):
-                raise ConfigError(f"{name} must be a positive number of seconds, got {t!r}")
+            try:
+                ok = validate.is_real_number(t) and MIN_TIMEOUT_S <= float(t) <= MAX_TIMEOUT_S
+            except OverflowError:          # an int too large for a float
+                ok = False
+            if not ok:
+                raise ConfigError(f"{name} must be a positive number of seconds in [{MIN_TIMEOUT_S:g}, "
+                                  f"{MAX_TIMEOUT_S:g}], got {validate.short_repr(t)}")
         self.timeout_s, self.close_timeout_s = float(timeout_s), float(close_timeout_s)
         self.spin_us = _spin_microseconds("spin_us", spin_us)
         self.worker_spin_us = _spin_microseconds("worker_spin_us", worker_spin_us)

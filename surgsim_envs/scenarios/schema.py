@@ -332,9 +332,13 @@ def _check_type(value: Any, hint: Any, path: tuple, ctx: _Ctx) -> Any:
     if hint is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ctx.error(path, f"expected a number, got {value!r} ({type(value).__name__})")
-        if not math.isfinite(value):
-            raise ctx.error(path, f"expected a finite number, got {value!r}")
-        return float(value)
+        try:
+            number = float(value)
+        except OverflowError:           # an integer too large for a float
+            number = math.inf
+        if not math.isfinite(number):
+            raise ctx.error(path, f"expected a finite number, got {_short(value)}")
+        return number
     if hint is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ctx.error(path, f"expected an integer, got {value!r} ({type(value).__name__})")
