@@ -51,8 +51,11 @@ def _hint(fix: str) -> str:
 
 
 def is_real_number(value: Any) -> bool:
-    """True for int / float / numpy real scalars, False for bool, complex, strings and arrays."""
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+    """True for int / float / numpy real scalars (0-d real arrays included), False for bool,
+    complex, strings and arrays with entries."""
+    if isinstance(value, np.ndarray):
+        return value.ndim == 0 and value.dtype.kind in "fiu"
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
 def real(value: Any, name: str, *, lo: float = -math.inf, hi: float = math.inf, unit: str = "",

@@ -29,6 +29,7 @@ import os
 from dataclasses import dataclass
 from typing import Any, Iterable
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 #: the shipped measured table (written by ``surgsim bench accuracy``; data only, no bench import)
@@ -76,9 +77,7 @@ def _valid(row: dict) -> bool:
 
 
 def _check_positive(key: str, val) -> None:
-    if not (isinstance(val, (int, float)) and not isinstance(val, bool) and math.isfinite(val) and val > 0):
-        raise ConfigError(f"{key} must be a positive number, got {val!r} "
-                          "(error_tolerance is a fraction like 0.1; step_budget_us in microseconds like 1000)")
+    validate.positive(val, key, fix="error_tolerance is a fraction like 0.1; step_budget_us in microseconds like 1000")
 
 
 def choose(error_tolerance: float, step_budget_us: float, scene: str = "indent", *,
