@@ -114,10 +114,16 @@ def check_integrator(config, what: str) -> None:
     value = config.integrator
     fix = "e.g. 'symplectic' (explicit, the default), 'implicit' or 'auto'"
     validate.text(value, f"{what}.integrator", fix=fix)
-    if value in model_class(config.model).integrator_names():
+    if value in _integrator_names(model_class(config.model)):
         return
-    known = sorted({n for m in model_names() for n in model_class(m).integrator_names()})
+    known = sorted({n for m in model_names() for n in _integrator_names(model_class(m))})
     validate.choice(value, f"{what}.integrator", known, fix=fix)
+
+
+def _integrator_names(cls) -> list[str]:
+    """The integrator names model class ``cls`` accepts (``integrators`` where it has no
+    ``integrator_names``, as :func:`tissue_options` reads them)."""
+    return cls.integrator_names() if hasattr(cls, "integrator_names") else list(getattr(cls, "integrators", ()))
 
 
 def check_episode_seconds(config, what: str) -> float:
@@ -172,8 +178,7 @@ def tissue_options(model: str, integrator: str) -> dict[str, Any]:
     "auto" choice (explicit when stable, implicit otherwise), else the model's default."""
     from surgsim_envs.tissue.registry import get as model_class
 
-    cls = model_class(model)
-    names = cls.integrator_names() if hasattr(cls, "integrator_names") else list(getattr(cls, "integrators", ()))
+    names = _integrator_names(model_class(model))
     if integrator in names:
         return {"integrator": integrator}
     return {"integrator": "auto"} if "auto" in names else {}
