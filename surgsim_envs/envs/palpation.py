@@ -52,6 +52,7 @@ from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explic
                                    check_on_unstable, check_positive, check_range, check_render_size, check_weights, check_task_resolution, ObsTerm, require_capabilities,
                                    integrator_for_range, reward_from_terms, sample, sphere_mask, tissue_options)
 from surgsim_envs.errors import ConfigError
+from surgsim_envs.materials import get_material
 
 
 #: m; with the slab at least this much thicker than ``max_depth`` the probe cannot reach the floor and the
@@ -123,6 +124,10 @@ class PalpationConfig:
         check_weights(self, ("shaping_weight", "time_cost", "press_reward", "cell_reward", "damage_weight",
                              "localisation_weight", "success_bonus"), "PalpationConfig")
         check_integrator(self, "PalpationConfig")
+        try:
+            get_material(self.material)
+        except (ConfigError, TypeError, ValueError) as exc:
+            raise ConfigError(f"PalpationConfig.material={validate.short_repr(self.material)}: {exc}") from None
         check_render_size(self, "PalpationConfig")
         validate.integer(self.max_rewarded_sites, "PalpationConfig.max_rewarded_sites", lo=0, hi=10_000,
                          fix="a count of press sites, e.g. 25")
