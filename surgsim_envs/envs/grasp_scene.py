@@ -16,7 +16,8 @@ from typing import Any, ClassVar, Sequence
 import numpy as np
 
 from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_integrator,
-                                   check_on_unstable, check_positive, check_render_size, check_range, check_task_resolution, require_capabilities, sample)
+                                   check_on_unstable, check_positive, check_render_size, check_range,
+                                   check_task_resolution, require_capabilities, sample)
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.envs.grasp_common import SlipTracker, build_grasp_simulation, check_grasp_organ, organ_key
 

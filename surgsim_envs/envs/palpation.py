@@ -49,7 +49,8 @@ from gymnasium import spaces
 
 from surgsim_envs import validate
 from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_integrator,
-                                   check_on_unstable, check_positive, check_range, check_render_size, check_weights, check_task_resolution, ObsTerm, require_capabilities,
+                                   check_on_unstable, check_positive, check_range, check_render_size,
+                                   check_task_resolution, check_weights, ObsTerm, require_capabilities,
                                    integrator_for_range, reward_from_terms, sample, sphere_mask, tissue_options)
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.materials import get_material

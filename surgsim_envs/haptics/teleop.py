@@ -223,7 +223,8 @@ def _run_headless(loop, physics, args, duration: float):
     out.mkdir(parents=True, exist_ok=True)
     sim = physics.sim
     width, height = int(args.size[0]), int(args.size[1])
-    check_camera(args.camera, [mujoco.mj_id2name(sim.model, mujoco.mjtObj.mjOBJ_CAMERA, i) for i in range(sim.model.ncam)])
+    cameras = [mujoco.mj_id2name(sim.model, mujoco.mjtObj.mjOBJ_CAMERA, i) for i in range(sim.model.ncam)]
+    check_camera(args.camera, cameras)
     try:
         renderer = mujoco.Renderer(sim.render_model, height=height, width=width)
     except Exception as exc:
