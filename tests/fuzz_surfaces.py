@@ -76,7 +76,7 @@ REWARD_FIELDS = {"Palpation-v0": ("shaping_weight", "time_cost", "press_reward",
 
 
 # -- reset options ---------------------------------------------------------------------------------
-PALPATION_OPTIONS = ("inclusion_xy", "inclusion_depth", "inclusion_radius", "stiffness_contrast", "young_scale")
+PALPATION_OPTIONS = ("inclusion_position", "inclusion_xy", "inclusion_depth", "inclusion_radius", "stiffness_contrast", "young_scale")
 
 
 def reset_case():

@@ -333,11 +333,13 @@ class PalpationEnv(SurgSimEnv):
         x = sample(rng, xy, "inclusion_xy", -half, half)
         y = sample(rng, xy, "inclusion_xy", -half, half)
         if options.get("inclusion_position") is not None:
-            pos = np.asarray(options["inclusion_position"], dtype=float).reshape(-1)
-            if pos.shape != (2,) or not np.all(np.isfinite(pos)) or np.any(np.abs(pos) > half):
+            value = options["inclusion_position"]
+            if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
                 raise ConfigError(f"inclusion_position must be (x, y) m inside +-{half} m, "
-                                  f"got {options['inclusion_position']!r}")
-            x, y = float(pos[0]), float(pos[1])
+                                  f"got {validate.short_repr(value)}")
+            x, y = (validate.real(v, f"inclusion_position[{i}]", lo=-half, hi=half, unit="m",
+                                  fix=f"the inclusion centre lies inside the slab, +-{half} m")
+                    for i, v in enumerate(value))
         depth = sample(rng, get("inclusion_depth"), "inclusion_depth", 0.0, float(c.slab_size[2]))
         radius = sample(rng, get("inclusion_radius"), "inclusion_radius", 1e-4, float(max(c.slab_size)))
         contrast = sample(rng, get("stiffness_contrast"), "stiffness_contrast", 1.0, 20.0)
