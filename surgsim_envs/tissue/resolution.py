@@ -116,12 +116,11 @@ def choose(error_tolerance: float, step_budget_us: float, scene: str = "indent",
 
 def check_resolution(resolution, what: str = "resolution") -> None:
     """Raise ConfigError unless ``resolution`` is None, ``"auto"`` or a spacing in m in (0, 0.1)."""
-    if resolution is None or resolution == "auto":
+    if resolution is None or (isinstance(resolution, str) and resolution == "auto"):
         return
-    if isinstance(resolution, str) or isinstance(resolution, bool) or not isinstance(resolution, (int, float)) \
-            or not (math.isfinite(resolution) and 0 < resolution < 0.1):
-        raise ConfigError(f"{what}={resolution!r} must be 'auto', a spacing in m between 0 and 0.1 (e.g. 0.005), "
-                          "or None for the default")
+    if not validate.is_real_number(resolution) or not 0 < resolution < 0.1:   # NaN fails the comparison
+        raise ConfigError(f"{what}={validate.short_repr(resolution)} must be 'auto', a spacing in m between 0 and "
+                          "0.1 (e.g. 0.005), or None for the default")
 
 
 def resolve_resolution(resolution, *, model: str | None = None, error_tolerance: float = 0.1,
