@@ -93,3 +93,22 @@ def test_bench_stability_typo_leaves_the_previous_map(capsys, tmp_path):
 def test_material_relax_refuses_a_hold_of_1e9_seconds(capsys):
     code, err = _run(["material", "relax", "--model", "mass_spring", "--hold-time", "1e9"], capsys)
     assert code == 2 and "relax: ramp_time + hold_time = 1e+09 s" in err and "shorten hold_time" in err, err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["bench", "envs", "--steps", "1000000000000"], r"--steps=1000000000000 is outside \[1, 1,000,000\]"),
+    (["bench", "envs", "--workers", "-1"], r"--workers=-1 is outside \[0, 1,024\]"),
+    (["bench", "layers", "--steps", "1000000000000"], r"--steps=1000000000000 is outside \[1, 1,000,000\]"),
+])
+def test_bench_step_counts_are_bounded(argv, message, capsys):
+    import re
+
+    code, err = _run(argv, capsys)
+    assert code == 2 and re.search(message, err), err
+
+
+def test_bench_speed_steps_are_bounded_by_argparse(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "speed", "--steps", "1000000000000"])
+    assert exc.value.code == 2
+    assert "expected a positive integer of at most 1,000,000" in capsys.readouterr().err
