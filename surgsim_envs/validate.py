@@ -73,9 +73,14 @@ def real(value: Any, name: str, *, lo: float = -math.inf, hi: float = math.inf, 
     below = v <= lo if lo_open else v < lo
     above = v >= hi if hi_open else v > hi
     if below or above:
-        lb, hb = "(" if lo_open else "[", ")" if hi_open else "]"
-        raise ConfigError(f"{_label(name, value, unit)} is outside {lb}{lo:g}, {hi:g}{hb}"
-                          f"{' ' + unit if unit else ''}{_hint(fix)}")
+        u = f" {unit}" if unit else ""
+        if math.isinf(hi):          # a one-sided bound reads as one
+            bound = f"must be {'>' if lo_open else '>='} {lo:g}{u}"
+        elif math.isinf(lo):
+            bound = f"must be {'<' if hi_open else '<='} {hi:g}{u}"
+        else:
+            bound = f"is outside {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}{u}"
+        raise ConfigError(f"{_label(name, value, unit)} {bound}{_hint(fix)}")
     return v
 
 

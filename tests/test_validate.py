@@ -88,3 +88,10 @@ def test_grid_nodes_counts_before_allocating():
     assert validate.grid_nodes((0.1, 0.1, 0.02), 0.01, "slab") == 11 * 11 * 3
     with pytest.raises(ConfigError, match=r"gives about 2e\+11 nodes, above the limit of 1,000,000"):
         validate.grid_nodes((0.1, 0.1, 0.02), 1e-5, "slab", hi=1_000_000)
+
+
+def test_one_sided_bounds_read_as_one():
+    with pytest.raises(ConfigError, match=r"k=-1 must be > 0; e.g. 20"):
+        validate.positive(-1, "k", fix="e.g. 20")
+    with pytest.raises(ConfigError, match=r"x=2.0 m must be <= 1 m"):
+        validate.real(2.0, "x", hi=1.0, unit="m")
