@@ -548,15 +548,21 @@ def _run_accounting(tasks, args) -> int:
     return 0
 
 
+#: env steps one timed run may take
+MAX_BENCH_STEPS = 1_000_000
+
+
 def run(args) -> int:
     import surgsim_envs  # noqa: F401
     from surgsim_envs.envs import TASKS
 
-    for key in ("steps", "repeats"):
-        if getattr(args, key) <= 0:
-            raise ConfigError(f"--{key} must be a positive integer, got {getattr(args, key)}")
-    if args.workers < 0:
-        raise ConfigError(f"--workers must be >= 0, got {args.workers}")
+    from surgsim_envs import validate
+
+    # the action arrays of a timed run are allocated up front: 10^12 steps asked for 29 TiB
+    validate.integer(args.steps, "--steps", lo=1, hi=MAX_BENCH_STEPS,
+                     fix=f"env steps per timed run, at most {MAX_BENCH_STEPS:,} (their actions are allocated up front)")
+    validate.integer(args.repeats, "--repeats", lo=1, hi=100, fix="timed runs per figure, e.g. 3")
+    validate.integer(args.workers, "--workers", lo=0, hi=1024, fix="async vector env size, 0 to skip")
     tasks = list(TASKS) if args.tasks == "all" else [t.strip() for t in args.tasks.split(",")]
     unknown = [t for t in tasks if t not in TASKS]
     if unknown:

@@ -24,6 +24,10 @@ import sys
 import time
 
 
+#: nodes the growth benchmark meshes at most
+MAX_GROWTH_NODES = 200_000
+
+
 def case_spacing(case, nodes: int) -> float:
     """Largest spacing (m) whose mesh has at least ``nodes`` nodes."""
     from surgsim_envs.geometry.box import box_volume
@@ -44,16 +48,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="surgsim-out/bench_growth", help="output directory (growth_speed.json)")
 
 
+def check_args(args: argparse.Namespace) -> None:
+    """ConfigError naming the first bad flag, before anything is meshed."""
+    from surgsim_envs import validate
+
+    validate.integer(args.nodes, "--nodes", lo=100, hi=MAX_GROWTH_NODES,
+                     fix=f"the growth solve factors a sparse matrix of 3 x nodes rows; above {MAX_GROWTH_NODES:,} "
+                         "nodes it takes hours and tens of GB")
+    validate.integer(args.repeats, "--repeats", lo=1, hi=100, fix="e.g. 3")
+    validate.positive(args.k, "--k", hi=1e6, fix="the growth constant, e.g. 20")
+
+
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from surgsim_envs.errors import ConfigError
     from surgsim_envs.planning.maxillofacial import DistractionCase
     from surgsim_envs.tissue.growth import GrowthSolver
     from surgsim_envs.tissue.growth_ops import ElementOperators
 
-    if args.nodes < 100 or args.repeats < 1:
-        raise ConfigError(f"--nodes must be >= 100 and --repeats >= 1, got {args.nodes}, {args.repeats}")
+    check_args(args)
     case = DistractionCase()
     spacing = case_spacing(case, args.nodes)
     t0 = time.perf_counter()

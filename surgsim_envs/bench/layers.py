@@ -108,7 +108,16 @@ def run_bench(spacing=0.002, steps=300, depth=0.004, speed=0.01, max_updates=200
             "load": os.getloadavg(), "cpus": os.cpu_count()}
 
 
+#: 1 ms probe steps one run may take (the default 300 is a 0.3 s sweep; 10^6 is a quarter hour of probing)
+MAX_PROBE_STEPS = 1_000_000
+
+
 def run(args) -> int:
+    from surgsim_envs import validate
+
+    validate.integer(args.steps, "--steps", lo=1, hi=MAX_PROBE_STEPS,
+                     fix=f"1 ms steps of probe motion, at most {MAX_PROBE_STEPS:,}")
+    validate.integer(args.samples, "--samples", lo=0, hi=args.steps, fix="steps compared with the all-node solution")
     res = run_bench(args.spacing, args.steps, args.depth, args.speed, args.max_updates, args.samples,
                     solver=args.solver, block_radius=args.block_radius, prefetch_rows=args.prefetch_rows,
                     stiffness=args.stiffness)

@@ -31,6 +31,7 @@ import scipy.optimize as so
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from surgsim_envs import validate
 from surgsim_envs.bench.slip_onset import SLID_SHARE, SLIP_DISTANCE
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.materials import Material, get_material
@@ -54,9 +55,11 @@ def model_class(model):
 
 def _positive(**values) -> None:
     for key, val in values.items():
-        if not (isinstance(val, (int, float, np.integer, np.floating)) and not isinstance(val, bool)
-                and math.isfinite(val) and val > 0):
-            raise ConfigError(f"{key} must be a positive number (SI units), got {val!r}")
+        validate.positive(val, key, fix="give a positive number (SI units)")
+
+
+#: nodes a virtual material test may mesh (a finer mesh takes hours per test)
+MAX_TEST_NODES = 1_000_000
 
 
 def is_explicit(cls, integrator: str | None) -> bool:
@@ -203,8 +206,7 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
     _positive(width=width, spacing=spacing, grading=grading)
     if width < 4.0 * a_max:
         raise ConfigError(f"width {width} m is too small for a contact radius of {a_max:.3g} m; use >= {4 * a_max:.3g} m")
-    if not (isinstance(n_depths, (int, np.integer)) and n_depths >= 1):
-        raise ConfigError(f"n_depths must be a positive integer, got {n_depths!r}")
+    validate.integer(n_depths, "n_depths", lo=1, hi=10_000, fix="the number of depths of the curve, e.g. 12")
     zone = min(0.999 * R, 1.6 * a_max + 2.0 * spacing)
     if "surface_only" in getattr(cls, "capabilities", ()):
         quarter = False      # a surface model would take the quarter mesh's symmetry cuts for free surface
@@ -343,13 +345,19 @@ def relax(model, material="liver", *, strain: float = 0.05, ramp_time: float = 0
         raise ConfigError(f"strain {strain} is too large for a relaxation test; use 0.01-0.2")
     if "integrator" not in opts and "implicit" in cls.integrators:
         opts = {**opts, "integrator": "implicit"}
+    validate.grid_nodes(size, spacing, "relax", hi=MAX_TEST_NODES)
     vol = box_volume(tuple(size), spacing, center=(0.0, 0.0, size[2] / 2.0), name="relax_block")
     z = vol.nodes[:, 2]
     bottom, top = np.isclose(z, 0.0), np.isclose(z, z.max())
     tissue = _build(cls, vol, mat, opts, fixed=bottom | top)
     dt = stable_dt(tissue, dt)
     h = float(size[2])
-    n_steps = int(round((ramp_time + hold_time) / dt))
+    n_steps = (ramp_time + hold_time) / dt
+    if n_steps > validate.MAX_PHYSICS_STEPS:
+        raise ConfigError(f"relax: ramp_time + hold_time = {ramp_time + hold_time:g} s at dt = {dt:.3g} s is "
+                          f"{n_steps:.3g} steps, above the {validate.MAX_PHYSICS_STEPS:,} a test may run (hours of "
+                          f"CPU); shorten hold_time to at most {validate.MAX_PHYSICS_STEPS * dt - ramp_time:.4g} s")
+    n_steps = int(round(n_steps))
     every = max(1, n_steps // int(samples))
     top_idx = np.flatnonzero(top)
     targets = tissue.rest_positions[top_idx].copy()

@@ -27,13 +27,18 @@ SPACING = 0.005  # m
 DEFAULT_SIZES = (250, 1000, 4000)
 
 
+#: the largest --steps / --repeats / --warmup: one case of 10^6 steps of 4,000 nodes is minutes
+MAX_STEPS = 1_000_000
+
+
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    if not 0 < value <= MAX_STEPS:
+        raise argparse.ArgumentTypeError(f"expected a positive integer of at most {MAX_STEPS:,} (each case is timed "
+                                         f"that many times), got {value}")
     return value
 
 

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 
 BLOCK = (0.03, 0.03, 0.015)   # m
@@ -197,11 +198,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.steps < 10:
-        raise ConfigError(f"--steps must be >= 10, got {args.steps}")
+    from surgsim_envs.bench.speed import available_models
+
+    # every flag is checked before anything is computed or written: a typo must not overwrite a map
+    validate.integer(args.steps, "--steps", lo=10, hi=100_000, fix="steps per trial, e.g. 200")
+    validate.real(args.dt_max, "--dt-max", lo=1e-6, hi=1.0, unit="s", fix="the search cap, e.g. 0.05")
     models = None if not args.models else [m.strip() for m in args.models.split(",") if m.strip()]
+    if args.models is not None:
+        known = [n for n, _ in available_models()]
+        unknown = [m for m in models or [] if m not in known]
+        if unknown or not models:
+            raise ConfigError(f"--models {args.models!r}: unknown model(s) {unknown}; mappable models: {known} "
+                              "(nothing was written)")
     youngs, spacings = (QUICK_YOUNG, QUICK_SPACING) if args.quick else (DEFAULT_YOUNG, DEFAULT_SPACING)
     rows = stability_map(models, youngs, spacings, steps=args.steps, dt_max=args.dt_max)
+    if not rows:
+        raise ConfigError(f"every case of the stability map failed (see above); {args.out}/stability.json was left "
+                          "as it was")
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "stability.json"), "w") as fh:
         json.dump(rows, fh, indent=2)

@@ -27,6 +27,7 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError, TissueUnstableError
 
 
@@ -66,31 +67,81 @@ def apply_overrides(config, overrides: dict[str, Any]):
 def check_range(value, what: str, lo: float = -math.inf, hi: float = math.inf) -> tuple[float, float]:
     """Validate a (low, high) range of finite numbers inside [lo, hi]; return it as floats."""
     try:
+        if isinstance(value, (str, bytes)) or any(not validate.is_real_number(v) for v in value):
+            raise TypeError
         a, b = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{what} must be a (low, high) pair of numbers, got {value!r}") from None
+    except (TypeError, ValueError, OverflowError):
+        raise ConfigError(f"{what} must be a (low, high) pair of numbers, got {validate.short_repr(value)}") from None
     if not (math.isfinite(a) and math.isfinite(b) and lo <= a <= b <= hi):
-        raise ConfigError(f"{what}={value!r} must satisfy {lo:g} <= low <= high <= {hi:g}")
+        raise ConfigError(f"{what}={validate.short_repr(value)} must satisfy {lo:g} <= low <= high <= {hi:g}")
     return a, b
 
 
 def check_positive(value, what: str, hint: str = "") -> float:
-    """Validate a positive finite number."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
-            or not math.isfinite(value) or value <= 0:
-        raise ConfigError(f"{what} must be a positive finite number, got {value!r}{'; ' + hint if hint else ''}")
-    return float(value)
+    """Validate a positive finite number (:func:`surgsim_envs.validate.positive`)."""
+    return validate.positive(value, what, fix=hint or "give a positive finite number")
+
+
+#: the largest reward weight, bonus or cost a task accepts: a weighted sum of a few hundred terms
+#: stays far from float overflow (a weight of 1e308 times a force of 2 N is inf, and inf - inf is NaN)
+MAX_REWARD_WEIGHT = 1e6
+#: the largest rendered frame side (px): 4096 x 4096 RGB is 50 MB per frame
+MAX_RENDER_PX = 4096
+
+
+def check_weights(config, keys, what: str) -> None:
+    """Every field of ``keys`` is a reward weight, bonus or cost: finite, in [0, MAX_REWARD_WEIGHT]
+    (the reward formula carries the sign)."""
+    for key in keys:
+        validate.weight(getattr(config, key), f"{what}.{key}", hi=MAX_REWARD_WEIGHT,
+                        fix=f"reward weights are magnitudes in [0, {MAX_REWARD_WEIGHT:g}] (the reward formula "
+                            "carries the sign)")
+
+
+def check_render_size(config, what: str) -> None:
+    """``render_width`` / ``render_height``: integers in [1, MAX_RENDER_PX] px; ``camera`` a name."""
+    for key in ("render_width", "render_height"):
+        validate.integer(getattr(config, key), f"{what}.{key}", lo=1, hi=MAX_RENDER_PX, unit="px",
+                         fix=f"frames are at most {MAX_RENDER_PX} px per side")
+    validate.text(config.camera, f"{what}.camera", fix="give a camera name of the scene, e.g. 'overview'")
+
+
+def check_integrator(config, what: str) -> None:
+    """``integrator``: a name the task's model has, or one some registered model has (the task then
+    takes the model's "auto" or default, as documented), or "auto"; never None, "" or a number."""
+    from surgsim_envs.tissue.registry import get as model_class, names as model_names
+
+    value = config.integrator
+    fix = "e.g. 'symplectic' (explicit, the default), 'implicit' or 'auto'"
+    validate.text(value, f"{what}.integrator", fix=fix)
+    if value in _integrator_names(model_class(config.model)):
+        return
+    known = sorted({n for m in model_names() for n in _integrator_names(model_class(m))})
+    validate.choice(value, f"{what}.integrator", known, fix=fix)
+
+
+def _integrator_names(cls) -> list[str]:
+    """The integrator names model class ``cls`` accepts (``integrators`` where it has no
+    ``integrator_names``, as :func:`tissue_options` reads them)."""
+    return cls.integrator_names() if hasattr(cls, "integrator_names") else list(getattr(cls, "integrators", ()))
+
+
+def check_episode_seconds(config, what: str) -> float:
+    """``episode_seconds`` in (0, validate.MAX_SIM_SECONDS] s."""
+    return validate.duration(config.episode_seconds, f"{what}.episode_seconds",
+                             fix=f"episodes longer than {validate.MAX_SIM_SECONDS:g} s of simulated time are refused "
+                                 "(hours of CPU per episode); e.g. 3.0")
 
 
 def check_task_resolution(config, what: str) -> None:
-    """Validate a task config's ``resolution`` (None, a spacing in m, or "auto") and, for "auto",
-    its ``error_tolerance`` (fraction) and ``step_budget_us`` (us per simulated ms)."""
+    """Validate a task config's ``resolution`` (None, a spacing in m, or "auto"), its
+    ``error_tolerance`` (fraction) and ``step_budget_us`` (us per simulated ms): the last two are
+    used only by "auto" but checked always (a field that is set is a field that is valid)."""
     from surgsim_envs.tissue.resolution import check_resolution
 
     check_resolution(config.resolution, f"{what}.resolution")
-    if config.resolution == "auto":
-        check_positive(config.error_tolerance, f"{what}.error_tolerance", "a fraction, e.g. 0.6 for 60 %")
-        check_positive(config.step_budget_us, f"{what}.step_budget_us", "us of compute per simulated ms, e.g. 1000")
+    check_positive(config.error_tolerance, f"{what}.error_tolerance", "a fraction, e.g. 0.6 for 60 %")
+    check_positive(config.step_budget_us, f"{what}.step_budget_us", "us of compute per simulated ms, e.g. 1000")
 
 
 def check_control_rate(config, what: str) -> None:
@@ -103,13 +154,13 @@ def check_control_rate(config, what: str) -> None:
     dt = check_positive(config.dt, f"{what}.dt", "the physics step in s, e.g. 4e-4")
     if not DT_RANGE[0] <= dt <= DT_RANGE[1]:
         raise ConfigError(f"{what}.dt={dt!r} s is outside the physics step range [{DT_RANGE[0]:g}, {DT_RANGE[1]:g}] s")
-    episode = check_positive(config.episode_seconds, f"{what}.episode_seconds", "e.g. 3.0")
+    episode = check_episode_seconds(config, what)
     hz = check_positive(config.control_hz, f"{what}.control_hz", "the control rate in Hz, e.g. 50")
     lo, hi = max(1.0 / episode, 1.0 / (SUBSTEPS_RANGE[1] * dt)), 1.0 / dt
     if not lo * (1 - 1e-9) <= hz <= hi * (1 + 1e-9):
         raise ConfigError(f"{what}.control_hz={hz!r} Hz is outside its physical range [{lo:.4g}, {hi:.4g}] Hz: the "
                           f"control period must be at least one physics step (dt={dt:g} s), at most "
-                          f"{SUBSTEPS_RANGE[1]} steps and at most the episode ({episode:g} s); e.g. 50 Hz")
+                          f"{SUBSTEPS_RANGE[1]} steps and at most the episode (episode_seconds={episode:g} s); e.g. 50 Hz")
 
 
 def sphere_mask(centroids: np.ndarray, centre, radius: float) -> np.ndarray:
@@ -127,8 +178,7 @@ def tissue_options(model: str, integrator: str) -> dict[str, Any]:
     "auto" choice (explicit when stable, implicit otherwise), else the model's default."""
     from surgsim_envs.tissue.registry import get as model_class
 
-    cls = model_class(model)
-    names = cls.integrator_names() if hasattr(cls, "integrator_names") else list(getattr(cls, "integrators", ()))
+    names = _integrator_names(model_class(model))
     if integrator in names:
         return {"integrator": integrator}
     return {"integrator": "auto"} if "auto" in names else {}
@@ -196,11 +246,8 @@ def check_on_unstable(value, what: str) -> None:
 
 def sample(rng: np.random.Generator, value, what: str, lo: float = -math.inf, hi: float = math.inf) -> float:
     """A number: ``value`` itself if scalar, else uniform in the (low, high) range ``value``."""
-    if isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool):
-        v = float(value)
-        if not (math.isfinite(v) and lo <= v <= hi):
-            raise ConfigError(f"{what}={value!r} must be a finite number in [{lo:g}, {hi:g}]")
-        return v
+    if validate.is_real_number(value):
+        return validate.real(value, what, lo=lo, hi=hi, fix=f"give a finite number in [{lo:g}, {hi:g}]")
     a, b = check_range(value, what, lo, hi)
     return float(rng.uniform(a, b)) if b > a else a
 

@@ -38,7 +38,7 @@ from typing import Any, Sequence
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import ObsTerm, check_positive, check_range, reward_from_terms, sample
+from surgsim_envs.envs.base import ObsTerm, check_positive, check_range, check_weights, reward_from_terms, sample
 from surgsim_envs.envs.grasp_common import (contact_nodes, contact_reward, excess_force_penalty, is_grasped,
                                             record_progress, slip_fraction)
 from surgsim_envs.envs.grasp_scene import GraspSceneConfig, GraspSceneEnv
@@ -70,8 +70,11 @@ class GraspConfig(GraspSceneConfig):
         super().validate()
         for key in ("max_step", "workspace", "hold_force", "damage_force", "tolerance"):
             check_positive(getattr(self, key), f"GraspConfig.{key}")
-        check_range(self.target_offset_x, "target_offset_x", -self.workspace, self.workspace)
-        check_range(self.target_offset_z, "target_offset_z", -self.workspace, self.workspace)
+        check_weights(self, ("force_weight", "slip_weight", "progress_weight", "contact_weight", "drop_penalty",
+                             "success_bonus"), "GraspConfig")
+        within = f"(within +-workspace={self.workspace:g} m)"
+        check_range(self.target_offset_x, f"target_offset_x {within}", -self.workspace, self.workspace)
+        check_range(self.target_offset_z, f"target_offset_z {within}", -self.workspace, self.workspace)
 
 
 class GraspEnv(GraspSceneEnv):

@@ -15,8 +15,9 @@ from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
-from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_on_unstable,
-                                   check_positive, check_range, check_task_resolution, require_capabilities, sample)
+from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_integrator,
+                                   check_on_unstable, check_positive, check_render_size, check_range,
+                                   check_task_resolution, require_capabilities, sample)
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.envs.grasp_common import SlipTracker, build_grasp_simulation, check_grasp_organ, organ_key
 
@@ -52,11 +53,17 @@ class GraspSceneConfig:
         check_control_rate(self, what)
         check_task_resolution(self, what)
         check_on_unstable(self.on_unstable, what)
+        check_integrator(self, what)
+        check_render_size(self, what)
         n = self.tissue_subcycles
         substeps = max(1, int(round(1.0 / self.control_hz / self.dt)))
         if n != "auto" and (isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 100 or substeps % n):
             raise ConfigError(f"{what}.tissue_subcycles={n!r} must be an integer in [1, 100] that divides the "
                               f"{substeps} physics steps of a control step, or 'auto'")
+        if n != "auto" and n > 1 and n * self.dt > MAX_SUBCYCLED_RIGID_DT * (1 + 1e-9):
+            raise ConfigError(f"{what}.tissue_subcycles={n!r} makes the MuJoCo step {n} x dt = {n * self.dt:g} s, "
+                              f"above {MAX_SUBCYCLED_RIGID_DT:g} s where the grasper's jaw servo goes unstable; use "
+                              f"at most {max(1, int(MAX_SUBCYCLED_RIGID_DT / self.dt * (1 + 1e-9)))} or 'auto'")
         check_grasp_organ(self.organ, f"{what}.organ")
         check_range(self.mu, "mu", 0.0, 2.0)
         from surgsim_envs.scene.contact_options import static_friction_ratio

@@ -47,10 +47,13 @@ from typing import Any, Sequence
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_on_unstable,
-                                   check_positive, check_range, check_task_resolution, ObsTerm, require_capabilities,
+from surgsim_envs import validate
+from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_integrator,
+                                   check_on_unstable, check_positive, check_range, check_render_size,
+                                   check_task_resolution, check_weights, ObsTerm, require_capabilities,
                                    integrator_for_range, reward_from_terms, sample, sphere_mask, tissue_options)
 from surgsim_envs.errors import ConfigError
+from surgsim_envs.materials import get_material
 
 
 #: m; with the slab at least this much thicker than ``max_depth`` the probe cannot reach the floor and the
@@ -119,24 +122,32 @@ class PalpationConfig:
                     "localisation_scale", "tolerance_mm", "map_half_width"):
             check_positive(getattr(self, key), f"PalpationConfig.{key}")
         check_control_rate(self, "PalpationConfig")
-        for key in ("shaping_weight", "time_cost", "press_reward", "cell_reward"):
-            v = getattr(self, key)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
-                raise ConfigError(f"PalpationConfig.{key}={v!r} must be a finite number >= 0")
+        check_weights(self, ("shaping_weight", "time_cost", "press_reward", "cell_reward", "damage_weight",
+                             "localisation_weight", "success_bonus"), "PalpationConfig")
+        check_integrator(self, "PalpationConfig")
+        try:
+            get_material(self.material)
+        except (ConfigError, TypeError, ValueError) as exc:
+            raise ConfigError(f"PalpationConfig.material={validate.short_repr(self.material)}: {exc}") from None
+        check_render_size(self, "PalpationConfig")
+        validate.integer(self.max_rewarded_sites, "PalpationConfig.max_rewarded_sites", lo=0, hi=10_000,
+                         fix="a count of press sites, e.g. 25")
         check_task_resolution(self, "PalpationConfig")
         check_on_unstable(self.on_unstable, "PalpationConfig")
         if not (isinstance(self.map_cells, (int, np.integer)) and 1 <= self.map_cells <= 20):
             raise ConfigError(f"PalpationConfig.map_cells={self.map_cells!r} must be an integer in [1, 20]")
-        if not (isinstance(self.report_hold_steps, (int, np.integer)) and self.report_hold_steps >= 1):
-            raise ConfigError(f"PalpationConfig.report_hold_steps={self.report_hold_steps!r} must be an integer >= 1")
+        validate.integer(self.report_hold_steps, "PalpationConfig.report_hold_steps", lo=1,
+                         hi=int(round(self.episode_seconds * self.control_hz)),
+                         fix="a count of control steps no longer than the episode, e.g. 5")
         if 1.0 / self.control_hz < self.dt:
             raise ConfigError(f"control period 1/control_hz={1 / self.control_hz:g} s is shorter than dt={self.dt:g} s; "
                               "lower control_hz or dt")
-        if not (isinstance(self.min_report_seconds, (int, float)) and 0 <= self.min_report_seconds <= self.episode_seconds):
-            raise ConfigError(f"min_report_seconds={self.min_report_seconds!r} must lie in [0, episode_seconds]")
-        size = np.asarray(self.slab_size, dtype=float)
-        if size.shape != (3,) or not np.all(size > 0):
-            raise ConfigError(f"slab_size must be three positive lengths in m, got {self.slab_size!r}")
+        validate.real(self.min_report_seconds, "PalpationConfig.min_report_seconds", lo=0.0, hi=self.episode_seconds,
+                      unit="s", fix="it must lie in [0, episode_seconds]")
+        size = check_slab_size(self.slab_size, "PalpationConfig.slab_size")
+        validate.grid_nodes(size, self.resolution if validate.is_real_number(self.resolution) else self.spacing,
+                            "PalpationConfig", hi=MAX_TASK_NODES,
+                            fix="use a coarser spacing or resolution (an episode would take hours)")
         if self.xy_limit > size[:2].min() / 2:
             raise ConfigError(f"xy_limit={self.xy_limit} m exceeds half the slab ({size[:2].min() / 2} m)")
         half = size[:2].min() / 2
@@ -145,6 +156,19 @@ class PalpationConfig:
         check_range(self.inclusion_radius, "inclusion_radius", 1e-4, float(size.max()))
         check_range(self.stiffness_contrast, "stiffness_contrast", 1.0, 20.0)
         check_range(self.young_scale, "young_scale", 0.1, 10.0)
+
+
+#: nodes of a task's tissue lattice: a mass-spring step of 10^6 nodes takes seconds, so an
+#: episode of a few hundred control steps takes hours; a finer lattice is a typo, not a task
+MAX_TASK_NODES = 1_000_000
+
+
+def check_slab_size(value, what: str) -> np.ndarray:
+    """(3,) float array of a slab's positive finite side lengths in m (each at most 1 m)."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 3:
+        raise ConfigError(f"{what}={value!r} must be three positive lengths in m, e.g. (0.1, 0.1, 0.02)")
+    return np.array([validate.positive(v, f"{what}[{i}]", hi=1.0, unit="m", fix="slab sides are lengths in (0, 1] m")
+                     for i, v in enumerate(value)])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -309,11 +333,13 @@ class PalpationEnv(SurgSimEnv):
         x = sample(rng, xy, "inclusion_xy", -half, half)
         y = sample(rng, xy, "inclusion_xy", -half, half)
         if options.get("inclusion_position") is not None:
-            pos = np.asarray(options["inclusion_position"], dtype=float).reshape(-1)
-            if pos.shape != (2,) or not np.all(np.isfinite(pos)) or np.any(np.abs(pos) > half):
+            value = options["inclusion_position"]
+            if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
                 raise ConfigError(f"inclusion_position must be (x, y) m inside +-{half} m, "
-                                  f"got {options['inclusion_position']!r}")
-            x, y = float(pos[0]), float(pos[1])
+                                  f"got {validate.short_repr(value)}")
+            x, y = (validate.real(v, f"inclusion_position[{i}]", lo=-half, hi=half, unit="m",
+                                  fix=f"the inclusion centre lies inside the slab, +-{half} m")
+                    for i, v in enumerate(value))
         depth = sample(rng, get("inclusion_depth"), "inclusion_depth", 0.0, float(c.slab_size[2]))
         radius = sample(rng, get("inclusion_radius"), "inclusion_radius", 1e-4, float(max(c.slab_size)))
         contrast = sample(rng, get("stiffness_contrast"), "stiffness_contrast", 1.0, 20.0)

@@ -38,10 +38,18 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import ObsTerm, check_positive, reward_from_terms
+from surgsim_envs import validate
+from surgsim_envs.envs.base import ObsTerm, check_positive, check_weights, reward_from_terms
 from surgsim_envs.envs.palpation import (PalpationConfig, PalpationEnv, damage_penalty, indentation_depth,
                                         stiffness_map)
 from surgsim_envs.errors import ConfigError
+
+
+#: physics steps of one phase of a press (settle, hold): 10^5 steps are 100 s of simulated time at
+#: the default 1 ms step, and minutes of CPU for one env step
+MAX_PRESS_STEPS = 100_000
+#: presses per episode
+MAX_PRESSES = 10_000
 
 
 @dataclass
@@ -64,18 +72,24 @@ class PalpationPressConfig(PalpationConfig):
 
     def validate(self) -> None:
         super().validate()
-        for key in ("press_depth", "clearance", "move_speed", "press_speed"):
-            check_positive(getattr(self, key), f"PalpationPressConfig.{key}")
-        for key in ("settle_steps", "hold_steps", "average_steps", "max_presses"):
-            v = getattr(self, key)
-            if not (isinstance(v, (int, np.integer)) and v >= 1):
-                raise ConfigError(f"PalpationPressConfig.{key}={v!r} must be an integer >= 1")
+        what = "PalpationPressConfig"
+        for key in ("press_depth", "clearance"):
+            check_positive(getattr(self, key), f"{what}.{key}")
+        for key in ("move_speed", "press_speed"):
+            # the moves between presses take travel / move_speed / dt physics steps in one env step
+            validate.real(getattr(self, key), f"{what}.{key}", lo=1e-3, hi=100.0, unit="m/s",
+                          fix="probe speeds lie in [0.001, 100] m/s (slower moves take hours per press)")
+        fix = (f"a press runs settle_steps + hold_steps physics steps; at most {MAX_PRESS_STEPS:,} each "
+               f"({MAX_PRESS_STEPS * self.dt:g} s at dt={self.dt:g} s) so one env step cannot run for hours")
+        for key in ("settle_steps", "hold_steps", "average_steps"):
+            validate.steps(getattr(self, key), f"{what}.{key}", hi=MAX_PRESS_STEPS, fix=fix)
+        validate.integer(self.max_presses, f"{what}.max_presses", lo=1, hi=MAX_PRESSES,
+                         fix=f"presses per episode in [1, {MAX_PRESSES:,}], e.g. 25")
         if self.average_steps > self.hold_steps:
-            raise ConfigError(f"PalpationPressConfig.average_steps={self.average_steps} must be <= hold_steps="
-                              f"{self.hold_steps}")
-        if not (isinstance(self.min_presses, (int, np.integer)) and 0 <= self.min_presses <= self.max_presses):
-            raise ConfigError(f"PalpationPressConfig.min_presses={self.min_presses!r} must be an integer in "
-                              f"[0, max_presses={self.max_presses}]")
+            raise ConfigError(f"{what}.average_steps={self.average_steps} must be <= hold_steps={self.hold_steps}")
+        validate.integer(self.min_presses, f"{what}.min_presses", lo=0, hi=self.max_presses,
+                         fix=f"it must lie in [0, max_presses={self.max_presses}]")
+        check_weights(self, ("press_cost",), what)
         if self.press_depth <= self.press_min_depth:
             raise ConfigError(f"press_depth={self.press_depth} m must exceed press_min_depth={self.press_min_depth} m "
                               "(shallower presses give no stiffness sample)")

@@ -34,11 +34,16 @@ import numpy as np
 from numba import njit
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import ObsTerm, check_positive, check_range, reward_from_terms, sample
+from surgsim_envs import validate
+from surgsim_envs.envs.base import ObsTerm, check_positive, check_range, check_weights, reward_from_terms, sample
 from surgsim_envs.envs.grasp_scene import GraspSceneConfig, GraspSceneEnv
 from surgsim_envs.envs.grasp_common import contact_nodes
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.approach_snapshot import ApproachSnapshot
+
+
+#: s, the longest settle a reset runs (the default 0.4 s settles the grasp)
+MAX_SETTLE_SECONDS = 10.0
 
 
 @dataclass
@@ -68,12 +73,15 @@ class SlippageConfig(GraspSceneConfig):
 
     def validate(self) -> None:
         super().validate()
-        for key in ("settle_time", "max_pull", "pull_damping", "max_slip", "slip_tolerance"):
+        for key in ("max_pull", "pull_damping", "max_slip", "slip_tolerance"):
             check_positive(getattr(self, key), f"SlippageConfig.{key}")
-        if not isinstance(self.replay_approach, bool):
-            raise ConfigError(f"SlippageConfig.replay_approach={self.replay_approach!r} must be True or False")
-        if not -1.0 <= self.initial_closure <= 1.0:
-            raise ConfigError(f"initial_closure={self.initial_closure!r} must lie in [-1, 1]")
+        validate.duration(self.settle_time, "SlippageConfig.settle_time", hi=MAX_SETTLE_SECONDS,
+                          fix=f"the grasp settles in about 0.4 s; at most {MAX_SETTLE_SECONDS:g} s (each reset runs "
+                              "the whole settle)")
+        check_weights(self, ("slip_weight", "squeeze_weight", "drop_penalty", "hold_reward"), "SlippageConfig")
+        validate.boolean(self.replay_approach, "SlippageConfig.replay_approach")
+        validate.real(self.initial_closure, "SlippageConfig.initial_closure", lo=-1.0, hi=1.0,
+                      fix="an action value from fully open (-1) to closed (+1)")
         check_range(self.pull_rate, "pull_rate", 0.0, 10.0)
         check_range(self.pull_amplitude, "pull_amplitude", 0.0, 10.0)
         check_range(self.pull_frequency, "pull_frequency", 0.0, 50.0)

@@ -64,6 +64,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from surgsim_envs import validate
 from surgsim_envs.envs import vector_ipc as ipc
 from surgsim_envs.envs.vector_info import InfoMerger
 from surgsim_envs.envs.vector_worker import _Worker, worker_main
@@ -80,6 +81,16 @@ MAX_ROLLOUT_BYTES = 1 << 30
 
 #: spaces whose samples are fixed-shape arrays (what the shared memory holds)
 _ARRAY_SPACES = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
+
+
+#: s, the longest a vector env waits for its workers (a day: "wait forever" is a hang, not a timeout)
+MAX_TIMEOUT_S = 86_400.0
+#: s, the shortest: a worker cannot even answer a command in less
+MIN_TIMEOUT_S = 1e-3
+#: numeric info entries per env the shared memory may hold (a task has a few dozen)
+MAX_INFO_KEYS = 4096
+#: envs one vector env may hold: each task env takes tens of MB, so 1024 of them fill a large machine
+MAX_ENVS = 1024
 
 
 def _positive_int(name, value, upper=None) -> int:
@@ -106,6 +117,9 @@ def _info_mode(info_keys):
             return None, True
         raise ConfigError(f"info_keys must be None (numeric entries), 'all' or a sequence of key names, "
                           f"got {info_keys!r}")
+    if not isinstance(info_keys, (list, tuple, set, frozenset)):
+        raise ConfigError(f"info_keys must be None (numeric entries), 'all' or a sequence of key names, got "
+                          f"{info_keys!r} of type {type(info_keys).__name__}")
     keys = tuple(info_keys)
     if not all(isinstance(k, str) for k in keys):
         raise ConfigError(f"info_keys must be None, 'all' or a sequence of key names (str), got {info_keys!r}")
@@ -129,7 +143,7 @@ class SurgSimVectorEnv(VectorEnv):
         self.closed = False
         self._broken: str | None = None
         self._waiting = False
-        self.num_envs = _positive_int("num_envs", num_envs)
+        self.num_envs = _positive_int("num_envs", num_envs, MAX_ENVS)
         n_workers = min(self.num_envs, os.cpu_count() or 1) if workers is None else workers
         n_workers = _positive_int("workers", n_workers, self.num_envs)
         try:
@@ -139,11 +153,17 @@ class SurgSimVectorEnv(VectorEnv):
                               f"got {autoreset_mode!r}") from None
         keys, keep_other = _info_mode(info_keys)
         self.info_keys = info_keys
-        max_info_keys = _positive_int("max_info_keys", max_info_keys)
+        max_info_keys = validate.integer(max_info_keys, "SurgSimVectorEnv max_info_keys", lo=1, hi=MAX_INFO_KEYS,
+                                         fix="the number of numeric info entries shared per env, e.g. 64")
         for name, t in (("timeout_s", timeout_s), ("start_timeout_s", start_timeout_s),
                         ("close_timeout_s", close_timeout_s)):
-            if not (isinstance(t, (int, float)) and np.isfinite(t) and t > 0):
-                raise ConfigError(f"{name} must be a positive number of seconds, got {t!r}")
+            try:
+                ok = validate.is_real_number(t) and MIN_TIMEOUT_S <= float(t) <= MAX_TIMEOUT_S
+            except OverflowError:          # an int too large for a float
+                ok = False
+            if not ok:
+                raise ConfigError(f"{name} must be a positive number of seconds in [{MIN_TIMEOUT_S:g}, "
+                                  f"{MAX_TIMEOUT_S:g}], got {validate.short_repr(t)}")
         self.timeout_s, self.close_timeout_s = float(timeout_s), float(close_timeout_s)
         self.spin_us = _spin_microseconds("spin_us", spin_us)
         self.worker_spin_us = _spin_microseconds("worker_spin_us", worker_spin_us)
@@ -153,6 +173,9 @@ class SurgSimVectorEnv(VectorEnv):
             raise ConfigError(f"env_id must be a registered task id (str) or a callable returning an env, got {env_id!r}")
         self.env_id = env_id if isinstance(env_id, str) else getattr(env_id, "__name__", repr(env_id))
 
+        if context is not None:
+            validate.choice(context, "SurgSimVectorEnv context", mp.get_all_start_methods(),
+                            fix="a multiprocessing start method, or None for the platform default")
         ctx = mp.get_context(context)
         if ctx.get_start_method() == "fork":
             # one resource tracker for all processes: a worker that attaches the shared memory must
@@ -173,7 +196,7 @@ class SurgSimVectorEnv(VectorEnv):
                 rep_r, rep_w = ctx.Pipe(duplex=False)
                 proc = ctx.Process(target=worker_main, name=f"SurgSimVectorEnv-{w}", daemon=True,
                                    args=(env_id, env_kwargs, lo, hi, cmd_r, rep_w, self.autoreset_mode.value,
-                                         keys, keep_other, max_info_keys, self.worker_spin_us))
+                                         keys, keep_other, max_info_keys, self.worker_spin_us, os.getpid()))
                 proc.start()
                 cmd_r.close()
                 rep_w.close()
@@ -413,6 +436,9 @@ class SurgSimVectorEnv(VectorEnv):
         self._check_usable()
         acts = self._v["actions"]
         a = np.asarray(actions)
+        if a.dtype.kind not in "iuf":
+            raise ConfigError(f"actions must be real numbers (float or int) of shape {acts.shape}, got dtype "
+                              f"{a.dtype} (bool, complex, string and object actions are refused)")
         if a.shape != acts.shape:
             raise ConfigError(f"actions must have shape {acts.shape} (num_envs x action shape), got {a.shape}")
         acts[...] = a

@@ -17,6 +17,7 @@ import numpy as np
 
 from surgsim_envs.envs import vector_ipc as ipc
 from surgsim_envs.envs.vector_info import InfoWriter
+from surgsim_envs.envs.vector_parent import PARENT_POLL_S, follow_parent, parent_alive
 
 NEXT_STEP, SAME_STEP, DISABLED = "NextStep", "SameStep", "Disabled"
 
@@ -216,18 +217,32 @@ def wait_for_command(poller, spin_s: float) -> None:
             return
 
 
+def _orphaned(worker) -> None:
+    """The main process died: unlink the shared memory (nobody else will) and exit now."""
+    shm = getattr(worker, "shm", None) if worker is not None else None
+    if shm is not None:
+        try:
+            shm.unlink()
+        except (FileNotFoundError, OSError):      # another worker unlinked it first
+            pass
+    os._exit(0)
+
+
 def worker_main(env_id, env_kwargs, lo, hi, cmd, rep, autoreset, info_keys, keep_other, max_info_keys,
-                spin_us: float = 0.0):
+                spin_us: float = 0.0, parent_pid: int | None = None):
     """Process entry point. ``cmd``/``rep``: the worker's ends (``multiprocessing.Connection``,
     used as raw file descriptors) of the command and reply pipes. ``spin_us``: after each reply the
-    worker polls for the next command this long before it sleeps (:func:`wait_for_command`)."""
+    worker polls for the next command this long before it sleeps (:func:`wait_for_command`).
+    ``parent_pid``: the main process; the worker exits when it dies (:mod:`vector_parent`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C goes to the main process, which closes us
     cfd, rfd = cmd.fileno(), rep.fileno()
     spin_s = float(spin_us) * 1e-6
     poller = select.poll()
     poller.register(cfd, select.POLLIN)
+    holder: list = [None]
+    signalled = True if parent_pid is None else follow_parent(parent_pid, lambda: _orphaned(holder[0]))
     try:
-        worker = _Worker(env_id, env_kwargs, lo, hi, autoreset, info_keys, keep_other, max_info_keys)
+        worker = holder[0] = _Worker(env_id, env_kwargs, lo, hi, autoreset, info_keys, keep_other, max_info_keys)
         ipc.send(rfd, ipc.OK, worker.description())
     except BaseException as exc:  # noqa: BLE001 - reported to the main process
         ipc.send(rfd, ipc.ERROR, _error_payload(exc, f"{lo}..{hi - 1}"))
@@ -236,6 +251,10 @@ def worker_main(env_id, env_kwargs, lo, hi, cmd, rep, autoreset, info_keys, keep
         try:
             if spin_s:
                 wait_for_command(poller, spin_s)
+            if not signalled:
+                while not poller.poll(PARENT_POLL_S * 1e3):
+                    if not parent_alive(parent_pid):
+                        _orphaned(worker)
             op, payload = ipc.receive(cfd)
         except (ipc.WorkerGone, OSError):     # the main process is gone
             break

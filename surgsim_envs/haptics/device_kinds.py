@@ -99,8 +99,9 @@ def _port(arg: str, spec: str) -> int:
         port = int(arg)
     except ValueError:
         port = -1
-    if not 0 < port < 65536:
-        raise ConfigError(f"device {spec!r}: PORT must be an integer in 1..65535, e.g. udp:9870")
+    if not 1024 <= port < 65536:
+        raise ConfigError(f"device {spec!r}: PORT must be an integer in 1024..65535 (ports below 1024 are reserved "
+                          "for system services), e.g. udp:9870")
     return port
 
 

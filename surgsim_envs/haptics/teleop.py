@@ -22,6 +22,7 @@ import sys
 from pathlib import Path
 
 from surgsim_envs.errors import ConfigError, SurgSimError
+from surgsim_envs.haptics.teleop_args import check_camera, check_device_duration, check_teleop_args
 
 TASK_NAMES = ("palpation", "grasp", "slippage")
 
@@ -83,19 +84,24 @@ def default_script(task: str, physics, seed: int = 0, tremor: float = 0.0) -> di
             "dwell": [0.2, 3.0, 0.5, 0.0], "grip": [0.0, grip, grip, grip], **extra}
 
 
-def _load_script(path: str) -> dict:
+def load_script(path: str) -> dict:
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"--script {path}: file not found")
-    if p.suffix.lower() == ".json":
-        return json.loads(p.read_text())
-    if p.suffix.lower() == ".toml":
+    suffix = p.suffix.lower()
+    if suffix in (".json", ".toml"):
+        import tomllib
+
         try:
-            import tomllib
-        except ModuleNotFoundError:  # pragma: no cover - python < 3.11
-            import tomli as tomllib
-        data = tomllib.loads(p.read_text())
-        return data.get("trajectory", data)
+            data = json.loads(p.read_text()) if suffix == ".json" else tomllib.loads(p.read_text())
+        except (ValueError, UnicodeDecodeError) as exc:    # JSONDecodeError, TOMLDecodeError
+            raise ConfigError(f"--script {path}: not valid {suffix[1:].upper()}: {exc}") from None
+        if suffix == ".toml":
+            data = data.get("trajectory", data)
+        if not isinstance(data, dict):
+            raise ConfigError(f"--script {path}: expected a trajectory object (waypoints, speeds, ...), got "
+                              f"{type(data).__name__}")
+        return data
     raise ConfigError(f"--script {path}: expected a .json or .toml trajectory spec")
 
 
@@ -106,7 +112,7 @@ def make_device(args, physics, limits):
     from surgsim_envs.haptics.scripted import ScriptedDevice, TrajectorySpec
 
     def scripted():
-        spec = _load_script(args.script) if args.script else default_script(args.task, physics, args.seed, args.tremor)
+        spec = load_script(args.script) if args.script else default_script(args.task, physics, args.seed, args.tremor)
         return ScriptedDevice(TrajectorySpec.from_dict(spec), limits=limits)
 
     return make(args.device, limits=limits, scripted=scripted)
@@ -123,8 +129,13 @@ def run(args) -> int:
     if servo == "process" and not kind.remote:
         raise ConfigError(f"--servo process needs a network device (--device udp:PORT): the servo process owns "
                           f"the device; got --device {args.device}. Use --servo thread for it.")
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise ConfigError(f"--duration must be > 0 s, got {args.duration}")
+    check_teleop_args(args)
+    if args.script:                      # a malformed or endless script is refused before the scene is built
+        from surgsim_envs.haptics.scripted import TrajectorySpec
+
+        spec = TrajectorySpec.from_dict(load_script(args.script))
+        if args.duration is None and kind.finite:
+            check_device_duration(spec, args.device)
     if not args.headless and not os.environ.get("DISPLAY") and sys.platform.startswith("linux"):
         print("surgsim teleop: no display ($DISPLAY is not set), so the interactive viewer cannot open.\n"
               f"Run headless instead, e.g.: surgsim teleop {args.task} --device {args.device} --headless "
@@ -146,7 +157,7 @@ def run(args) -> int:
     duration = args.duration
     if duration is None:
         if kind.finite:
-            duration = float(device.duration) + 0.2
+            duration = check_device_duration(device, args.device) + 0.2
         else:  # live devices: until the viewer closes; headless needs a bound
             duration = 10.0 if args.headless else math.inf
     config = ServoConfig(rate_hz=args.rate, max_force_rate=args.max_force_rate, extrapolation=args.extrapolation,
@@ -212,13 +223,15 @@ def _run_headless(loop, physics, args, duration: float):
     out.mkdir(parents=True, exist_ok=True)
     sim = physics.sim
     width, height = int(args.size[0]), int(args.size[1])
+    cameras = [mujoco.mj_id2name(sim.model, mujoco.mjtObj.mjOBJ_CAMERA, i) for i in range(sim.model.ncam)]
+    check_camera(args.camera, cameras)
     try:
         renderer = mujoco.Renderer(sim.render_model, height=height, width=width)
     except Exception as exc:
         raise RenderingUnavailableError(
             f"offscreen rendering failed ({exc}); set MUJOCO_GL=egl or MUJOCO_GL=osmesa (apt-get install libosmesa6)"
         ) from None
-    cam = args.camera if mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_CAMERA, args.camera) >= 0 else -1
+    cam = args.camera
     scratch = mujoco.MjData(sim.render_model)
     path = out / f"teleop_{args.task}.mp4"
     from surgsim_envs.haptics.recording import PacedVideoWriter

@@ -52,10 +52,20 @@ from pathlib import Path
 import numpy as np
 
 from surgsim_envs.errors import ConfigError
+from surgsim_envs.policies.npz_members import declared_arrays, read_arrays
 
 FORMAT = "surgsim-mlp-v1"
 MAX_LAYERS = 32
 MAX_PARAMETERS = 50_000_000
+#: bytes the members of a policy file may declare (the parameters as float64, plus the small arrays)
+MAX_FILE_BYTES = 8 * MAX_PARAMETERS + (1 << 20)
+#: members a policy file may hold: W/b per layer and the optional arrays of the table above
+MAX_MEMBERS = 2 * MAX_LAYERS + 32
+#: members that hold text; every other member holds real numbers
+TEXT_KEYS = ("format", "activation", "output_activation", "mode", "obs_keys", "action_keys")
+#: largest magnitude of a weight, bias, normalisation or scaling value: trained networks stay far
+#: below it, and a product of a few layers of 1e300 overflows float64 to inf
+MAX_ABS_PARAMETER = 1e12
 ACTIVATIONS = {
     "identity": lambda x: x,
     "tanh": np.tanh,
@@ -176,30 +186,41 @@ class NpzPolicy:
     def _bad(self, msg: str) -> ConfigError:
         return ConfigError(f"policy {self.source}: {msg} (format {FORMAT}, see surgsim_envs.policies.npz_policy)")
 
-    def _finite(self, a, name: str, ndim: int) -> np.ndarray:
+    def _real(self, a, name: str) -> np.ndarray:
+        """``a`` as a float64 array if it holds real numbers (float or int); complex, string,
+        datetime, bool and object arrays are refused, not converted."""
         try:
-            arr = np.asarray(a, dtype=np.float64)
+            raw = np.asarray(a)
         except (TypeError, ValueError):
             raise self._bad(f"{name} is not a numeric array") from None
+        if raw.dtype.kind not in "fiu":
+            raise self._bad(f"{name} has dtype {raw.dtype}; it must hold real numbers (float or int)")
+        return raw.astype(np.float64)
+
+    def _finite(self, a, name: str, ndim: int) -> np.ndarray:
+        arr = self._real(a, name)
         if arr.ndim != ndim or 0 in arr.shape:
             raise self._bad(f"{name} must be a non-empty {ndim}-D array, got shape {arr.shape}")
         if not np.all(np.isfinite(arr)):
             raise self._bad(f"{name} holds NaN or inf")
+        if np.abs(arr).max() > MAX_ABS_PARAMETER:
+            raise self._bad(f"{name} holds {np.abs(arr).max():.3g}, above the limit of {MAX_ABS_PARAMETER:g} in "
+                            "magnitude (the forward pass would overflow)")
         return arr
 
     def _vector(self, a, n: int, default: float, name: str, finite: bool = True) -> np.ndarray:
         if a is None:
             return np.full(n, default)
-        try:
-            arr = np.asarray(a, dtype=np.float64).reshape(-1)
-        except (TypeError, ValueError):
-            raise self._bad(f"{name} is not numeric") from None
+        arr = self._real(a, name).reshape(-1)
         if arr.size == 1:
             arr = np.full(n, float(arr[0]))
         if arr.shape != (n,):
             raise self._bad(f"{name} must have {n} values, got {arr.size}")
         if finite and not np.all(np.isfinite(arr)):
             raise self._bad(f"{name} holds NaN or inf")
+        if finite and arr.size and np.abs(arr).max() > MAX_ABS_PARAMETER:
+            raise self._bad(f"{name} holds {np.abs(arr).max():.3g}, above the limit of {MAX_ABS_PARAMETER:g} in "
+                            "magnitude")
         return arr
 
     # -- evaluation ---------------------------------------------------------------------------
@@ -314,10 +335,10 @@ class NpzPolicy:
         if not p.is_file():
             raise ConfigError(f"policy file {str(p)!r} not found")
         try:
-            with np.load(p, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except (OSError, ValueError, EOFError) as exc:
-            raise ConfigError(f"policy {p}: not a readable .npz file ({exc})") from None
+            declared_arrays(p, max_members=MAX_MEMBERS, max_bytes=MAX_FILE_BYTES, text_keys=TEXT_KEYS)
+            data = read_arrays(p)
+        except ConfigError as exc:
+            raise ConfigError(f"policy {p}: {exc}; see surgsim_envs.policies.npz_policy") from None
         fmt = str(data.get("format", ""))
         if fmt != FORMAT:
             raise ConfigError(f"policy {p}: format {fmt!r} is not {FORMAT!r}; see surgsim_envs.policies.npz_policy")

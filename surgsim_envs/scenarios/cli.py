@@ -32,6 +32,17 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.haptics.device_kinds import device_kind
 
 
+def device_specs(sc, override: str | None) -> list[str]:
+    """The device specs a run of ``sc`` opens: ``override`` (``--device``) for every phase, else
+    the device of each phase driven by one."""
+    if override is not None:
+        return [override]
+    specs = [p.device for p in sc.phases if p.driver == "device"]
+    if sc.trainee.driver == "device":
+        specs.append(sc.trainee.device)
+    return sorted(set(specs))
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenario", help="scenario file (.toml), e.g. tasks/spleen_grasp_and_retract.toml")
     parser.add_argument("--out", default=None, help="output directory (default surgsim-out/<scenario name>)")
@@ -75,6 +86,11 @@ def run(args) -> int:
 
         validate_driver(_Ctx("command line", KeyLocator(None)), ("--device",), "device", args.device, "",
                         folder=sc.folder, check_files=True)
+    if not args.viewer:   # a device read from the viewer window cannot run without it (--check says so too)
+        for spec in device_specs(sc, args.device):
+            if device_kind(spec)[0].needs_viewer:
+                raise ConfigError(f"device {spec!r} reads its input from the viewer window: run with --viewer (and a "
+                                  "display), or use a scripted or replay device")
     if args.check:
         runs = len(sc.runs())
         print(f"{args.scenario}: valid scenario '{sc.name}' ({len(sc.phases)} phases, {runs} run{'s' * (runs != 1)})")
@@ -82,9 +98,7 @@ def run(args) -> int:
     if args.viewer and not os.environ.get("DISPLAY") and sys.platform.startswith("linux"):
         print("surgsim run: --viewer needs a display ($DISPLAY is not set); run without --viewer", file=sys.stderr)
         return 2
-    if args.device and device_kind(args.device)[0].needs_viewer and not args.viewer:
-        raise ConfigError(f"--device {args.device} needs --viewer (its input is read from the viewer window)")
-    from surgsim_envs.scenarios.report import write_report
+    from surgsim_envs.scenarios.report import number_text as _num, write_report
     from surgsim_envs.scenarios.runner import run_scenario
 
     if args.out:
@@ -97,16 +111,16 @@ def run(args) -> int:
     results = run_scenario(sc, duration_scale=scale, device=args.device, policy=args.policy, out_dir=out,
                            video=not args.no_video, viewer=args.viewer, progress=not args.quiet, tremor=args.tremor)
     report = write_report(results, out)
-    print(f"surgsim run: {sc.name}: score {report['score']:.1f} / 100, "
+    print(f"surgsim run: {sc.name}: score {_num(report['score'], '.1f')} / 100, "
           f"{'passed' if report['passed'] else 'not passed'}")
     for name, c in report["criteria"].items():
         value = "-" if c["value"] is None else f"{c['value']:.4g}{' ' + c['unit'] if c['unit'] else ''}"
-        print(f"  {name:<18} {value:<14} score {c['score']:.2f} {'ok' if c['passed'] else 'FAILED'}")
+        print(f"  {name:<18} {value:<14} score {_num(c['score'], '.2f')} {'ok' if c['passed'] else 'FAILED'}")
     if len(report["runs"]) > 1:
         for r in report["runs"]:
             keys = ", ".join(f"{k}={r[k]}" for k in sc.sweep)
             onset = "no slip" if r["slip_onset_pull"] is None else f"slip onset at {r['slip_onset_pull']:.3f} N pull"
-            print(f"  run {keys}: peak normal {r['peak_normal']:.3f} N, {onset}, score {r['score']:.1f}")
+            print(f"  run {keys}: peak normal {r['peak_normal']:.3f} N, {onset}, score {_num(r['score'], '.1f')}")
     for r in report["runs"]:
         if r["error"]:
             print(f"  run stopped early: {r['error']}", file=sys.stderr)

@@ -143,18 +143,23 @@ def _fmt(v, unit=""):
     return f"{v}{(' ' + unit) if unit else ''}"
 
 
+def number_text(v, spec: str) -> str:
+    """``v`` formatted with ``spec``, or "-" for a missing (None) or non-finite value."""
+    return "-" if v is None or not math.isfinite(v) else format(v, spec)
+
+
 def markdown(report: dict) -> str:
     """A short human-readable summary of a report dictionary."""
     lines = [f"# Scenario report: {report['scenario']}", ""]
     if report.get("description"):
         lines += [report["description"], ""]
-    lines += [f"**Score: {report['score']:.1f} / 100** — {'PASSED' if report['passed'] else 'NOT PASSED'}"
+    lines += [f"**Score: {number_text(report['score'], '.1f')} / 100** — {'PASSED' if report['passed'] else 'NOT PASSED'}"
               f" ({len(report['runs'])} run{'s' if len(report['runs']) != 1 else ''}, duration scale "
               f"{report['duration_scale']:g})", ""]
     lines += ["| criterion | value | target | limit | weight | score | passed |", "|---|---|---|---|---|---|---|"]
     for name, c in report["criteria"].items():
         lines.append(f"| {name} | {_fmt(c['value'], c['unit'])} | {_fmt(c['target'])} | {_fmt(c['limit'])} | "
-                     f"{_fmt(c['weight'])} | {c['score']:.2f} | {'yes' if c['passed'] else 'no'} |")
+                     f"{_fmt(c['weight'])} | {number_text(c['score'], '.2f')} | {'yes' if c['passed'] else 'no'} |")
     v = report["safety"]["violations"]
     lines += ["", f"Safety limit {report['safety']['limit']:g} N: "
                   + ("no violations." if not v else f"{len(v)} violation(s): "
@@ -166,10 +171,12 @@ def markdown(report: dict) -> str:
                   "|" + "---|" * (len(keys) + 6)]
         for r in report["runs"]:
             lines.append("| " + " | ".join([_fmt(r[k]) for k in keys] + [
-                f"{r['score']:.1f}", _fmt(r["peak_normal"]), _fmt(r["normal_end_close"]), _fmt(r["normal_end_hold"]),
+                number_text(r["score"], ".1f"), _fmt(r["peak_normal"]), _fmt(r["normal_end_close"]), _fmt(r["normal_end_hold"]),
                 _fmt(r["slip_onset_pull"]), _fmt(r["slip_onset_time"])]) + " |")
     lines += ["", "Phases: " + ", ".join(f"{p['label']} ({p['driver']}, {p['start']:.2f}-{p['end']:.2f} s)"
                                          for p in report["phases"]), ""]
+    for err in report.get("write_errors", []):
+        lines += [f"Not written: {err}", ""]
     files = report.get("files", {})
     if files:
         lines += ["Files: " + ", ".join(f"[{k}]({Path(v).name})" for k, v in files.items() if v), ""]
@@ -181,25 +188,49 @@ _RUN_KEYS = {"score", "passed", "completed", "error", "slip_onset_pull", "slip_o
              "close_linearity_r2", "slip_events", "criteria", "violations", "phases", "metrics", "wall_time_s", "info"}
 
 
+def _finite_or_none(value):
+    """``value`` with every non-finite float replaced by None (report.json stays valid JSON)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_none(v) for v in value]
+    return value
+
+
 def write_report(results, out_dir, *, timeseries: bool = True) -> dict:
-    """Write report.json, forces.png, report.md (and timeseries.npz) into ``out_dir``; return the report."""
+    """Write report.json, forces.png, report.md (and timeseries.npz) into ``out_dir``; return the report.
+
+    A run writes what it has: a plot or time series that cannot be written is named in
+    ``report["write_errors"]`` and report.json / report.md are written all the same."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report = build_report(results)
-    files = {"json": str(out / "report.json"), "plot": str(plot_forces(results, out / "forces.png")),
-             "markdown": str(out / "report.md")}
+    files = {"json": str(out / "report.json"), "markdown": str(out / "report.md")}
+    errors = []
+    try:
+        files["plot"] = str(plot_forces(results, out / "forces.png"))
+    except Exception as exc:  # noqa: BLE001 - the report is written without the plot
+        errors.append(f"forces.png not written ({type(exc).__name__}: {exc})")
     videos = [r.info.get("video") for r in results if r.info.get("video")]
     if videos:
         files["video"] = videos[0] if len(videos) == 1 else ", ".join(videos)
     if timeseries:
-        arrays = {}
-        for k, r in enumerate(results):
-            for name in r.recording.FIELDS:
-                arrays[f"run{k}_{name}"] = getattr(r.recording, name)
-            arrays[f"run{k}_position"] = r.recording.position
-        np.savez_compressed(out / "timeseries.npz", **arrays)
-        files["timeseries"] = str(out / "timeseries.npz")
+        try:
+            arrays = {}
+            for k, r in enumerate(results):
+                for name in r.recording.FIELDS:
+                    arrays[f"run{k}_{name}"] = getattr(r.recording, name)
+                arrays[f"run{k}_position"] = r.recording.position
+            np.savez_compressed(out / "timeseries.npz", **arrays)
+            files["timeseries"] = str(out / "timeseries.npz")
+        except Exception as exc:  # noqa: BLE001 - the report is written without the time series
+            errors.append(f"timeseries.npz not written ({type(exc).__name__}: {exc})")
     report["files"] = files
-    (out / "report.json").write_text(json.dumps(report, indent=2))
+    if errors:
+        report["write_errors"] = errors
+    report = _finite_or_none(report)
+    (out / "report.json").write_text(json.dumps(report, indent=2, allow_nan=False))
     (out / "report.md").write_text(markdown(report))
     return report

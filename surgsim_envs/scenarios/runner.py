@@ -186,10 +186,10 @@ def make_device(spec: str, script: str, runner: "_Runner", tremor: float, seed: 
     def scripted():
         if script:
             from surgsim_envs.haptics.scripted import ScriptedDevice, TrajectorySpec
-            from surgsim_envs.haptics.teleop import _load_script
+            from surgsim_envs.haptics.teleop import load_script
 
             path = str(resolve_data_file(script, runner.sc.folder))
-            return ScriptedDevice(TrajectorySpec.from_dict(_load_script(path)), limits=limits)
+            return ScriptedDevice(TrajectorySpec.from_dict(load_script(path)), limits=limits)
         dev = PlanDevice.make(runner, tremor, seed)
         dev.limits = limits
         return dev

@@ -114,6 +114,10 @@ LIMITS: dict[str, tuple[float, float, bool, str]] = {
     "policy.episodes": (1, 1000, True, ""),
     "policy.max_steps": (1, 1_000_000, True, "steps"),
     "scoring.safety_limit": (0.0, 1e3, False, "N"),
+    # the score is a weighted mean: weights up to 1e6 keep the sums of a few criteria far from overflow
+    "criterion.weight": (0.0, 1e6, True, ""),
+    "criterion.target": (-1e12, 1e12, True, ""),
+    "criterion.limit": (-1e12, 1e12, True, ""),
 }
 MAX_RUN_DURATION = 3600.0  # s of simulated time per run (phases x duration scale)
 MAX_GRID_PRESSES = 400
@@ -328,9 +332,13 @@ def _check_type(value: Any, hint: Any, path: tuple, ctx: _Ctx) -> Any:
     if hint is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ctx.error(path, f"expected a number, got {value!r} ({type(value).__name__})")
-        if not math.isfinite(value):
-            raise ctx.error(path, f"expected a finite number, got {value!r}")
-        return float(value)
+        try:
+            number = float(value)
+        except OverflowError:           # an integer too large for a float
+            number = math.inf
+        if not math.isfinite(number):
+            raise ctx.error(path, f"expected a finite number, got {_short(value)}")
+        return number
     if hint is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ctx.error(path, f"expected an integer, got {value!r} ({type(value).__name__})")
@@ -433,6 +441,10 @@ def validate_driver(ctx: _Ctx, path: tuple, driver: str, device: str, policy: st
             kind, arg = device_kind(device)
         except ConfigError as exc:
             raise ctx.error(path + ("device",), str(exc)) from None
+        if kind.remote and not trusted:
+            raise ctx.error(path + ("device",), f"device {device!r} opens a network port, which a scenario file may "
+                                                "not do (sharing a scenario must not open a port); pass --device "
+                                                f"{device} on the command line instead")
         if kind.file_arg and check_files:
             _check_file(ctx, path + ("device",), arg, folder, kind.name)
     if driver == "policy":
@@ -480,6 +492,57 @@ def _check_scene_value(ctx: _Ctx, path: tuple, key: str, value) -> None:
         from surgsim_envs.materials import PRESETS
 
         _check_registered(ctx, path, value, sorted(PRESETS), "material preset")
+
+
+def check_env_kwargs(ctx: _Ctx, path: tuple, task: str, env_kwargs: dict) -> None:
+    """``env_kwargs`` must be fields of task ``task``'s own config class with values its
+    ``validate()`` accepts (the checks ``gym.make`` runs, without building the scene), so a file
+    that passes ``--check`` cannot fail on them at run time."""
+    import gymnasium as gym
+
+    spec = gym.registry[task]
+    env_cls = spec.entry_point
+    if isinstance(env_cls, str):
+        from gymnasium.envs.registration import load_env_creator
+
+        env_cls = load_env_creator(env_cls)
+    config_cls = getattr(env_cls, "config_cls", None)
+    if config_cls is None:
+        if env_kwargs:
+            raise ctx.error(path, f"task {task!r} takes no env_kwargs here (it has no config class); remove them")
+        return
+    kwargs = {**(spec.kwargs or {}), **env_kwargs}
+    render_mode = kwargs.pop("render_mode", None)
+    if render_mode not in (None, "rgb_array"):
+        raise ctx.error(path + ("render_mode",), f"render_mode {render_mode!r}: a scenario runs headless; use "
+                                                 "'rgb_array' or leave it out")
+    names = {f.name for f in dataclasses.fields(config_cls)}
+    unknown = sorted(set(kwargs) - names)
+    if unknown:
+        raise ctx.error(path + (unknown[0],), f"{unknown} are not fields of {task}'s {config_cls.__name__}; its fields: "
+                                             f"{', '.join(sorted(names))}")
+    try:
+        config = dataclasses.replace(config_cls(), **kwargs)
+        config.validate()
+    except ConfigError as exc:
+        key = next((k for k in kwargs if k in str(exc)), None)
+        raise ctx.error(path + ((key,) if key else ()), str(exc)) from None
+    except Exception as exc:  # noqa: BLE001 - a value the task's checks did not foresee: still refused here
+        raise ctx.error(path, f"{task} cannot take these env_kwargs ({type(exc).__name__}: {exc})") from None
+
+
+def _check_script(ctx: _Ctx, path: tuple, file: Path) -> None:
+    """A trajectory script must parse and describe a valid, bounded trajectory."""
+    from surgsim_envs.haptics.scripted import TrajectorySpec
+    from surgsim_envs.haptics.teleop import load_script
+
+    try:
+        spec = TrajectorySpec.from_dict(load_script(str(file)))
+        seconds = float(spec.duration)
+    except ConfigError as exc:
+        raise ctx.error(path, str(exc)) from None
+    if not math.isfinite(seconds) or seconds > MAX_RUN_DURATION:
+        raise ctx.error(path, f"the trajectory lasts {seconds:g} s, more than the {MAX_RUN_DURATION:g} s limit of a run")
 
 
 def _check_task_id(ctx: _Ctx, path: tuple, task: str) -> None:
@@ -575,6 +638,7 @@ def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = No
     _limit(ctx, ("trainee", "tremor"), "trainee.tremor", trainee.tremor)
     if trainee.script:
         _check_file(ctx, ("trainee", "script"), trainee.script, folder, "trajectory script")
+        _check_script(ctx, ("trainee", "script"), resolve_data_file(trainee.script, folder))
 
     scoring_tab = data.get("scoring", {})
     scoring = build_dataclass(ScoringSpec, scoring_tab, ("scoring",), ctx, skip=("criteria",))
@@ -587,8 +651,8 @@ def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = No
             raise ctx.error(("scoring", "criteria", name), f"unknown criterion {name!r}; choose from "
                                                            f"{', '.join(CRITERIA)}")
         crit = build_dataclass(CriterionSpec, tab, ("scoring", "criteria", name), ctx)
-        if crit.weight < 0:
-            raise ctx.error(("scoring", "criteria", name, "weight"), f"must be >= 0, got {crit.weight}")
+        for key in ("weight", "target", "limit"):
+            _limit(ctx, ("scoring", "criteria", name, key), f"criterion.{key}", getattr(crit, key))
         if name != "completion" and not crit.limit > crit.target:
             raise ctx.error(("scoring", "criteria", name, "limit"),
                             f"limit ({crit.limit}) must be greater than target ({crit.target})")
@@ -624,6 +688,7 @@ def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = No
         check_policy(ctx, ("policy", "file"), policy.file, folder, allow_code, trusted=False)
         _limit(ctx, ("policy", "episodes"), "policy.episodes", policy.episodes)
         _limit(ctx, ("policy", "max_steps"), "policy.max_steps", policy.max_steps)
+        check_env_kwargs(ctx, ("policy", "env_kwargs"), meta.task, policy.env_kwargs)
     elif meta.task:
         raise ctx.error(("scenario", "task"), "a task rollout needs a [policy] table with file = '...'")
 

@@ -13,19 +13,18 @@ node's stiffness makes the sequence of equilibria diverge; see docs/models/fem_s
 from __future__ import annotations
 
 import dataclasses
-import math
 
 from surgsim_envs.contact import ContactParams
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 
 def static_friction_ratio(contact_cfg) -> float:
     """mu_s / mu of a ContactConfig (or a task config with that field), checked (a number >= 1)."""
     r = getattr(contact_cfg, "static_friction_ratio", 1.0)
-    if isinstance(r, bool) or not isinstance(r, (int, float)) or not math.isfinite(r) or r < 1.0:
-        raise ConfigError(f"{type(contact_cfg).__name__}.static_friction_ratio={r!r} must be a number >= 1 (static "
-                          "friction mu_s as a multiple of the kinetic mu; 1 = one coefficient)")
-    return float(r)
+    return validate.real(r, f"{type(contact_cfg).__name__}.static_friction_ratio", lo=1.0, hi=100.0,
+                         fix="a number >= 1 (static friction mu_s as a multiple of the kinetic mu; 1 = one "
+                             "coefficient)")
 
 
 def contact_params_for(params: ContactParams, contact_cfg, tissue) -> ContactParams:

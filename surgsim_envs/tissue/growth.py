@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse.linalg as spla
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, GrowthDivergedError, GrowthNotConvergedError
 from surgsim_envs.geometry.volume import tet_signed_volumes
 from surgsim_envs.tissue.nested_dissection import dof_order, nested_dissection, node_adjacency
@@ -119,15 +120,13 @@ def mesh_volume(positions: np.ndarray, tets: np.ndarray) -> float:
     return float(np.sum(tet_signed_volumes(positions, tets)))
 
 
+#: growth iterations one call may run (each is a back-substitution with the factored stiffness)
+MAX_GROWTH_ITERATIONS = 100_000
+
+
 def _check_number(name, value, *, minimum=None, exclusive=True, fix=""):
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a number, got {value!r}. {fix}") from None
-    if not math.isfinite(v) or (minimum is not None and (v <= minimum if exclusive else v < minimum)):
-        rel = ">" if exclusive else ">="
-        raise ConfigError(f"{name} must be a finite number {rel} {minimum}, got {value!r}. {fix}")
-    return v
+    lo = -math.inf if minimum is None else float(minimum)
+    return validate.real(value, name, lo=lo, lo_open=exclusive and minimum is not None, fix=fix)
 
 
 class GrowthSolver:
@@ -289,8 +288,8 @@ class GrowthSolver:
         tol = _check_number("tol", tol, minimum=0.0, fix="e.g. 1e-5 (relative growth per iteration)")
         if tol >= 1:
             raise ConfigError(f"tol must lie in (0, 1), got {tol!r}")
-        if not (isinstance(max_iter, (int, np.integer)) and not isinstance(max_iter, bool) and max_iter >= 1):
-            raise ConfigError(f"max_iter must be an integer >= 1, got {max_iter!r}")
+        validate.integer(max_iter, "max_iter", lo=1, hi=MAX_GROWTH_ITERATIONS,
+                         fix=f"iterations of the growth loop, at most {MAX_GROWTH_ITERATIONS:,} (each is a solve)")
         ops = self.ops
         t0 = time.perf_counter()
         self._factor()

@@ -29,6 +29,7 @@ import os
 from dataclasses import dataclass
 from typing import Any, Iterable
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 #: the shipped measured table (written by ``surgsim bench accuracy``; data only, no bench import)
@@ -76,9 +77,7 @@ def _valid(row: dict) -> bool:
 
 
 def _check_positive(key: str, val) -> None:
-    if not (isinstance(val, (int, float)) and not isinstance(val, bool) and math.isfinite(val) and val > 0):
-        raise ConfigError(f"{key} must be a positive number, got {val!r} "
-                          "(error_tolerance is a fraction like 0.1; step_budget_us in microseconds like 1000)")
+    validate.positive(val, key, fix="error_tolerance is a fraction like 0.1; step_budget_us in microseconds like 1000")
 
 
 def choose(error_tolerance: float, step_budget_us: float, scene: str = "indent", *,
@@ -117,12 +116,11 @@ def choose(error_tolerance: float, step_budget_us: float, scene: str = "indent",
 
 def check_resolution(resolution, what: str = "resolution") -> None:
     """Raise ConfigError unless ``resolution`` is None, ``"auto"`` or a spacing in m in (0, 0.1)."""
-    if resolution is None or resolution == "auto":
+    if resolution is None or (isinstance(resolution, str) and resolution == "auto"):
         return
-    if isinstance(resolution, str) or isinstance(resolution, bool) or not isinstance(resolution, (int, float)) \
-            or not (math.isfinite(resolution) and 0 < resolution < 0.1):
-        raise ConfigError(f"{what}={resolution!r} must be 'auto', a spacing in m between 0 and 0.1 (e.g. 0.005), "
-                          "or None for the default")
+    if not validate.is_real_number(resolution) or not 0 < resolution < 0.1:   # NaN fails the comparison
+        raise ConfigError(f"{what}={validate.short_repr(resolution)} must be 'auto', a spacing in m between 0 and "
+                          "0.1 (e.g. 0.005), or None for the default")
 
 
 def resolve_resolution(resolution, *, model: str | None = None, error_tolerance: float = 0.1,

@@ -1,0 +1,114 @@
+"""Hostile ``surgsim`` command lines: every flag either works or is refused with its name, the
+bound and the fix, before anything runs or is written (never a traceback, never a hang)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+pytest.importorskip("hypothesis", reason="hypothesis is in the [test] extra")
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+
+import fuzz_surfaces as fs  # noqa: E402
+from fuzz_harness import check  # noqa: E402
+from surgsim_envs.cli import main  # noqa: E402
+
+FAST = settings(max_examples=60, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+MORE = settings(max_examples=1500, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+
+
+@FAST
+@given(fs.cli_case())
+def test_fuzz_teleop_flags(case):
+    check(fs.run_teleop_flags, case, timeout_s=20)
+
+
+@pytest.mark.slow
+@MORE
+@given(fs.cli_case())
+def test_fuzz_teleop_flags_more(case):
+    check(fs.run_teleop_flags, case, timeout_s=20)
+
+
+@FAST
+@given(fs.growth_case())
+def test_fuzz_bench_growth_flags(case):
+    check(fs.run_growth_flags, case, timeout_s=20, names=(case[0],))
+
+
+def _run(argv, capsys):
+    code = main(argv)
+    return code, capsys.readouterr().err
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--seed", "-1"], r"--seed=-1 is outside \[0, "),
+    (["--size", "0", "0"], r"--size W=0 px is outside \[16, 4,096\]"),
+    (["--fps", "inf"], "--fps=inf Hz must be finite"),
+    (["--rate", "1e9"], r"--rate=1000000000.0 Hz is outside \(0, 10000\] Hz"),
+    (["--tremor", "1e9"], r"--tremor=1000000000.0 m is outside \[0, 0.01\] m"),
+    (["--device", "udp:1"], "PORT must be an integer in 1024..65535"),
+    (["--duration", "1e12"], r"--duration=1000000000000.0 s is outside \(0, 3600\] s"),
+    (["--spacing", "1e-6"], r"--spacing=1e-06 m is outside \[0.002, 0.05\] m"),
+])
+def test_teleop_refuses_before_building_the_scene(flags, message, capsys, tmp_path):
+    code, err = _run(["teleop", "palpation", "--headless", "--out", str(tmp_path), *flags], capsys)
+    assert code == 2
+    assert "building the" not in capsys.readouterr().out      # refused up front
+    import re
+    assert re.search(message, err), err
+
+
+def test_teleop_refuses_a_malformed_or_endless_script(tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"waypoints": [[0, 0, 0]')
+    code, err = _run(["teleop", "palpation", "--headless", "--out", str(tmp_path), "--script", str(bad)], capsys)
+    assert code == 2 and "not valid JSON" in err, err
+    listed = tmp_path / "list.json"
+    listed.write_text("[1, 2]")
+    code, err = _run(["teleop", "palpation", "--headless", "--out", str(tmp_path), "--script", str(listed)], capsys)
+    assert code == 2 and "expected a trajectory object" in err, err
+    endless = tmp_path / "endless.json"       # 1 cm at 1e-12 m/s: 1e10 s
+    endless.write_text(json.dumps({"waypoints": [[0, 0, 0], [0.01, 0, 0]], "speeds": [1e-12], "dwell": [0, 0]}))
+    code, err = _run(["teleop", "palpation", "--headless", "--out", str(tmp_path), "--script", str(endless)], capsys)
+    assert code == 2 and "lasts 1e+10 s, above the 3600 s" in err and "--duration" in err, err
+
+
+def test_bench_growth_refuses_a_billion_nodes(capsys, tmp_path):
+    code, err = _run(["bench", "growth", "--nodes", "1000000000", "--out", str(tmp_path)], capsys)
+    assert code == 2 and r"--nodes=1000000000 is outside [100, 200,000]" in err, err
+    assert not any(tmp_path.iterdir())
+
+
+def test_bench_stability_typo_leaves_the_previous_map(capsys, tmp_path):
+    (tmp_path / "stability.json").write_text('[{"kept": true}]')
+    code, err = _run(["bench", "stability", "--models", "bogus", "--quick", "--out", str(tmp_path)], capsys)
+    assert code == 2 and "unknown model(s) ['bogus']" in err and "nothing was written" in err, err
+    assert json.loads((tmp_path / "stability.json").read_text()) == [{"kept": True}]
+    code, err = _run(["bench", "stability", "--models", ",", "--out", str(tmp_path)], capsys)
+    assert code == 2 and "unknown model(s) []" in err, err
+
+
+def test_material_relax_refuses_a_hold_of_1e9_seconds(capsys):
+    code, err = _run(["material", "relax", "--model", "mass_spring", "--hold-time", "1e9"], capsys)
+    assert code == 2 and "relax: ramp_time + hold_time = 1e+09 s" in err and "shorten hold_time" in err, err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["bench", "envs", "--steps", "1000000000000"], r"--steps=1000000000000 is outside \[1, 1,000,000\]"),
+    (["bench", "envs", "--workers", "-1"], r"--workers=-1 is outside \[0, 1,024\]"),
+    (["bench", "layers", "--steps", "1000000000000"], r"--steps=1000000000000 is outside \[1, 1,000,000\]"),
+])
+def test_bench_step_counts_are_bounded(argv, message, capsys):
+    import re
+
+    code, err = _run(argv, capsys)
+    assert code == 2 and re.search(message, err), err
+
+
+def test_bench_speed_steps_are_bounded_by_argparse(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "speed", "--steps", "1000000000000"])
+    assert exc.value.code == 2
+    assert "expected a positive integer of at most 1,000,000" in capsys.readouterr().err
