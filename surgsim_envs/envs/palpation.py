@@ -253,6 +253,7 @@ class PalpationEnv(SurgSimEnv):
 
     def _build(self) -> None:
         from surgsim_envs.scene import Simulation, palpation_config, palpation_scene
+        from surgsim_envs.tissue.registry import get as model_class
 
         c = self.config
         cfg = palpation_config(organ="slab")
@@ -261,7 +262,11 @@ class PalpationEnv(SurgSimEnv):
         t.resolution, t.error_tolerance, t.step_budget_us = c.resolution, c.error_tolerance, c.step_budget_us
         t.material = c.material
         t.model = c.model
-        t.options = tissue_options(c.model, c.integrator)
+        # the probe tip (10 mm) presses about one lattice spacing of surface: a concentrated load, so the
+        # model is built with the options it declares for one (``TissueModel.point_load_options``; a model
+        # from outside the package may not declare any)
+        t.options = {**tissue_options(c.model, c.integrator),
+                     **getattr(model_class(c.model), "point_load_options", {})}
         t.region_materials = None
         t.volume_options = {"size": tuple(float(s) for s in c.slab_size)}
         t.position = (0.0, 0.0, float(c.slab_size[2]) / 2.0)
