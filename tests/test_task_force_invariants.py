@@ -189,8 +189,8 @@ def test_default_model_force_rises_with_depth_over_the_inclusion():
 def test_default_model_stiffer_inclusion_raises_the_force_above_it():
     """The reported case (5x inclusion, r 7 mm, 11 mm deep, 8 mm press over it): the reference ``fem``
     reads about twice the contrast-1 force there (the slow test measures it); the plain spring network
-    read 0.66x (its surface node over the stiff column snapped sideways off the probe,
-    docs/models/mass_spring.md)."""
+    (``volume_stiffness=None``) reads 0.66x: its surface node over the stiff column snaps sideways off
+    the probe (docs/models/mass_spring.md)."""
     ratio = contrast_ratio(DEFAULT_MODEL)
     assert ratio > 1.5, f"{DEFAULT_MODEL}: 5x inclusion reads {ratio:.3f}x the homogeneous force above it"
 
