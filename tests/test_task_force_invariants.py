@@ -76,7 +76,8 @@ def _run(env, target, duration: float, speed: float | None = None, trace: list |
     into ``trace`` if given."""
     u = env.unwrapped
     sim = u.sim
-    sim.set_tool_target("probe", np.asarray(target, dtype=float), speed=u.config.probe_speed if speed is None else speed)
+    speed = u.config.probe_speed if speed is None else speed
+    sim.set_tool_target("probe", np.asarray(target, dtype=float), speed=speed)
     steps = int(round(duration / sim.dt))
     if trace is None:
         sim.physics_step(steps)
