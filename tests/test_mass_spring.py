@@ -9,7 +9,7 @@ import scipy.sparse.linalg as spla
 from surgsim_envs import tissue
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.geometry import Volume, box_volume
-from surgsim_envs.tissue.mass_spring import MassSpringModel
+from surgsim_envs.tissue.mass_spring import CAPPED_POISSON, MassSpringModel
 
 
 def _faces(vol):
@@ -349,8 +349,11 @@ def test_volume_term_auto_gives_the_material_poisson_ratio_and_modulus(poisson):
     mat = _elastic(poisson=poisson, relax_fraction=0.0, nonlinear=0.0)
     e_plain, nu_plain = _uniaxial(MassSpringModel(vol, mat), vol)
     e_auto, nu_auto = _uniaxial(MassSpringModel(vol, mat, volume_stiffness="auto"), vol)
+    e_capped, nu_capped = _uniaxial(MassSpringModel(vol, mat, volume_stiffness="capped"), vol)
     assert nu_plain < 0.1                              # the bare network barely bulges
     assert abs(nu_auto - poisson) < 0.05 and abs(e_auto - 1.0) < 0.1
+    # "capped" (the point-load option): the material's E, its Poisson ratio up to the cap (0.123), not more
+    assert abs(nu_capped - CAPPED_POISSON) < 0.03 and abs(e_capped - 1.0) < 0.05
     # a fixed k_v leaves the springs alone and only adds bulk stiffness
     e_kv, nu_kv = _uniaxial(MassSpringModel(vol, mat, volume_stiffness=2.0 * mat.young), vol)
     assert nu_kv > nu_plain + 0.2 and e_kv > e_plain
@@ -394,6 +397,25 @@ def test_volume_term_conserves_energy_undamped_and_lowers_critical_dt():
     assert m.active_integrator == "symplectic"
     assert np.max(np.abs(e - e0)) < 0.1 * e0
     assert abs(e[-500:].mean() - e[:500].mean()) < 0.005 * e0
+
+
+@pytest.mark.parametrize("preset", ["liver", "silicone"])
+def test_capped_volume_term_keeps_the_plain_networks_explicit_limit(preset):
+    """"capped" raises the network's Poisson ratio only as far as its P-wave modulus allows: the exact
+    explicit limit 2 / sqrt(lambda_max(M^-1 K)) stays within 3 % of the plain network's; "auto"
+    (liver nu 0.45, silicone 0.49) shortens it 2-16x. The rest state stores no volume energy."""
+    vol = box_volume((0.03, 0.03, 0.03), 0.01)
+    mat = tissue.get_material(preset).replace(relax_fraction=0.0)
+
+    def exact_limit(m):
+        K = m.stiffness_matrix().toarray()
+        minv = 1.0 / np.sqrt(np.repeat(m.masses, 3))
+        return 2.0 / math.sqrt(np.linalg.eigvalsh(minv[:, None] * K * minv[None, :]).max())
+
+    plain, capped, auto = (MassSpringModel(vol, mat, volume_stiffness=v) for v in (None, "capped", "auto"))
+    assert exact_limit(capped) >= 0.97 * exact_limit(plain)
+    assert exact_limit(auto) < 0.5 * exact_limit(plain)
+    assert capped.volume_energy() == 0.0
 
 
 def test_volume_term_critical_dt_bounds_the_explicit_limit():

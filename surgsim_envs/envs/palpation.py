@@ -256,6 +256,23 @@ def _normalised(k: np.ndarray) -> np.ndarray:
     return k / top if top > 0 else np.zeros_like(k)
 
 
+def column_contrast(points: np.ndarray, centre, radius: float, contrast: float, bottom: float) -> np.ndarray:
+    """(P,) stiffness factor of the vertical tissue column from height ``bottom`` (m) up to each point of
+    ``points`` (P, 3) m, with a sphere (``centre`` (3,) m, ``radius`` m) ``contrast`` times stiffer than
+    the rest: the series (Reuss) average over the column, ``h / ((h - l) + l / contrast)`` with h the
+    column's height and l the length of it inside the sphere (1 where h = 0 or the column misses it)."""
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    c = np.asarray(centre, dtype=float)
+    half = np.sqrt(np.clip(radius ** 2 - ((p[:, :2] - c[:2]) ** 2).sum(axis=1), 0.0, None))
+    top = p[:, 2]
+    inside = np.clip(np.minimum(c[2] + half, top) - np.maximum(c[2] - half, bottom), 0.0, None)
+    h = top - bottom
+    out = np.ones(len(p))
+    ok = h > 0
+    out[ok] = h[ok] / ((h[ok] - inside[ok]) + inside[ok] / contrast)
+    return out
+
+
 def localisation_error(guess_xy: np.ndarray, true_xy: np.ndarray) -> float:
     """m, planar distance from the guess to the inclusion centre."""
     return float(np.hypot(*(np.asarray(guess_xy, dtype=float) - np.asarray(true_xy, dtype=float))))
@@ -277,6 +294,7 @@ class PalpationEnv(SurgSimEnv):
 
     def _build(self) -> None:
         from surgsim_envs.scene import Simulation, palpation_config, palpation_scene
+        from surgsim_envs.tissue.registry import get as model_class
 
         c = self.config
         cfg = palpation_config(organ="slab")
@@ -285,7 +303,11 @@ class PalpationEnv(SurgSimEnv):
         t.resolution, t.error_tolerance, t.step_budget_us = c.resolution, c.error_tolerance, c.step_budget_us
         t.material = c.material
         t.model = c.model
-        t.options = tissue_options(c.model, c.integrator)
+        # the probe tip (10 mm) presses about one lattice spacing of surface: a concentrated load, so the
+        # model is built with the options it declares for one (``TissueModel.point_load_options``; a model
+        # from outside the package may not declare any)
+        t.options = {**tissue_options(c.model, c.integrator),
+                     **getattr(model_class(c.model), "point_load_options", {})}
         t.region_materials = None
         t.volume_options = {"size": tuple(float(s) for s in c.slab_size)}
         t.position = (0.0, 0.0, float(c.slab_size[2]) / 2.0)
@@ -346,8 +368,13 @@ class PalpationEnv(SurgSimEnv):
         scale = sample(rng, get("young_scale"), "young_scale", 0.1, 10.0)
         centre = np.array([x, y, self.surface_z - depth])
         tissue = self.sim.tissue()
-        tissue.scale_material("young", scale)             # the contract's only way to change stiffness
-        tissue.scale_material("young", scale * contrast, mask=sphere_mask(self.centroids, centre, radius))
+        if "surface_only" in getattr(tissue, "capabilities", ()):
+            # a surface-only model's elements are its surface nodes, each standing for the column of tissue
+            # under it: the inclusion reaches it as that column's series stiffness (the sphere lies below)
+            tissue.scale_material("young", scale * column_contrast(self.centroids, centre, radius, contrast, 0.0))
+        else:
+            tissue.scale_material("young", scale)             # the contract's only way to change stiffness
+            tissue.scale_material("young", scale * contrast, mask=sphere_mask(self.centroids, centre, radius))
         self.sim.reset(seed=int(rng.integers(2**31)))
         check_explicit_step(tissue, self.sim.dt, f"Palpation: stiffness contrast {contrast:.2f} x young_scale "
                                                  f"{scale:.2f}")

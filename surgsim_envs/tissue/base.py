@@ -98,6 +98,9 @@ class TissueModel(abc.ABC):
     material_fields: ClassVar[tuple[str, ...]] = ()
     #: names of the per-node scalar fields :meth:`node_fields` returns
     node_field_names: ClassVar[tuple[str, ...]] = ("displacement", "stress")
+    #: constructor options the model needs where a tool presses a concentrated load into it (a probe
+    #: tip about one lattice spacing wide): scenes that do so build it with these (tissue contract v2)
+    point_load_options: ClassVar[Mapping[str, Any]] = {}
     #: derived from ``capabilities`` ("surface_only"); kept as attributes for the base-class logic
     surface_only: ClassVar[bool] = False
     #: derived from ``capabilities`` ("quasi_static")

@@ -19,7 +19,7 @@ Docs: docs/models/mass_spring_calibrated.md.
 from __future__ import annotations
 
 import math
-from typing import ClassVar
+from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
@@ -89,6 +89,8 @@ class CalibratedMassSpringModel(MassSpringModel):
     #: external forces (n re-evaluated with critical_dt(), as "auto" does); "auto" takes it instead of
     #: "implicit" while n <= MAX_SUBCYCLES and the contact stiffness alone is stable at dt
     integrators: ClassVar[tuple[str, ...]] = ("symplectic", "implicit", "subcycled")
+    #: the calibrated volume term already keeps tets under a concentrated load from collapsing
+    point_load_options: ClassVar[Mapping[str, Any]] = {}
 
     def __init__(self, volume, material="liver", *, integrator=None, K2=None, b0=None, b1=None,
                  mass_scaling: float | None = MASS_SCALING_RATIO, **base_kwargs):

@@ -19,12 +19,20 @@ The instantaneous small-strain constant comes from Young's modulus of the tets a
 ``k_ij = c * sum_{t ∋ ij} E_t V_t / L0_ij^2`` with ``c = 1`` (an isotropic spread of edge directions
 then gives exactly Young's modulus E with Poisson ratio 1/4; on the Kuhn box lattice it gives
 1.034 E with nu ~ 0.03 — a spring network cannot represent an arbitrary Poisson ratio).
+
+The plain network (paper 002, the default) lets the tets under a node that carries a concentrated
+load collapse flat: over a stiff inclusion the surface node under a palpation probe snaps sideways
+off the tip and the probe reads less force than beside it. ``volume_stiffness="capped"`` (the model's
+``point_load_options``, which the palpation tasks build it with) adds a per-tet volume term: springs
+scaled and ``k_v`` set so that the small-strain modulus is E and the Poisson ratio min(nu,
+CAPPED_POISSON = 0.123), the largest whose P-wave modulus (which sets the explicit step) is the plain
+network's. See docs/models/mass_spring.md.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Mapping
 
 import numpy as np
 from numba import njit
@@ -46,6 +54,13 @@ NETWORK_POISSON = 0.03
 #: network Lame constants per unit E: mu_n = E_n / (2 (1 + nu_n)), lambda_n = E_n nu_n / ((1 + nu_n)(1 - 2 nu_n))
 NETWORK_SHEAR_FACTOR = NETWORK_YOUNG_FACTOR / (2.0 * (1.0 + NETWORK_POISSON))
 NETWORK_LAMBDA_FACTOR = NETWORK_YOUNG_FACTOR * NETWORK_POISSON / ((1.0 + NETWORK_POISSON) * (1.0 - 2.0 * NETWORK_POISSON))
+#: P-wave modulus lambda_n + 2 mu_n of the plain network per unit E (it sets the explicit step's limit)
+NETWORK_PWAVE_FACTOR = NETWORK_LAMBDA_FACTOR + 2.0 * NETWORK_SHEAR_FACTOR
+#: the largest Poisson ratio whose P-wave modulus E (1 - nu) / ((1 + nu)(1 - 2 nu)) does not exceed the plain
+#: network's (the root of 2 m nu^2 + (m - 1) nu - (m - 1) = 0, m = NETWORK_PWAVE_FACTOR): the default volume
+#: term ("capped") matches the material's E and min(nu, CAPPED_POISSON) without shortening the explicit step
+CAPPED_POISSON = (-(NETWORK_PWAVE_FACTOR - 1.0) + math.sqrt((NETWORK_PWAVE_FACTOR - 1.0) ** 2
+                  + 8.0 * NETWORK_PWAVE_FACTOR * (NETWORK_PWAVE_FACTOR - 1.0))) / (4.0 * NETWORK_PWAVE_FACTOR)
 #: relative residual at which the implicit step's conjugate gradients stop
 CG_TOLERANCE = 1e-6
 #: iteration cap of the implicit step's conjugate gradients
@@ -100,8 +115,8 @@ class MassSpringModel(TissueModel):
 
     Parameters
     ----------
-    volume, material: see :class:`TissueModel`. Per-tet fields (``self.fields``) set the springs,
-        so region materials (inclusions) make the springs around them stiffer.
+    volume, material: see :class:`TissueModel`. Per-tet fields (``self.fields``) set the springs
+        and the volume term, so region materials (inclusions) make the springs and tets around them stiffer.
     integrator: "auto" (default: "symplectic" while dt <= :meth:`stable_dt` (DT_SAFETY x critical_dt), else
         "implicit"; see :meth:`TissueModel.choose_integrator`), "symplectic" (semi-implicit Euler,
         explicit: dt < :meth:`critical_dt`) or "implicit" (backward Euler, one Newton step,
@@ -114,10 +129,12 @@ class MassSpringModel(TissueModel):
         ``relax_fraction > 0`` (the branch spring ``kM = g1/(1-g1) K1``).
     The overrides may also come from ``material.extra`` ({"K1": ..., ...}); keywords win.
     volume_stiffness: optional per-tet volume-preservation term (Teschner et al. 2004),
-        ``E_t = 0.5 k_v (V - V0)^2 / V0``: None (off, the default: a plain spring network),
-        a number k_v >= 0 in Pa (springs unchanged), or "auto": springs scaled by
-        mu / mu_network and k_v = lambda - scale * lambda_network per tet, so that the network's
-        small-strain (E, nu) on the box lattice match the material's (see docs/models/mass_spring.md).
+        ``E_t = 0.5 k_v (V - V0)^2 / V0``: None (off, the default: paper 002's plain spring network,
+        whose tets under a concentrated load can collapse flat), a number k_v >= 0 in Pa (springs
+        unchanged), "auto" or "capped": springs scaled by mu / mu_network and k_v = lambda - scale *
+        lambda_network per tet, so that the network's small-strain (E, nu) on the box lattice match the
+        material's E and its nu ("auto") or min(nu, CAPPED_POISSON) ("capped": the explicit step's limit
+        stays the plain network's; ``point_load_options``). See docs/models/mass_spring.md.
     **base_kwargs: region_materials, fixed, gravity, guard (see :class:`TissueModel`).
     """
 
@@ -131,6 +148,9 @@ class MassSpringModel(TissueModel):
         {"forces", "unstructured_mesh", "implicit_contact", "viscoelastic", "static_solve"})
     material_fields: ClassVar[tuple[str, ...]] = ("young", "poisson", "density", "damping", "relax_fraction",
                                                   "relax_time", "nonlinear")
+    #: a probe pressing one surface node collapses the plain network's tets (module docstring): the
+    #: capped volume term keeps them, at the plain network's explicit step
+    point_load_options: ClassVar[Mapping[str, Any]] = {"volume_stiffness": "capped"}
 
     def __init__(self, volume, material="liver", *, integrator=None, springs="edges",
                  K1=None, K2=None, b0=None, b1=None, volume_stiffness=None, cg_tol: float = CG_TOLERANCE,
@@ -194,7 +214,7 @@ class MassSpringModel(TissueModel):
         def mean(field: str) -> np.ndarray:
             return np.bincount(edge_of, weights=w * np.repeat(f[field], 6), minlength=ne) / wsum
 
-        if self.volume_stiffness == "auto":   # springs carry the material's shear modulus only
+        if self.volume_stiffness in ("auto", "capped"):   # springs carry the shear modulus only
             wk = np.bincount(edge_of, weights=np.repeat(w_tet * self._shear_scale, 6), minlength=ne)
         else:
             wk = wsum
@@ -259,24 +279,27 @@ class MassSpringModel(TissueModel):
             self.volume_rest = np.ones(0)
             return
         if isinstance(volume_stiffness, str):
-            if volume_stiffness != "auto":
-                raise ConfigError(f"mass_spring: volume_stiffness={volume_stiffness!r} must be None (off), 'auto' "
-                                  "(match the material's Poisson ratio) or a stiffness k_v >= 0 in Pa")
+            if volume_stiffness not in ("auto", "capped"):
+                raise ConfigError(f"mass_spring: volume_stiffness={volume_stiffness!r} must be None (off), 'auto' (the "
+                                  "material's E and Poisson ratio), 'capped' (its E and Poisson ratio up to "
+                                  f"{CAPPED_POISSON:.3f}) or a stiffness k_v >= 0 in Pa")
             E, nu = self.fields["young"], self.fields["poisson"]
             if np.any(nu >= 0.5) or np.any(nu <= -1.0):
-                raise ConfigError("mass_spring: volume_stiffness='auto' needs -1 < poisson < 0.5 in every region")
+                raise ConfigError(f"mass_spring: volume_stiffness={volume_stiffness!r} needs -1 < poisson < 0.5 in "
+                                  "every region")
+            if volume_stiffness == "capped":
+                nu = np.minimum(nu, CAPPED_POISSON)
             mu = E / (2.0 * (1.0 + nu))
             lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
             self._shear_scale = mu / (NETWORK_SHEAR_FACTOR * E)
             kv = np.maximum(lam - self._shear_scale * NETWORK_LAMBDA_FACTOR * E, 0.0)
-            self.volume_stiffness = "auto"
+            self.volume_stiffness = volume_stiffness
         else:
             value = _check_scalar("volume_stiffness", volume_stiffness, positive=False)
             kv = np.full(nt, value)
             self.volume_stiffness = value
-        x = self.rest_positions
-        e = x[tets[:, 1:]] - x[tets[:, :1]]
-        v0 = np.linalg.det(e) / 6.0
+        v0 = np.empty(nt)     # by the energy kernel's arithmetic: the rest state is exactly unloaded
+        kern.tet_volumes(np.ascontiguousarray(self.rest_positions, dtype=np.float64), tets, v0)
         if np.any(v0 <= 0):
             raise ConfigError(f"mass_spring: volume '{self.volume.name}' has {int(np.sum(v0 <= 0))} tets with "
                               "non-positive rest volume; the volume term needs positively oriented tets")

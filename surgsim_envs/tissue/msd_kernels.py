@@ -140,9 +140,19 @@ def volume_forces(pos, tets, V0, kv, f_out):
         f_out[a, 2] -= k * (g12 + g22 + g32)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True)
+def tet_volumes(pos, tets, out):
+    """Signed tet volumes (m^3) into ``out`` (T,), by the arithmetic of :func:`volume_energy` (strict IEEE:
+    rest volumes taken with it make the rest state's volume energy exactly 0 in every caller)."""
+    g = np.empty((4, 3))
+    for t in range(tets.shape[0]):
+        out[t] = _tet_volume_gradient(pos, tets, t, g)
+
+
+@njit(cache=True)
 def volume_energy(pos, tets, V0, kv):
-    """Volume-term energy (J): sum over tets of 0.5 kv (V - V0)^2 / V0."""
+    """Volume-term energy (J): sum over tets of 0.5 kv (V - V0)^2 / V0 (strict IEEE, no fastmath: the
+    same sum wherever it is compiled, e.g. the guard's energy reference in the scene's compiled loop)."""
     g = np.empty((4, 3))
     energy = 0.0
     for t in range(tets.shape[0]):

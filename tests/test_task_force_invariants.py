@@ -1,0 +1,316 @@
+"""Task-level force invariants in the palpation scene (Palpation-v0; PalpationPress-v0 builds the same
+scene), for every registered tissue model the task accepts.
+
+Each check drives the task's own scene (``env.unwrapped.sim``): the probe hovers 2 mm above a site,
+descends at the task's probe speed to a depth below the rest surface, and is held there; the
+quasi-static force is the mean F_z on the probe over the last 50 ms of the hold.
+
+* contact is unilateral: frictionless, the tissue never pulls the probe towards itself (F_z >= 0 on
+  a probe pressed from above), at any physics step of a press, its hold and the retraction;
+* the force rises with depth at one site;
+* a stiffer inclusion never lowers the force above it (contrast C against contrast 1, the same
+  press), and raises it where the reference (``fem``) does;
+* frictionless, the quasi-static force at a pose does not depend on how the probe got there
+  (straight down, or down beside the site and slid in at depth), within 2 %.
+
+The default model runs in the default test run (one case per invariant); every model under
+``-m slow``. Models the task refuses (capability) are skipped by name.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import surgsim_envs  # noqa: F401  (registers the tasks)
+from surgsim_envs import tissue
+from surgsim_envs.envs.palpation import PalpationConfig, column_contrast
+
+TASK = "SurgSim/Palpation-v0"
+DEFAULT_MODEL = PalpationConfig.model
+#: the reported case: 5x inclusion of radius 7 mm, centre 11 mm deep under (0.02, 0), seed 5
+INCLUSION = {"inclusion_position": (0.02, 0.0), "inclusion_depth": (0.011, 0.011),
+             "inclusion_radius": (0.007, 0.007)}
+SEED = 5
+#: materials: the liver preset frictionless (the contact-only invariants); elastic as well for the path
+#: test (the liver's Maxwell branches remember the path, which is physics, not contact)
+FRICTIONLESS = {"preset": "liver", "friction": 0.0}
+FRICTIONLESS_ELASTIC = {"preset": "liver", "friction": 0.0, "relax_fraction": 0.0}
+HOVER = 0.002          # m above the rest surface before a press
+READ_WINDOW = 0.05     # s, the quasi-static reading averages F_z over this
+#: numerical allowance of "never lowers": a contrast-1 and a contrast-C press read within this
+#: fraction of each other when the inclusion is too deep to matter
+NEVER_LOWER_SLACK = 0.01
+
+
+def _accepted_models() -> list:
+    """Every registered model, those Palpation-v0 refuses (a capability it lacks) marked skip by name."""
+    from surgsim_envs.envs.palpation import PalpationEnv
+
+    out = []
+    for name in tissue.names():
+        caps = tissue.registry.get(name).capabilities
+        needed = list(PalpationEnv.REQUIRES) + (["implicit_contact"] if "quasi_static" in caps else [])
+        missing = [c for c in needed if c not in caps]
+        if missing:
+            out.append(pytest.param(name, marks=pytest.mark.skip(reason=f"{TASK} refuses {name}: no {missing[0]!r}")))
+        else:
+            out.append(name)
+    return out
+
+
+def _env(model: str, material=None):
+    kw = {"model": model}
+    if material is not None:
+        kw["material"] = material
+    return gym.make(TASK, **kw)
+
+
+def _reset(env, contrast: float, seed: int = SEED, **options):
+    env.reset(seed=seed, options={**INCLUSION, "stiffness_contrast": (contrast, contrast), **options})
+
+
+def _run(env, target, duration: float, speed: float | None = None, trace: list | None = None) -> None:
+    """Move the probe target to ``target`` (m) and advance ``duration`` s; F_z of every physics step
+    into ``trace`` if given."""
+    u = env.unwrapped
+    sim = u.sim
+    speed = u.config.probe_speed if speed is None else speed
+    sim.set_tool_target("probe", np.asarray(target, dtype=float), speed=speed)
+    steps = int(round(duration / sim.dt))
+    if trace is None:
+        sim.physics_step(steps)
+        return
+    for _ in range(steps):
+        sim.physics_step(1)
+        trace.append(float(sim.tool_force("probe")[2]))
+
+
+def _tip_z(env, depth: float) -> float:
+    """Tip-centre height (m) with the tip's lowest point ``depth`` m below the rest surface."""
+    u = env.unwrapped
+    return u.surface_z + u.config.tip_radius - depth
+
+
+def _reading(env) -> float:
+    """Quasi-static F_z (N): mean over the next READ_WINDOW s with the target held."""
+    trace: list = []
+    sim = env.unwrapped.sim
+    for _ in range(int(round(READ_WINDOW / sim.dt))):
+        sim.physics_step(1)
+        trace.append(float(sim.tool_force("probe")[2]))
+    return float(np.mean(trace))
+
+
+def press_force(env, site, depth: float, hold: float = 0.5, trace: list | None = None) -> float:
+    """Straight-down press at ``site`` (x, y) m to ``depth`` m, held ``hold`` s: the quasi-static F_z (N)."""
+    x, y = site
+    _run(env, (x, y, _tip_z(env, -HOVER)), 0.35, trace=trace)          # over the site, 2 mm above
+    descend = (depth + HOVER) / env.unwrapped.config.probe_speed
+    _run(env, (x, y, _tip_z(env, depth)), descend + hold, trace=trace)
+    return _reading(env)
+
+
+def slide_in_force(env, site, depth: float, offset: float = 0.008, slide_speed: float = 0.02,
+                   hold: float = 0.5) -> float:
+    """Press ``offset`` m beside ``site`` (-x) to ``depth``, slide in at depth at ``slide_speed`` m/s, hold."""
+    x, y = site
+    _run(env, (x - offset, y, _tip_z(env, -HOVER)), 0.35)
+    _run(env, (x - offset, y, _tip_z(env, depth)), (depth + HOVER) / env.unwrapped.config.probe_speed + 0.05)
+    _run(env, (x, y, _tip_z(env, depth)), offset / slide_speed, speed=slide_speed)
+    _run(env, (x, y, _tip_z(env, depth)), hold)
+    return _reading(env)
+
+
+# ----------------------------------------------------------------------------------------------
+# the invariants, one function each (model in, assertion out)
+def check_unilateral(model: str, site=(0.02, 0.0), depth: float = 0.008) -> None:
+    env = _env(model, FRICTIONLESS)
+    _reset(env, 5.0)
+    trace: list = []
+    f = press_force(env, site, depth, trace=trace)
+    x, y = site
+    _run(env, (x, y, _tip_z(env, -HOVER)), (depth + HOVER) / env.unwrapped.config.probe_speed + 0.2, trace=trace)
+    env.close()
+    trace = np.asarray(trace)
+    assert f > 0.0, f"{model}: a press {depth * 1e3:.0f} mm deep reads {f:.4f} N"
+    # the only force on a probe pressed from above onto a flat slab is the tissue pushing it up
+    assert trace.min() >= -1e-9 * max(f, 1e-3), (
+        f"{model}: frictionless contact pulls the probe towards the tissue: F_z = {trace.min():.4g} N at physics "
+        f"step {int(trace.argmin())} of the press, hold and retraction")
+    assert trace[-1] == 0.0, f"{model}: the retracted probe (2 mm above the rest surface) still reads {trace[-1]:.4g} N"
+
+
+def check_depth_monotone(model: str, site=(0.02, 0.0), depths=(0.002, 0.004, 0.006, 0.008)) -> list:
+    env = _env(model)
+    forces = []
+    for d in depths:
+        _reset(env, 5.0)
+        forces.append(press_force(env, site, d))
+    env.close()
+    assert all(b > a for a, b in zip(forces, forces[1:])), (
+        f"{model}: force at {site} m against depth {[round(d * 1e3) for d in depths]} mm: "
+        f"{[round(f, 4) for f in forces]} N does not rise")
+    return forces
+
+
+def contrast_ratio(model: str, site=(0.02, 0.0), depth: float = 0.008, contrast: float = 5.0) -> float:
+    """F(contrast) / F(contrast 1) of the same press over the inclusion."""
+    env = _env(model)
+    _reset(env, contrast)
+    stiff = press_force(env, site, depth)
+    _reset(env, 1.0)
+    plain = press_force(env, site, depth)
+    env.close()
+    return stiff / plain
+
+
+def path_difference(model: str, site=(0.02, 0.0), depth: float = 0.005) -> tuple[float, float]:
+    """(straight-down, slid-in) quasi-static forces (N), frictionless and elastic; same total time."""
+    env = _env(model, FRICTIONLESS_ELASTIC)
+    _reset(env, 5.0)
+    straight = press_force(env, site, depth, hold=0.5 + 0.008 / 0.02 + 0.05)
+    _reset(env, 5.0)
+    slid = slide_in_force(env, site, depth)
+    env.close()
+    return straight, slid
+
+
+# ----------------------------------------------------------------------------------------------
+# default run: the default model, one case each
+def test_default_model_contact_is_unilateral_through_press_and_retraction():
+    check_unilateral(DEFAULT_MODEL)
+
+
+def test_default_model_force_rises_with_depth_over_the_inclusion():
+    check_depth_monotone(DEFAULT_MODEL, depths=(0.003, 0.0055, 0.008))
+
+
+def test_default_model_stiffer_inclusion_raises_the_force_above_it():
+    """The reported case (5x inclusion, r 7 mm, 11 mm deep, 8 mm press over it): the reference ``fem``
+    reads about twice the contrast-1 force there (the slow test measures it); the plain spring network
+    (``volume_stiffness=None``) reads 0.66x: its surface node over the stiff column snaps sideways off
+    the probe (docs/models/mass_spring.md)."""
+    ratio = contrast_ratio(DEFAULT_MODEL)
+    assert ratio > 1.5, f"{DEFAULT_MODEL}: 5x inclusion reads {ratio:.3f}x the homogeneous force above it"
+
+
+def test_default_model_frictionless_force_does_not_depend_on_the_path():
+    straight, slid = path_difference(DEFAULT_MODEL)
+    assert abs(slid - straight) <= 0.02 * straight, (
+        f"{DEFAULT_MODEL}: straight down {straight:.4f} N, slid in at depth {slid:.4f} N")
+
+
+# ----------------------------------------------------------------------------------------------
+# -m slow: every model the task accepts
+MODELS = _accepted_models()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", MODELS)
+def test_every_model_contact_is_unilateral(model):
+    check_unilateral(model)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("site", [(0.02, 0.0), (-0.02, 0.0)], ids=["over", "mirror"])
+def test_every_model_force_rises_with_depth(model, site):
+    check_depth_monotone(model, site)
+
+
+#: contrast cases: the reported one, a weak and a strong inclusion, a shallow press, a site off the lattice
+CONTRAST_CASES = [((0.02, 0.0), 0.008, 5.0), ((0.02, 0.0), 0.008, 2.0), ((0.02, 0.0), 0.006, 10.0),
+                  ((0.02, 0.0), 0.004, 5.0), ((0.017, 0.004), 0.008, 5.0)]
+
+
+@pytest.fixture(scope="module")
+def reference_ratios():
+    """``fem``'s contrast ratios of CONTRAST_CASES (the reference the invariant compares with)."""
+    return {case: contrast_ratio("fem", *case) for case in CONTRAST_CASES}
+
+
+#: models that fail the contrast invariant today, with the measured reason (strict: a fix must remove the mark)
+CONTRAST_XFAIL = {
+    "diffusion": "the surface-only model feels the inclusion (its column's series stiffness) too weakly: F(C=5) / "
+                 "F(C=1) = 1.13 (measured) over the reported inclusion where fem reads 2.09 (Palpation-v0, 8 mm "
+                 "press); PalpationPress-v0's 6 mm press 1.035 where fem reads 2.05",
+}
+
+
+def _marked(models, xfail: dict) -> list:
+    out = []
+    for m in models:
+        name = m.values[0] if hasattr(m, "values") else m
+        out.append(pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=xfail[name])) if name in xfail else m)
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", _marked(MODELS, CONTRAST_XFAIL))
+def test_every_model_stiffer_inclusion_never_lowers_and_raises_where_fem_does(model, reference_ratios):
+    for case in CONTRAST_CASES:
+        ratio = contrast_ratio(model, *case)
+        ref = reference_ratios[case]
+        assert ratio >= 1.0 - NEVER_LOWER_SLACK, f"{model}: {case} lowers the force above the inclusion: {ratio:.3f}x"
+        if ref > 1.2:   # the reference feels the inclusion: so must the model, by a third of its rise at least
+            assert ratio - 1.0 >= (ref - 1.0) / 3.0, f"{model}: {case} reads {ratio:.3f}x where fem reads {ref:.3f}x"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", MODELS)
+def test_every_model_frictionless_force_does_not_depend_on_the_path(model):
+    straight, slid = path_difference(model)
+    assert abs(slid - straight) <= 0.02 * straight, f"{model}: straight down {straight:.4f} N, slid in {slid:.4f} N"
+
+
+def press_task_samples(model: str) -> list:
+    """PalpationPress-v0's own stiffness samples (N/m) of one press over the reported inclusion, contrast 5 and 1."""
+    env = gym.make("SurgSim/PalpationPress-v0", model=model)
+    x, y = INCLUSION["inclusion_position"]
+    half = env.unwrapped.config.map_half_width
+    readings = []
+    for contrast in (5.0, 1.0):
+        _reset(env, contrast)
+        env.step(np.array([x / half, y / half, -1.0], dtype=np.float32))
+        readings.append(float(env.unwrapped.samples_k[-1]))
+    env.close()
+    return readings
+
+
+def test_palpation_press_shares_the_scene_and_its_inclusion_raises_the_press_force():
+    """PalpationPress-v0 builds Palpation-v0's scene: its own press (6 mm, held, averaged) over the
+    reported inclusion reads more than the same press with contrast 1."""
+    stiff, plain = press_task_samples(DEFAULT_MODEL)
+    assert stiff > 1.5 * plain, f"PalpationPress-v0 stiffness samples {stiff:.2f}, {plain:.2f} N/m (contrast 5, 1)"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", _marked(MODELS, CONTRAST_XFAIL))
+def test_palpation_press_inclusion_raises_the_press_force(model):
+    stiff, plain = press_task_samples(model)
+    assert stiff >= 1.2 * plain, f"{model}: PalpationPress-v0 samples {stiff:.2f}, {plain:.2f} N/m (contrast 5, 1)"
+
+
+def test_column_contrast_is_the_series_stiffness_of_the_column_under_a_point():
+    """A surface-only model's element is a surface point standing for the column below it: an
+    inclusion reaches it as the column's series (Reuss) stiffness h / ((h - l) + l / C)."""
+    pts = [[0.0, 0.0, 0.02], [0.003, 0.0, 0.02], [0.006, 0.0, 0.02], [0.0, 0.0, 0.0]]
+    f = column_contrast(pts, (0.0, 0.0, 0.01), 0.005, 4.0, 0.0)
+    # through the centre: z 5..15 mm inside, 10 of 20 mm: 20 / (10 + 10/4); 3 mm off-axis: chord 8 mm;
+    # 6 mm off-axis misses the sphere; a point on the bottom has no column
+    assert f == pytest.approx([20 / (10 + 2.5), 20 / (12 + 2.0), 1.0, 1.0], rel=1e-12)
+
+
+def test_the_inclusion_reaches_a_surface_only_model_in_palpation():
+    """The inclusion's contrast reaches the surface point above it as its column's series stiffness
+    (the volumetric mask would stiffen only the surface point nearest the centre: a fixed bottom node)."""
+    env = gym.make(TASK, model="diffusion")
+    _reset(env, 5.0, young_scale=(1.0, 1.0))
+    t = env.unwrapped.sim.tissue()
+    young = t.fields["young"]
+    above = int(np.argmin(np.linalg.norm(t.element_centroids() - [0.02, 0.0, 0.02], axis=1)))
+    env.close()
+    # column 20 mm, sphere r 7 mm at 11 mm depth: 14 mm inside, 20 / (6 + 14 / 5)
+    assert young[above] / np.median(young) == pytest.approx(20 / (6 + 14 / 5), rel=1e-9)
