@@ -421,3 +421,10 @@ def test_teleop_headless_writes_video_and_force_log(tmp_path, capsys):
     stats = json.loads((out / "stats.json").read_text())
     assert stats["task"] == "palpation" and stats["ticks"] == pytest.approx(len(log), abs=2)
     assert (out / "teleop_palpation.mp4").stat().st_size > 0
+    # H.264 wherever the [media] extra is installed (the test extra installs imageio-ffmpeg)
+    pytest.importorskip("imageio_ffmpeg")
+    import cv2
+
+    cap = cv2.VideoCapture(str(out / "teleop_palpation.mp4"))
+    fourcc = int(cap.get(cv2.CAP_PROP_FOURCC)).to_bytes(4, "little").decode("ascii", "replace").lower()
+    assert fourcc == "h264" and int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) >= 5

@@ -203,7 +203,6 @@ def _run_process_servo(args, port, physics, limits) -> int:
 
 
 def _run_headless(loop, physics, args, duration: float):
-    import cv2
     import mujoco
 
     from surgsim_envs.errors import RenderingUnavailableError
@@ -222,15 +221,16 @@ def _run_headless(loop, physics, args, duration: float):
     scratch = mujoco.MjData(sim.render_model)
     path = out / f"teleop_{args.task}.mp4"
     from surgsim_envs.haptics.recording import PacedVideoWriter
+    from surgsim_envs.scene.media import VideoWriter
 
-    writer = PacedVideoWriter(cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(args.fps),
-                                              (width, height)), float(args.fps))  # frames at the video's rate
+    # H.264 with the [media] extra (imageio-ffmpeg), else mp4v with a warning (scene/media.py)
+    writer = PacedVideoWriter(VideoWriter(path, float(args.fps), (width, height)), float(args.fps))
 
     def frame(_loop) -> None:
         with _loop.physics_lock:  # copy the state briefly; render outside the lock
             mujoco.mj_copyData(scratch, sim.render_model, sim.sync_visual())
         renderer.update_scene(scratch, camera=cam)
-        writer.write(cv2.cvtColor(renderer.render(), cv2.COLOR_RGB2BGR))
+        writer.write(renderer.render().copy())      # RGB; the renderer reuses its buffer
 
     try:
         stats = loop.run_realtime(duration, on_frame=frame, frame_period=1.0 / args.fps)
