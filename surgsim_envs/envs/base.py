@@ -434,9 +434,9 @@ class SurgSimEnv(gym.Env):
 
             require_display("render_mode='human'")
             try:
-                import mujoco.viewer
+                from surgsim_envs.scene.display import open_viewer
 
-                self._viewer = mujoco.viewer.launch_passive(self.sim.render_model, self.sim.sync_visual())
+                self._viewer = open_viewer(self.sim.render_model, self.sim.sync_visual())   # panels hidden
             except Exception as exc:  # no display, or not the main thread on macOS
                 raise RenderingUnavailableError(
                     f"render_mode='human' needs a display for mujoco.viewer ({exc}); use render_mode='rgb_array' "
