@@ -456,3 +456,12 @@ def test_teleop_headless_writes_video_and_force_log(tmp_path, capsys):
     cap = cv2.VideoCapture(str(out / "teleop_palpation.mp4"))
     fourcc = int(cap.get(cv2.CAP_PROP_FOURCC)).to_bytes(4, "little").decode("ascii", "replace").lower()
     assert fourcc == "h264" and int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) >= 5
+
+
+def test_root_is_told_the_servo_takes_sched_fifo():
+    from surgsim_envs.haptics.realtime import FIFO_PRIORITY, fifo_notice
+
+    line = fifo_notice(True, euid=0)
+    assert line is not None and "SCHED_FIFO" in line and f"priority {FIFO_PRIORITY}" in line
+    assert "\n" not in line
+    assert fifo_notice(True, euid=1000) is None and fifo_notice(False, euid=0) is None

@@ -153,6 +153,11 @@ def run(args) -> int:
     except ImportError as exc:
         raise SurgSimError(f"teleop needs the MuJoCo scene (surgsim_envs.scene), which is unavailable: {exc}") from None
 
+    from surgsim_envs.haptics.realtime import fifo_notice
+
+    notice = fifo_notice()
+    if notice:
+        print(f"surgsim teleop: {notice}", flush=True)
     print(f"building the {args.task} scene ...", flush=True)
     physics = scene_adapter.make_haptic_simulation(args.task, spacing=args.spacing, model=args.model)
     limits = DeviceLimits(max_force=args.max_force)
