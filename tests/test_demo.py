@@ -14,7 +14,10 @@ def test_demo_runs_and_summary_shows_the_physics(tmp_path, duration, cold, capsy
     from surgsim_envs import numba_cache
 
     if cold:
+        from surgsim_envs.scene import demo
+
         monkeypatch.setattr(numba_cache, "is_warm", lambda stage, package=None: False)
+        monkeypatch.setattr(demo, "WARMUP_DURATION", 0.5)      # the path, not the compile (caches are warm here)
     out = tmp_path / "demo"
     assert main(["demo", "--duration", duration, "--no-video", "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
