@@ -15,6 +15,7 @@ import sys
 COMMANDS: dict[str, tuple[str, str]] = {
     "models": ("surgsim_envs.tissue.models_cmd", "list registered tissue models"),
     "demo": ("surgsim_envs.scene.demo", "palpate and grasp on built-in defaults; writes ./surgsim-out/"),
+    "warmup": ("surgsim_envs.warmup", "compile the physics kernels ahead (numba caches) for the demo and every task"),
     "material": ("surgsim_envs.bench.material_cmd", "virtual material tests (indent, relax, slip)"),
     "fit": ("surgsim_envs.bench.fit", "fit model parameters to measured force data"),
     "teleop": ("surgsim_envs.haptics.teleop", "teleoperate a task with a (simulated) haptic device"),

@@ -9,6 +9,12 @@ stamp of the sources of the package's numba modules with the one stored beside t
 they differ, deletes the package's numba cache files, so that every kernel is compiled again from
 the current sources.
 
+Cold or warm: :func:`mark_warm` (called by ``surgsim warmup`` and by the demo after it compiled)
+records, beside the stamp, which warm-up stages built the caches, for which kernel sources and
+how many cache files there were; :func:`is_warm` says whether a stage's caches are still there
+(False after a source change, ``--clear`` or deleted cache files), so the demo can compile ahead
+with a progress bar instead of stalling on its first step.
+
 Caches numba keeps elsewhere (``NUMBA_CACHE_DIR``, or a user cache directory when the package
 folder is read-only) are left alone; ``python -m surgsim_envs.numba_cache --clear`` deletes the
 package's caches by hand.
@@ -17,11 +23,13 @@ package's caches by hand.
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent
 STAMP_NAME = "numba_sources.stamp"
+WARM_NAME = "numba_warm.json"
 CACHE_SUFFIXES = (".nbi", ".nbc")
 
 
@@ -104,6 +112,56 @@ def invalidate_stale_caches(package: Path = PACKAGE) -> int:
         return deleted
     except Exception:  # noqa: BLE001 - never stop an import over a cache
         return 0
+
+
+def _kernels_in_stamp(package: Path) -> str | None:
+    try:
+        return (package / "__pycache__" / STAMP_NAME).read_text().split()[1]
+    except (OSError, IndexError):
+        return None
+
+
+def caches_here(package: Path = PACKAGE) -> bool:
+    """Whether numba writes this package's caches next to its modules (the folder is writable
+    and ``NUMBA_CACHE_DIR`` is unset), i.e. whether :func:`is_warm` can tell."""
+    return not os.environ.get("NUMBA_CACHE_DIR") and os.access(package, os.W_OK)
+
+
+def mark_warm(stages, package: Path = PACKAGE) -> None:
+    """Record that the warm-up ``stages`` (names) compiled their kernels into the caches. Never
+    raises (a missing mark only costs another warm-up)."""
+    try:
+        if not caches_here(package):
+            return
+        kernels = _kernels_in_stamp(package) or kernels_stamp(package)
+        path = package / "__pycache__" / WARM_NAME
+        try:
+            old = json.loads(path.read_text())
+        except (OSError, ValueError):
+            old = {}
+        done = set(old.get("stages", [])) if old.get("kernels") == kernels else set()
+        record = {"kernels": kernels, "stages": sorted(done | set(stages)), "cache_files": len(cache_files(package))}
+        path.parent.mkdir(exist_ok=True)
+        tmp = path.with_name(f"{WARM_NAME}.{os.getpid()}")
+        tmp.write_text(json.dumps(record))
+        os.replace(tmp, path)
+    except Exception:  # noqa: BLE001 - never fail a run over a cache mark
+        pass
+
+
+def is_warm(stage: str, package: Path = PACKAGE) -> bool | None:
+    """True if ``stage``'s kernels were compiled into the caches since the numba sources last
+    changed and no cache file went since; False if not (a fresh checkout, ``--clear``, an edit);
+    None where the caches live elsewhere (see :func:`caches_here`) and this cannot tell."""
+    if not caches_here(package):
+        return None
+    try:
+        record = json.loads((package / "__pycache__" / WARM_NAME).read_text())
+    except (OSError, ValueError):
+        return False
+    current = _kernels_in_stamp(package) or kernels_stamp(package)
+    return (record.get("kernels") == current and stage in record.get("stages", [])
+            and len(cache_files(package)) >= int(record.get("cache_files", 0)) > 0)
 
 
 if __name__ == "__main__":  # pragma: no cover - manual tool

@@ -25,7 +25,10 @@ def test_fem_fit_recovers_young(data):
 
 
 def test_mass_spring_fit_reports_residual(data):
-    out = fit("mass_spring", "indent", *data, material={"young": 3000.0, "poisson": 0.45, "relax_fraction": 0.0}, **KW)
+    runs = []
+    out = fit("mass_spring", "indent", *data, material={"young": 3000.0, "poisson": 0.45, "relax_fraction": 0.0},
+              progress=lambda: runs.append(1), **KW)
+    assert len(runs) == out.evaluations >= 1       # the CLI's progress bar ticks once per model run
     assert out.params["young"] > 7000.0        # a spring network is softer than the FEM slab (no volume term)
     assert out.residual > 0 and np.isfinite(out.residual)
 

@@ -404,6 +404,34 @@ def test_teleop_without_display_says_so_and_offers_headless(monkeypatch, capsys)
     assert main(["teleop", "grasp", "--device", "udp:notaport", "--headless"]) == 2
 
 
+def test_keyboard_teleop_without_a_window_offers_only_commands_that_work(monkeypatch, capsys):
+    """The keyboard reads keys from the viewer window: without a display (or with --headless) the
+    advice is a virtual display or another device headless, never '--device keyboard --headless'."""
+    from surgsim_envs.cli import main
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    for extra in ([], ["--headless"]):
+        assert main(["teleop", "palpation", "--device", "keyboard", *extra]) == 2
+        err = capsys.readouterr().err
+        assert "reads its keys from the viewer window" in err
+        assert "xvfb-run -a surgsim teleop palpation --device keyboard" in err
+        assert "surgsim teleop palpation --device scripted --headless" in err
+        assert "keyboard --headless" not in err and "drop --headless" not in err
+
+
+def test_teleop_help_lists_the_key_bindings(capsys):
+    from surgsim_envs.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["teleop", "--help"])
+    out = capsys.readouterr().out
+    for keys, action in kb.KEY_BINDINGS:
+        assert f"{keys}" in out and action in out
+    assert "--panels" in out
+    left, right = kb.key_overlay()
+    assert len(left.splitlines()) == len(right.splitlines()) == len(kb.KEY_BINDINGS)
+
+
 def test_teleop_headless_writes_video_and_force_log(tmp_path, capsys):
     pytest.importorskip("surgsim_envs.haptics.scene_adapter", exc_type=ImportError)
     from surgsim_envs.cli import main
@@ -421,3 +449,19 @@ def test_teleop_headless_writes_video_and_force_log(tmp_path, capsys):
     stats = json.loads((out / "stats.json").read_text())
     assert stats["task"] == "palpation" and stats["ticks"] == pytest.approx(len(log), abs=2)
     assert (out / "teleop_palpation.mp4").stat().st_size > 0
+    # H.264 wherever the [media] extra is installed (the test extra installs imageio-ffmpeg)
+    pytest.importorskip("imageio_ffmpeg")
+    import cv2
+
+    cap = cv2.VideoCapture(str(out / "teleop_palpation.mp4"))
+    fourcc = int(cap.get(cv2.CAP_PROP_FOURCC)).to_bytes(4, "little").decode("ascii", "replace").lower()
+    assert fourcc == "h264" and int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) >= 5
+
+
+def test_root_is_told_the_servo_takes_sched_fifo():
+    from surgsim_envs.haptics.realtime import FIFO_PRIORITY, fifo_notice
+
+    line = fifo_notice(True, euid=0)
+    assert line is not None and "SCHED_FIFO" in line and f"priority {FIFO_PRIORITY}" in line
+    assert "\n" not in line
+    assert fifo_notice(True, euid=1000) is None and fifo_notice(False, euid=0) is None

@@ -262,11 +262,58 @@ def test_speed_bench_rows_cover_every_integrator_and_reject_bad_sizes():
     rows = speed.run_bench([30], repeats=1, steps=2, warmup=1, models=["mass_spring"], progress=False)
     assert [r["integrator"] for r in rows] == list(MassSpringModel.integrators)
     for r in rows:
-        assert set(r) == {"model", "integrator", "nodes", "us_per_step"}
+        assert set(r) == {"model", "integrator", "nodes", "dt_s", "us_per_step"}
         assert r["model"] == "mass_spring" and r["us_per_step"] > 0
         assert abs(r["nodes"] - 30) <= 15
     with pytest.raises(ConfigError, match="sizes"):
         speed.parse_sizes("250,abc")
+
+
+def test_speed_bench_reruns_a_diverged_explicit_case_at_a_stable_dt_and_names_it():
+    """Symplectic mass-spring at 245 nodes is stable at rest at 1 ms but its critical dt under the
+    0.5 N load is 0.943 ms: the row runs at DT_SAFETY x the reported critical dt and says so."""
+    from surgsim_envs.bench import speed
+    from surgsim_envs.tissue.base import DT_SAFETY
+
+    row = speed.time_model(MassSpringModel, "symplectic", 250, repeats=5, steps=50, warmup=20)
+    assert row["nodes"] == 245
+    assert row["us_per_step"] is not None and row["us_per_step"] > 0
+    assert "error" not in row
+    assert 0.5e-3 < row["dt_s"] < DT_SAFETY * 1.2e-3         # below the loaded critical dt, not a blind halving
+    assert "unstable at dt 1 ms" in row["note"] and f"{DT_SAFETY} x critical" in row["note"]
+
+
+def test_speed_bench_row_names_why_a_case_failed():
+    from surgsim_envs.bench import speed
+    from surgsim_envs.errors import TissueUnstableError
+
+    class AlwaysUnstable:
+        name, integrators = "always_unstable", ("symplectic",)
+        default_integrator, auto_pair, capabilities = "symplectic", None, ()
+
+        def __init__(self, vol, material, integrator, fixed):
+            self.n_nodes = vol.n_nodes
+
+        def stable_dt(self):
+            return 1e-3
+
+        def step(self, dt, forces):
+            raise TissueUnstableError(self.name, dt, dt / 2, "node speed too high")
+
+    class Broken(AlwaysUnstable):
+        name = "broken"
+
+        def step(self, dt, forces):
+            raise ZeroDivisionError("division by zero")
+
+    row = speed.time_model(AlwaysUnstable, "symplectic", 30, repeats=1, steps=1, warmup=1)
+    assert row["us_per_step"] is None
+    assert row["error"].startswith("unstable: tissue model 'always_unstable' became unstable")
+    assert row["dt_s"] == pytest.approx(1e-3 * (0.8 / 2) ** speed.RETRIES)   # retried RETRIES times, then gave up
+    row = speed.time_model(Broken, "symplectic", 30, repeats=1, steps=1, warmup=1)
+    assert row["us_per_step"] is None and row["error"] == "ZeroDivisionError: division by zero"
+    table = speed.format_table([row])
+    assert "failed [1]" in table and "[1] broken/symplectic/" in table
 
 
 # --- integrator="auto" (the default): explicit below 0.8 x critical_dt(), implicit above -----------

@@ -57,3 +57,52 @@ def test_the_package_keeps_a_stamp_after_import():
         files, kernels = stamp.read_text().split()
         assert files == nc.files_stamp() and kernels == nc.kernels_stamp()
     assert surgsim_envs.__version__
+
+
+def _stamped_package(tmp_path, kernels="k1"):
+    pkg = tmp_path / "pkg"
+    (pkg / "__pycache__").mkdir(parents=True)
+    (pkg / "__pycache__" / nc.STAMP_NAME).write_text(f"files {kernels}")
+    _caches(pkg)
+    return pkg
+
+
+def test_a_stage_is_warm_until_its_caches_go_or_the_kernels_change(tmp_path, monkeypatch):
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    pkg = _stamped_package(tmp_path)
+    assert nc.is_warm("demo: grasp scene", pkg) is False              # never warmed
+    nc.mark_warm(["demo: grasp scene"], pkg)
+    assert nc.is_warm("demo: grasp scene", pkg) is True
+    assert nc.is_warm("task: SurgSim/Grasp-v0", pkg) is False          # another stage
+    nc.mark_warm(["task: SurgSim/Grasp-v0"], pkg)                      # marks add up
+    assert nc.is_warm("demo: grasp scene", pkg) and nc.is_warm("task: SurgSim/Grasp-v0", pkg)
+    nc.cache_files(pkg)[0].unlink()                                    # a cache file deleted by hand
+    assert nc.is_warm("demo: grasp scene", pkg) is False
+    _caches(pkg)
+    (pkg / "__pycache__" / nc.STAMP_NAME).write_text("files k2")      # the kernel sources changed
+    assert nc.is_warm("demo: grasp scene", pkg) is False
+    nc.mark_warm(["demo: grasp scene"], pkg)                           # a new mark forgets the old sources' stages
+    assert nc.is_warm("demo: grasp scene", pkg) and not nc.is_warm("task: SurgSim/Grasp-v0", pkg)
+
+
+def test_warm_state_is_unknown_where_numba_caches_elsewhere(tmp_path, monkeypatch):
+    pkg = _stamped_package(tmp_path)
+    nc.mark_warm(["demo: grasp scene"], pkg)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
+    assert nc.is_warm("demo: grasp scene", pkg) is None
+
+
+def test_run_stages_counts_the_kernels_really_compiled():
+    import numba
+
+    from surgsim_envs.scene.kernel_warmup import Stage, run_stages
+
+    @numba.njit(cache=False)
+    def triple(x):
+        return 3 * x
+
+    stages = [Stage("first call", lambda: triple(2.0)), Stage("again", lambda: triple(5.0)),
+              Stage("new type", lambda: triple(2))]
+    res = run_stages(stages, progress=False, mark=False)
+    assert [r.kernels_compiled for r in res] == [1, 0, 1]
+    assert res[0].kernels == [f"{__name__}.test_run_stages_counts_the_kernels_really_compiled.<locals>.triple"]

@@ -47,6 +47,20 @@ def test_spaces_and_names(env):
     assert env.spec.max_episode_steps == u.config.max_presses == 25
 
 
+def test_corner_press_stays_inside_the_observation_space(env):
+    """A press at the map's corner: the probe's measured position trails past the edge by a few
+    um (0.0375006 m against the declared 0.0375 m before the clip); the observation stays in its
+    space and reports the corner itself."""
+    env.reset(seed=0)
+    obs, *_ = env.step(np.array([1.0, 1.0, -1.0], dtype=np.float32))
+    u = env.unwrapped
+    i = u.observation_names.index("last_press_xy[0] [m]")
+    hw = np.float32(u.config.map_half_width)
+    assert env.observation_space.contains(obs)
+    np.testing.assert_allclose(obs[i:i + 2], [hw, hw], rtol=0, atol=1e-4)
+    assert np.all(np.abs(obs[i:i + 2]) <= hw)
+
+
 def test_press_reads_a_stiffness_in_newtons_per_metre(env):
     """Pressing 6 mm right over a 4x inclusion reads a stiffer tissue than pressing 3 cm away
     (the continuous task's physics check, here through one press each)."""

@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -86,8 +87,9 @@ def _scale(pred: np.ndarray, force: np.ndarray) -> float:
     return float(pred @ force) / den
 
 
-def fit_indent(model, x, force, material="liver", **indent_opts) -> FitResult:
-    """Fit E (Pa) to an indentation curve: depths ``x`` (m), forces (N)."""
+def fit_indent(model, x, force, material="liver", *, progress=None, **indent_opts) -> FitResult:
+    """Fit E (Pa) to an indentation curve: depths ``x`` (m), forces (N). ``progress()``, if given,
+    is called after every model run."""
     from surgsim_envs.bench.material import indent
 
     from surgsim_envs.bench.material import model_class
@@ -100,6 +102,8 @@ def fit_indent(model, x, force, material="liver", **indent_opts) -> FitResult:
     def shape_for(extra):
         res = indent(cls, mat, depth=float(x.max()), time_steps=0, **{"n_depths": 16, **indent_opts, **extra})
         count[0] += 1
+        if progress is not None:
+            progress()
         return res, np.interp(x, np.concatenate([[0.0], res.depth]), np.concatenate([[0.0], res.force]))
 
     # models may name shape parameters to search as well (class attribute fit_shape_parameters,
@@ -119,8 +123,10 @@ def fit_indent(model, x, force, material="liver", **indent_opts) -> FitResult:
     return _result(res.model, "indent", {"young": s * mat.young, **extra}, x, force, pred, count[0])
 
 
-def fit_relax(model, x, force, material="liver", *, max_evaluations: int = 40, **relax_opts) -> FitResult:
+def fit_relax(model, x, force, material="liver", *, max_evaluations: int = 40, progress=None,
+              **relax_opts) -> FitResult:
     """Fit E (Pa), relax_fraction and relax_time (s) to a ramp-and-hold curve: times ``x`` (s), forces (N).
+    ``progress()``, if given, is called after every model run.
 
     relax_opts go to :func:`surgsim_envs.bench.material.relax` (strain, ramp_time, size, spacing...);
     hold_time defaults to the data's duration."""
@@ -146,6 +152,8 @@ def fit_relax(model, x, force, material="liver", *, max_evaluations: int = 40, *
             m = mat.replace(relax_fraction=float(np.clip(g1, 0.0, 0.95)), relax_time=float(math.exp(log_tau)))
             r = relax(cls, m, **opts)
             count[0] += 1
+            if progress is not None:
+                progress()
             cache[key] = np.interp(x, r.time, r.force)
         return cache[key]
 
@@ -253,7 +261,12 @@ def run(args: argparse.Namespace) -> int:
             opts[key] = float(value)
         except ValueError:
             opts[key] = value
-    result = fit(args.model, args.test, x, force, args.material, **opts)
+    from tqdm import tqdm
+
+    # model runs: the bounded searches stop on tolerance, so the count is open-ended
+    with tqdm(desc=f"fit {args.model} ({args.test})", unit="model run", file=sys.stderr,
+              bar_format="{desc}: {n} model runs [{elapsed}, {rate_fmt}]") as bar:
+        result = fit(args.model, args.test, x, force, args.material, progress=lambda: bar.update(1), **opts)
     if args.plot:
         plot_fit(result, args.plot)
     if args.json:

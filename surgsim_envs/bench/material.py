@@ -175,7 +175,7 @@ def _solve_lcp(c: np.ndarray, g: np.ndarray) -> np.ndarray:
 def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: float = 0.003,
            thickness: float = 0.03, width: float | None = None, spacing: float | None = None, bonded: bool = True,
            n_depths: int = 12, grading: float = 1.3, max_cell: float | None = None, quarter: bool = True,
-           dt: float | None = None, time_steps: int = 20, **opts) -> IndentResult:
+           dt: float | None = None, time_steps: int = 20, progress=None, **opts) -> IndentResult:
     """Press a rigid sphere (``indenter_radius`` m) up to ``depth`` (m) into a square slab
     (``width`` m, default 4 x ``thickness``; ``thickness`` m) lying on a rigid base.
 
@@ -187,6 +187,8 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
     n_depths: depths sampled uniformly in (0, depth].
     dt, time_steps: the timed dynamic run (dt default 1 ms, reduced to the model's stable_dt() for
         explicit integrators); ``time_steps=0`` skips it (us_per_step = nan).
+    progress: optional ``progress(label)``, called after each of :func:`indent_stages` stages
+        (the compliance solve, each depth, the timed run) for a progress bar.
     **opts: model options (e.g. integrator="implicit").
 
     Returns an :class:`IndentResult` (depth m, force N, nodes, us_per_step).
@@ -251,6 +253,8 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
         sol = lu.solve(rhs)
         comp = sol[zdofs]                               # m/N: z displacement per unit upward z force
     comp = 0.5 * (comp + comp.T)
+    if progress is not None:
+        progress("compliance of the contact zone")
     gap0 = R - np.sqrt(R * R - r[cand] ** 2)            # sphere surface height above its lowest point
     depths = np.linspace(depth / n_depths, depth, n_depths)
     forces = np.empty(n_depths)
@@ -258,6 +262,8 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
     for k, d in enumerate(depths):
         p = _solve_lcp(comp, gap0 - d)                  # gap g = -d + gap0 (u_z <= g)
         forces[k] = p.sum() * (4.0 if quarter else 1.0)
+        if progress is not None:
+            progress(f"depth {d * 1e3:.3g} mm")
 
     top_surface = None                                 # deformed top surface at the deepest depth
     if sol is not None:                                # (models solved through a stiffness matrix)
@@ -273,11 +279,18 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
             us, dt_used = _time_steps(tissue, load, R, depth, dt, int(time_steps))
         except TissueUnstableError as exc:          # report it; the force curve is still valid
             us, dt_used = math.nan, exc.dt
+        if progress is not None:
+            progress("timed steps")
     return IndentResult(depths, forces, n, us, dt_used, cls.name, tissue.integrator, float(spacing),
                         {"bonded": bool(bonded), "quarter": bool(quarter), "thickness": float(thickness),
                          "width": float(width), "radius": R, "young": mat.young, "poisson": mat.poisson,
                          "contact_nodes": int(np.count_nonzero(p)), "candidate_nodes": int(len(cand))},
                         top_surface=top_surface)
+
+
+def indent_stages(n_depths: int = 12, time_steps: int = 20) -> int:
+    """How many times :func:`indent` calls its ``progress`` callback."""
+    return 1 + int(n_depths) + (1 if time_steps else 0)
 
 
 def _time_steps(tissue, load: np.ndarray, radius: float, depth: float, dt: float | None, steps: int):

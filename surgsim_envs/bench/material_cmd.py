@@ -88,8 +88,16 @@ def run(args: argparse.Namespace) -> int:
         opts["spacing"] = args.spacing
     mat = parse_sets(args.set, args.material)
     if args.test == "indent":
-        res = mt.indent(args.model, mat, indenter_radius=args.radius, depth=args.depth, thickness=args.thickness,
-                        width=args.width, bonded=not args.unbonded, n_depths=args.points, **opts)
+        from tqdm import tqdm
+
+        with tqdm(total=mt.indent_stages(args.points), desc="material indent", unit="stage", file=sys.stderr,
+                  bar_format="{desc}: {n}/{total} |{bar:20}| [{elapsed}] {postfix}") as bar:
+            def progress(label):
+                bar.set_postfix_str(label, refresh=False)
+                bar.update(1)
+
+            res = mt.indent(args.model, mat, indenter_radius=args.radius, depth=args.depth, thickness=args.thickness,
+                            width=args.width, bonded=not args.unbonded, n_depths=args.points, progress=progress, **opts)
         out = {"depth": res.depth.tolist(), "force": res.force.tolist(), "nodes": res.nodes,
                "us_per_step": res.us_per_step, "dt": res.dt}
         text = (f"{res.model}/{res.integrator}: {res.nodes} nodes, force {res.force[-1]:.4g} N at depth "

@@ -262,7 +262,9 @@ class SurgSimEnv(gym.Env):
     """Base class of the SurgSim tasks (see module docstring).
 
     config: the task's config dataclass (None = defaults); render_mode: None, "rgb_array" or
-    "human"; **overrides: config fields to replace.
+    "human"; human_pace: with render_mode="human", steps run at this many times real time, one
+    per control period (default 1.0; None runs unpaced, as fast as the physics goes; see
+    scene/pacing.py); **overrides: config fields to replace.
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 25}
@@ -271,7 +273,7 @@ class SurgSimEnv(gym.Env):
     #: names accepted in ``reset(options=...)``
     OPTIONS: ClassVar[tuple[str, ...]] = ()
 
-    def __init__(self, config=None, render_mode: str | None = None, **overrides):
+    def __init__(self, config=None, render_mode: str | None = None, *, human_pace: float | None = 1.0, **overrides):
         if config is None:
             config = self.config_cls()
         if not isinstance(config, self.config_cls):
@@ -287,6 +289,11 @@ class SurgSimEnv(gym.Env):
             require_display("render_mode='human'")   # raises here; MuJoCo would exit the process later
         self.render_mode = render_mode
         self.metadata = dict(self.metadata, render_fps=int(round(self.config.control_hz)))
+        from surgsim_envs.scene.pacing import RealTimePacer, pace_period
+
+        period = pace_period(self.config.control_hz, human_pace)
+        #: render_mode="human": holds each step to its control period (None: unpaced)
+        self.human_pacer = RealTimePacer(period) if period is not None and render_mode == "human" else None
         self._renderer = None
         self._viewer = None
         self._sims: dict[Any, Any] = {}
@@ -474,15 +481,17 @@ class SurgSimEnv(gym.Env):
 
             require_display("render_mode='human'")
             try:
-                import mujoco.viewer
+                from surgsim_envs.scene.display import open_viewer
 
-                self._viewer = mujoco.viewer.launch_passive(self.sim.render_model, self.sim.sync_visual())
+                self._viewer = open_viewer(self.sim.render_model, self.sim.sync_visual())   # panels hidden
             except Exception as exc:  # no display, or not the main thread on macOS
                 raise RenderingUnavailableError(
                     f"render_mode='human' needs a display for mujoco.viewer ({exc}); use render_mode='rgb_array' "
                     "on headless machines") from exc
         self.sim.sync_visual()
         self._viewer.sync()
+        if self.human_pacer is not None:
+            self.human_pacer.wait()
 
     def close(self):
         if self._renderer is not None:

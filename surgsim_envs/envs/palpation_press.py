@@ -173,8 +173,11 @@ class PalpationPressEnv(PalpationEnv):
         self.peak_force = max(self.peak_force, fmax)
         d = float(np.mean(depth))
         k = float(np.mean(fz)) / d if d >= c.press_min_depth else 0.0
-        pos = sim.tool_position(probe)
-        self.last = (float(pos[0]), float(pos[1]), float(np.mean(fz)), k)
+        # The probe's measured position trails its target by a contact-friction lag (a few um
+        # past a map edge): clip it to the map the observation space declares.
+        hw = float(c.map_half_width)
+        x, y = np.clip(sim.tool_position(probe)[:2], -hw, hw)
+        self.last = (float(x), float(y), float(np.mean(fz)), k)
 
     # -- observation ----------------------------------------------------------------------------
     def _next_unsampled(self) -> np.ndarray:

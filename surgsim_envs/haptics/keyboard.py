@@ -44,6 +44,30 @@ _MOVES = {
 }
 
 
+#: (keys, action) in the order the help and the viewer overlay list them (module docstring)
+KEY_BINDINGS = (
+    ("Right / Left", "+x / -x"),
+    ("Up / Down", "+y / -y"),
+    ("PgUp / PgDn, E / Q", "+z / -z"),
+    ("J / K", "grip close / open"),
+    ("Space", "toggle button 0"),
+    ("B", "toggle button 1"),
+    ("R", "back home, grip open"),
+    ("[ / ]", "halve / double the step"),
+)
+
+
+def key_help() -> str:
+    """The key bindings as text lines (for ``--help`` and the terminal)."""
+    width = max(len(k) for k, _ in KEY_BINDINGS)
+    return "\n".join(f"  {k:<{width}}  {a}" for k, a in KEY_BINDINGS)
+
+
+def key_overlay() -> tuple[str, str]:
+    """The key bindings as the two columns of a viewer text overlay."""
+    return ("\n".join(k for k, _ in KEY_BINDINGS), "\n".join(a for _, a in KEY_BINDINGS))
+
+
 class KeyboardDevice(HapticDevice):
     """Handle position moved by key presses (see module docstring)."""
 

@@ -33,6 +33,18 @@ FIFO_PRIORITY = 10
 NICE_BOOST = -10
 
 
+def fifo_notice(enable: bool = True, euid: int | None = None) -> str | None:
+    """The one line a command prints before a servo thread that will take ``SCHED_FIFO`` starts
+    (running as root, with ``realtime_priority`` on), else None. ``euid`` defaults to the
+    process's effective user id."""
+    if euid is None:
+        euid = os.geteuid() if hasattr(os, "geteuid") else -1
+    if not enable or euid != 0 or not hasattr(os, "SCHED_FIFO"):
+        return None
+    return (f"running as root: the servo thread takes real-time scheduling (SCHED_FIFO, priority {FIFO_PRIORITY}; "
+            "Linux caps real-time threads at 95 % of a core)")
+
+
 def raise_thread_priority(enable: bool = True) -> str:
     """Raise the calling thread's scheduling priority (module docstring); returns what was
     obtained: ``"SCHED_FIFO"``, ``"nice -10"`` or ``"default"``."""

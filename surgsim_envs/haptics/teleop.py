@@ -28,6 +28,13 @@ TASK_NAMES = ("palpation", "grasp", "slippage")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from surgsim_envs.haptics.keyboard import key_help
+
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.epilog = ("--device keyboard (in the viewer window; also shown in its top-left corner):\n" + key_help()
+                     + "\n\nWithout a display, run headless with a device that needs no window: scripted, "
+                       "replay:FILE or udp:PORT\n(e.g. surgsim teleop palpation --device scripted --headless); "
+                       "the keyboard needs a (virtual) display: xvfb-run -a surgsim teleop ...")
     parser.add_argument("task", choices=TASK_NAMES, help="task to teleoperate")
     parser.add_argument("--device", default="scripted",
                         help="scripted | replay:FILE (.csv/.json) | keyboard | udp:PORT (default scripted)")
@@ -49,6 +56,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fps", type=float, default=25.0, help="video/viewer frames per second")
     parser.add_argument("--size", type=int, nargs=2, default=(480, 360), metavar=("W", "H"), help="video size, pixels")
     parser.add_argument("--camera", default="overview", help="camera name for the video")
+    parser.add_argument("--panels", action="store_true",
+                        help="show MuJoCo's viewer side panels (hidden by default; Tab toggles them)")
     parser.add_argument("--servo", choices=("auto", "thread", "process"), default="auto",
                         help="auto (default): process for udp devices, thread otherwise; thread: the servo in "
                              "this process; process: in its own process with real-time priority (udp devices "
@@ -136,18 +145,30 @@ def run(args) -> int:
         spec = TrajectorySpec.from_dict(load_script(args.script))
         if args.duration is None and kind.finite:
             check_device_duration(spec, args.device)
-    if not args.headless and not os.environ.get("DISPLAY") and sys.platform.startswith("linux"):
+    no_display = not os.environ.get("DISPLAY") and sys.platform.startswith("linux")
+    if kind.needs_viewer and (args.headless or no_display):
+        why = "--headless has no window" if args.headless else "there is no display ($DISPLAY is not set)"
+        print(f"surgsim teleop: --device {args.device} reads its keys from the viewer window, and {why}.\n"
+              f"Run it under a display (or a virtual one: xvfb-run -a surgsim teleop {args.task} --device "
+              f"{args.device}), or teleoperate headless with a device that needs no window, e.g.:\n"
+              f"  surgsim teleop {args.task} --device scripted --headless --out surgsim-out/teleop --duration 5\n"
+              "(also replay:FILE or udp:PORT)", file=sys.stderr)
+        return 2
+    if not args.headless and no_display:
         print("surgsim teleop: no display ($DISPLAY is not set), so the interactive viewer cannot open.\n"
               f"Run headless instead, e.g.: surgsim teleop {args.task} --device {args.device} --headless "
               "--out surgsim-out/teleop --duration 5", file=sys.stderr)
         return 2
-    if kind.needs_viewer and args.headless:
-        raise ConfigError(f"--device {args.device} needs the interactive viewer; drop --headless (and run with a display)")
     try:
         from surgsim_envs.haptics import scene_adapter
     except ImportError as exc:
         raise SurgSimError(f"teleop needs the MuJoCo scene (surgsim_envs.scene), which is unavailable: {exc}") from None
 
+    from surgsim_envs.haptics.realtime import fifo_notice
+
+    notice = fifo_notice()
+    if notice:
+        print(f"surgsim teleop: {notice}", flush=True)
     print(f"building the {args.task} scene ...", flush=True)
     physics = scene_adapter.make_haptic_simulation(args.task, spacing=args.spacing, model=args.model)
     limits = DeviceLimits(max_force=args.max_force)
@@ -169,7 +190,7 @@ def run(args) -> int:
         if args.headless:
             stats = _run_headless(loop, physics, args, duration)
         else:
-            stats = _run_viewer(loop, physics, device, duration)
+            stats = _run_viewer(loop, physics, device, duration, panels=getattr(args, "panels", False))
     print(stats.summary())
     if device.session_summary():
         print(device.session_summary(), flush=True)
@@ -201,7 +222,7 @@ def _run_process_servo(args, port, physics, limits) -> int:
                             _config(args, physics))
     print(f"listening for pose packets on udp://127.0.0.1:{port} (servo process)", flush=True)
     stats = _run_headless(loop, physics, args, duration) if args.headless else \
-        _run_viewer(loop, physics, None, duration)
+        _run_viewer(loop, physics, None, duration, panels=getattr(args, "panels", False))
     print(stats.summary())
     print(f"bridge: {loop.device_stats}")
     if args.headless:
@@ -214,7 +235,6 @@ def _run_process_servo(args, port, physics, limits) -> int:
 
 
 def _run_headless(loop, physics, args, duration: float):
-    import cv2
     import mujoco
 
     from surgsim_envs.errors import RenderingUnavailableError
@@ -235,15 +255,16 @@ def _run_headless(loop, physics, args, duration: float):
     scratch = mujoco.MjData(sim.render_model)
     path = out / f"teleop_{args.task}.mp4"
     from surgsim_envs.haptics.recording import PacedVideoWriter
+    from surgsim_envs.scene.media import VideoWriter
 
-    writer = PacedVideoWriter(cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(args.fps),
-                                              (width, height)), float(args.fps))  # frames at the video's rate
+    # H.264 with the [media] extra (imageio-ffmpeg), else mp4v with a warning (scene/media.py)
+    writer = PacedVideoWriter(VideoWriter(path, float(args.fps), (width, height)), float(args.fps))
 
     def frame(_loop) -> None:
         with _loop.physics_lock:  # copy the state briefly; render outside the lock
             mujoco.mj_copyData(scratch, sim.render_model, sim.sync_visual())
         renderer.update_scene(scratch, camera=cam)
-        writer.write(cv2.cvtColor(renderer.render(), cv2.COLOR_RGB2BGR))
+        writer.write(renderer.render().copy())      # RGB; the renderer reuses its buffer
 
     try:
         stats = loop.run_realtime(duration, on_frame=frame, frame_period=1.0 / args.fps)
@@ -253,15 +274,20 @@ def _run_headless(loop, physics, args, duration: float):
     return stats
 
 
-def _run_viewer(loop, physics, device, duration: float):  # pragma: no cover - needs a display
-    import mujoco.viewer
-
-    from surgsim_envs.scene.display import close_viewer, frame_tissue, require_display
+def _run_viewer(loop, physics, device, duration: float, panels: bool = False):  # pragma: no cover - needs a display
+    from surgsim_envs.scene.display import close_viewer, frame_tissue, open_viewer, require_display
 
     require_display("surgsim teleop (viewer)")   # raises; MuJoCo would exit the process
     sim = physics.sim
     callback = getattr(device, "key_callback", None)   # devices that read the viewer's keys
-    viewer = mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual(), key_callback=callback)
+    help_text = None
+    if callback is not None:
+        from surgsim_envs.haptics.keyboard import key_help, key_overlay
+
+        help_text = key_overlay()
+        print("keys (in the viewer window):\n" + key_help(), flush=True)
+    viewer = open_viewer(sim.render_model, sim.sync_visual(), key_callback=callback, panels=panels,
+                         help_text=help_text)
     frame_tissue(viewer, sim)   # free camera on the tissue (the default frames the whole floor)
     try:
         def frame(_loop):

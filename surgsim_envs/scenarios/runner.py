@@ -389,12 +389,10 @@ def run_one(sc: Scenario, values: dict | None = None, *, video_path=None, viewer
             print(f"surgsim run: no video: {exc}")
             renderer = writer = None
     if viewer:  # pragma: no cover - needs a display
-        import mujoco.viewer
-
-        from surgsim_envs.scene.display import require_display
+        from surgsim_envs.scene.display import open_viewer, require_display
 
         require_display("surgsim run --viewer")   # raises; MuJoCo would exit the process
-        view = mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual())
+        view = open_viewer(sim.render_model, sim.sync_visual())   # MuJoCo's side panels hidden
         from surgsim_envs.scene.display import frame_tissue
 
         frame_tissue(view, sim)   # free camera on the tissue (the default frames the whole floor)

@@ -7,6 +7,8 @@
 
 Headless rendering: if ``MUJOCO_GL`` is unset and there is no display, this package sets
 ``MUJOCO_GL=egl`` before MuJoCo is first imported (set it yourself to ``osmesa`` if EGL is missing).
+If the backend's library is missing, MuJoCo is imported without OpenGL and rendering raises
+RenderingUnavailableError naming the backend and its package (scene/gl_backend.py).
 """
 
 import os
@@ -15,6 +17,10 @@ import sys
 if "MUJOCO_GL" not in os.environ and sys.platform.startswith("linux") and not os.environ.get("DISPLAY") \
         and "mujoco" not in sys.modules:
     os.environ["MUJOCO_GL"] = "egl"
+
+from surgsim_envs.scene.gl_backend import import_mujoco  # noqa: E402
+
+import_mujoco()   # a missing OpenGL library must not stop the physics (scene/gl_backend.py)
 
 from surgsim_envs.scene.builder import (SCENES, Scene, build_scene, grasp_config, grasp_scene,  # noqa: E402
                                         make_scene, palpation_config, palpation_scene, register_scene, scene_config)

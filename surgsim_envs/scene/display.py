@@ -49,6 +49,22 @@ def require_display(what: str = "the MuJoCo viewer") -> None:
         raise RenderingUnavailableError(f"{what} needs a display: {problem}; {_HINT}")
 
 
+def open_viewer(model, data, *, key_callback=None, panels: bool = False, help_text: tuple[str, str] | None = None):
+    """``mujoco.viewer.launch_passive`` with MuJoCo's side panels hidden unless ``panels`` (they
+    cover about 60 % of a default window; Tab / Shift+Tab still toggle them) and, if given,
+    ``help_text`` = (left column, right column) drawn in the window's top-left corner (e.g. a
+    device's key bindings). Call :func:`require_display` first."""
+    import mujoco
+    import mujoco.viewer
+
+    viewer = mujoco.viewer.launch_passive(model, data, key_callback=key_callback, show_left_ui=panels,
+                                          show_right_ui=panels)
+    if help_text is not None:
+        viewer.set_texts((mujoco.mjtFontScale.mjFONTSCALE_100, mujoco.mjtGridPos.mjGRID_TOPLEFT,
+                          help_text[0], help_text[1]))
+    return viewer
+
+
 def close_viewer(viewer, timeout: float = 10.0) -> None:
     """Close a ``mujoco.viewer.launch_passive`` handle and WAIT for its window thread to finish.
 

@@ -5,7 +5,8 @@ and their ``mp4v`` (MPEG-4 part 2) files do not play in browsers or notebooks. S
 :class:`VideoWriter` encodes H.264 (libx264, yuv420p, ``+faststart``) through the ffmpeg binary
 of ``imageio-ffmpeg`` when it is installed (the ``[media]`` extra, which also brings ``moviepy``
 for ``gymnasium.wrappers.RecordVideo``), and otherwise falls back to OpenCV ``mp4v`` and says so
-once (``VideoWriter.codec`` tells which one wrote the file).
+once (``VideoWriter.codec`` tells which one wrote the file). Every video the package writes goes
+through it: ``surgsim demo``, ``surgsim run`` and ``surgsim teleop --headless``.
 """
 
 from __future__ import annotations
@@ -98,6 +99,11 @@ class VideoWriter:
         if self._cv is not None:
             self._cv.release()
             self._cv = None
+
+    def release(self) -> None:
+        """:meth:`close` under OpenCV's name, so this writer is a frame sink wherever a
+        ``cv2.VideoWriter`` was (e.g. haptics.recording.PacedVideoWriter)."""
+        self.close()
 
     def __enter__(self):
         return self

@@ -19,8 +19,8 @@ import numpy as np
 
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError
 
-_GL_HINT = ("set MUJOCO_GL=egl (Mesa EGL, works without a GPU) or MUJOCO_GL=osmesa (apt-get install libosmesa6) "
-            "before importing mujoco, or run without rendering (e.g. `surgsim demo --no-video`)")
+_GL_HINT = ("set MUJOCO_GL=egl (Mesa EGL, works without a GPU; apt-get install libegl1) or MUJOCO_GL=osmesa "
+            "(apt-get install libosmesa6) before importing mujoco, or run without rendering (e.g. `surgsim demo --no-video`)")
 
 
 class SceneRenderer:
@@ -33,6 +33,10 @@ class SceneRenderer:
     def __init__(self, sim, width: int = 640, height: int = 480):
         import mujoco
 
+        from surgsim_envs.scene import gl_backend
+
+        if gl_backend.GL_IMPORT_ERROR is not None:     # MuJoCo was imported without OpenGL
+            raise RenderingUnavailableError(gl_backend.GL_IMPORT_ERROR)
         m = sim.render_model   # physics model + tissue flexes (scene/visual.py)
         for what, v, cap in (("width", width, m.vis.global_.offwidth), ("height", height, m.vis.global_.offheight)):
             if not isinstance(v, int) or v <= 0 or v > cap:
