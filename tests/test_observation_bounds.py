@@ -15,18 +15,12 @@ register_envs()
 REGISTERED = sorted(t for t in gym.registry if t.startswith("SurgSim/"))
 PATTERNS = ("random", "all_low", "all_high", "corners")
 STEPS = 3
-#: known: PalpationPress-v0's last_press_xy reads the probe's reached position, which overshoots
-#: the xy limit by a few um at an extreme site; only those cases are expected to fail
-KNOWN = {("SurgSim/PalpationPress-v0", p): "last_press_xy overshoots xy_limit at an extreme site, until that task clamps it"
-         for p in ("all_high", "corners")}
 
 
 def _cases():
     for task in REGISTERED:
         for pattern in PATTERNS:
-            reason = KNOWN.get((task, pattern))
-            marks = [pytest.mark.xfail(strict=False, reason=reason)] if reason else []
-            yield pytest.param(task, pattern, marks=marks, id=f"{task.split('/')[-1]}-{pattern}")
+            yield pytest.param(task, pattern, id=f"{task.split('/')[-1]}-{pattern}")
 
 
 def _actions(space: gym.spaces.Box, pattern: str, rng: np.random.Generator):
