@@ -143,7 +143,7 @@ def _quasi_static_handle(mu):
 def test_held_force_across_mu():
     """mu 0.1-1.5, mass_spring (the pull ramp extends until the grasp slides; mu 1.1 and 1.5 never
     slid in the old fixed 0.6 s ramp). Checked: an onset for every mu, the Coulomb bound (slack 2 %,
-    quasi-static handle), the held force rising with mu (paper 002, Fig. 5: slippage at higher
+    quasi-static handle), the held force rising with mu (the grasping simulation paper, Fig. 5: slippage at higher
     pulls as friction rises) and its share of mu times the normal force before the pull falling as
     mu rises (the pull unloads the jaws more: docs/material_tests.md, "Slip onset")."""
     mus = (0.1, 0.3, 0.75, 1.1, 1.5)

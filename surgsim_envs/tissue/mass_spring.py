@@ -20,7 +20,7 @@ The instantaneous small-strain constant comes from Young's modulus of the tets a
 then gives exactly Young's modulus E with Poisson ratio 1/4; on the Kuhn box lattice it gives
 1.034 E with nu ~ 0.03 — a spring network cannot represent an arbitrary Poisson ratio).
 
-The plain network (paper 002, the default) lets the tets under a node that carries a concentrated
+The plain network (the grasping simulation paper, the default) lets the tets under a node that carries a concentrated
 load collapse flat: over a stiff inclusion the surface node under a palpation probe snaps sideways
 off the tip and the probe reads less force than beside it. ``volume_stiffness="capped"`` (the model's
 ``point_load_options``, which the palpation tasks build it with) adds a per-tet volume term: springs
@@ -129,7 +129,7 @@ class MassSpringModel(TissueModel):
         ``relax_fraction > 0`` (the branch spring ``kM = g1/(1-g1) K1``).
     The overrides may also come from ``material.extra`` ({"K1": ..., ...}); keywords win.
     volume_stiffness: optional per-tet volume-preservation term (Teschner et al. 2004),
-        ``E_t = 0.5 k_v (V - V0)^2 / V0``: None (off, the default: paper 002's plain spring network,
+        ``E_t = 0.5 k_v (V - V0)^2 / V0``: None (off, the default: the grasping simulation paper's plain spring network,
         whose tets under a concentrated load can collapse flat), a number k_v >= 0 in Pa (springs
         unchanged), "auto" or "capped": springs scaled by mu / mu_network and k_v = lambda - scale *
         lambda_network per tet, so that the network's small-strain (E, nu) on the box lattice match the
