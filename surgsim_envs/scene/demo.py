@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError
+from surgsim_envs.scene.video_overlay import annotate, legend_for
 
 #: default simulated seconds: palpation + grasp (close 1 s, hold 1.5 s, pull 1.5 s)
 DEFAULT_DURATION = 7.0
@@ -42,6 +43,9 @@ class _Runner:
     def __init__(self, sim, renderer, writer, camera, bar, label):
         self.sim, self.renderer, self.writer, self.camera, self.bar = sim, renderer, writer, camera, bar
         self.label = label
+        self.caption = ""                # what the video shows now (drawn on every frame)
+        self.readout = None              # sample -> text lines drawn at the bottom of the frame
+        self.legend = None if renderer is None else legend_for(sim)
         self.samples: list[dict] = []
         self.physics_seconds = 0.0     # steps after the first (rates exclude kernel loading)
         self.physics_steps = 0
@@ -75,7 +79,9 @@ class _Runner:
             self.physics_seconds += time.perf_counter() - t0
             self.physics_steps += n
             if self.writer is not None and sim.time >= self._next_frame - 1e-9:
-                self.writer.write(self.renderer.render(self.camera))
+                frame = np.array(self.renderer.render(self.camera))
+                lines = self.readout(self.samples[-1]) if self.readout is not None and self.samples else ()
+                self.writer.write(annotate(frame, f"t = {sim.time:4.2f} s  {self.caption}", lines, self.legend))
                 self._next_frame += 1.0 / FPS
             if self.bar is not None:
                 self.bar.update(min(n * sim.dt, self.bar.total - self.bar.n))
@@ -97,16 +103,20 @@ def _palpation(sim, runner, duration: float) -> dict:
         return {"t": s.time, "normal": rep["normal_force"], "tangential": rep["tangential_force"],
                 "penetration": rep["penetration"], "z": float(s.tool_position("probe")[2])}
 
-    for x in xs:
+    runner.readout = lambda s: (f"probe force {s['normal']:.3f} N   indentation {1e3 * s['penetration']:.1f} mm",)
+    for x, where in zip(xs, ("above the stiff inclusion", "3 cm beside it")):
         above = [x, 0.0, top + r + 0.002]
         sim.set_tool_target("probe", above, speed=math.inf)
+        runner.caption = f"palpation: the probe moves {where}"
         runner.run(0.05 * phase, record)
         start = len(runner.samples)
         sim.set_tool_target("probe", [x, 0.0, top + r - depth], speed=speed)
+        runner.caption = f"palpation: pressing 4 mm {where}"
         runner.run(phase * 0.95, record)
         pressed = runner.samples[start:]
         peaks.append(max((s["normal"] for s in pressed), default=0.0))
         sim.set_tool_target("probe", above, speed=speed * 2)
+        runner.caption = "palpation: the probe lifts; the tissue springs back"
         runner.run(phase, record)
     pen = max((s["penetration"] for s in runner.samples), default=0.0)
     return {"indentation_depth_m": depth, "peak_force_above_inclusion_N": peaks[0],
@@ -131,13 +141,18 @@ def _grasp(sim, runner, duration: float) -> dict:
                 "tangential": rep["tangential_force"], "contacts": rep["contacts"], "slipping": rep["slipping"],
                 "pull_force": float(-s.tool_force("grasper") @ axis), "jaw_normal": jaws["normal"].tolist()}
 
+    runner.readout = lambda s: (f"squeeze (jaw normal forces) {s['normal']:.2f} N   pull {s['pull_force']:.2f} N",
+                                f"contact nodes {s['contacts']}   sliding along the jaws {s['slipping']}")
     sim.set_jaw_opening("grasper", closed, speed=(cfg.open_radius - closed) / (0.9 * close_t))
+    runner.caption = "grasp: three jaws close on the spleen"
     runner.run(close_t, record)
     state["phase"] = "hold"
+    runner.caption = "grasp: hold (the tissue relaxes under the jaws)"
     runner.run(hold_t, record)
     state["phase"] = "pull"
     pull_dist = min(0.05, cfg.travel * 0.9)
     sim.set_tool_target("grasper", g.home + axis * pull_dist, speed=pull_dist / pull_t)
+    runner.caption = "grasp: pull; once the pull exceeds friction the tissue slips out (intended)"
     runner.run(pull_t, record)
     pulls = [s for s in runner.samples if s["phase"] == "pull"]
     # gross slip onset as in the grasping simulation paper (Fig. 5, red points): the pull force peaks and then falls

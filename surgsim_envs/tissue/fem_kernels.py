@@ -424,7 +424,7 @@ def _energy_pass(x, tets, dm_inv, vol, mu, lam, rots, anp, rot_iters, rot_tol, e
 def _energy_serial(x, tets, dm_inv, vol, mu, lam, rots, anp, rot_iters, rot_tol, eps_buf, trv, e_tet):
     """Single-thread :func:`_energy_pass` (same loop body, written out on purpose: a per-tet
     helper call is not inlined and costs 5x, and even an ``inline="always"`` helper made
-    ``elastic_energy`` 1.6-2.5x slower on 3,969 nodes, measured 2026-11-23)."""
+    ``elastic_energy`` 1.6-2.5x slower on 3,969 nodes)."""
     for e in range(tets.shape[0]):
         if rot_iters > 0:
             _element_rotation(x, tets, dm_inv, rots, e, rot_iters, rot_tol, eps_buf, True)
