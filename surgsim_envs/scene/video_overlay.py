@@ -48,9 +48,15 @@ def legend_for(sim) -> ColorLegend | None:
 
 
 def _text(img, text, org, scale=0.5, color=(255, 255, 255)):
+    """White text on a darkened box just large enough for it (readable on any background)."""
     import cv2
 
-    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), 3, cv2.LINE_AA)
+    (tw, th), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
+    x, y = org
+    y0, y1 = max(0, y - th - 4), min(img.shape[0], y + base + 2)
+    x0, x1 = max(0, x - 3), min(img.shape[1], x + tw + 3)
+    box = img[y0:y1, x0:x1]
+    box[:] = (0.35 * box).astype(img.dtype)
     cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, color, 1, cv2.LINE_AA)
 
 
@@ -59,8 +65,6 @@ def annotate(frame: np.ndarray, caption: str = "", lines=(), legend: ColorLegend
     returned). Text that does not fit is cut at the frame's edge."""
     h, w = frame.shape[:2]
     if caption:
-        band = frame[: 28]
-        band[:] = (0.45 * band).astype(frame.dtype)          # darken a strip for contrast
         _text(frame, caption, (10, 19), 0.55)
     for k, line in enumerate(lines):
         _text(frame, line, (10, h - 12 - 20 * (len(lines) - 1 - k)), 0.5)
