@@ -46,4 +46,4 @@ def test_presses_in_the_palpation_scene_are_unilateral_rise_with_depth_and_feel_
     assert row["max_tensile_N"] <= 1e-9                          # contact never pulls the probe
     assert ta.monotone(f, PROBES.depths)
     assert ta.contrast(f, 1, 0.006)[0] > 1.0                      # a 5x stiffer lump feels stiffer
-    assert 0.0 <= row["path_difference"] < 0.02                   # frictionless: the same pose, the same force
+    assert 0.0 <= row["path_difference"] < 0.02                   # frictionless, elastic: one pose, one force

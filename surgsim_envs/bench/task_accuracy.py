@@ -15,8 +15,9 @@ Per task x model x spacing it reports:
   press, ours and the reference's (a stiff lump must feel stiffer);
 * **monotone in depth**: whether the force rises with depth at every site;
 * **unilateral**: the largest pulling (tensile) force on the probe seen during any press, N;
-* **path independence**, frictionless: the same pose reached straight down and by a pressed slide
-  from 6 mm away (relative difference);
+* **path independence**, frictionless and elastic (``relax_fraction`` 0, so no viscoelastic
+  history): the same pose reached straight down and by a pressed slide from 6 mm away (relative
+  difference);
 * **cost**: median wall time of one env control step while pressing (us), and per simulated ms.
 
 Rows carry ``scene`` = the task id, ``error`` (the 95th percentile) and ``us_per_ms``, so
@@ -178,7 +179,7 @@ def measure(task: str, model: str, spacing: float, probes: ProbeSet, dt: float |
            "us_per_env_step": float(np.median(presser.step_us)),
            "control_dt": float(env.control_dt), "dt": float(env.sim.dt)}
     env.close()
-    # frictionless path independence at the middle depth over the first inclusion
+    # frictionless, elastic path independence at the middle depth over the first inclusion
     try:
         flat = _make(task, model, spacing, material=_frictionless(env.config.material), dt=dt)
         p = _Presser(flat, probes.hold)
@@ -194,9 +195,10 @@ def measure(task: str, model: str, spacing: float, probes: ProbeSet, dt: float |
 
 
 def _frictionless(material):
-    if isinstance(material, str):
-        return {"preset": material, "friction": 0.0}
-    return {**dict(material), "friction": 0.0}
+    """The task's material without friction and without relaxation: what is left of a difference
+    between two ways to one pose is then the contact's own history, not physics."""
+    base = {"preset": material} if isinstance(material, str) else dict(material)
+    return {**base, "friction": 0.0, "relax_fraction": 0.0}
 
 
 def monotone(forces: dict, depths: Iterable[float]) -> bool:
