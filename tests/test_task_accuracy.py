@@ -9,7 +9,7 @@ from surgsim_envs.bench import task_accuracy as ta
 from surgsim_envs.errors import ConfigError
 
 PROBES = ta.ProbeSet(inclusions=(ta.Inclusion("lump", (0.02, 0.0), 0.011, 0.007, 5.0),), depths=(0.003, 0.006),
-                     hold=0.2, spacings=(0.01,), reference_spacings=(0.01,))
+                     hold=0.5, spacings=(0.01,), reference_spacings=(0.01,))   # 0.5 s: settled to 0.1 %
 
 
 def _row(forces, model="m"):

@@ -73,7 +73,7 @@ PALPATION_FULL = ProbeSet(
                 Inclusion("3x lump, r 9 mm, 9 mm deep", (-0.015, 0.01), 0.009, 0.009, 3.0)),
     depths=(0.003, 0.005, 0.007), hold=0.5, spacings=(0.01, 0.0075, 0.005),
     reference_spacings=(0.005, 0.004, 0.0033, 0.0025))
-PALPATION_QUICK = ProbeSet(inclusions=PALPATION_FULL.inclusions[:1], depths=(0.004, 0.007), hold=0.3,
+PALPATION_QUICK = ProbeSet(inclusions=PALPATION_FULL.inclusions[:1], depths=(0.004, 0.007), hold=0.5,
                            spacings=(0.01,), reference_spacings=(0.0075, 0.005))
 
 #: task id -> (full probe set, quick probe set); tasks not listed are reported as not covered
