@@ -30,12 +30,6 @@ def test_dundurs_beta():
     assert cr.dundurs_beta(0.5) == 0.0 and cr.dundurs_beta(0.0) == 0.5
 
 
-def test_rough_sphere_is_hertz_times_the_no_slip_factor():
-    d = np.linspace(1e-4, 1e-3, 5)
-    ratio = cr.rough_sphere_force(d, 0.01, 4000.0, 0.3) / hertz_force(d, 0.01, 4000.0, 0.3)
-    np.testing.assert_allclose(ratio, cr.no_slip_stiffness_factor(0.3), rtol=1e-14)
-
-
 def test_hertz_contact_radius_is_sqrt_r_d():
     d = np.array([1e-4, 5e-4, 2e-3])
     p = hertz_force(d, 0.01, 4000.0, 0.45)

@@ -4,8 +4,9 @@ The frictionless indentation force is Hertz's (:func:`surgsim_envs.bench.referen
 and gross sliding is Coulomb's mu N (:func:`surgsim_envs.bench.references.gross_slip_pull`); this
 module adds what friction changes:
 
-* how much a no-slip (fully adhesive, "rough") contact may raise the normal force of a press
-  (:func:`no_slip_stiffness_factor`, :func:`rough_sphere_force`);
+* how much a no-slip (fully adhesive, "rough") contact raises the normal stiffness of a punch of
+  given contact radius (:func:`no_slip_stiffness_factor`; for a sphere, whose contact grows, the
+  converged FEM of docs/contact.md gives less: +5 % at nu = 0, under +0.1 % at nu = 0.45);
 * the partial-slip tangential force-displacement curve of a pressed sphere under a growing
   tangential load, up to gross sliding (Cattaneo 1938; Mindlin 1949):
   :func:`cattaneo_mindlin_displacement`, :func:`cattaneo_mindlin_force`.
@@ -28,8 +29,9 @@ NO_SLIP_SPHERE = Reference(
     "Mossakovskii (1963) and Spence (1968, 1975): a punch in complete adhesion (no slip) with an elastic "
     "half-space has the incremental stiffness dP/dd = 2 E* a kappa(nu), kappa = (1 - nu) ln(3 - 4 nu) / (1 - 2 nu), "
     "whatever the punch profile (Borodich and Keer, Proc. R. Soc. A 460:507, 2004)",
-    "rigid axisymmetric indenter, linear elastic half-space, small strain, the contact radius a(d) of the "
-    "frictionless (Hertz) solution; the coupling between normal and shear tractions is Dundurs' "
+    "rigid axisymmetric punch at a given contact radius a (exact for a flat punch), linear elastic half-space, "
+    "small strain; for a sphere the no-slip contact radius at a given depth differs from Hertz's, so the "
+    "factor is not the sphere's load ratio; the coupling between normal and shear tractions is Dundurs' "
     "beta = (1 - 2 nu) / (2 (1 - nu)) (Goodman 1962), which vanishes for nu = 0.5",
 )
 CATTANEO_MINDLIN = Reference(
@@ -85,14 +87,6 @@ def no_slip_stiffness_factor(poisson: float) -> float:
         series = 1.0 - e + 4.0 * e * e / 3.0  # ln(1 + 2e) / (2e)
         return 2.0 * (1.0 - nu) * series
     return (1.0 - nu) * math.log(1.0 + 2.0 * e) / e
-
-
-def rough_sphere_force(depth, radius: float, young: float, poisson: float) -> np.ndarray:
-    """Normal force (N) of a rigid sphere (``radius`` m) pressed ``depth`` (m) into a half-space with
-    no slip anywhere in the contact: Hertz times :func:`no_slip_stiffness_factor` (each depth
-    increment is carried by the no-slip punch stiffness at the Hertz contact radius). The ratio to
-    Hertz is the most friction can raise the normal force of a straight press on a half-space."""
-    return hertz_force(depth, radius, young, poisson) * no_slip_stiffness_factor(poisson)
 
 
 def hertz_contact_radius(normal_force, radius: float, young: float, poisson: float) -> np.ndarray:

@@ -1,0 +1,52 @@
+"""The penalty contact with Coulomb friction against analytic references, on a quasi-static FEM
+slab (bench.frictional_press, bench.contact_references). Fast representatives here; the refined
+comparisons run with -m slow."""
+
+import numpy as np
+import pytest
+
+from surgsim_envs.bench import contact_references as cr
+from surgsim_envs.bench.frictional_press import frictional_press
+from surgsim_envs.errors import ConfigError
+
+MAT = {"preset": "liver", "relax_fraction": 0.0}
+
+
+def test_bonded_punch_raises_the_load_by_mossakovskii_factor_fast():
+    # a flat punch in full stick (mu 5) against the same punch frictionless, nu = 0: kappa = ln 3 = 1.099;
+    # coarse mesh (radius / spacing 2.5), so 2 % (the refined slow case is within 1 %)
+    mat = {**MAT, "poisson": 0.0}
+    kw = dict(radius=0.005, depth=5e-5, thickness=0.025, spacing=0.002, press_steps=4, tool="punch")
+    p0 = frictional_press(mat, mu=0.0, **kw).normal[-1]
+    p1 = frictional_press(mat, mu=5.0, **kw).normal[-1]
+    assert p1 / p0 == pytest.approx(cr.no_slip_stiffness_factor(0.0), rel=0.02)
+
+
+def test_gross_sliding_carries_mu_n_fast():
+    # a/R = 0.035 (little ploughing by the tilted normals); slid 1.6 mm, ~8 x the Cattaneo-Mindlin slip
+    # displacement, in increments of 25 um (the slip decision is explicit, see bench.frictional_press)
+    r = frictional_press(MAT, mu=0.5, radius=0.04, depth=5e-5, thickness=0.006, spacing=1e-3, slide=1.6e-3,
+                         press_steps=3, slide_steps=64, penalty_ratio=2.0)
+    ds = cr.mindlin_slip_displacement(0.5, r.normal[2], r.info["contact_radius"], 4000.0, 0.45)
+    assert r.x[-1] > 6 * ds
+    assert np.mean(r.sliding_fraction[-6:]) > 0.8
+    np.testing.assert_allclose(r.tangential[-6:] / (0.5 * r.normal[-6:]), 1.0, rtol=0.02)
+
+
+def test_rig_refuses_bad_input():
+    with pytest.raises(ConfigError, match="tool must be 'sphere' or 'punch'"):
+        frictional_press(MAT, tool="cone")
+    with pytest.raises(ConfigError, match="mu must be a Coulomb coefficient >= 0"):
+        frictional_press(MAT, mu=-0.1)
+    with pytest.raises(ConfigError, match="depth 0.006 m must be below half the radius"):
+        frictional_press(MAT, depth=0.006)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("nu", [0.0, 0.3, 0.45])
+def test_bonded_punch_matches_mossakovskii(nu):
+    # radius / spacing 3.3: 1.0891 / 1.0284 / 1.0033 against kappa 1.0986 / 1.0286 / 1.0028
+    mat = {**MAT, "poisson": nu}
+    kw = dict(radius=0.005, depth=5e-5, thickness=0.05, spacing=0.0015, press_steps=8, tool="punch")
+    ratio = frictional_press(mat, mu=5.0, **kw).normal[-1] / frictional_press(mat, mu=0.0, **kw).normal[-1]
+    assert ratio == pytest.approx(cr.no_slip_stiffness_factor(nu), rel=0.012)
