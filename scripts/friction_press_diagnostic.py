@@ -65,7 +65,8 @@ def split(sim, env):
     fn = np.einsum("ij,ij->i", F[rows], n)
     ft = F[rows] - fn[:, None] * n
     ang = np.degrees(np.arccos(np.clip(-n[:, 2], -1, 1)))
-    return {"tip_depth_mm": round((env.surface_z + env.config.tip_radius - pos[2]) * 1e3, 3), "tool_Fz": float(f_tool[2]), "normal_part": float(-(fn * n[:, 2]).sum()),
+    return {"tip_depth_mm": round((env.surface_z + env.config.tip_radius - pos[2]) * 1e3, 3),
+            "tool_Fz": float(f_tool[2]), "normal_part": float(-(fn * n[:, 2]).sum()),
             "friction_part": float(-ft[:, 2].sum()), "nodes": [
                 (int(i), round(float(a), 1), round(float(f), 4), round(float(-t[2]), 4), round(float(-dd) * 1e3, 3))
                 for i, a, f, t, dd in zip(rows, ang, fn, ft, d)]}
@@ -83,8 +84,9 @@ if __name__ == "__main__":
     for mu in (None, 0.0):
         r = run(a.model, mu, a.depth, a.hold, a.slide, a.spacing, samples=a.samples)
         for k, v in r.items():
-            print(f"mu={'liver' if mu is None else mu} {k}: depth {v['tip_depth_mm']} mm Fz {v['tool_Fz']:.4f} N = normal {v['normal_part']:.4f}"
-                  f" + friction {v['friction_part']:.4f}")
+            name = "liver" if mu is None else mu
+            print(f"mu={name} {k}: depth {v['tip_depth_mm']} mm Fz {v['tool_Fz']:.4f} N = "
+                  f"normal {v['normal_part']:.4f} + friction {v['friction_part']:.4f}")
             print("   nodes (id, normal angle deg, f_n N, friction up on tool N, penetration mm):")
             for row in v["nodes"]:
                 print("    ", row)

@@ -7,7 +7,10 @@ slide: the tangential force Q against the sphere's displacement at constant dept
     Cattaneo-Mindlin (with the measured P and Hertz contact radius) and mu P.
 
 python scripts/frictional_contact_validation.py press --spacing 0.001 --poisson 0.45
-python scripts/frictional_contact_validation.py slide --spacing 0.0015
+python scripts/frictional_contact_validation.py sweep --poisson 0.45
+python scripts/frictional_contact_validation.py punch --radius 0.005 --depth 0.00005 --spacing 0.0015
+python scripts/frictional_contact_validation.py slide --radius 0.04 --depth 5e-5 --thickness 0.014 --spacing 4.7e-4 \
+    --slide 1e-4 --slide-steps 100 --steps 5 --penalty 2
 """
 from __future__ import annotations
 
@@ -57,7 +60,8 @@ def sweep(a):
         p = [frictional_press(mat, mu=mu, radius=a.radius, depth=depth, thickness=10 * ca, spacing=ca / 2.5,
                               press_steps=a.steps, iterations=a.iterations, penalty_ratio=a.penalty).normal[-1]
              for mu in (0.0, 5.0)]
-        print(f"{d:.4f} {ca / a.radius:.4f} {p[0]:.4e} {p[1]:.4e} {p[1] / p[0]:.5f} {p[1] / p[0] - kappa:+.5f}", flush=True)
+        ratio = p[1] / p[0]
+        print(f"{d:.4f} {ca / a.radius:.4f} {p[0]:.4e} {p[1]:.4e} {ratio:.5f} {ratio - kappa:+.5f}", flush=True)
 
 
 def punch(a):

@@ -77,7 +77,8 @@ def frictional_press(material="liver", *, mu: float = 0.5, radius: float = 0.01,
                      slide: float = 0.0, thickness: float = 0.03, width: float | None = None,
                      spacing: float | None = None, grading: float = 1.3, max_cell: float | None = None,
                      press_steps: int = 10, slide_steps: int = 20, iterations: int = 200,
-                     tolerance: float = 1e-3, penalty_ratio: float = 10.0, tool: str = "sphere") -> FrictionalPressResult:
+                     tolerance: float = 1e-3, penalty_ratio: float = 10.0,
+                     tool: str = "sphere") -> FrictionalPressResult:
     """Press a rigid sphere (``radius`` m) ``depth`` m into a bonded slab (``thickness`` m, ``width`` m,
     default 4 x thickness) of ``material`` with tool friction ``mu``, then slide it ``slide`` m along
     +x (module docstring). spacing: fine mesh spacing (m, default a / 6, a the contact radius);
@@ -94,7 +95,8 @@ def frictional_press(material="liver", *, mu: float = 0.5, radius: float = 0.01,
     from surgsim_envs.tissue.fem_static import QuasiStaticFEMModel
 
     mat = get_material(material)
-    for key, val in (("radius", radius), ("depth", depth), ("thickness", thickness), ("penalty_ratio", penalty_ratio)):
+    for key, val in (("radius", radius), ("depth", depth), ("thickness", thickness), ("penalty_ratio", penalty_ratio),
+                     ("tolerance", tolerance)):
         if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
             raise ConfigError(f"{key} must be a positive number (SI units), got {val!r}")
     if not (isinstance(mu, (int, float)) and math.isfinite(mu) and mu >= 0):
@@ -147,7 +149,7 @@ def frictional_press(material="liver", *, mu: float = 0.5, radius: float = 0.01,
         pos = np.array([[x, 0.0, centre - d]])
         sliding = 0
         travel = depth / press_steps if s < press_steps else slide / slide_steps
-        for _ in range(iterations):
+        for passes in range(1, iterations + 1):
             res = cm.compute_prepared(tissue.positions, tissue.velocities, pos, rot, vel, com)
             sliding = max(sliding, int(cm.report.slipping[0]))      # a relocated anchor sticks next pass
             tissue.step(1.0, res.forces * w, res.stiffness * share)
@@ -155,14 +157,15 @@ def frictional_press(material="liver", *, mu: float = 0.5, radius: float = 0.01,
                 break
         g = tissue.integrated_external_forces
         out["x"][s], out["depth"][s] = x, d
-        out["passes"][s] = _ + 1
+        out["passes"][s] = passes
         out["normal"][s] = -copies * g[:, 2].sum()
         out["tangential"][s] = copies * g[:, 0].sum() if slide > 0 else 0.0
         n_on = int(cm.report.contacts[0])
         out["sliding"][s] = min(sliding / n_on, 1.0) if n_on else 0.0
         out["pen"][s] = float(cm.report.penetration[0])
     return FrictionalPressResult(out["x"], out["depth"], out["normal"], out["tangential"], out["sliding"], out["pen"],
-                                 {"nodes": int(tissue.n_nodes), "spacing": h, "max_passes": int(out["passes"].max()), "contact_radius": a, "tool": tool,
+                                 {"nodes": int(tissue.n_nodes), "spacing": h, "max_passes": int(out["passes"].max()),
+                                  "contact_radius": a, "tool": tool,
                                   "stiffness_per_node": k, "mu": float(mu), "radius": float(radius),
                                   "thickness": float(thickness), "width": width, "young": mat.young,
                                   "poisson": mat.poisson})
