@@ -33,6 +33,21 @@ def test_gross_sliding_carries_mu_n_fast():
     np.testing.assert_allclose(r.tangential[-6:] / (0.5 * r.normal[-6:]), 1.0, rtol=0.02)
 
 
+@pytest.mark.slow
+def test_partial_slip_starts_at_the_bonded_circle_stiffness():
+    # Cattaneo-Mindlin: the pressed sphere first resists a tangential displacement like a bonded circle of
+    # the contact radius, dQ/d delta = 8 G a / (2 - nu), then softens as the slip annulus grows (concave),
+    # below mu P. Coarse mesh (a / h = 2) and a slab 7 a thick on its base, so 10 % on the initial secant
+    # stiffness (measured 8 s under load, so -m slow).
+    r = frictional_press(MAT, mu=0.5, radius=0.04, depth=5e-5, thickness=0.01, spacing=7e-4, slide=1e-5,
+                         press_steps=3, slide_steps=5, penalty_ratio=2.0)
+    p0, a = r.normal[2], float(cr.hertz_contact_radius(r.normal[2], 0.04, 4000.0, 0.45))
+    q, x = r.tangential[3:], r.x[3:]
+    g = cr.shear_modulus(4000.0, 0.45)
+    assert q[0] / x[0] == pytest.approx(8 * g * a / (2 - 0.45), rel=0.10)
+    assert np.all(np.diff(q) > 0) and np.all(np.diff(np.diff(q)) < 0) and q[-1] < 0.5 * p0
+
+
 def test_rig_refuses_bad_input():
     with pytest.raises(ConfigError, match="tool must be 'sphere' or 'punch'"):
         frictional_press(MAT, tool="cone")
