@@ -258,6 +258,18 @@ def reward_from_terms(terms: dict[str, float]) -> tuple[float, dict[str, float]]
     return float(sum(clean.values())), clean
 
 
+def check_render_mode(render_mode, modes, task: str = "") -> None:
+    """Refuse a ``render_mode`` outside ``modes`` (None is always fine), and ``"human"`` without
+    a display (raised here; MuJoCo would exit the process later)."""
+    if render_mode is not None and render_mode not in modes:
+        where = f" by {task}" if task else ""
+        raise ConfigError(f"render_mode={render_mode!r} is not supported{where}; use one of {modes} or None")
+    if render_mode == "human":
+        from surgsim_envs.scene.display import require_display
+
+        require_display("render_mode='human'")
+
+
 class SurgSimEnv(gym.Env):
     """Base class of the SurgSim tasks (see module docstring).
 
@@ -280,13 +292,7 @@ class SurgSimEnv(gym.Env):
             raise ConfigError(f"config must be a {self.config_cls.__name__}, got {type(config).__name__}")
         self.config = apply_overrides(config, overrides) if overrides else config
         self.config.validate()
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ConfigError(f"render_mode={render_mode!r} is not supported; use one of "
-                              f"{self.metadata['render_modes']} or None")
-        if render_mode == "human":
-            from surgsim_envs.scene.display import require_display
-
-            require_display("render_mode='human'")   # raises here; MuJoCo would exit the process later
+        check_render_mode(render_mode, self.metadata["render_modes"])
         self.render_mode = render_mode
         self.metadata = dict(self.metadata, render_fps=int(round(self.config.control_hz)))
         from surgsim_envs.scene.pacing import RealTimePacer, pace_period

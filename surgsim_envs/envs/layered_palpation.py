@@ -32,7 +32,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from surgsim_envs.envs.base import ObsTerm, SurgSimEnv, apply_overrides, observation_space_of
+from surgsim_envs.envs.base import ObsTerm, SurgSimEnv, apply_overrides, check_render_mode, observation_space_of
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 
 #: wall thickness of the default abdominal wall (m): presses stay well inside it
@@ -143,13 +143,7 @@ class LayeredPalpationEnv(gym.Env):
             raise ConfigError(f"config must be a LayeredPalpationConfig, got {type(config).__name__}")
         self.config = cfg = apply_overrides(config, overrides) if overrides else dataclasses.replace(config)
         cfg.validate()
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ConfigError(f"render_mode={render_mode!r} is not supported by SurgSim/LayeredPalpation-v0; use "
-                              f"one of {self.metadata['render_modes']} or None")
-        if render_mode == "human":
-            from surgsim_envs.scene.display import require_display
-
-            require_display("render_mode='human'")   # raises here; MuJoCo would exit the process later
+        check_render_mode(render_mode, self.metadata["render_modes"], "SurgSim/LayeredPalpation-v0")
         self.render_mode = render_mode
         self.metadata = dict(self.metadata, render_fps=max(1, int(round(cfg.control_hz))))
         key = (tuple(float(v) for v in cfg.size), float(cfg.spacing))
