@@ -4,8 +4,8 @@ events (xdotool), `surgsim run ... --viewer` and dm_control's viewer on the dm_c
 Skips with a reason where Xvfb / xdotool / xwd are absent (Debian: apt-get install xvfb xdotool
 x11-apps; .ci/run installs them when it runs as root).
 
-The screen is 1280x1024: MuJoCo's viewer opens at 2/3 of the screen, and at 800x600 its two UI
-panels cover the whole 3D view. Tab / Shift+Tab hide the panels."""
+The screen is 1280x1024: MuJoCo's viewer opens at 2/3 of the screen. The package opens it with
+MuJoCo's two UI panels hidden (they would cover most of the 3D view; Tab / Shift+Tab show them)."""
 
 import os
 import shutil
@@ -94,10 +94,9 @@ def test_human_viewer_shows_the_scene(xvfb):
         _wait_for(proc, "CLOSED")
     finally:
         proc.kill()
-    r, g, b = img[..., 0], img[..., 1], img[..., 2]
-    tissue = (r > g + 40) & (r > b + 40)                  # the liver slab's red-brown surface
+    tissue = _tissue(img)                  # the slab, coloured by displacement, seen through the task's camera
     assert img.std() > 10, "the screen is blank"
-    assert tissue.mean() > 0.005, f"no tissue-coloured pixels on screen ({tissue.mean():.4f})"
+    assert tissue.mean() > 0.02, f"the tissue fills too little of the screen ({tissue.mean():.4f})"
 
 
 def _window(env, name: str = "MuJoCo", timeout: float = 240.0) -> str:
@@ -155,7 +154,6 @@ def test_teleop_keyboard_moves_the_probe(xvfb):
         win = _window(xvfb)
         t_open = time.time()
         _focus(xvfb, win)
-        _xdotool(xvfb, "key", "Tab", "shift+Tab")           # hide the viewer's UI panels
         before = _framed(xvfb)
         _xdotool(xvfb, "key", "--delay", "100", *(["Next"] * 8))   # Page Down: -z, 1 mm each
         time.sleep(3.0)
@@ -190,7 +188,6 @@ def test_run_scenario_with_viewer(xvfb, tmp_path):
     try:
         win = _window(xvfb)
         _focus(xvfb, win)
-        _xdotool(xvfb, "key", "Tab", "shift+Tab")
         img = _framed(xvfb, timeout=30)
         out, err = proc.communicate(timeout=300)
         wall = time.time() - t0

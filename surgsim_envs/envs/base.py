@@ -489,7 +489,8 @@ class SurgSimEnv(gym.Env):
             try:
                 from surgsim_envs.scene.display import open_viewer
 
-                self._viewer = open_viewer(self.sim.render_model, self.sim.sync_visual())   # panels hidden
+                self._viewer = open_viewer(self.sim.render_model, self.sim.sync_visual(),   # panels hidden
+                                           camera=getattr(self.config, "camera", None))
             except Exception as exc:  # no display, or not the main thread on macOS
                 raise RenderingUnavailableError(
                     f"render_mode='human' needs a display for mujoco.viewer ({exc}); use render_mode='rgb_array' "

@@ -279,9 +279,10 @@ class LayeredPalpationEnv(gym.Env):
             from surgsim_envs.errors import RenderingUnavailableError
 
             try:
-                import mujoco.viewer
+                from surgsim_envs.scene.display import open_viewer
 
-                self._viewer = mujoco.viewer.launch_passive(sim.render_model, sim.sync_visual())
+                self._viewer = open_viewer(sim.render_model, sim.sync_visual(),   # panels hidden
+                                           camera=getattr(self.config, "camera", None))
             except Exception as exc:  # no display, or not the main thread on macOS
                 raise RenderingUnavailableError(
                     f"render_mode='human' needs a display for mujoco.viewer ({exc}); use render_mode='rgb_array' "

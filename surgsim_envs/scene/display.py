@@ -49,11 +49,13 @@ def require_display(what: str = "the MuJoCo viewer") -> None:
         raise RenderingUnavailableError(f"{what} needs a display: {problem}; {_HINT}")
 
 
-def open_viewer(model, data, *, key_callback=None, panels: bool = False, help_text: tuple[str, str] | None = None):
+def open_viewer(model, data, *, key_callback=None, panels: bool = False, help_text: tuple[str, str] | None = None,
+                camera: str | None = None):
     """``mujoco.viewer.launch_passive`` with MuJoCo's side panels hidden unless ``panels`` (they
     cover about 60 % of a default window; Tab / Shift+Tab still toggle them) and, if given,
     ``help_text`` = (left column, right column) drawn in the window's top-left corner (e.g. a
-    device's key bindings). Call :func:`require_display` first."""
+    device's key bindings); ``camera``: a camera of the model to look through at first (the task's
+    render camera), else MuJoCo's free camera. Call :func:`require_display` first."""
     import mujoco
     import mujoco.viewer
 
@@ -62,6 +64,11 @@ def open_viewer(model, data, *, key_callback=None, panels: bool = False, help_te
     if help_text is not None:
         viewer.set_texts((mujoco.mjtFontScale.mjFONTSCALE_100, mujoco.mjtGridPos.mjGRID_TOPLEFT,
                           help_text[0], help_text[1]))
+    cam_id = -1 if camera is None else mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
+    if cam_id >= 0:       # start from the scene's named camera (the view rgb_array frames); drag to leave it
+        with viewer.lock():
+            viewer.cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
+            viewer.cam.fixedcamid = cam_id
     return viewer
 
 
