@@ -322,9 +322,12 @@ def chart(table: dict, path: str | Path) -> None:
             ax.annotate(f"{r['model']} {r['spacing'] * 1e3:.3g} mm", (r["us_per_env_step"], 100 * r["error"]),
                         fontsize=7, xytext=(3, 3), textcoords="offset points")
         ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel("wall time per env step (us)")
-        ax.set_ylabel("force error against converged fem, p95 (%)")
-        ax.set_title(task)
+        ax.set_ylabel("force error against the reference fem, p95 (%)")
+        ref = table["references"][task]
+        state = "converged" if ref.get("reference_converged") else "not converged"
+        ax.set_title(f"{task}\nreference: fem at {ref['spacing'] * 1e3:.3g} mm ({state})", fontsize=10)
         ax.grid(True, alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
