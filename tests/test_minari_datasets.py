@@ -53,3 +53,26 @@ def test_bad_recordings_are_refused_with_the_value(tmp_path, kwargs, match):
     with pytest.raises(ConfigError, match=match):
         md.record(**args)
     assert not list(tmp_path.iterdir())
+
+
+def test_a_teleoperation_session_records_the_device_pose_and_the_felt_force(tmp_path):
+    ds = md.record("SurgSim/Palpation-v0", "scripted", episodes=1, seed=0, out=tmp_path, max_steps=150)
+    ep = next(ds.iterate_episodes())
+    n = len(ep.actions)
+    dev, felt, tool = ep.infos["device_position_m"], ep.infos["felt_force_N"], ep.infos["tool_force_N"]["probe"]
+    assert dev.shape == (n + 1, 3) and felt.shape == (n + 1, 3) and ep.infos["device_quaternion"].shape == (n + 1, 4)
+    assert dev[:-1, 2].min() < -0.005                         # the hand went down into the tissue
+    np.testing.assert_allclose(felt[1:], tool[1:], atol=1e-12)  # the hand feels the probe's contact force
+    assert felt[:, 2].max() > 0.02 and np.all(felt[:, 2] >= -1e-9)
+    # the probe depth the task was asked for is the device's height below the probe's home
+    c_hover, c_depth = 0.002, 0.008                           # Palpation-v0's hover and max_depth (m)
+    press = np.clip(2.0 * -dev[:-1, 2] / (c_hover + c_depth) - 1.0, -1.0, 1.0)
+    np.testing.assert_allclose(ep.actions[:, 2], press, atol=1e-6)
+
+
+def test_haptic_devices_drive_only_tasks_with_a_pose_mapping(tmp_path):
+    with pytest.raises(ConfigError, match="cannot be driven by a haptic device.*Palpation-v0"):
+        md.record("SurgSim/Grasp-v0", "scripted", episodes=1, out=tmp_path)
+    with pytest.raises(ConfigError, match="nowhere.csv"):
+        md.record("SurgSim/Palpation-v0", "replay:nowhere.csv", episodes=1, out=tmp_path)
+    assert not list(tmp_path.iterdir())

@@ -8,10 +8,16 @@ step in ``infos``:
 * ``reward_terms``: the task's weighted reward terms (the same names as ``info["reward_terms"]``;
   zeros at reset);
 * ``source_action``: the action the device chose at this observation (zeros at the last one); it
-  differs from the recorded action when ``--noise`` perturbs the applied actions.
+  differs from the recorded action when ``--noise`` perturbs the applied actions;
+* with a haptic device (a teleoperation session, :mod:`~surgsim_envs.integrations.teleop_actions`):
+  ``device_position_m`` and ``device_quaternion`` (the device pose read at this observation; zeros
+  and identity at the last) and ``felt_force_N`` (the force sent back to the hand after the step
+  that led here, N, limited by the device; zeros at reset).
 
 Sources (``--device``): ``expert`` (the task's scripted expert), ``random`` (uniform actions from
-the action space), ``policy:FILE.npz`` (a saved :class:`~surgsim_envs.policies.NpzPolicy`).
+the action space), ``policy:FILE.npz`` (a saved :class:`~surgsim_envs.policies.NpzPolicy`),
+``scripted`` and ``replay:FILE`` (haptic devices whose pose drives the task: a teleoperation
+session; Palpation-v0).
 Episode *k* is reset with seed ``seed + k``, and the dataset's description names the package
 version, the task, the source and the seed, so a recording can be made again.
 
@@ -53,7 +59,15 @@ def _expert(task: str) -> Callable:
 def action_source(task: str, device: str) -> Callable:
     """``factory(env) -> policy(obs) -> action``, made anew for every episode."""
     if not isinstance(device, str):
-        raise ConfigError(f"device must be 'expert', 'random' or 'policy:FILE.npz', got {device!r}")
+        raise ConfigError(f"device must be 'expert', 'random', 'policy:FILE.npz', 'scripted' or 'replay:FILE', "
+                          f"got {device!r}")
+    if device == "scripted" or device.startswith("replay:"):
+        from surgsim_envs.integrations.teleop_actions import device_source
+
+        if device.startswith("replay:") and not Path(device.split(":", 1)[1]).expanduser().is_file():
+            raise ConfigError(f"replay file {device.split(':', 1)[1]!r} not found (relative paths resolve from the "
+                              f"working directory {os.getcwd()!r})")
+        return device_source(task, device)
     if device == "expert":
         return _expert(task)
     if device == "random":
@@ -67,7 +81,8 @@ def action_source(task: str, device: str) -> Callable:
                               f"directory {os.getcwd()!r})")
         policy = NpzPolicy.load(path, mode="deterministic")
         return lambda env: policy
-    raise ConfigError(f"unknown device {device!r}: use 'expert', 'random' or 'policy:FILE.npz'")
+    raise ConfigError(f"unknown device {device!r}: use 'expert', 'random', 'policy:FILE.npz' (a saved policy), "
+                      "'scripted' or 'replay:FILE' (a haptic device: a teleoperation session)")
 
 
 def _step_info(env, info: dict, term_names: tuple) -> dict:
@@ -141,11 +156,16 @@ def record(task: str, device: str = "expert", episodes: int = 10, seed: int = 0,
         for k in range(episodes):
             obs, info = env.reset(seed=seed + k)
             policy = factory(env)
+            haptic = hasattr(policy, "after_step")     # a haptic device: its pose and the felt force too
             observations, actions, rewards, terms, truncs = [obs], [], [], [], []
             infos = [_step_info(env, info, names)]
+            if haptic:
+                infos[0]["felt_force_N"] = np.zeros(3)
             for _ in range(limit if limit else 10**6):
                 chosen = np.asarray(policy(obs), dtype=env.action_space.dtype)
                 infos[-1]["source_action"] = chosen
+                if haptic:
+                    infos[-1]["device_position_m"], infos[-1]["device_quaternion"] = policy.last_device
                 action = chosen
                 if noise > 0.0:
                     action = np.clip(chosen + rng.normal(0.0, noise, chosen.shape), env.action_space.low,
@@ -157,9 +177,14 @@ def record(task: str, device: str = "expert", episodes: int = 10, seed: int = 0,
                 terms.append(bool(terminated))
                 truncs.append(bool(truncated))
                 infos.append(_step_info(env, info, names))
+                if haptic:
+                    policy.after_step()
+                    infos[-1]["felt_force_N"] = policy.felt.copy()
                 if terminated or truncated:
                     break
             infos[-1]["source_action"] = np.zeros_like(actions[-1])
+            if haptic:
+                infos[-1]["device_position_m"], infos[-1]["device_quaternion"] = np.zeros(3), np.array([1.0, 0, 0, 0])
             truncs[-1] = truncs[-1] or not terms[-1]   # an episode cut by max_steps ends truncated
             buffers.append(EpisodeBuffer(id=k, seed=seed + k, observations=np.stack(observations),
                                          actions=np.stack(actions), rewards=rewards, terminations=terms,
@@ -196,7 +221,9 @@ def returns(dataset) -> np.ndarray:
 
 def add_arguments(parser) -> None:
     parser.add_argument("task", help="task id, e.g. SurgSim/Grasp-v0")
-    parser.add_argument("--device", default="expert", help="expert | random | policy:FILE.npz (default expert)")
+    parser.add_argument("--device", default="expert",
+                        help="expert | random | policy:FILE.npz | scripted | replay:FILE (default expert; the last "
+                             "two are haptic devices driving the task: a teleoperation session)")
     parser.add_argument("--episodes", type=int, default=10, help="episodes to record (default 10)")
     parser.add_argument("--seed", type=int, default=0, help="episode k is reset with seed + k (default 0)")
     parser.add_argument("--noise", type=float, default=0.0,
