@@ -4,7 +4,6 @@ bind other than loopback."""
 
 from __future__ import annotations
 
-import time
 
 import pytest
 
@@ -22,6 +21,7 @@ from surgsim_envs.haptics.pose_protocol import (
 )
 from surgsim_envs.haptics.session_gate import OPEN_PACKETS, SEQ_WINDOW, SESSION_TIMEOUT_S, SessionGate
 from surgsim_envs.haptics.udp_bridge import UdpDevice, UdpHapticClient, is_loopback
+from udp_support import poll_until  # noqa: E402
 
 DEV, ATTACKER = ("127.0.0.1", 5000), ("127.0.0.1", 6000)
 GENUINE, SPOOF = 0x1111, 0x2222
@@ -132,14 +132,6 @@ def test_bad_keys_are_refused_with_the_fix(bad, match):
     assert check_key(new_session_key().hex()) is not None
 
 
-def _poll_until(dev, predicate, tries=300):
-    for _ in range(tries):
-        dev.poll()
-        if predicate():
-            return True
-        time.sleep(0.001)
-    return False
-
 
 def test_a_bind_beyond_loopback_requires_tagged_packets():
     assert is_loopback("127.0.0.1") and is_loopback("localhost") and not is_loopback("0.0.0.0")
@@ -151,11 +143,11 @@ def test_a_bind_beyond_loopback_requires_tagged_packets():
         with UdpHapticClient(server) as plain, UdpHapticClient(server, key=dev.key.hex()) as keyed:
             for i in range(2 * OPEN_PACKETS):
                 plain.send_pose(i * 1e-3, (0.0, 0.0, 0.03))
-            assert _poll_until(dev, lambda: dev.stats.malformed == 2 * OPEN_PACKETS)
+            assert poll_until(dev, lambda: dev.stats.malformed == 2 * OPEN_PACKETS)
             assert not dev.has_pose
             for i in range(OPEN_PACKETS + 2):
                 keyed.send_pose(i * 1e-3, (0.0, 0.0, -0.001 * i))
-            assert _poll_until(dev, lambda: dev.stats.accepted == 3)
+            assert poll_until(dev, lambda: dev.stats.accepted == 3)
             assert dev.read(0.0).position[2] == pytest.approx(-0.001 * (OPEN_PACKETS + 1))
             dev.send_force((0.0, 0.0, 0.5), 0.0)
             got = []

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import struct
-import time
 
 import numpy as np
 import pytest
@@ -23,6 +22,7 @@ from surgsim_envs.haptics.udp_bridge import (
     encode_force,
     encode_pose,
 )
+from udp_support import poll_until  # noqa: E402
 
 
 def test_packet_round_trip_and_documented_sizes():
@@ -58,15 +58,6 @@ def test_malformed_pose_packets_raise(data):
         decode_pose(data)
 
 
-def _poll_until(dev, predicate, tries=200):
-    """Bounded wait for loopback datagrams (normally available at once)."""
-    for _ in range(tries):
-        dev.poll()
-        if predicate():
-            return True
-        time.sleep(0.001)
-    return False
-
 
 def test_loopback_round_trip_poses_in_forces_out_malformed_rejected():
     dev = UdpDevice(port=0, limits=DeviceLimits(max_force=5.0))
@@ -86,7 +77,7 @@ def test_loopback_round_trip_poses_in_forces_out_malformed_rejected():
             if i % 10 == 3:  # interleave garbage: counted, never fatal
                 client.send_raw(b"\x00" * 7)
                 client.send_raw(encode_pose(999, 0, (math.nan, 0, 0)))
-            assert _poll_until(dev, lambda: dev.stats.accepted == i + 1)
+            assert poll_until(dev, lambda: dev.stats.accepted == i + 1)
             loop.tick(i * 1e-3, physics_until=phys.time + 1e-3)
         # 40 poses accepted, 8 malformed rejected, the loop kept running
         assert dev.stats.accepted == len(depths)
@@ -109,7 +100,7 @@ def test_loopback_round_trip_poses_in_forces_out_malformed_rejected():
         # an older sequence number is stale, not applied
         stale = encode_pose(0, 0.0, (0.0, 0.0, 0.05), session=client.session)
         client.send_raw(stale)
-        assert _poll_until(dev, lambda: dev.stats.stale == OPEN_PACKETS - 1 + 1)
+        assert poll_until(dev, lambda: dev.stats.stale == OPEN_PACKETS - 1 + 1)
         assert dev.read(1.0).position[2] == pytest.approx(-depths[-1])
     finally:
         if client is not None:
@@ -136,7 +127,7 @@ def test_force_packet_flags_saturation():
     with dev, UdpHapticClient(dev.address) as client:
         for _ in range(OPEN_PACKETS):
             client.send_pose(0.0, (0, 0, 0))
-        assert _poll_until(dev, lambda: dev.stats.accepted == 1)
+        assert poll_until(dev, lambda: dev.stats.accepted == 1)
         dev.send_force((0.0, 0.0, 3.0), 0.0)
         got = []
         for _ in range(100):

@@ -20,15 +20,8 @@ from surgsim_envs.haptics.udp_bridge import (
     decode_pose,
     encode_pose,
 )
+from udp_support import poll_until  # noqa: E402
 
-
-def _poll_until(dev, predicate, tries=300):
-    for _ in range(tries):
-        dev.poll()
-        if predicate():
-            return True
-        time.sleep(0.001)
-    return False
 
 
 @pytest.mark.parametrize("quat, expected", [
@@ -66,11 +59,11 @@ def test_bridge_survives_a_far_ahead_packet_and_a_client_restart():
     with dev, UdpHapticClient(dev.address) as client:
         for i in range(5):
             client.send_pose(i * 1e-3, (0.0, 0.0, 0.001 * i))
-        assert _poll_until(dev, lambda: dev.stats.accepted == 5 - OPEN_PACKETS + 1)
+        assert poll_until(dev, lambda: dev.stats.accepted == 5 - OPEN_PACKETS + 1)
         client.send_raw(encode_pose(0xFFFF0000, 0.0, (0.05, 0.05, 0.05), session=client.session))  # stray
         for i in range(5, 10):
             client.send_pose(i * 1e-3, (0.0, 0.0, 0.001 * i))
-        assert _poll_until(dev, lambda: dev.stats.accepted == 10 - OPEN_PACKETS + 1)
+        assert poll_until(dev, lambda: dev.stats.accepted == 10 - OPEN_PACKETS + 1)
         assert dev.stats.stale == OPEN_PACKETS - 1 + 1
         assert dev.read(0.0).position[2] == pytest.approx(0.009)
     # a new client process (new port, new session id, sequence from 0) takes over once the old
@@ -79,7 +72,7 @@ def test_bridge_survives_a_far_ahead_packet_and_a_client_restart():
     with dev, UdpHapticClient(dev.address) as restarted:
         for i in range(6):
             restarted.send_pose(i * 1e-3, (0.0, 0.01 * i, 0.0))
-        assert _poll_until(dev, lambda: dev.stats.accepted == (10 - OPEN_PACKETS + 1) + (6 - OPEN_PACKETS + 1))
+        assert poll_until(dev, lambda: dev.stats.accepted == (10 - OPEN_PACKETS + 1) + (6 - OPEN_PACKETS + 1))
         assert dev.stats.takeovers == 1
         assert dev.read(0.0).position[1] == pytest.approx(0.05)
 
@@ -120,7 +113,7 @@ def test_no_force_reaches_the_device_before_its_first_pose():
         for k in range(OPEN_PACKETS):  # the hand, out of contact; the stream opens on the last
             assert not dev.has_pose
             client.send_pose(0.05, (0.0, 0.0, 0.05))
-        assert _poll_until(dev, lambda: dev.has_pose)
+        assert poll_until(dev, lambda: dev.has_pose)
         loop.tick(0.05, physics_until=phys.time + 1e-3)
         assert loop.proxy_target[2] == pytest.approx(0.0)
 
@@ -134,7 +127,7 @@ def test_one_overflowing_packet_does_not_end_a_teleoperation_of_the_scene():
         loop = ServoLoop(dev, phys, config)
         for _ in range(OPEN_PACKETS):
             client.send_pose(0.0, (0.0, 0.0, 0.0))
-        assert _poll_until(dev, lambda: dev.has_pose)
+        assert poll_until(dev, lambda: dev.has_pose)
         client.send_raw(encode_pose(OPEN_PACKETS, 0.001, (0.0, 0.0, 0.0), (1e300, 0.0, 0.0, 1e300),
                                     session=client.session))
         for i in range(20):
