@@ -3,6 +3,7 @@ replays exactly from its seeds, and the refusals."""
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -71,8 +72,49 @@ def test_a_teleoperation_session_records_the_device_pose_and_the_felt_force(tmp_
 
 
 def test_haptic_devices_drive_only_tasks_with_a_pose_mapping(tmp_path):
+    from surgsim_envs.integrations.teleop_actions import device_source
+
     with pytest.raises(ConfigError, match="cannot be driven by a haptic device.*Palpation-v0"):
-        md.record("SurgSim/Grasp-v0", "scripted", episodes=1, out=tmp_path)
+        device_source("SurgSim/Unknown-v0", "scripted")
     with pytest.raises(ConfigError, match="nowhere.csv"):
         md.record("SurgSim/Palpation-v0", "replay:nowhere.csv", episodes=1, out=tmp_path)
     assert not list(tmp_path.iterdir())
+
+
+def test_a_teleoperated_grasp_closes_with_the_grip_and_carries_the_organ_to_the_target(tmp_path):
+    ds = md.record("SurgSim/Grasp-v0", "scripted", episodes=1, seed=3, out=tmp_path)
+    ep = next(ds.iterate_episodes())
+    felt, tool = ep.infos["felt_force_N"], ep.infos["tool_force_N"]["grasper"]
+    np.testing.assert_allclose(felt[1:], tool[1:], atol=1e-12)    # the hand feels the grasper's contact force
+    assert np.all(ep.actions[:, 3] == 1.0)                         # the hand squeezes the grip fully
+    dev = ep.infos["device_position_m"][:-1]
+    assert np.all(dev[:30] == 0.0) and np.abs(dev[-1]).max() > 0.005   # still while the jaws close, then carried
+    # the episode ended because the grasped organ reached this episode's target (within tolerance 5 mm)
+    assert ep.terminations[-1] and np.linalg.norm(ep.observations[-1, 3:6]) <= 0.005
+
+
+def test_a_teleoperated_slippage_grip_is_the_jaw_closure(tmp_path):
+    ds = md.record("SurgSim/Slippage-v0", "scripted", episodes=1, seed=0, out=tmp_path, max_steps=60)
+    ep = next(ds.iterate_episodes())
+    np.testing.assert_allclose(ep.infos["felt_force_N"][1:], ep.infos["tool_force_N"]["grasper"][1:], atol=1e-12)
+    # the demonstration holds the settled closure (initial_closure 0.7), then tightens
+    np.testing.assert_allclose(ep.actions[0, 0], 0.7, atol=1e-6)
+    assert np.all(np.diff(ep.actions[:, 0]) >= -1e-6) and ep.actions[-1, 0] > 0.7
+
+
+def test_teleoperated_presses_land_under_the_device(tmp_path):
+    ds = md.record("SurgSim/PalpationPress-v0", "scripted", episodes=1, seed=0, out=tmp_path / "press", max_steps=10)
+    ep = next(ds.iterate_episodes())
+    env = gym.make("SurgSim/PalpationPress-v0")
+    home, hw = env.unwrapped.home, env.unwrapped.config.map_half_width
+    env.close()
+    dev = ep.infos["device_position_m"][:-1]
+    np.testing.assert_allclose(ep.actions[:, :2] * hw, dev[:, :2] + home[:2], atol=1e-6)
+    assert np.ptp(dev[:, 0]) > 0.01                               # the hand moved between presses
+    ds = md.record("SurgSim/LayeredPalpation-v0", "scripted", episodes=1, seed=0, out=tmp_path / "layered", max_steps=6)
+    ep = next(ds.iterate_episodes())
+    dev, felt = ep.infos["device_position_m"][:-1], ep.infos["felt_force_N"]
+    depth = (ep.actions[:, 2] + 1.0) / 2.0 * 0.008                 # LayeredPalpation-v0's max_depth
+    np.testing.assert_allclose(depth, -dev[:, 2], atol=1e-6)      # as deep as the hand is below the wall's top
+    np.testing.assert_allclose(felt[1:, 2], ep.observations[1:, 3], rtol=1e-6)   # the probe force it read
+    assert felt[1:, 2].min() > 0.0
