@@ -116,8 +116,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.repeats < 1:
         raise ConfigError(f"surgsim bench calibrated-cost: --repeats must be >= 1, got {args.repeats}")
+    import sys
+
+    from tqdm import tqdm
+
     print(f"load: {os.getloadavg()}")
-    for label, vol, regions in volumes():
+    for label, vol, regions in tqdm(volumes(), desc="bench calibrated-cost", unit="mesh", file=sys.stderr):
         fixed = np.isclose(vol.nodes[:, 2], vol.nodes[:, 2].min())
         print(f"\n{label}: {vol.n_nodes} nodes, {len(vol.tets)} tets")
         print("model | springs | critical_dt ms (Gershgorin) | exact ms | symplectic us/step | us per sim ms "

@@ -214,8 +214,16 @@ def run_bench(duration: float = 5.0, flooders: int = 1, pose_hz: float = 1000.0,
         raise ConfigError(f"--servo must be 'thread' or 'process', got {servo!r}")
     if not (duration > 0 and flooders >= 1 and pose_hz > 0):
         raise ConfigError(f"--duration, --flooders and --pose-hz must be > 0, got {duration}, {flooders}, {pose_hz}")
+    import sys
+
+    def say(text: str) -> None:      # stage messages, not a bar: redraws would disturb the timed servo
+        print(f"bench haptics-flood: {text}", file=sys.stderr, flush=True)
+
+    say("poll cost with garbage queued ...")
     costs = [poll_cost(max_drain, max_poll_s), poll_cost(256, 1.0)]  # this build's bound vs the old one
+    say(f"quiet run, {duration:g} s ...")
     quiet = _one_run(duration, 0, pose_hz, scene, fake_work, max_drain, max_poll_s, 0.0, spin_s, priority, servo)
+    say(f"flooded run, {duration:g} s, {flooders} flooder(s) ...")
     flooded = _one_run(duration, flooders, pose_hz, scene, fake_work, max_drain, max_poll_s, flood_rate, spin_s, priority, servo)
     return {"poll_cost": costs, "quiet": quiet, "flooded": flooded, "max_drain": max_drain, "max_poll_s": max_poll_s,
             "p99_flooded_over_quiet": flooded["period_p99_ms"] / quiet["period_p99_ms"],

@@ -55,7 +55,12 @@ def run_bench(duration: float = 3.0, depth: float = 0.004, fake: bool = False, f
     bottom = contact_z - depth - home[2]  # device frame (origin at home)
     mapping = DeviceMapping(origin=tuple(home))
     limits = DeviceLimits(max_force=10.0)
-    # 1) press into contact on the simulated clock (also compiles numba kernels)
+    # 1) press into contact on the simulated clock (also compiles numba kernels); no progress bar in
+    # the timed part: its redraws would share the GIL with the servo it measures
+    import sys
+
+    print(f"bench haptics: pressing into contact (the first run compiles kernels), then {duration:g} s held "
+          "on the wall clock ...", file=sys.stderr, flush=True)
     approach = ScriptedDevice(TrajectorySpec(waypoints=[[0, 0, 0], [0, 0, bottom]], speeds=0.02, dwell=[0.0, 0.3],
                                              profile="minimum_jerk"), limits=limits)
     with approach:

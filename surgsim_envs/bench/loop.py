@@ -130,11 +130,20 @@ def run_mujoco_flex(dof: str, dt: float = 1e-3) -> dict:
             "indentation_mm": (top + TIP - d.xpos[pid][2]) * 1e3, "dofs": int(m.nv)}
 
 
-def bench(skip_full: bool = False) -> list[dict]:
-    rows = [run_ours("symplectic", 5e-4), run_ours("implicit", 1e-3)]
+def bench(skip_full: bool = False, progress: bool = True) -> list[dict]:
+    import sys
+
+    from tqdm import tqdm
+
+    cases = [("ours symplectic", lambda: run_ours("symplectic", 5e-4)), ("ours implicit", lambda: run_ours("implicit", 1e-3))]
     if not skip_full:
-        rows.append(run_mujoco_flex("full"))
-    rows.append(run_mujoco_flex("trilinear"))
+        cases.append(("MuJoCo flex full", lambda: run_mujoco_flex("full")))
+    cases.append(("MuJoCo flex trilinear", lambda: run_mujoco_flex("trilinear")))
+    rows = []
+    with tqdm(cases, desc="bench loop", unit="case", file=sys.stderr, disable=not progress) as bar:
+        for label, case in bar:
+            bar.set_postfix_str(label)
+            rows.append(case())
     return rows
 
 

@@ -77,8 +77,12 @@ def run(args) -> int:
         raise ConfigError(f"--workers must be a comma list of integers >= 1, got {args.workers!r}") from None
     if not workers or min(workers) < 1 or args.steps <= 0 or args.repeats <= 0:
         raise ConfigError("--workers entries, --steps and --repeats must be positive")
+    import sys
+
+    from tqdm import tqdm
+
     rows = []
-    for n in workers:
+    for n in tqdm(workers, desc="bench sb3-vec", unit="size", file=sys.stderr):
         r = rate(args.task, n, args.steps, args.repeats)
         rows.append({"workers": n, "vec": "DummyVecEnv" if n == 1 else "SubprocVecEnv", "steps_per_s": r})
         if getattr(args, "shared", False) and n > 1:

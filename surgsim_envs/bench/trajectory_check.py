@@ -32,8 +32,12 @@ def record(tasks, steps: int) -> dict:
 
     import surgsim_envs  # noqa: F401  (registers the tasks)
 
+    import sys
+
+    from tqdm import tqdm
+
     out = {}
-    for task in tasks:
+    for task in tqdm(tasks, desc="bench trajectory", unit="task", file=sys.stderr):
         env = gym.make(task)
         rng = np.random.default_rng(1)
         rec = [env.reset(seed=3)]
