@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 #: steps per task stage (the actions cycle low, middle, high)
 TASK_STEPS = 3
@@ -90,10 +91,10 @@ def run(args) -> int:
             print(f"{s.name:<40} {state}")
         return 0
     if args.force:
-        print(f"surgsim warmup: cleared {clear_caches()} numba cache files under {PACKAGE}")
+        print(f"surgsim warmup: cleared {clear_caches()} numba cache files under {PACKAGE}", file=sys.stderr)
     if not caches_here():
         print("surgsim warmup: note: numba keeps the caches outside the package (NUMBA_CACHE_DIR or a read-only "
-              "install); they are built there")
+              "install); they are built there", file=sys.stderr)     # stdout stays the table or the JSON
     results = run_stages(stages, desc="surgsim warmup", progress=not args.quiet)
     if args.json:
         print(json.dumps([{"name": r.name, "seconds": round(r.seconds, 3), "kernels_compiled": r.kernels_compiled}

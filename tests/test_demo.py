@@ -58,3 +58,13 @@ def test_warmup_of_a_warm_task_compiles_nothing(capsys):
     assert main(["warmup", "--only", "task: SurgSim/PalpationPress-v0", "--quiet", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)
     assert [r["name"] for r in rows] == ["task: SurgSim/PalpationPress-v0"] and rows[0]["kernels_compiled"] == 0
+
+
+def test_warmup_json_stays_json_when_the_caches_live_outside_the_package(capsys, monkeypatch):
+    from surgsim_envs import numba_cache
+
+    monkeypatch.setattr(numba_cache, "caches_here", lambda: False)    # as with NUMBA_CACHE_DIR or a read-only install
+    assert main(["warmup", "--only", "task: SurgSim/PalpationPress-v0", "--quiet", "--json"]) == 0
+    out = capsys.readouterr()
+    assert json.loads(out.out)[0]["name"] == "task: SurgSim/PalpationPress-v0"
+    assert "caches outside the package" in out.err
