@@ -292,7 +292,7 @@ def vector_case():
 def run_vector(case):
     """A 2-env PalpationPress-v0 vector env (one worker) with one hostile option, or hostile actions
     (every entry of the (2, 3) action array set to the drawn value), reset and stepped."""
-    from surgsim_envs.envs.vector import SurgSimVectorEnv
+    from surgsim_envs.vector import SurgSimVectorEnv
 
     key, value = case
     kwargs = {"num_envs": 2, "workers": 1, "timeout_s": 60.0}

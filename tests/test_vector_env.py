@@ -1,4 +1,4 @@
-"""SurgSimVectorEnv (surgsim_envs/envs/vector.py): the shared-memory multi-process vector env
+"""SurgSimVectorEnv (surgsim_envs/vector/env.py): the shared-memory multi-process vector env
 behind ``gym.make_vec(task, n)``. Behaviour only (speed: ``surgsim bench envs --vector``):
 the same numbers as Gymnasium's SyncVectorEnv for the same seeds (a toy env for every autoreset
 mode and info shape in milliseconds, Palpation-v0 with an autoreset in the default run, the
@@ -19,7 +19,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import surgsim_envs.envs  # noqa: F401  (registers the tasks)
-from surgsim_envs.envs.vector import SurgSimVectorEnv
+from surgsim_envs.vector import SurgSimVectorEnv
 from surgsim_envs.errors import ConfigError, NonFiniteInputError, VectorEnvWorkerError
 
 

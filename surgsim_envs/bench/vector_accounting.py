@@ -1,4 +1,4 @@
-"""Where the time of one :class:`~surgsim_envs.envs.vector.SurgSimVectorEnv` step goes
+"""Where the time of one :class:`~surgsim_envs.vector.SurgSimVectorEnv` step goes
 (``surgsim bench envs --vector-accounting``).
 
 The vector env's own code is timed from outside: the main process's phases by a subclass that
@@ -26,8 +26,8 @@ import time
 
 import numpy as np
 
-from surgsim_envs.envs import vector_ipc as ipc
-from surgsim_envs.envs import vector_worker
+from surgsim_envs.vector import ipc
+from surgsim_envs.vector import worker as vector_worker
 from surgsim_envs.errors import ConfigError
 
 _clock = time.perf_counter
@@ -190,7 +190,7 @@ def accounting_rows(env, env_counts=(2, 8), workers: int = 2, steps: int = 300, 
     import functools
 
     from surgsim_envs.bench.envs_speed import _actions
-    from surgsim_envs.envs.vector import SurgSimVectorEnv
+    from surgsim_envs.vector import SurgSimVectorEnv
 
     single = _single_action_space(env)
     rng = np.random.default_rng(seed)

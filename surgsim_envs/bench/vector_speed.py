@@ -1,6 +1,6 @@
 """Vector env figures for ``surgsim bench envs --vector`` (the async aim: 2 workers
 >= 1.7x one process): one env in this process, Gymnasium's AsyncVectorEnv and
-:class:`~surgsim_envs.envs.vector.SurgSimVectorEnv` (``gym.make_vec``'s default for our tasks),
+:class:`~surgsim_envs.vector.SurgSimVectorEnv` (``gym.make_vec``'s default for our tasks),
 all built up front and timed **alternately** in rounds (same load for each), for the task and for
 a busy-wait stand-in env of a given step time that returns the task's info dict (the ceiling any
 vector env can reach at that step time). Also the signal round trip of the IPC options the
@@ -307,7 +307,7 @@ def spin_contenders(step_us: float, info: dict | None, workers: int, spin_us: fl
     returns a deep copy of ``info``)."""
     from gymnasium.vector import AsyncVectorEnv
 
-    from surgsim_envs.envs.vector import SurgSimVectorEnv
+    from surgsim_envs.vector import SurgSimVectorEnv
 
     env = functools.partial(SpinEnv, step_us, info)
 

@@ -1,4 +1,4 @@
-"""stable-baselines3 over :class:`~surgsim_envs.envs.vector.SurgSimVectorEnv`: an SB3 ``VecEnv``
+"""stable-baselines3 over :class:`~surgsim_envs.vector.SurgSimVectorEnv`: an SB3 ``VecEnv``
 whose envs run in the shared-memory workers instead of SubprocVecEnv's pipes (needs the
 [train] extra).
 
@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 
-from surgsim_envs.envs.vector import SurgSimVectorEnv
+from surgsim_envs.vector import SurgSimVectorEnv
 from surgsim_envs.errors import ConfigError
 
 

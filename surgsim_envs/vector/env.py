@@ -10,7 +10,7 @@
 ``workers`` processes (default ``min(num_envs, os.cpu_count())``), each hosting a contiguous block
 of envs and stepping them one after another. Actions, observations, rewards, terminations,
 truncations and the numeric info entries live in one shared-memory block
-(:mod:`~surgsim_envs.envs.vector_ipc`); a step is one byte down each worker's command pipe and
+(:mod:`~surgsim_envs.vector.ipc`); a step is one byte down each worker's command pipe and
 one byte back. Gymnasium's AsyncVectorEnv instead pickles each env's action, observation and
 info dict through a ``multiprocessing.Pipe`` and merges the infos key by key in the main process
 (~0.4-0.6 ms per vector step here: CHANGELOG.md "Vector env: shared memory instead of pickled steps").
@@ -24,7 +24,7 @@ cast to the action space's dtype (float32) on their way to the workers.
 
 **Infos** (``info_keys=``): by default only the numeric entries (``bool``/``int``/``float``/numpy
 scalars, also inside nested dicts such as ``reward_terms``), through shared memory with
-Gymnasium's ``_key`` masks (:mod:`~surgsim_envs.envs.vector_info`); strings, lists and None
+Gymnasium's ``_key`` masks (:mod:`~surgsim_envs.vector.info`); strings, lists and None
 (``organ``, ``inclusion_centre_m``, ``estimate_xy_m`` ...) are left out, since pickling them every
 step costs as much as the step's pipe round trip. ``info_keys="all"`` adds them back (pickled,
 only for steps that have them); a tuple of key names keeps just those (``()``: no infos at all).
@@ -65,9 +65,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from surgsim_envs import validate
-from surgsim_envs.envs import vector_ipc as ipc
-from surgsim_envs.envs.vector_info import InfoMerger
-from surgsim_envs.envs.vector_worker import _Worker, worker_main
+from surgsim_envs.vector import ipc
+from surgsim_envs.vector.info import InfoMerger
+from surgsim_envs.vector.worker import _Worker, worker_main
 from surgsim_envs.errors import ConfigError, VectorEnvWorkerError
 
 #: us the main process polls for replies without sleeping once fewer workers than cores are busy
