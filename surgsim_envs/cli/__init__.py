@@ -1,8 +1,10 @@
-"""The ``surgsim`` command.
+"""The ``surgsim`` command (``python -m surgsim_envs.cli``).
 
 Each sub-command lives in its own module exposing ``add_arguments(parser)`` and
-``run(args) -> int``; this file only wires them up, importing a module when its command runs
-(so ``surgsim models`` never pays for MuJoCo or numba start-up).
+``run(args) -> int``: the modules that only parse arguments and print are in this package
+(``models``, ``material``, ``run``, ``grow``, ``validate``); the benchmarks and the commands whose
+module also holds domain code stay in their packages. This file only wires them up, importing a
+module when its command runs (so ``surgsim models`` never pays for MuJoCo or numba start-up).
 """
 
 from __future__ import annotations
@@ -13,16 +15,16 @@ import sys
 
 #: command -> (module, help). "bench X" are sub-commands of "bench".
 COMMANDS: dict[str, tuple[str, str]] = {
-    "models": ("surgsim_envs.tissue.models_cmd", "list registered tissue models"),
+    "models": ("surgsim_envs.cli.models", "list registered tissue models"),
     "demo": ("surgsim_envs.scene.demo", "palpate and grasp on built-in defaults; writes ./surgsim-out/"),
     "warmup": ("surgsim_envs.warmup", "compile the physics kernels ahead (numba caches) for the demo and every task"),
-    "material": ("surgsim_envs.bench.material_cmd", "virtual material tests (indent, relax, slip)"),
+    "material": ("surgsim_envs.cli.material", "virtual material tests (indent, relax, slip)"),
     "fit": ("surgsim_envs.bench.fit", "fit model parameters to measured force data"),
     "teleop": ("surgsim_envs.haptics.teleop", "teleoperate a task with a (simulated) haptic device"),
-    "run": ("surgsim_envs.scenarios.cli", "run a trainee scenario file and write a report"),
+    "run": ("surgsim_envs.cli.run", "run a trainee scenario file and write a report"),
     "record": ("surgsim_envs.integrations.minari_datasets", "record demonstrations of a task as a Minari dataset"),
-    "grow": ("surgsim_envs.planning.grow_cmd", "tissue growth after a bone displacement (Vandewalle et al. 2003): basic vs growth"),
-    "validate": ("surgsim_envs.bench.validate_cmd", "signed surface distances of a prediction to a reference (Vandewalle et al. 2003)"),
+    "grow": ("surgsim_envs.cli.grow", "tissue growth after a bone displacement (Vandewalle et al. 2003): basic vs growth"),
+    "validate": ("surgsim_envs.cli.validate", "signed surface distances of a prediction to a reference (Vandewalle et al. 2003)"),
 }
 BENCH: dict[str, tuple[str, str]] = {
     "speed": ("surgsim_envs.bench.speed", "tissue model step time per model, integrator, node count"),
@@ -99,7 +101,3 @@ def main(argv: list[str] | None = None) -> int:
     except SurgSimError as exc:
         print(f"surgsim {args._command}: error: {exc}", file=sys.stderr)
         return 2
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
