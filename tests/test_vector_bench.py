@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from surgsim_envs.bench.envs_speed import SpinEnv
+from surgsim_envs.bench.spin_env import SpinEnv
 from surgsim_envs.bench.vector_speed import IndependentProcesses, alternate, contender_names, env_counts
 from surgsim_envs.errors import ConfigError
 

@@ -22,7 +22,9 @@ import time
 
 import numpy as np
 
+from surgsim_envs.bench.random_actions import random_actions
 from surgsim_envs.bench.reference_kernel import reference_kernel_us
+from surgsim_envs.bench.spin_env import SpinEnv
 from surgsim_envs.errors import ConfigError
 
 #: s, an async step that takes longer than this raises instead of hanging
@@ -75,13 +77,6 @@ def add_arguments(parser) -> None:
                              "calls (ContactModel.compute + TissueModel.step per substep) against the prepared one")
 
 
-def _actions(space, n, rng, palpation):
-    a = rng.uniform(-1, 1, (n, *space.shape)).astype(np.float32)
-    if palpation:
-        a[..., -1] = -1.0                  # the last component is "report": keep the episode going
-    return a
-
-
 def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = False,
                 compiled_vs: bool = False) -> dict:
     """Median env steps/s of one env in this process, plus its timing settings."""
@@ -92,11 +87,11 @@ def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = Fals
     rng = np.random.default_rng(0)
     pal = "Palpation" in env_id
     env.reset(seed=0)
-    for a in _actions(env.action_space, 20, rng, pal):
+    for a in random_actions(env.action_space, 20, rng, pal):
         env.step(a)
     rates, physics_rates, refs = [], [], []
     for r in range(repeats):
-        acts = _actions(env.action_space, steps, rng, pal)
+        acts = random_actions(env.action_space, steps, rng, pal)
         env.reset(seed=r)
         physics = 0
         t0 = time.perf_counter()
@@ -149,7 +144,7 @@ def overhead(env, steps: int, repeats: int, rng, palpation: bool) -> tuple[float
     n = max(1, steps // 4)
     for _ in range(repeats):
         env.reset(seed=int(rng.integers(2**31)))
-        acts = _actions(env.action_space, n, rng, palpation)
+        acts = random_actions(env.action_space, n, rng, palpation)
         first = u.sim.steps
         t0 = time.perf_counter()
         for a in acts:
@@ -208,7 +203,7 @@ def checked_vs_prepared(env, repeats: int, rng, palpation: bool, n: int = 200) -
     for r in range(repeats):
         for k in range(2):
             env.reset(seed=r)
-            for a in _actions(env.action_space, 5, rng, palpation):
+            for a in random_actions(env.action_space, 5, rng, palpation):
                 env.step(a)
             compiled, sim.compiled_substeps = sim.compiled_substeps, False   # the prepared generic loop
             try:
@@ -240,7 +235,7 @@ def compiled_vs_generic(env, repeats: int, rng, palpation: bool, steps: int, n: 
             for compiled in (True, False):
                 sim.compiled_substeps = compiled
                 env.reset(seed=r)
-                acts = _actions(env.action_space, k, rng, palpation)
+                acts = random_actions(env.action_space, k, rng, palpation)
                 taken = 0
                 c0 = time.thread_time()
                 t0 = time.perf_counter()
@@ -262,34 +257,6 @@ def compiled_vs_generic(env, repeats: int, rng, palpation: bool, steps: int, n: 
             "compiled_substep_us": med(sub_us[True]), "generic_substep_us": med(sub_us[False]),
             "generic_over_compiled_env_step": med(env_us[False]) / med(env_us[True]),
             "generic_over_compiled_substep": med(sub_us[False]) / med(sub_us[True])}
-
-
-class SpinEnv:
-    """A trivial Gymnasium env whose step busy-waits ``step_us`` microseconds (0: returns at once),
-    with a 20-float observation: the async baseline (pipe round-trip and process scheduling only).
-    ``info``: the info dict each step returns (a fresh deep copy per step; default empty), e.g. a
-    task's own, to see what sending and merging it costs."""
-
-    def __new__(cls, step_us: float = 0.0, info: dict | None = None):
-        import copy
-        import gymnasium as gym
-        from gymnasium import spaces
-
-        class _Spin(gym.Env):
-            observation_space = spaces.Box(-1.0, 1.0, (20,), np.float32)
-            action_space = spaces.Box(-1.0, 1.0, (4,), np.float32)
-
-            def reset(self, *, seed=None, options=None):
-                super().reset(seed=seed)
-                return np.zeros(20, np.float32), {}
-
-            def step(self, action):
-                end = time.perf_counter() + step_us * 1e-6
-                while time.perf_counter() < end:
-                    pass
-                return np.zeros(20, np.float32), 0.0, False, False, copy.deepcopy(info) if info else {}
-
-        return _Spin()
 
 
 def _spin_env(step_us: float, info: dict | None = None):
@@ -415,13 +382,13 @@ def async_rate(env_id: str, workers: int, steps: int, repeats: int, info_keys=No
     pal = "Palpation" in env_id
     try:
         vec.reset(seed=list(range(workers)))
-        for a in _actions(vec.action_space, 10, rng, pal):
+        for a in random_actions(vec.action_space, 10, rng, pal):
             vec.step_async(a)
             vec.step_wait(timeout=STEP_TIMEOUT)
         rates = []
         n = max(1, steps // workers)
         for _ in range(repeats):
-            acts = _actions(vec.action_space, n, rng, pal)
+            acts = random_actions(vec.action_space, n, rng, pal)
             t0 = time.perf_counter()
             for a in acts:
                 vec.step_async(a)

@@ -176,7 +176,7 @@ def peer_sweep(spacings=SPACINGS, models=None, progress: bool = True) -> list[di
 
     from tqdm import tqdm
 
-    from surgsim_envs.bench.accuracy import MATERIAL, RADIUS, THICKNESS, add_self_error, force_error
+    from surgsim_envs.bench.accuracy_scene import MATERIAL, RADIUS, THICKNESS, add_self_error, force_error
     from surgsim_envs.bench.references import dimitriadis_force, dimitriadis_valid_depth
     from surgsim_envs.tissue import get_material
 

@@ -39,7 +39,7 @@ BENCH: dict[str, tuple[str, str]] = {
     "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
     "task-accuracy": ("surgsim_envs.bench.task_accuracy",
                       "probe forces in each task's own scene, every model against converged fem"),
-    "soak": ("surgsim_envs.bench.soak", "long random-action runs: NaN, exceptions, force bounds, memory growth"),
+    "soak": ("surgsim_envs.cli.bench_soak", "long random-action runs: NaN, exceptions, force bounds, memory growth"),
     "diffusion": ("surgsim_envs.bench.diffusion_bench", "diffusion model (Zhong et al. 2016) update time vs the paper's Table 9.1"),
     "growth": ("surgsim_envs.bench.growth_speed", "tissue growth iteration time (Vandewalle et al. 2003) on a ~10,000-node mesh"),
     "memory": ("surgsim_envs.bench.fractional_memory", "fractional model: error and step cost against short memory L"),

@@ -176,10 +176,10 @@ class PlanDevice:
 
 def make_device(spec: str, script: str, runner: "_Runner", tremor: float, seed: int):
     """A connected-to-be HapticDevice from a spec: scripted | replay:FILE | keyboard | udp:PORT
-    (:func:`surgsim_envs.haptics.device.make_device`; "scripted" is the scenario's phase plan, or
+    (:func:`surgsim_envs.haptics.device_kinds.make_device`; "scripted" is the scenario's phase plan, or
     ``script``; a replay FILE is resolved in the scenario's folder)."""
     from surgsim_envs.haptics.device import DeviceLimits
-    from surgsim_envs.haptics.device import make_device as make
+    from surgsim_envs.haptics.device_kinds import make_device as make
     from surgsim_envs.scenarios.schema import resolve_data_file
 
     limits = DeviceLimits(max_force=1e6)  # the scenario scores forces; the device only records them
