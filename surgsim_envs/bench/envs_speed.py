@@ -72,15 +72,13 @@ def add_arguments(parser) -> None:
     parser.add_argument("--signal-options", action="store_true",
                         help="also time the per-step signal options for --workers processes (pipe byte, "
                              "semaphore pair, multiprocessing Connection)")
-    parser.add_argument("--checked-loop", action="store_true",
-                        help="also time, alternately in this process, the physics loop through the checked public "
-                             "calls (ContactModel.compute + TissueModel.step per substep) against the prepared one")
 
 
-def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = False,
-                compiled_vs: bool = False) -> dict:
+def single_rate(env_id: str, steps: int, repeats: int, compiled_vs: bool = False) -> dict:
     """Median env steps/s of one env in this process, plus its timing settings."""
     import gymnasium as gym
+
+    from surgsim_envs.scene.compiled_substeps import compiled_substeps_for
 
     env = gym.make(env_id)
     u = env.unwrapped
@@ -120,13 +118,9 @@ def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = Fals
            "reference_kernel_us": statistics.median(refs),
            "env_step_in_reference_kernels": 1e6 / statistics.median(rates) / statistics.median(refs),
            "load_avg_1min": os.getloadavg()[0]}
-    out["compiled_substeps"] = u.sim._compiled_runner() is not None
+    out["compiled_substeps"] = u.sim.compiled_substeps and compiled_substeps_for(u.sim) is not None
     if compiled_vs:
         out.update(compiled_vs_generic(env, repeats, rng, pal, steps))
-    if checked_loop and u.sim._has_tools:
-        checked, prepared = checked_vs_prepared(env, repeats, rng, pal)
-        out.update(checked_loop_substep_us=checked, prepared_loop_substep_us=prepared,
-                   checked_over_prepared=checked / prepared)
     env.close()
     return out
 
@@ -166,59 +160,6 @@ def overhead(env, steps: int, repeats: int, rng, palpation: bool) -> tuple[float
     return statistics.median(sub), statistics.median(own)
 
 
-def _checked_physics_step(sim) -> None:
-    """One physics step through the checked public calls (the loop before the prepared and compiled paths)."""
-    import mujoco
-
-    from surgsim_envs.scene.simulation import _rate_limit, _write_rows, _zero_rows
-
-    m, d, dt = sim.model, sim.data, sim.dt
-    if sim._moving:
-        sim._moving = _rate_limit(sim._views["ctrl"], sim._goal, sim._rate, dt)
-    mujoco.mj_step1(m, d)
-    sim._gather()
-    w = sim._wrench
-    w[:] = 0.0
-    for tissue, contact in sim._pairs:
-        res = contact.compute(tissue.positions, tissue.velocities, sim._shape_kind, sim._shape_tool,
-                              sim._shape_size, sim._gpos, sim._gmat, sim._gvel, sim._tcom, dt)
-        tissue.step(dt, res.forces, res.stiffness)
-        contact.attribute_increment(tissue.integrated_external_forces)
-        w[:, :3] += res.tool_force
-        w[:, 3:] += res.tool_torque
-    xfrc = sim._views["xfrc_applied"]
-    _write_rows(xfrc, sim._bodies, w)
-    mujoco.mj_step2(m, d)
-    _zero_rows(xfrc, sim._bodies)
-    sim.steps += 1
-
-
-def checked_vs_prepared(env, repeats: int, rng, palpation: bool, n: int = 200) -> tuple[float, float]:
-    """``(checked_us, prepared_us)``: median wall time of one physics substep through the checked
-    public calls and through ``Simulation``'s prepared generic loop (compiled substeps off),
-    alternately from the same env state."""
-    u = env.unwrapped
-    sim = u.sim
-    times = ([], [])
-    for r in range(repeats):
-        for k in range(2):
-            env.reset(seed=r)
-            for a in random_actions(env.action_space, 5, rng, palpation):
-                env.step(a)
-            compiled, sim.compiled_substeps = sim.compiled_substeps, False   # the prepared generic loop
-            try:
-                t0 = time.perf_counter()
-                if k == 0:
-                    for _ in range(n):
-                        _checked_physics_step(sim)
-                else:
-                    sim._physics_steps(n)
-                times[k].append((time.perf_counter() - t0) / n * 1e6)
-            finally:
-                sim.compiled_substeps = compiled
-    return statistics.median(times[0]), statistics.median(times[1])
-
-
 def compiled_vs_generic(env, repeats: int, rng, palpation: bool, steps: int, n: int = 300) -> dict:
     """Median wall time of an env step (``steps // 4`` random actions from a reset) and of one
     physics substep (``n`` substeps from the state the actions left), with the compiled substeps
@@ -247,7 +188,7 @@ def compiled_vs_generic(env, repeats: int, rng, palpation: bool, steps: int, n: 
                 env_us[compiled].append((time.perf_counter() - t0) / taken * 1e6)
                 env_cpu_us[compiled].append((time.thread_time() - c0) / taken * 1e6)
                 t0 = time.perf_counter()
-                sim._physics_steps(n)
+                sim.physics_step(n)
                 sub_us[compiled].append((time.perf_counter() - t0) / n * 1e6)
     finally:
         sim.compiled_substeps = True
@@ -543,8 +484,7 @@ def run(args) -> int:
             row = vector_row(t, args)
             rows.append(row)
             continue
-        row = single_rate(t, args.steps, args.repeats, getattr(args, "checked_loop", False),
-                          getattr(args, "compiled_vs_generic", False))
+        row = single_rate(t, args.steps, args.repeats, getattr(args, "compiled_vs_generic", False))
         if vector:
             row.update(vector_row(t, args, 1e6 / row["steps_per_s"]))
         if args.workers:

@@ -2,9 +2,10 @@
 
 Each sub-command lives in its own module exposing ``add_arguments(parser)`` and
 ``run(args) -> int``: the modules that only parse arguments and print are in this package
-(``models``, ``material``, ``run``, ``grow``, ``validate``); the benchmarks and the commands whose
-module also holds domain code stay in their packages. This file only wires them up, importing a
-module when its command runs (so ``surgsim models`` never pays for MuJoCo or numba start-up).
+(``models``, ``material``, ``run``, ``grow``, ``validate``, ``bench_soak``); the benchmarks and
+the commands whose module also holds domain code stay in their packages. This file only wires
+them up, importing a module when its command runs (so ``surgsim models`` never pays for MuJoCo
+or numba start-up).
 """
 
 from __future__ import annotations
@@ -51,12 +52,12 @@ BENCH: dict[str, tuple[str, str]] = {
 
 def _attach(sub, name: str, module: str, help_text: str) -> None:
     parser = sub.add_parser(name, help=help_text, description=help_text)
-    parser.set_defaults(_module=module, _command=name)
+    parser.set_defaults(cli_module=module, cli_command=name)
     try:
         mod = importlib.import_module(module)
     except ImportError as exc:
         if exc.name and module.startswith(exc.name) or (exc.name or "").startswith("surgsim_envs"):
-            parser.set_defaults(_missing=f"'{name}' is not available in this build ({exc})")
+            parser.set_defaults(cli_missing=f"'{name}' is not available in this build ({exc})")
             return
         raise
     mod.add_arguments(parser)
@@ -87,17 +88,17 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser(argv)
     args = parser.parse_args(argv)
-    if not getattr(args, "_module", None):
+    if not getattr(args, "cli_module", None):
         parser.print_help()
         return 0 if not argv else 2
-    if getattr(args, "_missing", None):
-        print(f"surgsim: {args._missing}", file=sys.stderr)
+    if getattr(args, "cli_missing", None):
+        print(f"surgsim: {args.cli_missing}", file=sys.stderr)
         return 2
-    module = importlib.import_module(args._module)
+    module = importlib.import_module(args.cli_module)
     from surgsim_envs.errors import SurgSimError
 
     try:
         return int(module.run(args) or 0)
     except SurgSimError as exc:
-        print(f"surgsim {args._command}: error: {exc}", file=sys.stderr)
+        print(f"surgsim {args.cli_command}: error: {exc}", file=sys.stderr)
         return 2

@@ -418,10 +418,10 @@ def apply_overrides(sc: Scenario, duration_scale: float = 1.0, device: str | Non
                     policy: str | None = None) -> Scenario:
     """Copy of ``sc`` with the CLI's overrides: a duration scale, every phase driven by ``device``
     or by ``policy`` (for task rollouts ``policy`` replaces ``[policy] file``)."""
-    from surgsim_envs.scenarios.schema import KeyLocator, _Ctx, validate_driver
+    from surgsim_envs.scenarios.schema import KeyLocator, ValidationContext, validate_driver
 
     out = sc.scaled(duration_scale) if duration_scale != 1.0 else copy.deepcopy(sc)
-    ctx = _Ctx("command line", KeyLocator(None))
+    ctx = ValidationContext("command line", KeyLocator(None))
     if device is not None:
         validate_driver(ctx, ("--device",), "device", device, "")
         for ph in out.phases:

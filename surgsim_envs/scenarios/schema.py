@@ -292,7 +292,10 @@ class KeyLocator:
         return None
 
 
-class _Ctx:
+class ValidationContext:
+    """Where a value being validated came from (file or command line, its line numbers, its
+    folder), so that an error names the key and the line."""
+
     def __init__(self, source: str, locator: KeyLocator, folder: Path | None = None):
         self.source, self.locator, self.folder = source, locator, folder
 
@@ -312,7 +315,7 @@ def _dotted(path: tuple) -> str:
 
 # ----------------------------------------------------------------------------------------------
 # Generic typed construction of dataclasses from TOML tables
-def _check_type(value: Any, hint: Any, path: tuple, ctx: _Ctx) -> Any:
+def _check_type(value: Any, hint: Any, path: tuple, ctx: ValidationContext) -> Any:
     origin = typing.get_origin(hint)
     args = typing.get_args(hint)
     if hint is Any:
@@ -372,7 +375,7 @@ def _check_type(value: Any, hint: Any, path: tuple, ctx: _Ctx) -> Any:
     return value  # pragma: no cover - unsupported annotation: accept as is
 
 
-def build_dataclass(cls, table: Any, path: tuple, ctx: _Ctx, skip: tuple = ()):
+def build_dataclass(cls, table: Any, path: tuple, ctx: ValidationContext, skip: tuple = ()):
     """Instance of dataclass ``cls`` from the TOML ``table``; ConfigError names unknown keys and bad types."""
     if not isinstance(table, dict):
         raise ctx.error(path, f"expected a table, got {table!r} ({type(table).__name__})")
@@ -397,7 +400,7 @@ def build_dataclass(cls, table: Any, path: tuple, ctx: _Ctx, skip: tuple = ()):
 _TOP = ("scenario", "scene", "trainee", "phases", "scoring", "sweep", "policy")
 
 
-def _limit(ctx: _Ctx, path: tuple, rule: str, value) -> None:
+def _limit(ctx: ValidationContext, path: tuple, rule: str, value) -> None:
     """Check ``value`` (a number or nested arrays of numbers) against ``LIMITS[rule]``."""
     if value is None:
         return
@@ -422,13 +425,13 @@ def resolve_data_file(name: str, folder: Path | None) -> Path:
     return p
 
 
-def _check_file(ctx: _Ctx, path: tuple, name: str, folder: Path | None, what: str) -> None:
+def _check_file(ctx: ValidationContext, path: tuple, name: str, folder: Path | None, what: str) -> None:
     if not resolve_data_file(name, folder).is_file():
         where = f"{folder} or the working directory" if folder is not None else "the working directory"
         raise ctx.error(path, f"{what} file {name!r} not found (looked in {where})")
 
 
-def validate_driver(ctx: _Ctx, path: tuple, driver: str, device: str, policy: str, folder: Path | None = None,
+def validate_driver(ctx: ValidationContext, path: tuple, driver: str, device: str, policy: str, folder: Path | None = None,
                     allow_code: bool = True, trusted: bool = True, check_files: bool = False) -> None:
     """Check a driver name, the device spec (files exist when ``check_files``) and the policy
     reference under the trust model (see :func:`surgsim_envs.scenarios.policies.check_policy_reference`)."""
@@ -454,7 +457,7 @@ def validate_driver(ctx: _Ctx, path: tuple, driver: str, device: str, policy: st
         check_policy(ctx, path + ("policy",), policy, folder, allow_code, trusted)
 
 
-def check_policy(ctx: _Ctx, path: tuple, ref: str, folder: Path | None, allow_code: bool, trusted: bool) -> None:
+def check_policy(ctx: ValidationContext, path: tuple, ref: str, folder: Path | None, allow_code: bool, trusted: bool) -> None:
     """:func:`~surgsim_envs.scenarios.policies.check_policy_reference` with the key's line."""
     from surgsim_envs.scenarios.policies import check_policy_reference
 
@@ -464,12 +467,12 @@ def check_policy(ctx: _Ctx, path: tuple, ref: str, folder: Path | None, allow_co
         raise ctx.error(path, str(exc)) from None
 
 
-def _check_registered(ctx: _Ctx, path: tuple, value: str | None, known: list, what: str) -> None:
+def _check_registered(ctx: ValidationContext, path: tuple, value: str | None, known: list, what: str) -> None:
     if value is not None and value not in known:
         raise ctx.error(path, f"unknown {what} {value!r}; choose one of {', '.join(map(str, known))}")
 
 
-def _check_scene_value(ctx: _Ctx, path: tuple, key: str, value) -> None:
+def _check_scene_value(ctx: ValidationContext, path: tuple, key: str, value) -> None:
     """Range and registry checks of one [scene] value (also used for every swept value)."""
     if key in ("spacing", "dt", "mu", "inclusion_xy"):
         _limit(ctx, path, f"scene.{key}", value)
@@ -494,7 +497,7 @@ def _check_scene_value(ctx: _Ctx, path: tuple, key: str, value) -> None:
         _check_registered(ctx, path, value, sorted(PRESETS), "material preset")
 
 
-def check_env_kwargs(ctx: _Ctx, path: tuple, task: str, env_kwargs: dict) -> None:
+def check_env_kwargs(ctx: ValidationContext, path: tuple, task: str, env_kwargs: dict) -> None:
     """``env_kwargs`` must be fields of task ``task``'s own config class with values its
     ``validate()`` accepts (the checks ``gym.make`` runs, without building the scene), so a file
     that passes ``--check`` cannot fail on them at run time."""
@@ -531,7 +534,7 @@ def check_env_kwargs(ctx: _Ctx, path: tuple, task: str, env_kwargs: dict) -> Non
         raise ctx.error(path, f"{task} cannot take these env_kwargs ({type(exc).__name__}: {exc})") from None
 
 
-def _check_script(ctx: _Ctx, path: tuple, file: Path) -> None:
+def _check_script(ctx: ValidationContext, path: tuple, file: Path) -> None:
     """A trajectory script must parse and describe a valid, bounded trajectory."""
     from surgsim_envs.haptics.scripted import TrajectorySpec
     from surgsim_envs.haptics.teleop import load_script
@@ -545,7 +548,7 @@ def _check_script(ctx: _Ctx, path: tuple, file: Path) -> None:
         raise ctx.error(path, f"the trajectory lasts {seconds:g} s, more than the {MAX_RUN_DURATION:g} s limit of a run")
 
 
-def _check_task_id(ctx: _Ctx, path: tuple, task: str) -> None:
+def _check_task_id(ctx: ValidationContext, path: tuple, task: str) -> None:
     try:
         import gymnasium as gym
 
@@ -557,7 +560,7 @@ def _check_task_id(ctx: _Ctx, path: tuple, task: str) -> None:
         raise ctx.error(path, f"unknown task id {task!r}; registered SurgSim tasks: {', '.join(ours)}")
 
 
-def _check_phase_values(ctx: _Ctx, path: tuple, phase) -> None:
+def _check_phase_values(ctx: ValidationContext, path: tuple, phase) -> None:
     """Range checks of a phase's physical values (by field name, see LIMITS)."""
     for f in dataclasses.fields(phase):
         rule = f"phase.{f.name}"
@@ -603,7 +606,7 @@ def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = No
     from surgsim_envs.scenarios.phases import build_phase, check_phase_order
     from surgsim_envs.scenarios.scoring import CRITERIA
 
-    ctx = _Ctx(source, KeyLocator(text), folder)
+    ctx = ValidationContext(source, KeyLocator(text), folder)
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: a scenario must be a TOML document (a table), got {type(data).__name__}")
     if _nesting_depth(data) > MAX_NESTING:
