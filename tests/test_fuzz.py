@@ -18,13 +18,8 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from surgsim_envs.errors import ConfigError  # noqa: E402
-from surgsim_envs.haptics.udp_bridge import (  # noqa: E402
-    POSE_STRUCT,
-    MalformedPacketError,
-    SessionGate,
-    decode_pose,
-    encode_pose,
-)
+from surgsim_envs.haptics.pose_protocol import POSE_STRUCT, MalformedPacketError, decode_pose, encode_pose  # noqa: E402
+from surgsim_envs.haptics.session_gate import SessionGate  # noqa: E402
 
 pytestmark = pytest.mark.timeout(300)
 

@@ -10,7 +10,7 @@ mean relative force error against Dimitriadis et al. (2002) over depths in [d_v/
 reference's validity depth (1.5 mm here); ``self_error`` is the same against the model's own
 finest resolution (its converged solution). Cost: microseconds of compute per simulated
 millisecond (wall time of one physics step, contact + tissue, times the steps per ms at the
-model's stable dt). Outputs ``accuracy.json`` (the table :func:`surgsim_envs.bench.choose` reads)
+model's stable dt). Outputs ``accuracy.json`` (the table :func:`surgsim_envs.tissue.resolution.choose` reads)
 and ``accuracy.png`` (log-log, Pareto front marked). Shape error (``shape_rms`` etc., m; chart
 ``accuracy_shape.png``): signed distances of the deformed top surface at the deepest depth to the
 most accurate model's finest surface under the same load (:mod:`surgsim_envs.bench.shape_error`,
@@ -23,7 +23,7 @@ same graded mesh whole, label = spacing in mm) and ``mujoco_flex_trilinear`` (do
 flex settles, force = sum of the sphere's contact forces, depth = sphere bottom below the
 undeformed surface (so MuJoCo's soft-contact penetration, reported as ``penetration``, counts
 as compliance). Cost = median wall time of one ``mj_step`` at 1 ms. Baseline rows carry
-``"baseline": true`` and are never picked by :func:`surgsim_envs.bench.choose`.
+``"baseline": true`` and are never picked by :func:`surgsim_envs.tissue.resolution.choose`.
 """
 
 from __future__ import annotations

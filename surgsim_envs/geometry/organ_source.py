@@ -24,7 +24,7 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.loaders import SURFACE_SUFFIXES, TET_SUFFIXES, load_tet_mesh, unit_scale
 from surgsim_envs.geometry.volume import Volume
 from surgsim_envs.geometry.nested_shells import nested_shell
-from surgsim_envs.geometry.self_intersection import meeting_pairs, self_intersections  # noqa: F401 (re-exported)
+from surgsim_envs.geometry.self_intersection import meeting_pairs
 
 #: options that go to the lattice filling of a surface file
 LATTICE_OPTIONS = ("snap", "max_snap", "min_quality")

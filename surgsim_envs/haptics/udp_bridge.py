@@ -39,33 +39,10 @@ import numpy as np
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.haptics.device import DeviceLimits, DeviceState, HapticDevice
-from surgsim_envs.haptics.pose_protocol import (  # noqa: F401  (the codec, re-exported for device-side code)
-    FORCE_SIZE,
-    FORCE_STRUCT,
-    MAGIC,
-    POSE_SIZE,
-    POSE_STRUCT,
-    PROTOCOL_VERSION,
-    TAG_SIZE,
-    TYPE_FORCE,
-    TYPE_POSE,
-    ForcePacket,
-    MalformedPacketError,
-    PosePacket,
-    check_key,
-    decode_force,
-    decode_pose,
-    encode_force,
-    encode_pose,
-    new_session_id,
-    new_session_key,
-)
-from surgsim_envs.haptics.session_gate import (  # noqa: F401
-    OPEN_PACKETS,
-    SEQ_WINDOW,
-    SESSION_TIMEOUT_S,
-    SessionGate,
-)
+from surgsim_envs.haptics.pose_protocol import (POSE_SIZE, TAG_SIZE, ForcePacket, MalformedPacketError,
+                                                PosePacket, check_key, decode_force, decode_pose,
+                                                encode_force, encode_pose, new_session_id, new_session_key)
+from surgsim_envs.haptics.session_gate import SessionGate
 
 DEFAULT_HOST = "127.0.0.1"
 

@@ -29,7 +29,7 @@ import numpy as np
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError, TissueUnstableError
 from surgsim_envs.scenarios.phases import SCENE_TOOL, PhaseContext
 from surgsim_envs.scenarios.schema import Scenario
-from surgsim_envs.scenarios.policies import load_policy, policy_for  # noqa: F401 (load_policy re-exported)
+from surgsim_envs.scenarios.policies import policy_for
 
 CONTROL_PERIOD = 0.01  # s between policy evaluations in phase scenarios
 FPS = 25

@@ -3,7 +3,7 @@
 This is the pure selection logic behind ``resolution="auto"`` in scenes and tasks. It lives in
 the tissue layer (it is a statement about tissue models, and needs only json + the measured
 table) so that :mod:`surgsim_envs.scene` can use it without importing :mod:`surgsim_envs.bench`,
-which sits above the scene. ``surgsim_envs.bench.choose`` re-exports it unchanged.
+which sits above the scene.
 
 The rule (documented in docs/benchmarks.md, "Speed against accuracy"):
 
