@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.haptics.recording import ForceLog
 
@@ -90,8 +91,7 @@ class DeviceLimits:
             raise ConfigError(
                 f"DeviceLimits workspace_max {tuple(hi)} must exceed workspace_min {tuple(lo)} on every axis; swap them"
             )
-        if not (math.isfinite(self.max_force) and self.max_force > 0):
-            raise ConfigError(f"DeviceLimits.max_force must be a positive finite force in N, got {self.max_force!r}")
+        validate.positive(self.max_force, "DeviceLimits.max_force", unit="N", fix="the device's force limit, e.g. 3.0")
 
     def clamp_position(self, position: np.ndarray) -> np.ndarray:
         """``position`` (3,) m clipped into the workspace box."""
