@@ -215,7 +215,7 @@ def scenario_case():
 
 def run_scenario_check(case):
     """``surgsim run --check`` of a scenario with one hostile value (env_kwargs or a criterion)."""
-    from surgsim_envs.scenarios.schema import loads_scenario
+    from surgsim_envs.scenarios.loader import loads_scenario
 
     which, key, value = case
     text = ROLLOUT.format(key=key, value=_toml_value(value)) if which == "rollout" else \

@@ -106,7 +106,8 @@ VALID = {"scenario": {"name": "ok", "scene": "palpation"},
 def test_fuzz_schema_mutations_are_accepted_in_range_or_named(table, data):
     import copy
 
-    from surgsim_envs.scenarios.schema import LIMITS, parse_scenario
+    from surgsim_envs.scenarios.loader import parse_scenario
+    from surgsim_envs.scenarios.schema import LIMITS
 
     doc = copy.deepcopy(VALID)
     key = data.draw(st.sampled_from(KEYS[table]))
@@ -130,7 +131,7 @@ def test_fuzz_schema_mutations_are_accepted_in_range_or_named(table, data):
 @settings(max_examples=60, deadline=None)
 @given(st.text(max_size=300))
 def test_fuzz_scenario_text(text):
-    from surgsim_envs.scenarios.schema import loads_scenario
+    from surgsim_envs.scenarios.loader import loads_scenario
 
     try:
         loads_scenario(text, "fuzz.toml")

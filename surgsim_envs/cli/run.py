@@ -142,7 +142,7 @@ def run_one(args, scenario: str, out: Path | None, summary: list | None = None) 
     """Run one scenario file into ``out`` (None: surgsim-out/<scenario name>). With ``summary``
     (a list; several files) the output goes to ``out/<scenario name>`` and (file, report, None)
     is appended to it."""
-    from surgsim_envs.scenarios.schema import load_scenario
+    from surgsim_envs.scenarios.loader import load_scenario
 
     from surgsim_envs.scenarios.policies import check_policy_reference
     from surgsim_envs.scenarios.schema import LIMITS, NAME_PATTERN
