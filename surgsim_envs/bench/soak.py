@@ -28,6 +28,7 @@ import time
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 
 FORCE_BOUND_N = 50.0
@@ -80,8 +81,7 @@ def soak(task: str, steps: int, seed: int = 0, force_bound: float = FORCE_BOUND_
 
     if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
         raise ConfigError(f"--steps must be an integer >= 1, got {steps!r}")
-    if not (math.isfinite(force_bound) and force_bound > 0):
-        raise ConfigError(f"--force-bound must be a positive force in N, got {force_bound!r}")
+    validate.positive(force_bound, "--force-bound", unit="N", fix="the peak force counted as out of bounds, e.g. 50")
     if not max_seconds > 0:
         raise ConfigError(f"--max-seconds must be > 0, got {max_seconds!r}")
     if task not in gym.registry:
