@@ -9,7 +9,7 @@ at the validity depth / 2 (the contact spans 0.5-2 spacings over [d_v/4, d_v]); 
 up to 3 spacings (the bench's default, 8 spacings, stretches cells under the contact to aspect 8, where
 no non-negative spring set is isotropic). Refinement: the bench case (E 4 kPa, R 5 mm, 30 mm) at 2,
 1.5, 1 mm with the same grading rule, and on the bench's own mesh (max cell 8 spacings).
-Error: mean |F / F_ref - 1| over depths in [d_v/4, d_v] (``bench.accuracy.force_error``).
+Error: mean |F / F_ref - 1| over depths in [d_v/4, d_v] (``bench.accuracy_scene.force_error``).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import sys
 import time
 
 
-from surgsim_envs.bench.accuracy import force_error
+from surgsim_envs.bench.accuracy_scene import force_error
 from surgsim_envs.bench.material import indent
 from surgsim_envs.bench.references import dimitriadis_force, dimitriadis_valid_depth
 from surgsim_envs.tissue import get_material

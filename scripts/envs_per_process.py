@@ -20,7 +20,7 @@ import gymnasium as gym
 import numpy as np
 
 import surgsim_envs  # noqa: F401  (registers the tasks)
-from surgsim_envs.bench.envs_speed import _actions
+from surgsim_envs.bench.random_actions import random_actions
 
 
 def per_step_us(task: str, counts, rounds: int, steps: int, seed: int = 0) -> dict:
@@ -34,7 +34,7 @@ def per_step_us(task: str, counts, rounds: int, steps: int, seed: int = 0) -> di
         times = {k: [] for k in counts}
         for _ in range(rounds + 1):                      # the first round warms up
             for k in counts:
-                acts = _actions(space, steps, rng, "Palpation" in task)
+                acts = random_actions(space, steps, rng, "Palpation" in task)
                 t0 = time.thread_time()
                 for j in range(steps):
                     e = envs[j % k]

@@ -6,7 +6,7 @@
     RAY_ADDRESS=auto python scripts/train_rllib.py --task SurgSim/PalpationPress-v0 --workers 32 --iterations 200
 
 ``--local`` starts a private one-CPU Ray on this machine and samples in the driver process (the
-successor of Ray's removed ``local_mode``). Each env is created by :func:`surgsim_envs.distributed.rllib_env.make_creator` and seeded from its
+successor of Ray's removed ``local_mode``). Each env is created by :func:`surgsim_envs.integrations.rllib.make_creator` and seeded from its
 worker and vector index (``--seed`` is the base). Without ``--local`` the script joins the cluster
 named by ``RAY_ADDRESS`` (or starts a single-node Ray). Prints one line per iteration (mean episode
 return) and writes ``result.json`` in ``--out``.
@@ -70,7 +70,7 @@ def main(argv=None) -> int:
     except ImportError:
         print("train_rllib.py needs Ray RLlib: pip install 'ray[rllib]' (the [distributed] extra)", file=sys.stderr)
         return 2
-    from surgsim_envs.distributed.rllib_env import register_rllib_envs
+    from surgsim_envs.integrations.rllib import register_rllib_envs
 
     if args.local:
         # Ray's local_mode (one process) was removed in recent Ray (RuntimeError in 2.60); the

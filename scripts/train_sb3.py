@@ -41,7 +41,7 @@ def parse(argv=None):
     p.add_argument("--gamma", type=float, default=0.99, help="discount factor (SB3 default 0.99)")
     p.add_argument("--vec", choices=["sync", "async", "shared"], default="async",
                    help="vector env (n-envs > 1): sync = SB3 DummyVecEnv, async = SubprocVecEnv, shared = "
-                        "surgsim_envs.envs.vector_sb3 (shared-memory workers, less overhead per step)")
+                        "surgsim_envs.integrations.sb3 (shared-memory workers, less overhead per step)")
     p.add_argument("--out", default=None)
     p.add_argument("--on-unstable", choices=["terminate", "raise"], default="terminate",
                    help="a diverging tissue ends the episode (info['unstable']) instead of killing the run")
@@ -133,7 +133,7 @@ def main(argv=None) -> int:
     # "module:id" makes worker processes (forkserver/spawn) import surgsim_envs, which registers the tasks
     env_kwargs = {"on_unstable": args.on_unstable}
     if args.vec == "shared" and args.n_envs > 1:
-        from surgsim_envs.envs.vector_sb3 import make_sb3_vec_env
+        from surgsim_envs.integrations.sb3 import make_sb3_vec_env
 
         venv = make_sb3_vec_env(args.task, args.n_envs, seed=args.seed, env_kwargs=env_kwargs,
                                 info_keys=("is_success", "success", "unstable"))
@@ -236,7 +236,7 @@ def main(argv=None) -> int:
               "trained": evaluate(trained, args.task, args.eval_episodes, args.seed, env_kwargs),
               "random": evaluate(lambda obs: space.sample(), args.task, args.eval_episodes, args.seed, env_kwargs)}
     if args.export_npz:
-        from surgsim_envs.policies.export_sb3 import check_export, sb3_to_npz
+        from surgsim_envs.integrations.sb3 import check_export, sb3_to_npz
 
         npz = sb3_to_npz(model, venv, source=args.export_npz, mode=args.export_mode)
         sample_env = gym.make(args.task, **env_kwargs)

@@ -78,5 +78,5 @@ class GrowthNotConvergedError(SurgSimError, RuntimeError):
 
 
 class VectorEnvWorkerError(SurgSimError, RuntimeError):
-    """A worker process of a SurgSim vector env (surgsim_envs/envs/vector.py) died or did not answer
+    """A worker process of a SurgSim vector env (surgsim_envs/vector/env.py) died or did not answer
     in time; the message names the worker, its env indices and what it was doing."""

@@ -89,6 +89,12 @@ def positive(value: Any, name: str, *, hi: float = math.inf, unit: str = "", fix
     return real(value, name, lo=0.0, hi=hi, unit=unit, fix=fix, lo_open=True)
 
 
+def positives(*, unit: str = "", fix: str = "", **values: Any) -> tuple[float, ...]:
+    """Each keyword value as a finite float > 0 (:func:`positive`, named by its keyword), checked
+    in the order given: ``positives(radius=r, young=e, fix="SI units")``."""
+    return tuple(positive(value, name, unit=unit, fix=fix) for name, value in values.items())
+
+
 def non_negative(value: Any, name: str, *, hi: float = math.inf, unit: str = "", fix: str = "") -> float:
     """``value`` as a finite float >= 0 (and <= ``hi``)."""
     return real(value, name, lo=0.0, hi=hi, unit=unit, fix=fix)

@@ -215,7 +215,7 @@ def scenario_case():
 
 def run_scenario_check(case):
     """``surgsim run --check`` of a scenario with one hostile value (env_kwargs or a criterion)."""
-    from surgsim_envs.scenarios.schema import loads_scenario
+    from surgsim_envs.scenarios.loader import loads_scenario
 
     which, key, value = case
     text = ROLLOUT.format(key=key, value=_toml_value(value)) if which == "rollout" else \
@@ -292,7 +292,7 @@ def vector_case():
 def run_vector(case):
     """A 2-env PalpationPress-v0 vector env (one worker) with one hostile option, or hostile actions
     (every entry of the (2, 3) action array set to the drawn value), reset and stepped."""
-    from surgsim_envs.envs.vector import SurgSimVectorEnv
+    from surgsim_envs.vector import SurgSimVectorEnv
 
     key, value = case
     kwargs = {"num_envs": 2, "workers": 1, "timeout_s": 60.0}

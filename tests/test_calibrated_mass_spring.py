@@ -6,7 +6,7 @@ and sphere indentation against Dimitriadis et al. (2002) on parameter sets the m
 import numpy as np
 import pytest
 
-from surgsim_envs.bench.accuracy import force_error
+from surgsim_envs.bench.accuracy_scene import force_error
 from surgsim_envs.bench.material import indent
 from surgsim_envs.bench.references import dimitriadis_force, dimitriadis_valid_depth
 from surgsim_envs.errors import ConfigError

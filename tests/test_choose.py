@@ -2,7 +2,7 @@
 
 import pytest
 
-from surgsim_envs.bench import choose, resolve_resolution
+from surgsim_envs.tissue.resolution import choose, resolve_resolution
 from surgsim_envs.errors import ConfigError
 
 ROWS = [
@@ -127,7 +127,7 @@ def test_shipped_table_has_fem_static_and_a_tight_tolerance_picks_it():
     for its three spacings, with fem's force errors (same element, same exact contact). Below the
     error of every cheaper row (layered reaches 3.2 % at 1.3 mm) the cheapest qualifying row is
     fem_static, and ``resolution="auto"`` with ``model="auto"`` builds the quasi-static model."""
-    from surgsim_envs.bench.choose import load_table
+    from surgsim_envs.tissue.resolution import load_table
 
     rows = {(r["model"], r["spacing"]): r for r in load_table()}
     for s in (0.003, 0.002, 0.0013):

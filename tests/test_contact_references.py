@@ -65,7 +65,7 @@ def test_bad_input_is_named():
         cr.cattaneo_mindlin_displacement(0.2, 0.5, 0.2, 0.003, 4000.0, 0.45)
     with pytest.raises(ConfigError, match="displacement must be finite and >= 0"):
         cr.cattaneo_mindlin_force(-1e-3, 0.5, 0.2, 0.003, 4000.0, 0.45)
-    with pytest.raises(ConfigError, match="young must be > 0"):
+    with pytest.raises(ConfigError, match="young=0.0 must be > 0"):
         cr.shear_modulus(0.0, 0.45)
     with pytest.raises(ConfigError, match="normal_force must be finite and >= 0"):
         cr.hertz_contact_radius(np.nan, 0.01, 4000.0, 0.45)

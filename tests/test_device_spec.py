@@ -3,7 +3,8 @@
 import pytest
 
 from surgsim_envs.errors import ConfigError
-from surgsim_envs.haptics.device import DeviceLimits, make_device, parse_device_spec
+from surgsim_envs.haptics.device import DeviceLimits
+from surgsim_envs.haptics.device_kinds import make_device, parse_device_spec
 
 
 def test_parse_device_spec_accepts_the_four_forms_and_names_bad_ones():

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from surgsim_envs.bench import material as mt
-from surgsim_envs.bench.accuracy import force_error
+from surgsim_envs.bench.accuracy_scene import force_error
 from surgsim_envs.bench.fit import fit
 from surgsim_envs.bench.references import dimitriadis_force, dimitriadis_valid_depth
 from surgsim_envs.tissue.diffusion import INDENT_CALIBRATION, DiffusionModel

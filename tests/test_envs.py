@@ -200,7 +200,7 @@ def test_make_vec(mode):
 
 def test_dm_env_adapter():
     pytest.importorskip("dm_env")
-    from surgsim_envs.envs.dm_env_adapter import make_dm_env
+    from surgsim_envs.integrations.dm_control import make_dm_env
 
     env = make_dm_env("SurgSim/Slippage-v0", seed=0)
     ts = env.reset()

@@ -15,7 +15,7 @@ def test_exported_stochastic_policy_samples_sb3_distribution(algo):
     import gymnasium as gym
     import torch
 
-    from surgsim_envs.policies.export_sb3 import check_export, sb3_to_npz
+    from surgsim_envs.integrations.sb3 import check_export, sb3_to_npz
 
     env = gym.make("Pendulum-v1")
     model = getattr(sb3, algo)("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [16, 16]})

@@ -18,13 +18,8 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from surgsim_envs.errors import ConfigError  # noqa: E402
-from surgsim_envs.haptics.udp_bridge import (  # noqa: E402
-    POSE_STRUCT,
-    MalformedPacketError,
-    SessionGate,
-    decode_pose,
-    encode_pose,
-)
+from surgsim_envs.haptics.pose_protocol import POSE_STRUCT, MalformedPacketError, decode_pose, encode_pose  # noqa: E402
+from surgsim_envs.haptics.session_gate import SessionGate  # noqa: E402
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -111,7 +106,8 @@ VALID = {"scenario": {"name": "ok", "scene": "palpation"},
 def test_fuzz_schema_mutations_are_accepted_in_range_or_named(table, data):
     import copy
 
-    from surgsim_envs.scenarios.schema import LIMITS, parse_scenario
+    from surgsim_envs.scenarios.loader import parse_scenario
+    from surgsim_envs.scenarios.schema import LIMITS
 
     doc = copy.deepcopy(VALID)
     key = data.draw(st.sampled_from(KEYS[table]))
@@ -135,7 +131,7 @@ def test_fuzz_schema_mutations_are_accepted_in_range_or_named(table, data):
 @settings(max_examples=60, deadline=None)
 @given(st.text(max_size=300))
 def test_fuzz_scenario_text(text):
-    from surgsim_envs.scenarios.schema import loads_scenario
+    from surgsim_envs.scenarios.loader import loads_scenario
 
     try:
         loads_scenario(text, "fuzz.toml")

@@ -203,13 +203,13 @@ def test_run_scenario_with_viewer(xvfb, tmp_path):
 
 
 def test_dm_control_viewer_runs_palpation(xvfb):
-    """dm_control.viewer.launch on surgsim_envs.dm_control_suite.load("palpation"): the window
+    """dm_control.viewer.launch on surgsim_envs.integrations.dm_control.load("palpation"): the window
     ("Explorer", glfw) shows the tissue; Space un-pauses it and the viewer steps the environment
     through the policy. viewer.launch blocks until its window closes, so the test ends the child."""
     code = textwrap.dedent("""
         import numpy as np
         from dm_control import viewer
-        import surgsim_envs.dm_control_suite as suite
+        import surgsim_envs.integrations.dm_control as suite
         env = suite.load("palpation")
         spec = env.action_spec()
         calls = []

@@ -125,7 +125,7 @@ def test_scenario_rollout_reseeds_a_stochastic_policy_per_episode(tmp_path):
     episode 0 of a seed-6 run press for press (a sampler seeded once per run would not)."""
     from surgsim_envs.policies import load_shipped
     from surgsim_envs.scenarios.rollout import run_rollout
-    from surgsim_envs.scenarios.schema import loads_scenario
+    from surgsim_envs.scenarios.loader import loads_scenario
 
     load_shipped("SurgSim/PalpationPress-v0").save(tmp_path / "press.npz")
     assert NpzPolicy.load(tmp_path / "press.npz").mode == "stochastic"

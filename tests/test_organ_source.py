@@ -8,7 +8,7 @@ import trimesh
 from surgsim_envs import geometry, tissue
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry import organ_volume
-from surgsim_envs.geometry.organ_source import self_intersections
+from surgsim_envs.geometry.self_intersection import self_intersections
 
 KIDNEY = dict(radius=0.03)   # an ellipsoidal "kidney", 6 x 4 x 3 cm
 

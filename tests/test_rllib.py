@@ -16,7 +16,7 @@ if importlib.util.find_spec("triton") is not None:
 import numpy as np
 import pytest
 
-from surgsim_envs.distributed.rllib_env import SLOTS_PER_WORKER, make_creator, worker_seed
+from surgsim_envs.integrations.rllib import SLOTS_PER_WORKER, make_creator, worker_seed
 from surgsim_envs.errors import ConfigError
 
 TASK = "SurgSim/PalpationPress-v0"

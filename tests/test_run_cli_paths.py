@@ -8,7 +8,7 @@ import shutil
 from pathlib import Path
 
 from surgsim_envs import cli
-from surgsim_envs.scenarios.cli import command_line_path
+from surgsim_envs.cli.run import command_line_path
 
 ROOT = Path(__file__).resolve().parents[1]
 PRESS = ROOT / "tasks" / "palpation_press_policy.toml"

@@ -246,7 +246,7 @@ def test_policy_rollout_scenario(tmp_path):
 
 
 def test_bad_policy_reference_is_a_config_error():
-    from surgsim_envs.scenarios.runner import load_policy
+    from surgsim_envs.scenarios.policies import load_policy
 
     with pytest.raises(ConfigError, match="no 'nope'"):
         load_policy("surgsim_envs.scenarios.policies:nope")

@@ -43,7 +43,7 @@ def test_indentation_shape_error_small_against_finest_fem():
     """Coarser FEM surfaces sit within a few percent of the indentation depth of the finest one
     (measured 15-31 um at depth 1.5 mm; not monotone at these coarse graded meshes); a wrong
     deformed surface (sign, scale) would be off by ~ the depth."""
-    from surgsim_envs.bench.accuracy import MATERIAL, RADIUS, THICKNESS
+    from surgsim_envs.bench.accuracy_scene import MATERIAL, RADIUS, THICKNESS
     from surgsim_envs.bench.material import indent
     from surgsim_envs.bench.references import dimitriadis_valid_depth
     from surgsim_envs.tissue import get_material

@@ -10,18 +10,10 @@ import pytest
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.haptics import DeviceLimits, ServoLoop, SpringWallPhysics
-from surgsim_envs.haptics.udp_bridge import (
-    FORCE_SIZE,
-    POSE_SIZE,
-    OPEN_PACKETS,
-    MalformedPacketError,
-    UdpDevice,
-    UdpHapticClient,
-    decode_force,
-    decode_pose,
-    encode_force,
-    encode_pose,
-)
+from surgsim_envs.haptics.pose_protocol import (FORCE_SIZE, POSE_SIZE, MalformedPacketError, decode_force, decode_pose,
+                                                encode_force, encode_pose)
+from surgsim_envs.haptics.session_gate import OPEN_PACKETS
+from surgsim_envs.haptics.udp_bridge import UdpDevice, UdpHapticClient
 from udp_support import poll_until  # noqa: E402
 
 

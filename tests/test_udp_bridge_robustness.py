@@ -12,14 +12,9 @@ import pytest
 from surgsim_envs.haptics import DeviceLimits, DeviceMapping, ServoConfig, ServoLoop, SpringWallPhysics
 from surgsim_envs.haptics.device import DeviceState, HapticDevice
 from surgsim_envs.haptics.quaternion import unit_quaternion
-from surgsim_envs.haptics.udp_bridge import (
-    OPEN_PACKETS,
-    SESSION_TIMEOUT_S,
-    UdpDevice,
-    UdpHapticClient,
-    decode_pose,
-    encode_pose,
-)
+from surgsim_envs.haptics.pose_protocol import decode_pose, encode_pose
+from surgsim_envs.haptics.session_gate import OPEN_PACKETS, SESSION_TIMEOUT_S
+from surgsim_envs.haptics.udp_bridge import UdpDevice, UdpHapticClient
 from udp_support import poll_until  # noqa: E402
 
 

@@ -95,3 +95,11 @@ def test_one_sided_bounds_read_as_one():
         validate.positive(-1, "k", fix="e.g. 20")
     with pytest.raises(ConfigError, match=r"x=2.0 m must be <= 1 m"):
         validate.real(2.0, "x", hi=1.0, unit="m")
+
+
+def test_positives_checks_each_keyword_in_order_and_names_the_first_bad_one():
+    assert validate.positives(radius=0.005, young=5000, fix="SI units") == (0.005, 5000.0)
+    with pytest.raises(ConfigError, match=r"young=-1 must be > 0; SI units"):
+        validate.positives(radius=0.005, young=-1, thickness=0.0, fix="SI units")
+    with pytest.raises(ConfigError, match=r"radius=nan m must be finite"):
+        validate.positives(radius=float("nan"), unit="m")

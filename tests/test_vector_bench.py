@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from surgsim_envs.bench.envs_speed import SpinEnv
+from surgsim_envs.bench.spin_env import SpinEnv
 from surgsim_envs.bench.vector_speed import IndependentProcesses, alternate, contender_names, env_counts
 from surgsim_envs.errors import ConfigError
 
@@ -44,7 +44,7 @@ def test_rollout_contender_counts_every_env_step():
     """The rollout contender steps num_envs x steps env steps per run (its rate is their count over the
     wall time), with "report" held at -1 on Palpation-shaped actions."""
     from surgsim_envs.bench.vector_speed import RolloutRun, UniformPolicy
-    from surgsim_envs.envs.vector import SurgSimVectorEnv
+    from surgsim_envs.vector import SurgSimVectorEnv
 
     from gymnasium import spaces
 

@@ -1,4 +1,4 @@
-"""InfoWriter (surgsim_envs/envs/vector_info.py), the worker side of the vector env's numeric
+"""InfoWriter (surgsim_envs/vector/info.py), the worker side of the vector env's numeric
 infos: a layout seen before is written by a plan (one gather, one numpy assignment); whatever
 the previous write of the same row left (a key the new layout lacks) must read absent and 0.
 The end-to-end comparison with SyncVectorEnv is in tests/test_vector_env.py."""
@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from surgsim_envs.envs.vector_info import InfoWriter
+from surgsim_envs.vector.info import InfoWriter
 
 
 def _numeric_leaves(info, slots, path=()):
@@ -50,7 +50,7 @@ def test_a_value_whose_type_alternates_is_written_by_two_plans_not_rebuilt(monke
     """Palpation's ``stiffness_estimate_N_per_m`` was a Python float on some steps and a numpy
     float64 on others: a plan per (keys, value types) keeps both layouts on the fast path (no plan
     made after the first two writes) and the row still holds exactly the info's numbers."""
-    from surgsim_envs.envs import vector_info
+    from surgsim_envs.vector import info as vector_info
 
     made = []
     real_make = vector_info._WritePlan.make.__func__

@@ -1,5 +1,5 @@
 """A vector env whose main process is SIGKILLed leaves no worker and no shared-memory block
-behind (surgsim_envs/envs/vector_parent.py), and its inputs are refused by name."""
+behind (surgsim_envs/vector/parent.py), and its inputs are refused by name."""
 
 from __future__ import annotations
 
@@ -14,14 +14,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from surgsim_envs.envs.vector import SurgSimVectorEnv
+from surgsim_envs.vector import SurgSimVectorEnv
 from surgsim_envs.errors import ConfigError
 
 REPO = Path(__file__).resolve().parents[1]
 
 CHILD = textwrap.dedent("""
     import sys, time
-    from surgsim_envs.envs.vector import SurgSimVectorEnv
+    from surgsim_envs.vector import SurgSimVectorEnv
     ctx = sys.argv[1] if sys.argv[1] != "default" else None
     vec = SurgSimVectorEnv("CartPole-v1", num_envs=2, workers=2, context=ctx)
     vec.reset(seed=0)

@@ -1,4 +1,4 @@
-"""SB3VectorEnv (surgsim_envs/envs/vector_sb3.py): stable-baselines3 on the shared-memory vector
+"""SB3VectorEnv (surgsim_envs/integrations/sb3.py): stable-baselines3 on the shared-memory vector
 env gives what SB3's own make_vec_env + DummyVecEnv gives for the same seed: observations,
 rewards, dones, terminal observations, TimeLimit.truncated, Monitor's episode records; and
 get_attr/set_attr/env_method with indices reach the right envs."""
@@ -17,7 +17,7 @@ def test_sb3_vector_env_matches_dummy_vec_env():
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from surgsim_envs.envs.vector_sb3 import make_sb3_vec_env
+    from surgsim_envs.integrations.sb3 import make_sb3_vec_env
 
     ours = make_sb3_vec_env(Toy, 3, seed=4, workers=2)
     ref = make_vec_env(Toy, n_envs=3, seed=4, vec_env_cls=DummyVecEnv)

@@ -1,5 +1,2 @@
-"""Benchmarks: virtual material tests, analytic references, speed against accuracy, stability maps."""
-
-from surgsim_envs.bench.choose import Choice, choose, resolve_resolution
-
-__all__ = ["choose", "resolve_resolution", "Choice"]
+"""Benchmarks: virtual material tests, analytic references, speed against accuracy, stability maps.
+The model and resolution choice they feed is :func:`surgsim_envs.tissue.resolution.choose`."""

@@ -10,7 +10,7 @@ mean relative force error against Dimitriadis et al. (2002) over depths in [d_v/
 reference's validity depth (1.5 mm here); ``self_error`` is the same against the model's own
 finest resolution (its converged solution). Cost: microseconds of compute per simulated
 millisecond (wall time of one physics step, contact + tissue, times the steps per ms at the
-model's stable dt). Outputs ``accuracy.json`` (the table :func:`surgsim_envs.bench.choose` reads)
+model's stable dt). Outputs ``accuracy.json`` (the table :func:`surgsim_envs.tissue.resolution.choose` reads)
 and ``accuracy.png`` (log-log, Pareto front marked). Shape error (``shape_rms`` etc., m; chart
 ``accuracy_shape.png``): signed distances of the deformed top surface at the deepest depth to the
 most accurate model's finest surface under the same load (:mod:`surgsim_envs.bench.shape_error`,
@@ -23,7 +23,7 @@ same graded mesh whole, label = spacing in mm) and ``mujoco_flex_trilinear`` (do
 flex settles, force = sum of the sphere's contact forces, depth = sphere bottom below the
 undeformed surface (so MuJoCo's soft-contact penetration, reported as ``penetration``, counts
 as compliance). Cost = median wall time of one ``mj_step`` at 1 ms. Baseline rows carry
-``"baseline": true`` and are never picked by :func:`surgsim_envs.bench.choose`.
+``"baseline": true`` and are never picked by :func:`surgsim_envs.tissue.resolution.choose`.
 """
 
 from __future__ import annotations
@@ -34,8 +34,8 @@ import math
 import os
 import sys
 
-import numpy as np
 
+from surgsim_envs.bench.accuracy_scene import MATERIAL, RADIUS, THICKNESS, add_self_error, force_error
 from surgsim_envs.bench.references import dimitriadis_force, dimitriadis_valid_depth
 from surgsim_envs.bench.shape_error import add_shape_error, plot_shape_axis
 from surgsim_envs.tissue.capabilities import CapabilityError
@@ -43,7 +43,6 @@ from surgsim_envs.tissue.capabilities import CapabilityError
 #: the capability the indentation needs (nodal forces in, positions out); asked of every registered model
 NEEDS = "forces"
 
-RADIUS, THICKNESS, MATERIAL = 0.005, 0.03, "liver"  # liver made elastic (relax_fraction = 0)
 SPACINGS = (0.003, 0.002, 0.0015, 0.001, 0.0007)
 QUICK_SPACINGS = (0.003, 0.002, 0.0013)
 FLEX_SPACINGS = (0.006, 0.004, 0.003)        # m, mujoco_flex_full (whole slab: 1,125 / 2,527 / 3,528 vertices)
@@ -55,13 +54,6 @@ FLEX_COLLISION_SPACING = 0.004               # m, the trilinear flex's (collisio
 REAL_TIME_US_PER_MS = 1000.0
 #: force error an "accurate" model must reach (<= 5 % at real time); drawn on the chart
 TARGET_ERROR = 0.05
-
-
-def force_error(depth, force, ref_force, valid_depth: float) -> float:
-    """Mean relative error of ``force`` against ``ref_force`` at depths in [valid_depth/4, valid_depth]."""
-    depth, force, ref_force = map(np.asarray, (depth, force, ref_force))
-    sel = (depth >= 0.25 * valid_depth - 1e-12) & (depth <= valid_depth + 1e-12)
-    return float(np.mean(np.abs(force[sel] / ref_force[sel] - 1.0)))
 
 
 def sweep(models=None, spacings=SPACINGS, progress: bool = True, time_steps: int = 10) -> list[dict]:
@@ -139,14 +131,6 @@ def flex_sweep(spacings=FLEX_SPACINGS, cellcounts=FLEX_CELLCOUNTS, progress: boo
                          "force": res.force.tolist(), "penetration": res.penetration.tolist(), "baseline": True})
     add_self_error(rows)
     return rows
-
-
-def add_self_error(rows: list[dict]) -> None:
-    """``self_error`` of every row: its force error against the same model's finest row."""
-    dv = dimitriadis_valid_depth(RADIUS, THICKNESS)
-    for r in rows:
-        finest = min((q for q in rows if q["model"] == r["model"]), key=lambda q: q["spacing"])
-        r["self_error"] = force_error(r["depth"], r["force"], finest["force"], dv)
 
 
 def pareto(rows: list[dict]) -> list[dict]:

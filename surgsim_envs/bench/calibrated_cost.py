@@ -72,7 +72,8 @@ def kernel_split_us(model, dt: float, repeats: int) -> tuple[float, float]:
     calls = [lambda: kern.spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s, dl, False, f_buf, work)]
     if ntets is not None:
         fvol = np.zeros_like(pos)
-        calls.append(lambda: nvk.add_forces(pos, ntets, model.node_rest_volume, model.node_bulk, model._vbuf, fvol))
+        vbuf = np.zeros(model.n_nodes)          # the kernel's per-node volume scratch
+        calls.append(lambda: nvk.add_forces(pos, ntets, model.node_rest_volume, model.node_bulk, vbuf, fvol))
     times = [[] for _ in calls]
     for _ in range(max(repeats, 10)):
         for k, call in enumerate(calls):

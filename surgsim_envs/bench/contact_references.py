@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.bench.references import Reference, gross_slip_pull, hertz_force
 from surgsim_envs.errors import ConfigError
 
@@ -49,13 +50,6 @@ COULOMB_SLIDING = Reference(
 )
 
 
-def _positive(**values) -> None:
-    for key, value in values.items():
-        v = np.asarray(value, dtype=float)
-        if not (np.all(np.isfinite(v)) and np.all(v > 0)):
-            raise ConfigError(f"{key} must be > 0 (SI units), got {value!r}")
-
-
 def _poisson(nu: float) -> float:
     if not (isinstance(nu, (int, float, np.floating)) and math.isfinite(nu) and 0.0 <= nu <= 0.5):
         raise ConfigError(f"poisson must lie in [0, 0.5] for these half-space references, got {nu!r}")
@@ -64,7 +58,7 @@ def _poisson(nu: float) -> float:
 
 def shear_modulus(young: float, poisson: float) -> float:
     """G = E / (2 (1 + nu)), Pa."""
-    _positive(young=young)
+    validate.positives(fix="give a positive number (SI units)", young=young)
     return float(young) / (2.0 * (1.0 + _poisson(poisson)))
 
 
@@ -91,7 +85,7 @@ def no_slip_stiffness_factor(poisson: float) -> float:
 
 def hertz_contact_radius(normal_force, radius: float, young: float, poisson: float) -> np.ndarray:
     """Hertz contact radius a = (3 P R / (4 E*))^(1/3), m, of a rigid sphere under normal load P (N)."""
-    _positive(radius=radius, young=young)
+    validate.positives(fix="give a positive number (SI units)", radius=radius, young=young)
     nu = _poisson(poisson)
     p = np.asarray(normal_force, dtype=float)
     if np.any(~np.isfinite(p)) or np.any(p < 0):
@@ -103,7 +97,7 @@ def mindlin_slip_displacement(mu: float, normal_force: float, contact_radius: fl
                               poisson: float) -> float:
     """delta_s = 3 mu P (2 - nu) / (16 G a), m: the tangential displacement at which the pressed sphere
     reaches gross sliding (Q = mu P) in the Cattaneo-Mindlin solution."""
-    _positive(mu=mu, normal_force=normal_force, contact_radius=contact_radius)
+    validate.positives(fix="give a positive number (SI units)", mu=mu, normal_force=normal_force, contact_radius=contact_radius)
     g = shear_modulus(young, poisson)
     return 3.0 * mu * normal_force * (2.0 - float(poisson)) / (16.0 * g * contact_radius)
 

@@ -22,7 +22,9 @@ import time
 
 import numpy as np
 
+from surgsim_envs.bench.random_actions import random_actions
 from surgsim_envs.bench.reference_kernel import reference_kernel_us
+from surgsim_envs.bench.spin_env import SpinEnv
 from surgsim_envs.errors import ConfigError
 
 #: s, an async step that takes longer than this raises instead of hanging
@@ -70,33 +72,24 @@ def add_arguments(parser) -> None:
     parser.add_argument("--signal-options", action="store_true",
                         help="also time the per-step signal options for --workers processes (pipe byte, "
                              "semaphore pair, multiprocessing Connection)")
-    parser.add_argument("--checked-loop", action="store_true",
-                        help="also time, alternately in this process, the physics loop through the checked public "
-                             "calls (ContactModel.compute + TissueModel.step per substep) against the prepared one")
 
 
-def _actions(space, n, rng, palpation):
-    a = rng.uniform(-1, 1, (n, *space.shape)).astype(np.float32)
-    if palpation:
-        a[..., -1] = -1.0                  # the last component is "report": keep the episode going
-    return a
-
-
-def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = False,
-                compiled_vs: bool = False) -> dict:
+def single_rate(env_id: str, steps: int, repeats: int, compiled_vs: bool = False) -> dict:
     """Median env steps/s of one env in this process, plus its timing settings."""
     import gymnasium as gym
+
+    from surgsim_envs.scene.compiled_substeps import compiled_substeps_for
 
     env = gym.make(env_id)
     u = env.unwrapped
     rng = np.random.default_rng(0)
     pal = "Palpation" in env_id
     env.reset(seed=0)
-    for a in _actions(env.action_space, 20, rng, pal):
+    for a in random_actions(env.action_space, 20, rng, pal):
         env.step(a)
     rates, physics_rates, refs = [], [], []
     for r in range(repeats):
-        acts = _actions(env.action_space, steps, rng, pal)
+        acts = random_actions(env.action_space, steps, rng, pal)
         env.reset(seed=r)
         physics = 0
         t0 = time.perf_counter()
@@ -125,13 +118,9 @@ def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = Fals
            "reference_kernel_us": statistics.median(refs),
            "env_step_in_reference_kernels": 1e6 / statistics.median(rates) / statistics.median(refs),
            "load_avg_1min": os.getloadavg()[0]}
-    out["compiled_substeps"] = u.sim._compiled_runner() is not None
+    out["compiled_substeps"] = u.sim.compiled_substeps and compiled_substeps_for(u.sim) is not None
     if compiled_vs:
         out.update(compiled_vs_generic(env, repeats, rng, pal, steps))
-    if checked_loop and u.sim._has_tools:
-        checked, prepared = checked_vs_prepared(env, repeats, rng, pal)
-        out.update(checked_loop_substep_us=checked, prepared_loop_substep_us=prepared,
-                   checked_over_prepared=checked / prepared)
     env.close()
     return out
 
@@ -149,7 +138,7 @@ def overhead(env, steps: int, repeats: int, rng, palpation: bool) -> tuple[float
     n = max(1, steps // 4)
     for _ in range(repeats):
         env.reset(seed=int(rng.integers(2**31)))
-        acts = _actions(env.action_space, n, rng, palpation)
+        acts = random_actions(env.action_space, n, rng, palpation)
         first = u.sim.steps
         t0 = time.perf_counter()
         for a in acts:
@@ -171,59 +160,6 @@ def overhead(env, steps: int, repeats: int, rng, palpation: bool) -> tuple[float
     return statistics.median(sub), statistics.median(own)
 
 
-def _checked_physics_step(sim) -> None:
-    """One physics step through the checked public calls (the loop before the prepared and compiled paths)."""
-    import mujoco
-
-    from surgsim_envs.scene.simulation import _rate_limit, _write_rows, _zero_rows
-
-    m, d, dt = sim.model, sim.data, sim.dt
-    if sim._moving:
-        sim._moving = _rate_limit(sim._views["ctrl"], sim._goal, sim._rate, dt)
-    mujoco.mj_step1(m, d)
-    sim._gather()
-    w = sim._wrench
-    w[:] = 0.0
-    for tissue, contact in sim._pairs:
-        res = contact.compute(tissue.positions, tissue.velocities, sim._shape_kind, sim._shape_tool,
-                              sim._shape_size, sim._gpos, sim._gmat, sim._gvel, sim._tcom, dt)
-        tissue.step(dt, res.forces, res.stiffness)
-        contact.attribute_increment(tissue.integrated_external_forces)
-        w[:, :3] += res.tool_force
-        w[:, 3:] += res.tool_torque
-    xfrc = sim._views["xfrc_applied"]
-    _write_rows(xfrc, sim._bodies, w)
-    mujoco.mj_step2(m, d)
-    _zero_rows(xfrc, sim._bodies)
-    sim.steps += 1
-
-
-def checked_vs_prepared(env, repeats: int, rng, palpation: bool, n: int = 200) -> tuple[float, float]:
-    """``(checked_us, prepared_us)``: median wall time of one physics substep through the checked
-    public calls and through ``Simulation``'s prepared generic loop (compiled substeps off),
-    alternately from the same env state."""
-    u = env.unwrapped
-    sim = u.sim
-    times = ([], [])
-    for r in range(repeats):
-        for k in range(2):
-            env.reset(seed=r)
-            for a in _actions(env.action_space, 5, rng, palpation):
-                env.step(a)
-            compiled, sim.compiled_substeps = sim.compiled_substeps, False   # the prepared generic loop
-            try:
-                t0 = time.perf_counter()
-                if k == 0:
-                    for _ in range(n):
-                        _checked_physics_step(sim)
-                else:
-                    sim._physics_steps(n)
-                times[k].append((time.perf_counter() - t0) / n * 1e6)
-            finally:
-                sim.compiled_substeps = compiled
-    return statistics.median(times[0]), statistics.median(times[1])
-
-
 def compiled_vs_generic(env, repeats: int, rng, palpation: bool, steps: int, n: int = 300) -> dict:
     """Median wall time of an env step (``steps // 4`` random actions from a reset) and of one
     physics substep (``n`` substeps from the state the actions left), with the compiled substeps
@@ -240,7 +176,7 @@ def compiled_vs_generic(env, repeats: int, rng, palpation: bool, steps: int, n: 
             for compiled in (True, False):
                 sim.compiled_substeps = compiled
                 env.reset(seed=r)
-                acts = _actions(env.action_space, k, rng, palpation)
+                acts = random_actions(env.action_space, k, rng, palpation)
                 taken = 0
                 c0 = time.thread_time()
                 t0 = time.perf_counter()
@@ -252,7 +188,7 @@ def compiled_vs_generic(env, repeats: int, rng, palpation: bool, steps: int, n: 
                 env_us[compiled].append((time.perf_counter() - t0) / taken * 1e6)
                 env_cpu_us[compiled].append((time.thread_time() - c0) / taken * 1e6)
                 t0 = time.perf_counter()
-                sim._physics_steps(n)
+                sim.physics_step(n)
                 sub_us[compiled].append((time.perf_counter() - t0) / n * 1e6)
     finally:
         sim.compiled_substeps = True
@@ -262,34 +198,6 @@ def compiled_vs_generic(env, repeats: int, rng, palpation: bool, steps: int, n: 
             "compiled_substep_us": med(sub_us[True]), "generic_substep_us": med(sub_us[False]),
             "generic_over_compiled_env_step": med(env_us[False]) / med(env_us[True]),
             "generic_over_compiled_substep": med(sub_us[False]) / med(sub_us[True])}
-
-
-class SpinEnv:
-    """A trivial Gymnasium env whose step busy-waits ``step_us`` microseconds (0: returns at once),
-    with a 20-float observation: the async baseline (pipe round-trip and process scheduling only).
-    ``info``: the info dict each step returns (a fresh deep copy per step; default empty), e.g. a
-    task's own, to see what sending and merging it costs."""
-
-    def __new__(cls, step_us: float = 0.0, info: dict | None = None):
-        import copy
-        import gymnasium as gym
-        from gymnasium import spaces
-
-        class _Spin(gym.Env):
-            observation_space = spaces.Box(-1.0, 1.0, (20,), np.float32)
-            action_space = spaces.Box(-1.0, 1.0, (4,), np.float32)
-
-            def reset(self, *, seed=None, options=None):
-                super().reset(seed=seed)
-                return np.zeros(20, np.float32), {}
-
-            def step(self, action):
-                end = time.perf_counter() + step_us * 1e-6
-                while time.perf_counter() < end:
-                    pass
-                return np.zeros(20, np.float32), 0.0, False, False, copy.deepcopy(info) if info else {}
-
-        return _Spin()
 
 
 def _spin_env(step_us: float, info: dict | None = None):
@@ -415,13 +323,13 @@ def async_rate(env_id: str, workers: int, steps: int, repeats: int, info_keys=No
     pal = "Palpation" in env_id
     try:
         vec.reset(seed=list(range(workers)))
-        for a in _actions(vec.action_space, 10, rng, pal):
+        for a in random_actions(vec.action_space, 10, rng, pal):
             vec.step_async(a)
             vec.step_wait(timeout=STEP_TIMEOUT)
         rates = []
         n = max(1, steps // workers)
         for _ in range(repeats):
-            acts = _actions(vec.action_space, n, rng, pal)
+            acts = random_actions(vec.action_space, n, rng, pal)
             t0 = time.perf_counter()
             for a in acts:
                 vec.step_async(a)
@@ -576,8 +484,7 @@ def run(args) -> int:
             row = vector_row(t, args)
             rows.append(row)
             continue
-        row = single_rate(t, args.steps, args.repeats, getattr(args, "checked_loop", False),
-                          getattr(args, "compiled_vs_generic", False))
+        row = single_rate(t, args.steps, args.repeats, getattr(args, "compiled_vs_generic", False))
         if vector:
             row.update(vector_row(t, args, 1e6 / row["steps_per_s"]))
         if args.workers:

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.materials import get_material
 
@@ -95,10 +96,8 @@ def frictional_press(material="liver", *, mu: float = 0.5, radius: float = 0.01,
     from surgsim_envs.tissue.fem_static import QuasiStaticFEMModel
 
     mat = get_material(material)
-    for key, val in (("radius", radius), ("depth", depth), ("thickness", thickness), ("penalty_ratio", penalty_ratio),
-                     ("tolerance", tolerance)):
-        if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
-            raise ConfigError(f"{key} must be a positive number (SI units), got {val!r}")
+    validate.positives(radius=radius, depth=depth, thickness=thickness, penalty_ratio=penalty_ratio,
+                       tolerance=tolerance, fix="give a positive number (SI units)")
     if not (isinstance(mu, (int, float)) and math.isfinite(mu) and mu >= 0):
         raise ConfigError(f"mu must be a Coulomb coefficient >= 0, got {mu!r}")
     if not (isinstance(slide, (int, float)) and math.isfinite(slide) and slide >= 0):
@@ -107,8 +106,7 @@ def frictional_press(material="liver", *, mu: float = 0.5, radius: float = 0.01,
         raise ConfigError(f"depth {depth} m must be below half the radius ({radius} m) and the thickness "
                           f"({thickness} m), and a punch's below a tenth of its radius: the slab is small-strain")
     for key, val in (("press_steps", press_steps), ("slide_steps", slide_steps), ("iterations", iterations)):
-        if not (isinstance(val, (int, np.integer)) and val >= 1):
-            raise ConfigError(f"{key} must be a positive integer, got {val!r}")
+        validate.integer(val, key, lo=1, fix="give a positive integer")
     if tool not in ("sphere", "punch"):
         raise ConfigError(f"tool must be 'sphere' or 'punch' (a flat-ended cylinder), got {tool!r}")
     a = math.sqrt(radius * depth) if tool == "sphere" else float(radius)

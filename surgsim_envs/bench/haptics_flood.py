@@ -53,7 +53,7 @@ def _pose_sender(addr, rate_hz: float, stop, sent, ready) -> None:  # runs in a 
 def _flooder(addr, seed: int, stop, sent, ready, rate: float) -> None:  # runs in a child process
     import socket
 
-    from surgsim_envs.haptics.udp_bridge import POSE_SIZE
+    from surgsim_envs.haptics.pose_protocol import POSE_SIZE
 
     rng = np.random.default_rng(seed)
     pool = [rng.bytes(int(n)) for n in rng.integers(1, 1400, 64)]

@@ -9,10 +9,10 @@ conditions; :func:`graded_slab` builds either. Units: m.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.box import lattice_tets
 from surgsim_envs.geometry.volume import Volume, tet_signed_volumes
@@ -46,9 +46,8 @@ def graded_slab(width: float, thickness: float, spacing: float, fine_extent: flo
 
     quarter: build only x >= 0, y >= 0 (use with symmetry conditions on x = 0 and y = 0).
     """
-    for key, val in (("width", width), ("thickness", thickness), ("spacing", spacing), ("fine_extent", fine_extent)):
-        if not (isinstance(val, (int, float, np.floating)) and math.isfinite(val) and val > 0):
-            raise ConfigError(f"{key} must be a positive length in m, got {val!r}")
+    validate.positives(width=width, thickness=thickness, spacing=spacing, fine_extent=fine_extent, unit="m",
+                       fix="give a positive length in m")
     if spacing > min(width / 2, thickness):
         raise ConfigError(f"spacing {spacing} m is larger than the slab (width {width} m, thickness {thickness} m); "
                           "use a spacing a few times smaller than the thickness")

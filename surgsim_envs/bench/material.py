@@ -53,11 +53,6 @@ def model_class(model):
     raise ConfigError(f"model must be a registered model name or a TissueModel subclass, got {model!r}")
 
 
-def _positive(**values) -> None:
-    for key, val in values.items():
-        validate.positive(val, key, fix="give a positive number (SI units)")
-
-
 #: nodes a virtual material test may mesh (a finer mesh takes hours per test)
 MAX_TEST_NODES = 1_000_000
 
@@ -197,7 +192,7 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
 
     cls = model_class(model)
     mat = get_material(material)
-    _positive(indenter_radius=indenter_radius, depth=depth, thickness=thickness)
+    validate.positives(fix="give a positive number (SI units)", indenter_radius=indenter_radius, depth=depth, thickness=thickness)
     R = float(indenter_radius)
     if depth >= min(R, thickness):
         raise ConfigError(f"depth {depth} m must be smaller than the indenter radius ({R} m) and the thickness "
@@ -205,7 +200,7 @@ def indent(model, material="liver", *, indenter_radius: float = 0.005, depth: fl
     a_max = math.sqrt(R * depth)
     width = 4.0 * thickness if width is None else width
     spacing = min(a_max / 4.0, thickness / 6.0) if spacing is None else spacing
-    _positive(width=width, spacing=spacing, grading=grading)
+    validate.positives(fix="give a positive number (SI units)", width=width, spacing=spacing, grading=grading)
     if width < 4.0 * a_max:
         raise ConfigError(f"width {width} m is too small for a contact radius of {a_max:.3g} m; use >= {4 * a_max:.3g} m")
     validate.integer(n_depths, "n_depths", lo=1, hi=10_000, fix="the number of depths of the curve, e.g. 12")
@@ -353,7 +348,7 @@ def relax(model, material="liver", *, strain: float = 0.05, ramp_time: float = 0
 
     cls = model_class(model)
     mat = get_material(material)
-    _positive(strain=strain, ramp_time=ramp_time, hold_time=hold_time, spacing=spacing, samples=samples)
+    validate.positives(fix="give a positive number (SI units)", strain=strain, ramp_time=ramp_time, hold_time=hold_time, spacing=spacing, samples=samples)
     if strain >= 0.5:
         raise ConfigError(f"strain {strain} is too large for a relaxation test; use 0.01-0.2")
     if "integrator" not in opts and "implicit" in cls.integrators:
@@ -533,7 +528,7 @@ def slip(model, material=None, *, mu: float = 0.6, radius: float = 0.008, length
     quasi_static = cls.has("quasi_static")
     if dt is None:
         dt = 5e-4 if quasi_static else 5e-5
-    _positive(radius=radius, length=length, spacing=spacing, squeeze=squeeze, dt=dt, close_time=close_time,
+    validate.positives(fix="give a positive number (SI units)", radius=radius, length=length, spacing=spacing, squeeze=squeeze, dt=dt, close_time=close_time,
               settle_time=settle_time, pull_time=pull_time, handle_stiffness=handle_stiffness,
               handle_speed=handle_speed, onset_slide=onset_slide, slip_distance=slip_distance)
     if not (isinstance(max_pull_time, (int, float)) and max_pull_time >= pull_time):

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 
 DOFS = ("full", "trilinear")
@@ -46,13 +47,10 @@ def flexcomp_xml(name: str, *, young: float, poisson: float, mass: float, dof: s
     """
     if dof not in DOFS:
         raise ConfigError(f"dof must be one of {DOFS}, got {dof!r}")
-    for key, val in (("young", young), ("mass", mass), ("radius", radius), ("solref", solref)):
-        if not (isinstance(val, (int, float, np.integer, np.floating)) and math.isfinite(val) and val > 0):
-            raise ConfigError(f"{key} must be a positive number (SI units), got {val!r}")
+    validate.positives(young=young, mass=mass, radius=radius, solref=solref, fix="give a positive number (SI units)")
     if not (0.0 <= poisson < 0.5):
         raise ConfigError(f"poisson must be in [0, 0.5), got {poisson!r}")
-    if not (isinstance(cellcount, (int, np.integer)) and cellcount >= 1):
-        raise ConfigError(f"cellcount must be a positive integer, got {cellcount!r}")
+    validate.integer(cellcount, "cellcount", lo=1, fix="give a positive integer")
     dof_attr = "" if dof == "full" else f'dof="{dof}"'
     if count is not None:
         if points is not None:
@@ -173,14 +171,11 @@ def flex_indent(dof: str = "full", material="liver", *, indenter_radius: float =
     from surgsim_envs.materials import get_material
 
     mat = get_material(material)
-    for key, val in (("indenter_radius", indenter_radius), ("depth", depth), ("thickness", thickness),
-                     ("spacing", spacing), ("dt", dt), ("ramp_time", ramp_time), ("hold_time", hold_time)):
-        if not (isinstance(val, (int, float, np.integer, np.floating)) and math.isfinite(val) and val > 0):
-            raise ConfigError(f"{key} must be a positive number (SI units), got {val!r}")
+    validate.positives(indenter_radius=indenter_radius, depth=depth, thickness=thickness, spacing=spacing, dt=dt,
+                       ramp_time=ramp_time, hold_time=hold_time, fix="give a positive number (SI units)")
     if depth >= min(indenter_radius, thickness):
         raise ConfigError(f"depth {depth} m must be smaller than the indenter radius and the thickness")
-    if not (isinstance(n_depths, (int, np.integer)) and n_depths >= 1):
-        raise ConfigError(f"n_depths must be a positive integer, got {n_depths!r}")
+    validate.integer(n_depths, "n_depths", lo=1, fix="give a positive integer")
     width = 4.0 * thickness if width is None else float(width)
     R = float(indenter_radius)
     a_max = math.sqrt(R * depth)

@@ -36,6 +36,7 @@ import time
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.bench.mujoco_flex import FlexIndentResult
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 
@@ -76,15 +77,12 @@ def pybullet_indent(mode: str = "fem", material="liver", *, indenter_radius: flo
     (module docstring); returns depth (m), force (N, up on the sphere), penetration (m) and cost."""
     if mode not in MODES:
         raise ConfigError(f"PyBullet soft-body mode must be one of {MODES}, got {mode!r}")
-    for key, val in (("indenter_radius", indenter_radius), ("depth", depth), ("thickness", thickness),
-                     ("spacing", spacing), ("dt", dt), ("margin", margin)):
-        if not (isinstance(val, (int, float, np.integer, np.floating)) and math.isfinite(val) and val > 0):
-            raise ConfigError(f"{key} must be a positive number (SI units), got {val!r}")
+    validate.positives(indenter_radius=indenter_radius, depth=depth, thickness=thickness, spacing=spacing, dt=dt,
+                       margin=margin, fix="give a positive number (SI units)")
     if depth >= min(indenter_radius, thickness):
         raise ConfigError(f"depth {depth} m must be smaller than the indenter radius and the thickness")
     for key, val in (("n_depths", n_depths), ("ramp_steps", ramp_steps), ("hold_steps", hold_steps)):
-        if not (isinstance(val, (int, np.integer)) and val >= 1):
-            raise ConfigError(f"{key} must be a positive integer, got {val!r}")
+        validate.integer(val, key, lo=1, fix="give a positive integer")
     try:
         import pybullet as pb
     except ImportError:
@@ -178,7 +176,7 @@ def peer_sweep(spacings=SPACINGS, models=None, progress: bool = True) -> list[di
 
     from tqdm import tqdm
 
-    from surgsim_envs.bench.accuracy import MATERIAL, RADIUS, THICKNESS, add_self_error, force_error
+    from surgsim_envs.bench.accuracy_scene import MATERIAL, RADIUS, THICKNESS, add_self_error, force_error
     from surgsim_envs.bench.references import dimitriadis_force, dimitriadis_valid_depth
     from surgsim_envs.tissue import get_material
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 
@@ -46,15 +47,9 @@ GROSS_SLIP = Reference(
 )
 
 
-def _check_positive(**values: float) -> None:
-    for key, value in values.items():
-        if not (np.all(np.isfinite(value)) and np.all(np.asarray(value) > 0)):
-            raise ConfigError(f"{key} must be > 0 (SI units), got {value!r}")
-
-
 def hertz_force(depth, radius: float, young: float, poisson: float) -> np.ndarray:
     """Hertz force (N) of a rigid sphere of ``radius`` (m) pressed ``depth`` (m) into a half-space."""
-    _check_positive(radius=radius, young=young)
+    validate.positives(fix="give a positive number (SI units)", radius=radius, young=young)
     d = np.clip(np.asarray(depth, dtype=float), 0.0, None)
     return 4.0 / 3.0 * young / (1.0 - poisson ** 2) * math.sqrt(radius) * d ** 1.5
 
@@ -66,7 +61,7 @@ def dimitriadis_force(depth, radius: float, young: float, poisson: float, thickn
     Hertz times the finite-thickness polynomial in chi = sqrt(R d) / h of Dimitriadis et al. (2002),
     with the nu-dependent coefficients alpha0, beta0 for a bonded (or non-bonded) layer.
     """
-    _check_positive(radius=radius, young=young, thickness=thickness)
+    validate.positives(fix="give a positive number (SI units)", radius=radius, young=young, thickness=thickness)
     nu = poisson
     if bonded:
         a0 = -(1.2876 - 1.4678 * nu + 1.3442 * nu ** 2) / (1.0 - nu)
@@ -85,7 +80,7 @@ def dimitriadis_force(depth, radius: float, young: float, poisson: float, thickn
 
 def dimitriadis_valid_depth(radius: float, thickness: float, max_chi: float = 1.0, max_depth_ratio: float = 0.3) -> float:
     """Largest depth (m) inside the reference's validity: chi <= max_chi and d <= max_depth_ratio * R."""
-    _check_positive(radius=radius, thickness=thickness)
+    validate.positives(fix="give a positive number (SI units)", radius=radius, thickness=thickness)
     return min(max_chi ** 2 * thickness ** 2 / radius, max_depth_ratio * radius)
 
 
@@ -97,7 +92,7 @@ def sls_ramp_hold_stress(t, strain: float, ramp_time: float, young: float, relax
     Ramp (t <= t_r): sigma = r [E_inf t + E1 tau (1 - exp(-t/tau))], r = strain / t_r.
     Hold (t > t_r): sigma = r [E_inf t_r + E1 tau (exp(-(t - t_r)/tau) - exp(-t/tau))].
     """
-    _check_positive(ramp_time=ramp_time, young=young, relax_time=relax_time)
+    validate.positives(fix="give a positive number (SI units)", ramp_time=ramp_time, young=young, relax_time=relax_time)
     if not 0.0 <= relax_fraction < 1.0:
         raise ConfigError(f"relax_fraction must lie in [0, 1), got {relax_fraction}")
     t = np.asarray(t, dtype=float)

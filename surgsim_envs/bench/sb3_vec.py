@@ -25,7 +25,7 @@ def add_arguments(p) -> None:
     p.add_argument("--steps", type=int, default=200, help="env steps per timed block (all workers together)")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--shared", action="store_true",
-                   help="also time SB3VectorEnv (surgsim_envs/envs/vector_sb3.py, shared-memory workers) for each n > 1")
+                   help="also time SB3VectorEnv (surgsim_envs/integrations/sb3.py, shared-memory workers) for each n > 1")
     p.add_argument("--json", action="store_true")
 
 
@@ -36,7 +36,7 @@ def rate(task: str, n: int, steps: int, repeats: int, shared: bool = False) -> f
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     if shared:
-        from surgsim_envs.envs.vector_sb3 import make_sb3_vec_env
+        from surgsim_envs.integrations.sb3 import make_sb3_vec_env
 
         venv = make_sb3_vec_env(task, n, seed=0, env_kwargs={"on_unstable": "terminate"})
     else:

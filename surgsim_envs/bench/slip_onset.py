@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 #: m, slip of a contact point's anchor along the pull that counts the point as slid
@@ -48,10 +49,8 @@ class AnchorSlip:
     """
 
     def __init__(self, n_points: int, k_t: float, slip_distance: float = SLIP_DISTANCE):
-        if not (isinstance(n_points, (int, np.integer)) and n_points > 0):
-            raise ConfigError(f"n_points must be a positive number of contact points, got {n_points!r}")
-        if not (np.isfinite(k_t) and k_t > 0):
-            raise ConfigError(f"k_t must be a stick-spring stiffness > 0 N/m, got {k_t!r}")
+        validate.integer(n_points, "n_points", lo=1, fix="the number of contact points")
+        validate.positive(k_t, "k_t", unit="N/m", fix="the stick-spring stiffness")
         if not (np.isfinite(slip_distance) and slip_distance > 0):
             raise ConfigError(f"slip_distance must be > 0 m (e.g. {SLIP_DISTANCE}), got {slip_distance!r}")
         self.k_t = float(k_t)

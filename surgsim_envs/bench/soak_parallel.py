@@ -85,14 +85,14 @@ def merge_rows(task: str, rows: list[dict], steps_requested: int) -> dict:
     return total
 
 
-def _clean(x):
+def json_safe(x):
     """Strict JSON: NaN/inf become null."""
     if isinstance(x, float) and not math.isfinite(x):
         return None
     if isinstance(x, dict):
-        return {k: _clean(v) for k, v in x.items()}
+        return {k: json_safe(v) for k, v in x.items()}
     if isinstance(x, list):
-        return [_clean(v) for v in x]
+        return [json_safe(v) for v in x]
     return x
 
 
@@ -100,7 +100,7 @@ def write_json(path: Path, data) -> None:
     """Write ``data`` to ``path`` atomically (a reader never sees half a file)."""
     path = Path(path)
     tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    tmp.write_text(json.dumps(_clean(data), indent=2))
+    tmp.write_text(json.dumps(json_safe(data), indent=2))
     os.replace(tmp, path)
 
 

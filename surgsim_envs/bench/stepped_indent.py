@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.materials import get_material
 
@@ -61,9 +62,8 @@ def stepped_indent(model="fem_static", material="liver", *, indenter_radius: flo
     for cap in ("quasi_static", "implicit_contact"):
         cls.require(cap, task="stepped indentation (surgsim_envs.bench.stepped_indent)")
     mat = get_material(material)
-    for key, val in (("indenter_radius", indenter_radius), ("depth", depth), ("thickness", thickness)):
-        if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
-            raise ConfigError(f"{key} must be a positive length in m, got {val!r}")
+    validate.positives(indenter_radius=indenter_radius, depth=depth, thickness=thickness, unit="m",
+                       fix="give a positive length in m")
     R = float(indenter_radius)
     if depth >= min(R, thickness):
         raise ConfigError(f"depth {depth} m must be below the radius {R} m and the thickness {thickness} m")

@@ -1,6 +1,6 @@
 """Vector env figures for ``surgsim bench envs --vector`` (the async aim: 2 workers
 >= 1.7x one process): one env in this process, Gymnasium's AsyncVectorEnv and
-:class:`~surgsim_envs.envs.vector.SurgSimVectorEnv` (``gym.make_vec``'s default for our tasks),
+:class:`~surgsim_envs.vector.SurgSimVectorEnv` (``gym.make_vec``'s default for our tasks),
 all built up front and timed **alternately** in rounds (same load for each), for the task and for
 a busy-wait stand-in env of a given step time that returns the task's info dict (the ceiling any
 vector env can reach at that step time). Also the signal round trip of the IPC options the
@@ -15,7 +15,8 @@ import time
 
 import numpy as np
 
-from surgsim_envs.bench.envs_speed import SpinEnv, _actions
+from surgsim_envs.bench.random_actions import random_actions
+from surgsim_envs.bench.spin_env import SpinEnv
 from surgsim_envs.errors import ConfigError
 
 #: s, a vector step that takes longer raises instead of hanging
@@ -55,7 +56,7 @@ def _independent_child(env_id, seed: int, conn, palpation: bool) -> None:
         n = conn.recv()
         if n is None:
             break
-        for a in _actions(env.action_space, n, rng, palpation):
+        for a in random_actions(env.action_space, n, rng, palpation):
             _, _, te, tr, _ = env.step(a)
             if te or tr:
                 env.reset()
@@ -110,7 +111,7 @@ class IndependentProcesses:
 
 class UniformPolicy:
     """A picklable random policy for :meth:`SurgSimVectorEnv.rollout`: the other contenders' actions
-    (:func:`~surgsim_envs.bench.envs_speed._actions`: uniform in [-1, 1], Palpation's "report" at -1)."""
+    (:func:`~surgsim_envs.bench.random_actions.random_actions`: uniform in [-1, 1], Palpation's "report" at -1)."""
 
     def __init__(self, action_space, palpation: bool = False, seed: int = 0):
         self.space, self.palpation = action_space, bool(palpation)
@@ -121,7 +122,7 @@ class UniformPolicy:
         self.rng = np.random.default_rng(seed)
 
     def __call__(self, obs):
-        return _actions(self.space, len(obs), self.rng, self.palpation)
+        return random_actions(self.space, len(obs), self.rng, self.palpation)
 
 
 class RolloutRun:
@@ -198,9 +199,9 @@ def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = Fals
         if _runs_itself(env):
             env.run(10)
         elif hasattr(env, "num_envs"):
-            _run_vector(env, _actions(env.action_space, 10, rng, palpation))
+            _run_vector(env, random_actions(env.action_space, 10, rng, palpation))
         else:
-            _run_single(env, _actions(env.action_space, 10, rng, palpation))
+            _run_single(env, random_actions(env.action_space, 10, rng, palpation))
     rates = {k: [] for k in contenders}
     main_cpu = {k: [] for k in contenders}
     worker_cpu = {k: [] for k in contenders}
@@ -209,10 +210,10 @@ def alternate(contenders: dict, steps: int, repeats: int, palpation: bool = Fals
             if _runs_itself(env):
                 r, m, w = _timed(_run_vector, env, range(max(1, steps // env.num_envs)))
             elif hasattr(env, "num_envs"):
-                acts = _actions(env.action_space, max(1, steps // env.num_envs), rng, palpation)
+                acts = random_actions(env.action_space, max(1, steps // env.num_envs), rng, palpation)
                 r, m, w = _timed(_run_vector, env, acts)
             else:
-                r, m, w = _timed(_run_single, env, _actions(env.action_space, steps, rng, palpation))
+                r, m, w = _timed(_run_single, env, random_actions(env.action_space, steps, rng, palpation))
             rates[name].append(r)
             main_cpu[name].append(m)
             worker_cpu[name].append(w)
@@ -303,11 +304,11 @@ def task_contenders(env_id: str, workers: int, spin_us: float = 0.0, worker_spin
 
 def spin_contenders(step_us: float, info: dict | None, workers: int, spin_us: float = 0.0,
                     worker_spin_us: float = 0.0, counts=None) -> dict:
-    """The same with :class:`~surgsim_envs.bench.envs_speed.SpinEnv` (busy-waits ``step_us``,
+    """The same with :class:`~surgsim_envs.bench.spin_env.SpinEnv` (busy-waits ``step_us``,
     returns a deep copy of ``info``)."""
     from gymnasium.vector import AsyncVectorEnv
 
-    from surgsim_envs.envs.vector import SurgSimVectorEnv
+    from surgsim_envs.vector import SurgSimVectorEnv
 
     env = functools.partial(SpinEnv, step_us, info)
 

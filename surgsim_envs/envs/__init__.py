@@ -32,10 +32,10 @@ MAX_EPISODE_STEPS = {"SurgSim/Palpation-v0": 600, "SurgSim/Grasp-v0": 150, "Surg
 
 def make_vector(env_id: str, num_envs: int = 1, **kwargs):
     """Every task's ``vector_entry_point``: ``gym.make_vec(task, num_envs=n)`` (no
-    ``vectorization_mode``) returns :class:`~surgsim_envs.envs.vector.SurgSimVectorEnv`, the
+    ``vectorization_mode``) returns :class:`~surgsim_envs.vector.SurgSimVectorEnv`, the
     shared-memory multi-process vector env; its options (``workers=``, ``info_keys=``,
     ``autoreset_mode=``, ...) go in make_vec's keyword arguments, next to the env's own."""
-    from surgsim_envs.envs.vector import SurgSimVectorEnv
+    from surgsim_envs.vector import SurgSimVectorEnv
 
     return SurgSimVectorEnv(env_id, num_envs, **kwargs)
 

@@ -16,6 +16,7 @@ from surgsim_envs.geometry.embedding import Embedding, embed_points, embed_surfa
 from surgsim_envs.geometry.inclusion import add_spherical_inclusion
 from surgsim_envs.geometry.lattice import lattice_volume, surface_distance
 from surgsim_envs.geometry.loaders import load_surface, load_tet_mesh
+from surgsim_envs.geometry.named_volume import make_volume
 from surgsim_envs.geometry.organ_source import check_surface_mesh, organ_volume
 from surgsim_envs.geometry.organs import ORGANS, liver_lobe_surface, spleen_surface
 from surgsim_envs.geometry.snapping import tet_quality
@@ -25,19 +26,3 @@ __all__ = ["Volume", "box_volume", "lattice_tets", "boundary_triangles", "tet_si
            "lattice_volume", "surface_distance", "load_surface", "load_tet_mesh", "add_spherical_inclusion",
            "spleen_surface", "liver_lobe_surface", "tet_quality", "ORGANS",
            "Embedding", "embed_points", "embed_surface", "interpolate", "organ_volume", "check_surface_mesh"]
-
-
-def make_volume(name: str, spacing: float | None = None, **kwargs) -> Volume:
-    """A named procedural volume: "block", "slab" (boxes centred at the origin, default spacing
-    5 mm) or an organ of :mod:`surgsim_envs.geometry.organs` ("slab_inclusion", "spleen",
-    "liver_lobe"; organs rest on z = 0). ``spacing`` in m."""
-    from surgsim_envs.errors import ConfigError
-
-    if name in ("block", "slab"):
-        size = kwargs.pop("size", (0.08, 0.08, 0.03) if name == "block" else (0.1, 0.1, 0.02))
-        return box_volume(size, spacing or 0.005, name=name, **kwargs)
-    if not isinstance(name, str):
-        raise ConfigError(f"volume name must be a string, got {name!r}; known: {['block', *ORGANS]}")
-    from surgsim_envs.geometry import organs
-
-    return organs.make_volume(name, spacing=spacing, **kwargs)

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 #: default clamp of extrapolated barycentric coordinates (1 = up to one tet size outside)
@@ -98,8 +99,7 @@ def embed_points(points, nodes, tets, max_extrapolation: float = MAX_EXTRAPOLATI
         raise ConfigError("cannot embed in a volume without tets (surface-only volumes have none)")
     if not (isinstance(max_extrapolation, (int, float)) and max_extrapolation >= 0):
         raise ConfigError(f"max_extrapolation must be >= 0 (in tet sizes), got {max_extrapolation!r}")
-    if not (isinstance(n_candidates, (int, np.integer)) and n_candidates >= 1):
-        raise ConfigError(f"n_candidates must be a positive integer, got {n_candidates!r}")
+    validate.integer(n_candidates, "n_candidates", lo=1, fix="the number of nearest tets tried per point, e.g. 8")
     k = int(min(n_candidates, len(tets)))
     centroids = nodes[tets].mean(axis=1)
     _, cand = cKDTree(centroids).query(pts, k=k)

@@ -24,7 +24,7 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.loaders import SURFACE_SUFFIXES, TET_SUFFIXES, load_tet_mesh, unit_scale
 from surgsim_envs.geometry.volume import Volume
 from surgsim_envs.geometry.nested_shells import nested_shell
-from surgsim_envs.geometry.self_intersection import meeting_pairs, self_intersections  # noqa: F401 (re-exported)
+from surgsim_envs.geometry.self_intersection import meeting_pairs
 
 #: options that go to the lattice filling of a surface file
 LATTICE_OPTIONS = ("snap", "max_snap", "min_quality")
@@ -70,7 +70,7 @@ def organ_volume(organ, spacing: float | None = None, units: str = "m", **option
         if organ not in registered_organs():
             raise ConfigError(f"unknown organ {organ!r}; registered organs: {registered_organs()}, or give a mesh "
                               f"file ({', '.join(SURFACE_SUFFIXES + TET_SUFFIXES)}) or a surgsim_envs.geometry.Volume")
-        from surgsim_envs.geometry import make_volume
+        from surgsim_envs.geometry.named_volume import make_volume
 
         return make_volume(organ, spacing=spacing, **options)
     raise ConfigError(f"organ must be a registered name {registered_organs()}, a mesh path "

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.haptics.recording import ForceLog
 
@@ -90,8 +91,7 @@ class DeviceLimits:
             raise ConfigError(
                 f"DeviceLimits workspace_max {tuple(hi)} must exceed workspace_min {tuple(lo)} on every axis; swap them"
             )
-        if not (math.isfinite(self.max_force) and self.max_force > 0):
-            raise ConfigError(f"DeviceLimits.max_force must be a positive finite force in N, got {self.max_force!r}")
+        validate.positive(self.max_force, "DeviceLimits.max_force", unit="N", fix="the device's force limit, e.g. 3.0")
 
     def clamp_position(self, position: np.ndarray) -> np.ndarray:
         """``position`` (3,) m clipped into the workspace box."""
@@ -209,28 +209,3 @@ class HapticDevice(ABC):
 
     def _render(self, force: np.ndarray, t: float) -> None:
         """Deliver ``force`` (already limited) to the hardware; simulated devices only record it."""
-
-
-# ----------------------------------------------------------------------------------------------
-# One device-spec parser and factory for the CLI, scenarios and teleop (kinds: device_kinds.py)
-def parse_device_spec(spec: str) -> tuple[str, str | int | None]:
-    """``"scripted"`` / ``"keyboard"`` / ``"replay:FILE"`` / ``"udp:PORT"`` -> ``(kind, argument)``;
-    ConfigError naming the spec and the accepted forms otherwise (the file is checked by the
-    factory, relative to its base folder). The kinds are registered in
-    :mod:`surgsim_envs.haptics.device_kinds`."""
-    from surgsim_envs.haptics.device_kinds import device_kind
-
-    kind, arg = device_kind(spec)
-    return kind.name, arg
-
-
-def make_device(spec: str, *, limits: DeviceLimits | None = None, scripted=None, base_dir=None) -> "HapticDevice":
-    """THE device factory: a HapticDevice from ``spec`` (see :func:`parse_device_spec`).
-
-    scripted: a callable returning the device for "scripted" (the caller knows its trajectory:
-    teleop's demonstration, a scenario's phase plan); base_dir: folder a relative replay FILE is
-    resolved against (a scenario's folder)."""
-    from surgsim_envs.haptics.device_kinds import device_kind
-
-    kind, arg = device_kind(spec)
-    return kind.build(arg, limits if limits is not None else DeviceLimits(), scripted, base_dir)

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 from surgsim_envs.errors import ConfigError
+from surgsim_envs.haptics.device import DeviceLimits, HapticDevice
 
 
 @dataclass(frozen=True)
@@ -116,3 +117,23 @@ register_device_kind(DeviceKind("replay", "replay:FILE", _build_replay, parse_ar
                                 file_arg=True))
 register_device_kind(DeviceKind("keyboard", "keyboard", _build_keyboard, needs_viewer=True))
 register_device_kind(DeviceKind("udp", "udp:PORT", _build_udp, parse_arg=_port, remote=True))
+
+
+# ----------------------------------------------------------------------------------------------
+# One device-spec parser and factory for the CLI, scenarios and teleop
+def parse_device_spec(spec: str) -> tuple[str, str | int | None]:
+    """``"scripted"`` / ``"keyboard"`` / ``"replay:FILE"`` / ``"udp:PORT"`` -> ``(kind, argument)``;
+    ConfigError naming the spec and the accepted forms otherwise (the file is checked by the
+    factory, relative to its base folder). The kinds are registered above."""
+    kind, arg = device_kind(spec)
+    return kind.name, arg
+
+
+def make_device(spec: str, *, limits: DeviceLimits | None = None, scripted=None, base_dir=None) -> HapticDevice:
+    """THE device factory: a HapticDevice from ``spec`` (see :func:`parse_device_spec`).
+
+    scripted: a callable returning the device for "scripted" (the caller knows its trajectory:
+    teleop's demonstration, a scenario's phase plan); base_dir: folder a relative replay FILE is
+    resolved against (a scenario's folder)."""
+    kind, arg = device_kind(spec)
+    return kind.build(arg, limits if limits is not None else DeviceLimits(), scripted, base_dir)

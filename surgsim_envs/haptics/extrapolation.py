@@ -48,6 +48,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 
@@ -138,10 +139,8 @@ class StiffnessExtrapolator(ForceExtrapolator):
     name = "stiffness"
 
     def __init__(self, k_max: float = 5000.0, min_dx: float = 2e-6, force_floor: float = 1e-6):
-        if not (math.isfinite(k_max) and k_max > 0):
-            raise ConfigError(f"k_max must be a positive stiffness in N/m, got {k_max!r}")
-        if not (min_dx > 0):
-            raise ConfigError(f"min_dx must be > 0 m, got {min_dx!r}")
+        validate.positive(k_max, "k_max", unit="N/m", fix="the largest stiffness the estimate may report, e.g. 5000")
+        validate.positive(min_dx, "min_dx", unit="m", fix="the smallest motion a stiffness is estimated from, e.g. 2e-6")
         self.k_max, self.min_dx, self.force_floor = float(k_max), float(min_dx), float(force_floor)
         self.k = 0.0
         super().__init__()

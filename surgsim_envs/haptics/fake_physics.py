@@ -27,6 +27,7 @@ import time as _time
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 
@@ -37,8 +38,7 @@ class SpringWallPhysics:
                  damping_ratio: float = 0.7, dt: float = 1e-3, wall_z: float = 0.0,
                  start_position=(0.0, 0.0, 0.02), work_seconds: float = 0.0):
         for name, v in (("k_wall", k_wall), ("k_coupling", k_coupling), ("tool_mass", tool_mass), ("dt", dt)):
-            if not (math.isfinite(v) and v > 0):
-                raise ConfigError(f"SpringWallPhysics {name} must be a positive finite number, got {v!r}")
+            validate.positive(v, f"SpringWallPhysics {name}", fix="give a positive number in SI units (N/m, kg, s)")
         if not (math.isfinite(damping_ratio) and damping_ratio >= 0):
             raise ConfigError(f"damping_ratio must be >= 0, got {damping_ratio!r}")
         omega = math.sqrt((k_coupling + k_wall) / tool_mass)

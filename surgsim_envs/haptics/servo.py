@@ -40,6 +40,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.haptics.device import DeviceState, HapticDevice
 from surgsim_envs.haptics.extrapolation import ForceExtrapolator, make_extrapolator
@@ -98,8 +99,7 @@ class ServoConfig:
             raise ConfigError(
                 f"physics_rate_hz must be in (0, rate_hz={self.rate_hz}] Hz or None, got {self.physics_rate_hz!r}"
             )
-        if not (math.isfinite(self.max_force_rate) and self.max_force_rate > 0):
-            raise ConfigError(f"max_force_rate must be a positive rate in N/s, got {self.max_force_rate!r}")
+        validate.positive(self.max_force_rate, "max_force_rate", unit="N/s", fix="the fastest force change sent to the device")
         make_extrapolator(self.extrapolation)  # validates the name
         if not (isinstance(self.spin_s, (int, float)) and math.isfinite(self.spin_s) and 0 <= self.spin_s < self.period):
             raise ConfigError(f"spin_s must be in [0, period={self.period:g}) s (e.g. 2e-4), got {self.spin_s!r}")

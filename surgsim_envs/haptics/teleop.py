@@ -115,9 +115,9 @@ def load_script(path: str) -> dict:
 
 
 def make_device(args, physics, limits):
-    """Build the device named on the command line (:func:`surgsim_envs.haptics.device.make_device`;
+    """Build the device named on the command line (:func:`surgsim_envs.haptics.device_kinds.make_device`;
     "scripted" plays ``--script`` or the task's demonstration trajectory)."""
-    from surgsim_envs.haptics.device import make_device as make
+    from surgsim_envs.haptics.device_kinds import make_device as make
     from surgsim_envs.haptics.scripted import ScriptedDevice, TrajectorySpec
 
     def scripted():

@@ -37,35 +37,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.haptics.device import DeviceLimits, DeviceState, HapticDevice
-from surgsim_envs.haptics.pose_protocol import (  # noqa: F401  (the codec, re-exported for device-side code)
-    FORCE_SIZE,
-    FORCE_STRUCT,
-    MAGIC,
-    POSE_SIZE,
-    POSE_STRUCT,
-    PROTOCOL_VERSION,
-    TAG_SIZE,
-    TYPE_FORCE,
-    TYPE_POSE,
-    ForcePacket,
-    MalformedPacketError,
-    PosePacket,
-    check_key,
-    decode_force,
-    decode_pose,
-    encode_force,
-    encode_pose,
-    new_session_id,
-    new_session_key,
-)
-from surgsim_envs.haptics.session_gate import (  # noqa: F401
-    OPEN_PACKETS,
-    SEQ_WINDOW,
-    SESSION_TIMEOUT_S,
-    SessionGate,
-)
+from surgsim_envs.haptics.pose_protocol import (POSE_SIZE, TAG_SIZE, ForcePacket, MalformedPacketError,
+                                                PosePacket, check_key, decode_force, decode_pose,
+                                                encode_force, encode_pose, new_session_id, new_session_key)
+from surgsim_envs.haptics.session_gate import SessionGate
 
 DEFAULT_HOST = "127.0.0.1"
 
@@ -124,10 +102,8 @@ class UdpDevice(HapticDevice):
         if key is None and not is_loopback(host):
             key = new_session_key()
         self.key: bytes | None = key
-        if not (isinstance(max_drain, int) and max_drain >= 1):
-            raise ConfigError(f"max_drain must be an integer >= 1 datagram per poll, got {max_drain!r}")
-        if not (isinstance(max_poll_s, (int, float)) and math.isfinite(max_poll_s) and max_poll_s > 0):
-            raise ConfigError(f"max_poll_s must be a positive time budget in s (e.g. 2e-4), got {max_poll_s!r}")
+        validate.integer(max_drain, "max_drain", lo=1, fix="the most datagrams one poll reads, e.g. 64")
+        validate.positive(max_poll_s, "max_poll_s", unit="s", fix="a time budget per poll, e.g. 2e-4")
         self.host, self.port = host, port
         self.max_drain = int(max_drain)
         self.max_poll_s = float(max_poll_s)

@@ -203,7 +203,7 @@ def device_source(task: str, spec: str, seed: int = 0) -> Callable:
     if task not in POSE_ACTIONS:
         raise ConfigError(f"task {task!r} cannot be driven by a haptic device yet; tasks that can: "
                           f"{sorted(POSE_ACTIONS)}. Record it with --device expert, random or policy:FILE.npz")
-    from surgsim_envs.haptics.device import make_device
+    from surgsim_envs.haptics.device_kinds import make_device
     from surgsim_envs.haptics.scripted import ScriptedDevice, TrajectorySpec
     from surgsim_envs.haptics.servo import DeviceMapping
 

@@ -5,7 +5,7 @@
 - :mod:`.sweep`: the parameter sweep of the paper's Fig. 5 (error mu, sigma against nu and k).
 - :mod:`.validation_report`: the paper's validation figures (colour-coded signed distances,
   histograms with mu and sigma) for any predicted vs reference surface (``surgsim validate``).
-- :mod:`.grow_cmd`: the ``surgsim grow`` command.
+- ``surgsim grow`` (:mod:`surgsim_envs.cli.grow`) runs the maxillofacial case from the command line.
 
 Layer: above tissue and geometry, below scene (imports neither MuJoCo nor Gymnasium);
 bench and the CLI use it.

@@ -2,7 +2,7 @@
 
 Each file is the ``surgsim-mlp-v1`` format of :mod:`surgsim_envs.policies.npz_policy` (plain
 arrays, loaded with ``allow_pickle=False``; numpy only, no torch): exported from
-stable-baselines3 by ``scripts/train_sb3.py --export-npz`` (:mod:`.export_sb3`), except
+stable-baselines3 by ``scripts/train_sb3.py --export-npz`` (:mod:`surgsim_envs.integrations.sb3`), except
 LayeredPalpation-v0's: a scripted raster-and-threshold expert written as an exact network by
 ``scripts/make_layered_policy.py``. Their training and evaluation are in docs/training.md.
 

@@ -40,7 +40,7 @@ reproducible from (policy file, seed, observations). ``deterministic`` uses the 
 
 Every array must be finite; std must be > 0; at most :data:`MAX_LAYERS` layers and
 :data:`MAX_PARAMETERS` numbers. A stable-baselines3 MLP policy maps onto it directly
-(:mod:`surgsim_envs.policies.export_sb3` exports one): its ``mlp_extractor.policy_net`` + ``action_net`` layers, tanh activation, the
+(:mod:`surgsim_envs.integrations.sb3` exports one): its ``mlp_extractor.policy_net`` + ``action_net`` layers, tanh activation, the
 VecNormalize mean/std as ``obs_mean``/``obs_std`` and the action space bounds as
 ``action_low``/``action_high``.
 """

@@ -9,9 +9,10 @@ policy, scored and reported.
 Importing this package does not import MuJoCo; running a scenario does. See docs/scenarios.md.
 """
 
+from surgsim_envs.scenarios.loader import load_scenario, loads_scenario, parse_scenario
 from surgsim_envs.scenarios.phases import PHASE_TYPES, Phase
 from surgsim_envs.scenarios.schema import (CriterionSpec, PolicySpec, Scenario, ScenarioMeta, SceneOverrides,
-                                           ScoringSpec, TraineeSpec, load_scenario, loads_scenario, parse_scenario)
+                                           ScoringSpec, TraineeSpec)
 from surgsim_envs.scenarios.scoring import CRITERIA
 
 

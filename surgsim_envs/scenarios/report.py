@@ -46,7 +46,7 @@ def _clean(value):
 
 
 def run_summary(res) -> dict:
-    """The ``runs`` entry of one :class:`~surgsim_envs.scenarios.runner.RunResult`."""
+    """The ``runs`` entry of one :class:`~surgsim_envs.scenarios.recording.RunResult`."""
     m = res.metrics
     onset = m.get("slip_onset") or {}
     out = dict(res.values)

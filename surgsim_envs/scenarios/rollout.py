@@ -18,6 +18,8 @@ import time
 import numpy as np
 
 from surgsim_envs.errors import ConfigError, TissueUnstableError
+from surgsim_envs.scenarios.recording import Recording, RunResult
+from surgsim_envs.scenarios.schema import Scenario
 
 
 def _as_policy(obj, env):
@@ -37,7 +39,6 @@ def run_rollout(sc, progress: bool = False):
 
     import surgsim_envs  # noqa: F401  (registers the SurgSim tasks)
     from surgsim_envs.scenarios.policies import policy_for
-    from surgsim_envs.scenarios.runner import Recording, _evaluate_rollout
 
     spec = sc.policy
     wall0 = time.perf_counter()
@@ -95,3 +96,27 @@ def run_rollout(sc, progress: bool = False):
         env.close()
     rec.finish()
     return _evaluate_rollout(sc, rec, completed, error, infos, time.perf_counter() - wall0)
+
+
+def _evaluate_rollout(sc: Scenario, rec: Recording, completed: bool, error, infos: list, wall: float) -> RunResult:
+    """Score a Gymnasium rollout: forces from the recording, the inclusion error from ``info``
+    (``localisation_error_m`` or ``guess_xy_m`` vs ``inclusion_centre_m``), averaged over episodes."""
+    from surgsim_envs.scenarios.scoring import compute_metrics, default_criteria, safety_violations, score_criteria
+
+    limit = sc.scoring.safety_limit
+    metrics = compute_metrics(rec, limit, completed)
+    errors = []
+    for info in infos:
+        if info.get("localisation_error_m") is not None:
+            errors.append(float(info["localisation_error_m"]))
+        elif info.get("guess_xy_m") is not None and info.get("inclusion_centre_m") is not None:
+            errors.append(float(np.linalg.norm(np.subtract(info["guess_xy_m"], info["inclusion_centre_m"][:2]))))
+    if errors:
+        metrics["inclusion_error"] = float(np.mean(errors))
+        metrics["inclusion_errors"] = errors
+    metrics["episodes"] = infos
+    criteria = sc.scoring.criteria or default_criteria(limit, bool(errors))
+    score, results = score_criteria(metrics, criteria)
+    violations = safety_violations(rec.t, rec.normal, limit)
+    return RunResult(sc, {}, rec, completed, error, metrics, score, results, violations, wall,
+                     {"task": sc.meta.task, "policy": sc.policy.file})

@@ -20,7 +20,6 @@ from __future__ import annotations
 import copy
 import math
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -28,72 +27,12 @@ import numpy as np
 
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError, TissueUnstableError
 from surgsim_envs.scenarios.phases import SCENE_TOOL, PhaseContext
+from surgsim_envs.scenarios.recording import Recording, RunResult
 from surgsim_envs.scenarios.schema import Scenario
-from surgsim_envs.scenarios.policies import load_policy, policy_for  # noqa: F401 (load_policy re-exported)
+from surgsim_envs.scenarios.policies import policy_for
 
 CONTROL_PERIOD = 0.01  # s between policy evaluations in phase scenarios
 FPS = 25
-
-
-# ----------------------------------------------------------------------------------------------
-class Recording:
-    """Time series of one run (arrays after :meth:`finish`). Units: s, N, m.
-
-    t, phase (index into ``phase_names``), normal / tangential (total over the tool, N),
-    pull_force (N, against the pull direction), slipping / contacts (node counts),
-    penetration (m), position (n, 3) tool origin (m, world), opening (m, grasper jaws; nan else).
-    """
-
-    FIELDS = ("t", "phase", "normal", "tangential", "pull_force", "slipping", "contacts", "penetration", "opening")
-
-    def __init__(self):
-        self._rows: list[tuple] = []
-        self._pos: list[np.ndarray] = []
-        self.phase_names: list[str] = []
-        self.phase_spans: list[dict] = []
-
-    def add(self, t, phase, normal, tangential, pull, slipping, contacts, penetration, position, opening) -> None:
-        self._rows.append((t, phase, normal, tangential, pull, slipping, contacts, penetration, opening))
-        self._pos.append(np.asarray(position, dtype=float))
-
-    def finish(self) -> "Recording":
-        arr = np.asarray(self._rows, dtype=float).reshape(-1, len(self.FIELDS))
-        for i, name in enumerate(self.FIELDS):
-            setattr(self, name, arr[:, i].copy())
-        self.phase = self.phase.astype(int)
-        self.position = np.asarray(self._pos, dtype=float).reshape(-1, 3)
-        return self
-
-    def phase_mask(self, phase_type: str) -> np.ndarray:
-        """Boolean mask of the samples inside phases of type ``phase_type``."""
-        ids = [i for i, span in enumerate(self.phase_spans) if span["type"] == phase_type]
-        return np.isin(self.phase, ids)
-
-    def as_dict(self) -> dict:
-        out = {name: getattr(self, name).tolist() for name in self.FIELDS}
-        out["position"] = self.position.tolist()
-        return out
-
-
-@dataclass
-class RunResult:
-    """One run's outcome. ``values``: the sweep values of this run ({} without a sweep)."""
-
-    scenario: Scenario
-    values: dict
-    recording: Recording
-    completed: bool
-    error: str | None
-    metrics: dict
-    score: float
-    criteria: list
-    violations: list
-    wall_time: float
-    info: dict = field(default_factory=dict)
-
-    @property
-    def passed(self) -> bool:
-        return all(c.passed for c in self.criteria)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -176,10 +115,10 @@ class PlanDevice:
 
 def make_device(spec: str, script: str, runner: "_Runner", tremor: float, seed: int):
     """A connected-to-be HapticDevice from a spec: scripted | replay:FILE | keyboard | udp:PORT
-    (:func:`surgsim_envs.haptics.device.make_device`; "scripted" is the scenario's phase plan, or
+    (:func:`surgsim_envs.haptics.device_kinds.make_device`; "scripted" is the scenario's phase plan, or
     ``script``; a replay FILE is resolved in the scenario's folder)."""
     from surgsim_envs.haptics.device import DeviceLimits
-    from surgsim_envs.haptics.device import make_device as make
+    from surgsim_envs.haptics.device_kinds import make_device as make
     from surgsim_envs.scenarios.schema import resolve_data_file
 
     limits = DeviceLimits(max_force=1e6)  # the scenario scores forces; the device only records them
@@ -418,10 +357,10 @@ def apply_overrides(sc: Scenario, duration_scale: float = 1.0, device: str | Non
                     policy: str | None = None) -> Scenario:
     """Copy of ``sc`` with the CLI's overrides: a duration scale, every phase driven by ``device``
     or by ``policy`` (for task rollouts ``policy`` replaces ``[policy] file``)."""
-    from surgsim_envs.scenarios.schema import KeyLocator, _Ctx, validate_driver
+    from surgsim_envs.scenarios.schema import KeyLocator, ValidationContext, validate_driver
 
     out = sc.scaled(duration_scale) if duration_scale != 1.0 else copy.deepcopy(sc)
-    ctx = _Ctx("command line", KeyLocator(None))
+    ctx = ValidationContext("command line", KeyLocator(None))
     if device is not None:
         validate_driver(ctx, ("--device",), "device", device, "")
         for ph in out.phases:
@@ -474,27 +413,3 @@ def run_scenario(sc: Scenario, *, duration_scale: float = 1.0, device: str | Non
         if bar is not None:
             bar.close()
     return results
-
-
-def _evaluate_rollout(sc: Scenario, rec: Recording, completed: bool, error, infos: list, wall: float) -> RunResult:
-    """Score a Gymnasium rollout: forces from the recording, the inclusion error from ``info``
-    (``localisation_error_m`` or ``guess_xy_m`` vs ``inclusion_centre_m``), averaged over episodes."""
-    from surgsim_envs.scenarios.scoring import compute_metrics, default_criteria, safety_violations, score_criteria
-
-    limit = sc.scoring.safety_limit
-    metrics = compute_metrics(rec, limit, completed)
-    errors = []
-    for info in infos:
-        if info.get("localisation_error_m") is not None:
-            errors.append(float(info["localisation_error_m"]))
-        elif info.get("guess_xy_m") is not None and info.get("inclusion_centre_m") is not None:
-            errors.append(float(np.linalg.norm(np.subtract(info["guess_xy_m"], info["inclusion_centre_m"][:2]))))
-    if errors:
-        metrics["inclusion_error"] = float(np.mean(errors))
-        metrics["inclusion_errors"] = errors
-    metrics["episodes"] = infos
-    criteria = sc.scoring.criteria or default_criteria(limit, bool(errors))
-    score, results = score_criteria(metrics, criteria)
-    violations = safety_violations(rec.t, rec.normal, limit)
-    return RunResult(sc, {}, rec, completed, error, metrics, score, results, violations, wall,
-                     {"task": sc.meta.task, "policy": sc.policy.file})

@@ -77,10 +77,6 @@ from typing import Any
 
 from surgsim_envs.errors import ConfigError
 
-try:
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - python < 3.11
-    import tomli as tomllib  # type: ignore[no-redef]
 
 SCENES = ("palpation", "grasp")
 DRIVERS = ("script", "device", "policy")
@@ -292,7 +288,10 @@ class KeyLocator:
         return None
 
 
-class _Ctx:
+class ValidationContext:
+    """Where a value being validated came from (file or command line, its line numbers, its
+    folder), so that an error names the key and the line."""
+
     def __init__(self, source: str, locator: KeyLocator, folder: Path | None = None):
         self.source, self.locator, self.folder = source, locator, folder
 
@@ -312,7 +311,7 @@ def _dotted(path: tuple) -> str:
 
 # ----------------------------------------------------------------------------------------------
 # Generic typed construction of dataclasses from TOML tables
-def _check_type(value: Any, hint: Any, path: tuple, ctx: _Ctx) -> Any:
+def _check_type(value: Any, hint: Any, path: tuple, ctx: ValidationContext) -> Any:
     origin = typing.get_origin(hint)
     args = typing.get_args(hint)
     if hint is Any:
@@ -372,7 +371,7 @@ def _check_type(value: Any, hint: Any, path: tuple, ctx: _Ctx) -> Any:
     return value  # pragma: no cover - unsupported annotation: accept as is
 
 
-def build_dataclass(cls, table: Any, path: tuple, ctx: _Ctx, skip: tuple = ()):
+def build_dataclass(cls, table: Any, path: tuple, ctx: ValidationContext, skip: tuple = ()):
     """Instance of dataclass ``cls`` from the TOML ``table``; ConfigError names unknown keys and bad types."""
     if not isinstance(table, dict):
         raise ctx.error(path, f"expected a table, got {table!r} ({type(table).__name__})")
@@ -397,7 +396,7 @@ def build_dataclass(cls, table: Any, path: tuple, ctx: _Ctx, skip: tuple = ()):
 _TOP = ("scenario", "scene", "trainee", "phases", "scoring", "sweep", "policy")
 
 
-def _limit(ctx: _Ctx, path: tuple, rule: str, value) -> None:
+def _limit(ctx: ValidationContext, path: tuple, rule: str, value) -> None:
     """Check ``value`` (a number or nested arrays of numbers) against ``LIMITS[rule]``."""
     if value is None:
         return
@@ -422,13 +421,13 @@ def resolve_data_file(name: str, folder: Path | None) -> Path:
     return p
 
 
-def _check_file(ctx: _Ctx, path: tuple, name: str, folder: Path | None, what: str) -> None:
+def _check_file(ctx: ValidationContext, path: tuple, name: str, folder: Path | None, what: str) -> None:
     if not resolve_data_file(name, folder).is_file():
         where = f"{folder} or the working directory" if folder is not None else "the working directory"
         raise ctx.error(path, f"{what} file {name!r} not found (looked in {where})")
 
 
-def validate_driver(ctx: _Ctx, path: tuple, driver: str, device: str, policy: str, folder: Path | None = None,
+def validate_driver(ctx: ValidationContext, path: tuple, driver: str, device: str, policy: str, folder: Path | None = None,
                     allow_code: bool = True, trusted: bool = True, check_files: bool = False) -> None:
     """Check a driver name, the device spec (files exist when ``check_files``) and the policy
     reference under the trust model (see :func:`surgsim_envs.scenarios.policies.check_policy_reference`)."""
@@ -454,7 +453,7 @@ def validate_driver(ctx: _Ctx, path: tuple, driver: str, device: str, policy: st
         check_policy(ctx, path + ("policy",), policy, folder, allow_code, trusted)
 
 
-def check_policy(ctx: _Ctx, path: tuple, ref: str, folder: Path | None, allow_code: bool, trusted: bool) -> None:
+def check_policy(ctx: ValidationContext, path: tuple, ref: str, folder: Path | None, allow_code: bool, trusted: bool) -> None:
     """:func:`~surgsim_envs.scenarios.policies.check_policy_reference` with the key's line."""
     from surgsim_envs.scenarios.policies import check_policy_reference
 
@@ -464,12 +463,12 @@ def check_policy(ctx: _Ctx, path: tuple, ref: str, folder: Path | None, allow_co
         raise ctx.error(path, str(exc)) from None
 
 
-def _check_registered(ctx: _Ctx, path: tuple, value: str | None, known: list, what: str) -> None:
+def _check_registered(ctx: ValidationContext, path: tuple, value: str | None, known: list, what: str) -> None:
     if value is not None and value not in known:
         raise ctx.error(path, f"unknown {what} {value!r}; choose one of {', '.join(map(str, known))}")
 
 
-def _check_scene_value(ctx: _Ctx, path: tuple, key: str, value) -> None:
+def _check_scene_value(ctx: ValidationContext, path: tuple, key: str, value) -> None:
     """Range and registry checks of one [scene] value (also used for every swept value)."""
     if key in ("spacing", "dt", "mu", "inclusion_xy"):
         _limit(ctx, path, f"scene.{key}", value)
@@ -494,7 +493,7 @@ def _check_scene_value(ctx: _Ctx, path: tuple, key: str, value) -> None:
         _check_registered(ctx, path, value, sorted(PRESETS), "material preset")
 
 
-def check_env_kwargs(ctx: _Ctx, path: tuple, task: str, env_kwargs: dict) -> None:
+def check_env_kwargs(ctx: ValidationContext, path: tuple, task: str, env_kwargs: dict) -> None:
     """``env_kwargs`` must be fields of task ``task``'s own config class with values its
     ``validate()`` accepts (the checks ``gym.make`` runs, without building the scene), so a file
     that passes ``--check`` cannot fail on them at run time."""
@@ -531,7 +530,7 @@ def check_env_kwargs(ctx: _Ctx, path: tuple, task: str, env_kwargs: dict) -> Non
         raise ctx.error(path, f"{task} cannot take these env_kwargs ({type(exc).__name__}: {exc})") from None
 
 
-def _check_script(ctx: _Ctx, path: tuple, file: Path) -> None:
+def _check_script(ctx: ValidationContext, path: tuple, file: Path) -> None:
     """A trajectory script must parse and describe a valid, bounded trajectory."""
     from surgsim_envs.haptics.scripted import TrajectorySpec
     from surgsim_envs.haptics.teleop import load_script
@@ -545,7 +544,7 @@ def _check_script(ctx: _Ctx, path: tuple, file: Path) -> None:
         raise ctx.error(path, f"the trajectory lasts {seconds:g} s, more than the {MAX_RUN_DURATION:g} s limit of a run")
 
 
-def _check_task_id(ctx: _Ctx, path: tuple, task: str) -> None:
+def _check_task_id(ctx: ValidationContext, path: tuple, task: str) -> None:
     try:
         import gymnasium as gym
 
@@ -557,7 +556,7 @@ def _check_task_id(ctx: _Ctx, path: tuple, task: str) -> None:
         raise ctx.error(path, f"unknown task id {task!r}; registered SurgSim tasks: {', '.join(ours)}")
 
 
-def _check_phase_values(ctx: _Ctx, path: tuple, phase) -> None:
+def _check_phase_values(ctx: ValidationContext, path: tuple, phase) -> None:
     """Range checks of a phase's physical values (by field name, see LIMITS)."""
     for f in dataclasses.fields(phase):
         rule = f"phase.{f.name}"
@@ -592,166 +591,3 @@ def _short(value, limit: int = 80) -> str:
     """``repr(value)`` cut to ``limit`` characters, for error messages."""
     text = repr(value)
     return text if len(text) <= limit else text[:limit - 3] + "..."
-
-
-def parse_scenario(data: dict, source: str = "<scenario>", text: str | None = None, folder: Path | None = None,
-                   allow_code: bool = False) -> Scenario:
-    """Validate a parsed TOML document and build a :class:`Scenario` (ConfigError on any problem).
-
-    ``folder``: where relative file names point (the scenario file's folder); ``allow_code``:
-    accept code-loading policies (see :mod:`surgsim_envs.scenarios.policies`)."""
-    from surgsim_envs.scenarios.phases import build_phase, check_phase_order
-    from surgsim_envs.scenarios.scoring import CRITERIA
-
-    ctx = _Ctx(source, KeyLocator(text), folder)
-    if not isinstance(data, dict):
-        raise ConfigError(f"{source}: a scenario must be a TOML document (a table), got {type(data).__name__}")
-    if _nesting_depth(data) > MAX_NESTING:
-        raise ConfigError(f"{source}: values nested too deeply (more than {MAX_NESTING} levels of arrays/tables); "
-                          "a scenario needs at most a few levels")
-    for key in data:
-        if key not in _TOP:
-            raise ctx.error((key,), f"unknown top-level table {key!r}; allowed: {', '.join(_TOP)}")
-    if "scenario" not in data:
-        raise ctx.error(("scenario",), "missing the [scenario] table (it needs at least name = \"...\")")
-    meta = build_dataclass(ScenarioMeta, data["scenario"], ("scenario",), ctx)
-    if not re.fullmatch(NAME_PATTERN, meta.name):
-        raise ctx.error(("scenario", "name"), f"give a name of letters, digits, '_', '-' or '.' (not starting with "
-                                              f"'.', at most 100 characters; it names the output folder), got "
-                                              f"{meta.name!r}")
-    if meta.task and meta.scene:
-        raise ctx.error(("scenario", "task"), f"give either scene = ... (scripted phases) or task = ... (a Gymnasium "
-                                              f"policy rollout), not both (scene={meta.scene!r}, task={meta.task!r})")
-    if not meta.task and meta.scene not in SCENES:
-        raise ctx.error(("scenario", "scene"), f"unknown scene {meta.scene!r}; choose one of {', '.join(SCENES)} "
-                                               "(or set task = \"SurgSim/...-v0\" for a policy rollout)")
-    for key in ("sample_period", "duration_scale", "seed"):
-        _limit(ctx, ("scenario", key), f"scenario.{key}", getattr(meta, key))
-    if meta.task:
-        _check_task_id(ctx, ("scenario", "task"), meta.task)
-    scene = build_dataclass(SceneOverrides, data.get("scene", {}), ("scene",), ctx)
-    for f in dataclasses.fields(SceneOverrides):
-        _check_scene_value(ctx, ("scene", f.name), f.name, getattr(scene, f.name))
-    trainee = build_dataclass(TraineeSpec, data.get("trainee", {}), ("trainee",), ctx)
-    drivers = dict(folder=folder, allow_code=allow_code, trusted=False, check_files=True)
-    validate_driver(ctx, ("trainee",), trainee.driver, trainee.device, trainee.policy, **drivers)
-    _limit(ctx, ("trainee", "tremor"), "trainee.tremor", trainee.tremor)
-    if trainee.script:
-        _check_file(ctx, ("trainee", "script"), trainee.script, folder, "trajectory script")
-        _check_script(ctx, ("trainee", "script"), resolve_data_file(trainee.script, folder))
-
-    scoring_tab = data.get("scoring", {})
-    scoring = build_dataclass(ScoringSpec, scoring_tab, ("scoring",), ctx, skip=("criteria",))
-    _limit(ctx, ("scoring", "safety_limit"), "scoring.safety_limit", scoring.safety_limit)
-    crit_tab = scoring_tab.get("criteria", {}) if isinstance(scoring_tab, dict) else {}
-    if not isinstance(crit_tab, dict):
-        raise ctx.error(("scoring", "criteria"), f"expected a table of criteria, got {crit_tab!r}")
-    for name, tab in crit_tab.items():
-        if name not in CRITERIA:
-            raise ctx.error(("scoring", "criteria", name), f"unknown criterion {name!r}; choose from "
-                                                           f"{', '.join(CRITERIA)}")
-        crit = build_dataclass(CriterionSpec, tab, ("scoring", "criteria", name), ctx)
-        for key in ("weight", "target", "limit"):
-            _limit(ctx, ("scoring", "criteria", name, key), f"criterion.{key}", getattr(crit, key))
-        if name != "completion" and not crit.limit > crit.target:
-            raise ctx.error(("scoring", "criteria", name, "limit"),
-                            f"limit ({crit.limit}) must be greater than target ({crit.target})")
-        scoring.criteria[name] = crit
-
-    sweep = data.get("sweep", {})
-    if not isinstance(sweep, dict):
-        raise ctx.error(("sweep",), f"expected a table like mu = [0.6, 0.8, 1.0], got {sweep!r}")
-    allowed = [f.name for f in dataclasses.fields(SceneOverrides)]
-    lengths = set()
-    for key, values in sweep.items():
-        if key not in allowed:
-            raise ctx.error(("sweep", key), f"cannot sweep {key!r}; sweepable [scene] keys: {', '.join(allowed)}")
-        if not isinstance(values, list) or not values:
-            raise ctx.error(("sweep", key), f"expected a non-empty array of values, got {values!r}")
-        hint = typing.get_type_hints(SceneOverrides)[key]
-        if len(values) > 100:
-            raise ctx.error(("sweep", key), f"{len(values)} values: at most 100 runs per sweep")
-        for i, v in enumerate(values):
-            _check_scene_value(ctx, ("sweep", key, i), key, _check_type(v, hint, ("sweep", key, i), ctx))
-        lengths.add(len(values))
-    if len(lengths) > 1:
-        raise ctx.error(("sweep",), f"all swept arrays must have the same length, got lengths {sorted(lengths)}")
-
-    policy = None
-    if "policy" in data:
-        if not meta.task:
-            raise ctx.error(("policy",), "a [policy] table needs scenario.task (a Gymnasium task id)")
-        policy = build_dataclass(PolicySpec, data["policy"], ("policy",), ctx)
-        if not policy.file:
-            raise ctx.error(("policy", "file"), "give the policy: a .npz data policy, 'builtin:NAME' or (with "
-                                                "--allow-code) 'file.py:function'")
-        check_policy(ctx, ("policy", "file"), policy.file, folder, allow_code, trusted=False)
-        _limit(ctx, ("policy", "episodes"), "policy.episodes", policy.episodes)
-        _limit(ctx, ("policy", "max_steps"), "policy.max_steps", policy.max_steps)
-        check_env_kwargs(ctx, ("policy", "env_kwargs"), meta.task, policy.env_kwargs)
-    elif meta.task:
-        raise ctx.error(("scenario", "task"), "a task rollout needs a [policy] table with file = '...'")
-
-    phases_tab = data.get("phases", [])
-    if meta.task:
-        if phases_tab:
-            raise ctx.error(("phases",), "a Gymnasium task rollout takes no [[phases]]; the policy drives the task")
-    else:
-        if not isinstance(phases_tab, list) or not phases_tab:
-            raise ctx.error(("phases",), "a scenario needs at least one [[phases]] table (e.g. type = \"hold\")")
-    if len(phases_tab) > 1000:
-        raise ctx.error(("phases",), f"{len(phases_tab)} phases: at most 1000")
-    phases = []
-    for i, tab in enumerate(phases_tab):
-        if isinstance(tab, dict) and not isinstance(tab.get("type"), str):
-            raise ctx.error(("phases", i, "type"), f"give the phase type as a string, got {tab.get('type')!r}")
-        phase = build_phase(tab, ("phases", i), ctx, trainee)
-        _check_phase_values(ctx, ("phases", i), phase)
-        validate_driver(ctx, ("phases", i), phase.driver, phase.device, phase.policy, **drivers)
-        phases.append(phase)
-    if phases:
-        check_phase_order(phases, meta.scene, ctx)
-    sc = Scenario(meta=meta, scene=scene, trainee=trainee, phases=phases, scoring=scoring, sweep=dict(sweep),
-                  policy=policy, source=None, folder=folder, allow_code=allow_code)
-    if sc.run_duration() > MAX_RUN_DURATION:
-        raise ctx.error(("phases",), f"one run lasts {sc.run_duration():g} s of simulated time (phase durations x "
-                                     f"duration_scale), more than the {MAX_RUN_DURATION:g} s limit")
-    return sc
-
-
-def loads_scenario(text: str, source: str = "<string>", folder: Path | None = None,
-                   allow_code: bool = False) -> Scenario:
-    """Parse and validate scenario TOML ``text`` (relative file names resolve against ``folder``)."""
-    if not isinstance(text, str):
-        raise ConfigError(f"{source}: scenario text must be a string, got {type(text).__name__}")
-    if len(text) > MAX_FILE_BYTES:
-        raise ConfigError(f"{source}: {len(text)} characters; a scenario file is at most {MAX_FILE_BYTES} "
-                          "(move data into separate files)")
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{source}: not valid TOML: {exc}") from None
-    except RecursionError:
-        raise ConfigError(f"{source}: arrays or tables nested too deeply to parse; a scenario needs at most a few "
-                          "levels of nesting") from None
-    try:
-        return parse_scenario(data, source, text, folder=folder, allow_code=allow_code)
-    except RecursionError:
-        raise ConfigError(f"{source}: values nested too deeply; a scenario needs at most a few levels") from None
-
-
-def load_scenario(path, allow_code: bool = False) -> Scenario:
-    """Load and validate the scenario file ``path`` (.toml); ``allow_code`` accepts code-loading
-    policies (``--allow-code``)."""
-    p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"scenario file {str(path)!r} not found; give a path such as tasks/spleen_grasp_and_retract.toml")
-    if p.stat().st_size > MAX_FILE_BYTES:
-        raise ConfigError(f"scenario file {str(p)!r} is {p.stat().st_size} bytes; at most {MAX_FILE_BYTES}")
-    try:
-        text = p.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"scenario file {str(p)!r} cannot be read as UTF-8 text ({exc})") from None
-    sc = loads_scenario(text, str(p), folder=p.parent, allow_code=allow_code)
-    sc.source = p
-    return sc

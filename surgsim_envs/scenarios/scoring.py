@@ -1,6 +1,6 @@
 """Scoring of a recorded scenario run: metrics, per-criterion results, safety violations.
 
-Metrics (SI units) computed from a :class:`~surgsim_envs.scenarios.runner.Recording`:
+Metrics (SI units) computed from a :class:`~surgsim_envs.scenarios.recording.Recording`:
 
 =====================  ====  ==================================================================
 criterion              unit  value

@@ -288,8 +288,6 @@ def positive(value, what: str, hint: str, allow_inf: bool = False) -> None:
         raise ConfigError(f"{what} must be a positive finite number, got {value!r}; {hint}")
 
 
-_vec, _positive = vec, positive
-
 
 def validate_step(dt: float, substeps: int) -> None:
     """Raise ConfigError unless dt (s) and substeps lie in their allowed ranges."""
@@ -311,8 +309,8 @@ def validate_tissue_resolution(t: TissueConfig) -> None:
         raise ConfigError(f"tissue '{t.name}': model='auto' needs resolution='auto' (the table picks both); "
                           "or name a model such as 'mass_spring' or 'fem'")
     if t.resolution == "auto":
-        _positive(t.error_tolerance, f"tissue '{t.name}' error_tolerance", "a fraction, e.g. 0.1 for 10 %")
-        _positive(t.step_budget_us, f"tissue '{t.name}' step_budget_us",
+        positive(t.error_tolerance, f"tissue '{t.name}' error_tolerance", "a fraction, e.g. 0.1 for 10 %")
+        positive(t.step_budget_us, f"tissue '{t.name}' step_budget_us",
                   "microseconds of compute per simulated millisecond, e.g. 1000")
         if not isinstance(t.accuracy_scene, str) or not t.accuracy_scene:
             raise ConfigError(f"tissue '{t.name}' accuracy_scene={t.accuracy_scene!r}; give a benchmark scene "
@@ -324,7 +322,7 @@ def validate_scene_config(cfg: SceneConfig) -> None:
     if not isinstance(cfg, SceneConfig):
         raise ConfigError(f"expected a SceneConfig, got {type(cfg).__name__}")
     validate_step(cfg.dt, cfg.substeps)
-    _vec(cfg.gravity, 3, "gravity")
+    vec(cfg.gravity, 3, "gravity")
     for flag in ("floor", "rigid_contacts"):
         if not isinstance(getattr(cfg, flag), bool):
             raise ConfigError(f"scene '{cfg.name}' {flag} must be True or False, got {getattr(cfg, flag)!r}")
@@ -340,11 +338,11 @@ def validate_scene_config(cfg: SceneConfig) -> None:
     for t in cfg.tissues:
         validate_tissue_resolution(t)
         if t.spacing is not None:
-            _positive(t.spacing, f"tissue '{t.name}' spacing", "try 0.005 (5 mm), or None for the organ's default")
-        _vec(t.position, 3, f"tissue '{t.name}' position")
-        _vec(t.euler, 3, f"tissue '{t.name}' euler")
-        _vec(t.gravity, 3, f"tissue '{t.name}' gravity")
-        _vec(t.rgba, 4, f"tissue '{t.name}' rgba")
+            positive(t.spacing, f"tissue '{t.name}' spacing", "try 0.005 (5 mm), or None for the organ's default")
+        vec(t.position, 3, f"tissue '{t.name}' position")
+        vec(t.euler, 3, f"tissue '{t.name}' euler")
+        vec(t.gravity, 3, f"tissue '{t.name}' gravity")
+        vec(t.rgba, 4, f"tissue '{t.name}' rgba")
     from surgsim_envs.scene.tools import tool_kind
 
     for t in cfg.tool_configs():
@@ -361,11 +359,11 @@ def validate_scene_config(cfg: SceneConfig) -> None:
         if h.tool in driven:
             raise ConfigError(f"tool '{h.tool}' is driven by two haptic proxies; give each tool at most one")
         driven.add(h.tool)
-        _positive(h.timeconst, f"haptic proxy '{h.name}' timeconst", "e.g. 0.01 s")
-        _positive(h.dampratio, f"haptic proxy '{h.name}' dampratio", "1 is critical damping")
+        positive(h.timeconst, f"haptic proxy '{h.name}' timeconst", "e.g. 0.01 s")
+        positive(h.dampratio, f"haptic proxy '{h.name}' dampratio", "1 is critical damping")
     for t in tools.values():
         if t.drive == "proxy" and t.name not in driven:
             raise ConfigError(f"tool '{t.name}' has drive='proxy' but no HapticProxyConfig(tool='{t.name}') drives it")
     for c in cfg.cameras:
-        _vec(c.position, 3, f"camera '{c.name}' position")
-        _vec(c.target, 3, f"camera '{c.name}' target")
+        vec(c.position, 3, f"camera '{c.name}' position")
+        vec(c.target, 3, f"camera '{c.name}' target")

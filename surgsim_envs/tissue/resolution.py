@@ -3,7 +3,7 @@
 This is the pure selection logic behind ``resolution="auto"`` in scenes and tasks. It lives in
 the tissue layer (it is a statement about tissue models, and needs only json + the measured
 table) so that :mod:`surgsim_envs.scene` can use it without importing :mod:`surgsim_envs.bench`,
-which sits above the scene. ``surgsim_envs.bench.choose`` re-exports it unchanged.
+which sits above the scene.
 
 The rule (documented in docs/benchmarks.md, "Speed against accuracy"):
 
@@ -76,10 +76,6 @@ def _valid(row: dict) -> bool:
         return False
 
 
-def _check_positive(key: str, val) -> None:
-    validate.positive(val, key, fix="error_tolerance is a fraction like 0.1; step_budget_us in microseconds like 1000")
-
-
 def choose(error_tolerance: float, step_budget_us: float, scene: str = "indent", *,
            table: str | Iterable[dict] | None = None, models: Iterable[str] | None = None,
            integrators: Iterable[str] | None = None) -> Choice:
@@ -89,8 +85,8 @@ def choose(error_tolerance: float, step_budget_us: float, scene: str = "indent",
     table: path of a table JSON or an iterable of rows (default: the shipped table).
     models, integrators: restrict to these names. Baseline rows (MuJoCo flex) are never chosen.
     """
-    _check_positive("error_tolerance", error_tolerance)
-    _check_positive("step_budget_us", step_budget_us)
+    validate.positives(error_tolerance=error_tolerance, step_budget_us=step_budget_us,
+                       fix="error_tolerance is a fraction like 0.1; step_budget_us in microseconds like 1000")
     rows = load_table(table) if table is None or isinstance(table, str) else list(table)
     allowed = None if models is None else set(models)
     allowed_int = None if integrators is None else set(integrators)

@@ -10,7 +10,7 @@
 ``workers`` processes (default ``min(num_envs, os.cpu_count())``), each hosting a contiguous block
 of envs and stepping them one after another. Actions, observations, rewards, terminations,
 truncations and the numeric info entries live in one shared-memory block
-(:mod:`~surgsim_envs.envs.vector_ipc`); a step is one byte down each worker's command pipe and
+(:mod:`~surgsim_envs.vector.ipc`); a step is one byte down each worker's command pipe and
 one byte back. Gymnasium's AsyncVectorEnv instead pickles each env's action, observation and
 info dict through a ``multiprocessing.Pipe`` and merges the infos key by key in the main process
 (~0.4-0.6 ms per vector step here: CHANGELOG.md "Vector env: shared memory instead of pickled steps").
@@ -24,7 +24,7 @@ cast to the action space's dtype (float32) on their way to the workers.
 
 **Infos** (``info_keys=``): by default only the numeric entries (``bool``/``int``/``float``/numpy
 scalars, also inside nested dicts such as ``reward_terms``), through shared memory with
-Gymnasium's ``_key`` masks (:mod:`~surgsim_envs.envs.vector_info`); strings, lists and None
+Gymnasium's ``_key`` masks (:mod:`~surgsim_envs.vector.info`); strings, lists and None
 (``organ``, ``inclusion_centre_m``, ``estimate_xy_m`` ...) are left out, since pickling them every
 step costs as much as the step's pipe round trip. ``info_keys="all"`` adds them back (pickled,
 only for steps that have them); a tuple of key names keeps just those (``()``: no infos at all).
@@ -65,9 +65,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from surgsim_envs import validate
-from surgsim_envs.envs import vector_ipc as ipc
-from surgsim_envs.envs.vector_info import InfoMerger
-from surgsim_envs.envs.vector_worker import _Worker, worker_main
+from surgsim_envs.vector import ipc
+from surgsim_envs.vector.info import InfoMerger
+from surgsim_envs.vector.worker import _Worker, worker_main
 from surgsim_envs.errors import ConfigError, VectorEnvWorkerError
 
 #: us the main process polls for replies without sleeping once fewer workers than cores are busy
@@ -93,19 +93,10 @@ MAX_INFO_KEYS = 4096
 MAX_ENVS = 1024
 
 
-def _positive_int(name, value, upper=None) -> int:
-    ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 1
-    if not ok or (upper is not None and value > upper):
-        bound = f" and at most {upper} ({upper} envs)" if upper is not None else ""
-        raise ConfigError(f"SurgSimVectorEnv {name} must be an integer >= 1{bound}, got {value!r}")
-    return int(value)
-
-
 def _spin_microseconds(name, value) -> float:
     """A polling time option (us) in [0, 100000]: ConfigError naming it otherwise (NaN included)."""
-    if not (isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value <= 1e5):
-        raise ConfigError(f"{name} must be a number of microseconds in [0, 100000], got {value!r}")
-    return float(value)
+    return validate.real(value, name, lo=0.0, hi=1e5, unit="us",
+                         fix="0 sleeps at once; a few tens of us save a wake-up where a core is free")
 
 
 def _info_mode(info_keys):
@@ -143,9 +134,11 @@ class SurgSimVectorEnv(VectorEnv):
         self.closed = False
         self._broken: str | None = None
         self._waiting = False
-        self.num_envs = _positive_int("num_envs", num_envs, MAX_ENVS)
+        self.num_envs = validate.integer(num_envs, "SurgSimVectorEnv num_envs", lo=1, hi=MAX_ENVS,
+                                         fix=f"at most {MAX_ENVS} envs in one vector env (each takes tens of MB)")
         n_workers = min(self.num_envs, os.cpu_count() or 1) if workers is None else workers
-        n_workers = _positive_int("workers", n_workers, self.num_envs)
+        n_workers = validate.integer(n_workers, "SurgSimVectorEnv workers", lo=1, hi=self.num_envs,
+                                     fix=f"at most one worker per env ({self.num_envs} envs)")
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError:
@@ -157,13 +150,8 @@ class SurgSimVectorEnv(VectorEnv):
                                          fix="the number of numeric info entries shared per env, e.g. 64")
         for name, t in (("timeout_s", timeout_s), ("start_timeout_s", start_timeout_s),
                         ("close_timeout_s", close_timeout_s)):
-            try:
-                ok = validate.is_real_number(t) and MIN_TIMEOUT_S <= float(t) <= MAX_TIMEOUT_S
-            except OverflowError:          # an int too large for a float
-                ok = False
-            if not ok:
-                raise ConfigError(f"{name} must be a positive number of seconds in [{MIN_TIMEOUT_S:g}, "
-                                  f"{MAX_TIMEOUT_S:g}], got {validate.short_repr(t)}")
+            validate.real(t, name, lo=MIN_TIMEOUT_S, hi=MAX_TIMEOUT_S, unit="s",
+                          fix="a worker that does not answer within it is reported; waiting forever is a hang")
         self.timeout_s, self.close_timeout_s = float(timeout_s), float(close_timeout_s)
         self.spin_us = _spin_microseconds("spin_us", spin_us)
         self.worker_spin_us = _spin_microseconds("worker_spin_us", worker_spin_us)
@@ -496,7 +484,7 @@ class SurgSimVectorEnv(VectorEnv):
         if self.autoreset_mode == AutoresetMode.DISABLED:
             raise ConfigError("rollout() needs autoreset (autoreset_mode NEXT_STEP or SAME_STEP): with DISABLED an "
                               "env that ends mid-rollout could not go on")
-        steps = _positive_int("rollout steps", steps)
+        steps = validate.integer(steps, "rollout steps", lo=1, fix="give the number of vector steps to run")
         if not callable(policy):
             raise ConfigError(f"rollout policy must be a callable (observations -> actions), got {policy!r}")
         if seed is not None:

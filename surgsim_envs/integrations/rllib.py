@@ -8,7 +8,7 @@ stream of episodes and a run must be reproducible, so the creator derives the en
 both indices (:func:`worker_seed`) and the env's *first* ``reset`` uses it (later resets continue
 the env's own generator, as Gymnasium does after a seeded reset).
 
-    from surgsim_envs.distributed.rllib_env import register_rllib_envs
+    from surgsim_envs.integrations.rllib import register_rllib_envs
     register_rllib_envs()          # names "SurgSim/PalpationPress-v0", ... for AlgorithmConfig.environment()
 
 ``env_config`` keys: ``seed`` (base seed, default 0) and any config field of the task

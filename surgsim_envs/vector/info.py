@@ -1,4 +1,4 @@
-"""Numeric info entries through shared memory, for :class:`~surgsim_envs.envs.vector.SurgSimVectorEnv`.
+"""Numeric info entries through shared memory, for :class:`~surgsim_envs.vector.SurgSimVectorEnv`.
 
 A worker writes each env's numeric info entries (Python ``bool``/``int``/``float`` and numpy
 scalars, also inside nested dicts such as ``reward_terms``) into its row of a

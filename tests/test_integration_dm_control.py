@@ -5,7 +5,7 @@ import pytest
 
 pytest.importorskip("dm_control", reason="dm-control is a dependency of surgsim_envs (pip install dm-control)")
 
-from surgsim_envs import dm_control_suite  # noqa: E402
+from surgsim_envs.integrations import dm_control as surgsim_dm_control  # noqa: E402
 from surgsim_envs.errors import ConfigError  # noqa: E402
 
 FAST = {"palpation": {"spacing": 0.02, "episode_seconds": 0.05, "min_report_seconds": 0.0,
@@ -16,12 +16,12 @@ FAST = {"palpation": {"spacing": 0.02, "episode_seconds": 0.05, "min_report_seco
         "layeredpalpation": {"spacing": 0.01, "max_presses": 3, "max_episode_steps": 3}}
 
 
-@pytest.mark.parametrize("name", dm_control_suite.names())
+@pytest.mark.parametrize("name", surgsim_dm_control.names())
 def test_load_steps_every_task_to_its_time_limit(name):
     from dm_control.rl import control
 
     kw = {k: v for k, v in FAST[name].items() if k != "max_episode_steps"}
-    env = dm_control_suite.load(name, task_kwargs={**kw, "random": 3})
+    env = surgsim_dm_control.load(name, task_kwargs={**kw, "random": 3})
     assert isinstance(env, control.Environment)
     u = env.physics.env
     assert env.physics.timestep() == pytest.approx(1.0 / u.config.control_hz)
@@ -44,8 +44,8 @@ def test_load_steps_every_task_to_its_time_limit(name):
 
 def test_unknown_name_and_render():
     with pytest.raises(ConfigError, match="unknown SurgSim task 'suturing'"):
-        dm_control_suite.load("suturing")
-    env = dm_control_suite.load("palpation", task_kwargs={"spacing": 0.02})
+        surgsim_dm_control.load("suturing")
+    env = surgsim_dm_control.load("palpation", task_kwargs={"spacing": 0.02})
     env.reset()
     try:
         frame = env.physics.render(96, 128, camera_id="overview")
@@ -57,7 +57,7 @@ def test_unknown_name_and_render():
 def test_layered_palpation_loads_by_its_snake_case_name():
     """``load("layered_palpation")`` is LayeredPalpation-v0; its dm_control clock runs one nominal
     press period per step and the scene's wall mirrors the task's pressed wall."""
-    env = dm_control_suite.load("layered_palpation", task_kwargs={"spacing": 0.01, "max_presses": 2, "random": 1})
+    env = surgsim_dm_control.load("layered_palpation", task_kwargs={"spacing": 0.01, "max_presses": 2, "random": 1})
     u = env.physics.env
     assert type(u).__name__ == "LayeredPalpationEnv"
     env.reset()

@@ -1,11 +1,13 @@
-"""Every SurgSim task as a dm_control environment (``dm_control.rl.control.Environment``).
+"""The SurgSim tasks for DeepMind's control stack: a dm_control environment per task
+(:func:`load`), and a plain ``dm_env`` wrapper of one Gymnasium env (:func:`make_dm_env`).
 
->>> from surgsim_envs import dm_control_suite
->>> env = dm_control_suite.load("palpation")                  # doctest: +SKIP
+>>> from surgsim_envs.integrations import dm_control
+>>> env = dm_control.load("palpation")                        # doctest: +SKIP
 >>> ts = env.reset(); ts = env.step(env.action_spec().generate_value())   # doctest: +SKIP
 >>> from dm_control import viewer; viewer.launch(env)         # doctest: +SKIP  (needs a display)
 
-Physics, task and environment are kept apart as dm_control does:
+**dm_control** (:func:`load`, ``dm_control.rl.control.Environment``). Physics, task and
+environment are kept apart as dm_control does:
 
 * :class:`SurgSimPhysics` is a ``dm_control.mujoco.Physics`` whose ``model``/``data`` are the
   scene's render twin (tools + the deformed tissue surfaces, :mod:`surgsim_envs.scene.visual`),
@@ -21,6 +23,13 @@ Physics, task and environment are kept apart as dm_control does:
 Version check (this machine): dm-control 1.0.50 (the newest) requires ``mujoco>=3.17.0`` and
 runs on our MuJoCo 4.0.0, except its named indexer (``physics.named``), which lists MjModel
 fields MuJoCo 4.0 removed (``flex_vertedge``): here ``physics.named`` is None.
+
+**dm_env** (:func:`make_dm_env`, ``pip install dm-env``): any ``gym.make`` keywords, one flat
+observation array. Truncation (time limit) ends the episode with ``discount=1`` (dm_env's
+truncation convention), termination with ``discount=0``.
+
+>>> env = dm_control.make_dm_env("SurgSim/Palpation-v0", seed=0)   # doctest: +SKIP
+>>> ts = env.reset(); ts = env.step(env.action_spec().generate_value())   # doctest: +SKIP
 """
 
 from __future__ import annotations
@@ -32,6 +41,7 @@ import re
 import numpy as np
 
 from surgsim_envs.errors import ConfigError
+
 
 def _short(task_id: str) -> str:
     """"SurgSim/PalpationPress-v0" -> "palpationpress"."""
@@ -118,7 +128,7 @@ def _physics_class():
         def _reload_from_data(self, data):
             # dm-control 1.0.50's named indexer lists MjModel fields MuJoCo 4.0 removed
             # (flex_vertedge, ...): it fails after everything else is set up. Then ``physics.named``
-            # is None; stepping, rendering and the viewer work (tests/test_dm_control_suite.py).
+            # is None; stepping, rendering and the viewer work (tests/test_integration_dm_control.py).
             try:
                 super()._reload_from_data(data)
             except AttributeError as exc:
@@ -233,3 +243,67 @@ SurgSimPhysics.from_env = lambda env: _physics_class().from_env(env)  # type: ig
 def SurgSimTask(env, random=None):  # noqa: N802
     """The dm_control Task class (see the module docstring)."""
     return _task_class()(env, random=random)
+
+
+# -- dm_env ---------------------------------------------------------------------------------------
+def make_dm_env(env_id: str, seed: int | None = None, **kwargs):
+    """A dm_env.Environment wrapping ``gym.make(env_id, **kwargs)``."""
+    try:
+        import dm_env  # noqa: F401
+    except ImportError as exc:
+        raise ConfigError("the dm_env adapter needs dm-env: pip install dm-env (or the [test] extra)") from exc
+    import gymnasium as gym
+
+    import surgsim_envs  # noqa: F401  (registers the tasks)
+
+    return DmEnvAdapter(gym.make(env_id, **kwargs), seed=seed)
+
+
+def _adapter_class():
+    import dm_env
+    from dm_env import specs
+
+    class _DmEnvAdapter(dm_env.Environment):
+        def __init__(self, env, seed=None):
+            self.env = env
+            self._seed = seed
+            self._reset_next = True
+            space = env.observation_space
+            self._obs_spec = specs.Array(space.shape, space.dtype, name="observation")
+            a = env.action_space
+            self._act_spec = specs.BoundedArray(a.shape, a.dtype, a.low, a.high, name="action")
+
+        def reset(self):
+            obs, _ = self.env.reset(seed=self._seed)
+            self._seed = None
+            self._reset_next = False
+            return dm_env.restart(np.asarray(obs))
+
+        def step(self, action):
+            if self._reset_next:
+                return self.reset()
+            obs, reward, terminated, truncated, self.last_info = self.env.step(action)
+            obs = np.asarray(obs)
+            if terminated:
+                self._reset_next = True
+                return dm_env.termination(reward, obs)
+            if truncated:
+                self._reset_next = True
+                return dm_env.truncation(reward, obs)
+            return dm_env.transition(reward, obs)
+
+        def observation_spec(self):
+            return self._obs_spec
+
+        def action_spec(self):
+            return self._act_spec
+
+        def close(self):
+            self.env.close()
+
+    return _DmEnvAdapter
+
+
+def DmEnvAdapter(env, seed: int | None = None):
+    """Wrap a Gymnasium env as a dm_env.Environment (the class is built on first use)."""
+    return _adapter_class()(env, seed)

@@ -1,4 +1,4 @@
-"""What the main process and the workers of :class:`~surgsim_envs.envs.vector.SurgSimVectorEnv`
+"""What the main process and the workers of :class:`~surgsim_envs.vector.SurgSimVectorEnv`
 share: the shared-memory layout and the pipe protocol.
 
 **Shared memory** (one ``multiprocessing.shared_memory.SharedMemory`` block, :class:`Layout`):

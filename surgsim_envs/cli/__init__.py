@@ -1,8 +1,11 @@
-"""The ``surgsim`` command.
+"""The ``surgsim`` command (``python -m surgsim_envs.cli``).
 
 Each sub-command lives in its own module exposing ``add_arguments(parser)`` and
-``run(args) -> int``; this file only wires them up, importing a module when its command runs
-(so ``surgsim models`` never pays for MuJoCo or numba start-up).
+``run(args) -> int``: the modules that only parse arguments and print are in this package
+(``models``, ``material``, ``run``, ``grow``, ``validate``, ``bench_soak``); the benchmarks and
+the commands whose module also holds domain code stay in their packages. This file only wires
+them up, importing a module when its command runs (so ``surgsim models`` never pays for MuJoCo
+or numba start-up).
 """
 
 from __future__ import annotations
@@ -13,16 +16,16 @@ import sys
 
 #: command -> (module, help). "bench X" are sub-commands of "bench".
 COMMANDS: dict[str, tuple[str, str]] = {
-    "models": ("surgsim_envs.tissue.models_cmd", "list registered tissue models"),
+    "models": ("surgsim_envs.cli.models", "list registered tissue models"),
     "demo": ("surgsim_envs.scene.demo", "palpate and grasp on built-in defaults; writes ./surgsim-out/"),
     "warmup": ("surgsim_envs.warmup", "compile the physics kernels ahead (numba caches) for the demo and every task"),
-    "material": ("surgsim_envs.bench.material_cmd", "virtual material tests (indent, relax, slip)"),
+    "material": ("surgsim_envs.cli.material", "virtual material tests (indent, relax, slip)"),
     "fit": ("surgsim_envs.bench.fit", "fit model parameters to measured force data"),
     "teleop": ("surgsim_envs.haptics.teleop", "teleoperate a task with a (simulated) haptic device"),
-    "run": ("surgsim_envs.scenarios.cli", "run a trainee scenario file and write a report"),
+    "run": ("surgsim_envs.cli.run", "run a trainee scenario file and write a report"),
     "record": ("surgsim_envs.integrations.minari_datasets", "record demonstrations of a task as a Minari dataset"),
-    "grow": ("surgsim_envs.planning.grow_cmd", "tissue growth after a bone displacement (Vandewalle et al. 2003): basic vs growth"),
-    "validate": ("surgsim_envs.bench.validate_cmd", "signed surface distances of a prediction to a reference (Vandewalle et al. 2003)"),
+    "grow": ("surgsim_envs.cli.grow", "tissue growth after a bone displacement (Vandewalle et al. 2003): basic vs growth"),
+    "validate": ("surgsim_envs.cli.validate", "signed surface distances of a prediction to a reference (Vandewalle et al. 2003)"),
 }
 BENCH: dict[str, tuple[str, str]] = {
     "speed": ("surgsim_envs.bench.speed", "tissue model step time per model, integrator, node count"),
@@ -37,7 +40,7 @@ BENCH: dict[str, tuple[str, str]] = {
     "stability": ("surgsim_envs.bench.stability", "largest stable dt map"),
     "task-accuracy": ("surgsim_envs.bench.task_accuracy",
                       "probe forces in each task's own scene, every model against converged fem"),
-    "soak": ("surgsim_envs.bench.soak", "long random-action runs: NaN, exceptions, force bounds, memory growth"),
+    "soak": ("surgsim_envs.cli.bench_soak", "long random-action runs: NaN, exceptions, force bounds, memory growth"),
     "diffusion": ("surgsim_envs.bench.diffusion_bench", "diffusion model (Zhong et al. 2016) update time vs the paper's Table 9.1"),
     "growth": ("surgsim_envs.bench.growth_speed", "tissue growth iteration time (Vandewalle et al. 2003) on a ~10,000-node mesh"),
     "memory": ("surgsim_envs.bench.fractional_memory", "fractional model: error and step cost against short memory L"),
@@ -49,12 +52,12 @@ BENCH: dict[str, tuple[str, str]] = {
 
 def _attach(sub, name: str, module: str, help_text: str) -> None:
     parser = sub.add_parser(name, help=help_text, description=help_text)
-    parser.set_defaults(_module=module, _command=name)
+    parser.set_defaults(cli_module=module, cli_command=name)
     try:
         mod = importlib.import_module(module)
     except ImportError as exc:
         if exc.name and module.startswith(exc.name) or (exc.name or "").startswith("surgsim_envs"):
-            parser.set_defaults(_missing=f"'{name}' is not available in this build ({exc})")
+            parser.set_defaults(cli_missing=f"'{name}' is not available in this build ({exc})")
             return
         raise
     mod.add_arguments(parser)
@@ -85,21 +88,17 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser(argv)
     args = parser.parse_args(argv)
-    if not getattr(args, "_module", None):
+    if not getattr(args, "cli_module", None):
         parser.print_help()
         return 0 if not argv else 2
-    if getattr(args, "_missing", None):
-        print(f"surgsim: {args._missing}", file=sys.stderr)
+    if getattr(args, "cli_missing", None):
+        print(f"surgsim: {args.cli_missing}", file=sys.stderr)
         return 2
-    module = importlib.import_module(args._module)
+    module = importlib.import_module(args.cli_module)
     from surgsim_envs.errors import SurgSimError
 
     try:
         return int(module.run(args) or 0)
     except SurgSimError as exc:
-        print(f"surgsim {args._command}: error: {exc}", file=sys.stderr)
+        print(f"surgsim {args.cli_command}: error: {exc}", file=sys.stderr)
         return 2
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

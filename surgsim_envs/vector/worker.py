@@ -1,8 +1,8 @@
-"""The worker process of :class:`~surgsim_envs.envs.vector.SurgSimVectorEnv`: hosts envs
+"""The worker process of :class:`~surgsim_envs.vector.SurgSimVectorEnv`: hosts envs
 ``lo..hi-1`` of the vector, reads their actions from shared memory, steps them, writes
 observations, rewards, terminations, truncations and numeric infos back, and answers each
 command with one byte (or a short pickled message: new info keys, non-numeric infos, call
-results, an error). Protocol and layout: :mod:`surgsim_envs.envs.vector_ipc`."""
+results, an error). Protocol and layout: :mod:`surgsim_envs.vector.ipc`."""
 
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ import traceback
 
 import numpy as np
 
-from surgsim_envs.envs import vector_ipc as ipc
-from surgsim_envs.envs.vector_info import InfoWriter
-from surgsim_envs.envs.vector_parent import PARENT_POLL_S, follow_parent, parent_alive
+from surgsim_envs.vector import ipc
+from surgsim_envs.vector.info import InfoWriter
+from surgsim_envs.vector.parent import PARENT_POLL_S, follow_parent, parent_alive
 
 NEXT_STEP, SAME_STEP, DISABLED = "NextStep", "SameStep", "Disabled"
 
@@ -27,9 +27,7 @@ class _Worker:
     ``in_main`` block)."""
 
     def __init__(self, env_id, env_kwargs, lo, hi, autoreset, info_keys, keep_other, max_info_keys):
-        import gymnasium as gym
-
-        import surgsim_envs.envs  # noqa: F401  (registers the tasks)
+        import gymnasium as gym   # the package root registers the SurgSim tasks once it loads
 
         self.lo, self.hi, self.autoreset = lo, hi, autoreset
         make = (lambda: gym.make(env_id, **env_kwargs)) if isinstance(env_id, str) else (lambda: env_id(**env_kwargs))
@@ -111,7 +109,7 @@ class _Worker:
     def rollout(self, policy, steps, name, layout, seed=None):
         """``steps`` steps of the block with actions from ``policy`` (called on the block's observations,
         ``(envs, *obs shape)`` -> ``(envs, *action shape)``), each exactly as :meth:`step` (autoreset,
-        infos), recorded into the rollout's shared memory ``name`` (:class:`~surgsim_envs.envs.vector_ipc.
+        infos), recorded into the rollout's shared memory ``name`` (:class:`~surgsim_envs.vector.ipc.
         RolloutLayout`). ``seed``: the policy (this worker's copy) is first ``reset(seed + lo)``.
         Returns the reply of :meth:`step` with every info key first seen meanwhile."""
         from multiprocessing import shared_memory
@@ -233,7 +231,7 @@ def worker_main(env_id, env_kwargs, lo, hi, cmd, rep, autoreset, info_keys, keep
     """Process entry point. ``cmd``/``rep``: the worker's ends (``multiprocessing.Connection``,
     used as raw file descriptors) of the command and reply pipes. ``spin_us``: after each reply the
     worker polls for the next command this long before it sleeps (:func:`wait_for_command`).
-    ``parent_pid``: the main process; the worker exits when it dies (:mod:`vector_parent`)."""
+    ``parent_pid``: the main process; the worker exits when it dies (:mod:`surgsim_envs.vector.parent`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C goes to the main process, which closes us
     cfd, rfd = cmd.fileno(), rep.fileno()
     spin_s = float(spin_us) * 1e-6

@@ -142,7 +142,7 @@ def run_one(args, scenario: str, out: Path | None, summary: list | None = None) 
     """Run one scenario file into ``out`` (None: surgsim-out/<scenario name>). With ``summary``
     (a list; several files) the output goes to ``out/<scenario name>`` and (file, report, None)
     is appended to it."""
-    from surgsim_envs.scenarios.schema import load_scenario
+    from surgsim_envs.scenarios.loader import load_scenario
 
     from surgsim_envs.scenarios.policies import check_policy_reference
     from surgsim_envs.scenarios.schema import LIMITS, NAME_PATTERN
@@ -160,9 +160,9 @@ def run_one(args, scenario: str, out: Path | None, summary: list | None = None) 
     if policy is not None:
         check_policy_reference(policy, None, allow_code=allow_code, trusted=True)
     if device is not None:
-        from surgsim_envs.scenarios.schema import KeyLocator, _Ctx, validate_driver
+        from surgsim_envs.scenarios.schema import KeyLocator, ValidationContext, validate_driver
 
-        validate_driver(_Ctx("command line", KeyLocator(None)), ("--device",), "device", device, "",
+        validate_driver(ValidationContext("command line", KeyLocator(None)), ("--device",), "device", device, "",
                         folder=None, check_files=True)
     if not args.viewer:   # a device read from the viewer window cannot run without it (--check says so too)
         for spec in device_specs(sc, device):
