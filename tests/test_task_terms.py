@@ -120,3 +120,19 @@ def test_info_reward_terms_are_the_declared_terms_and_sum_to_the_reward(task):
         if term or trunc:
             break
     env.close()
+
+
+def test_layered_commit_term_applies_only_on_the_committing_press():
+    from surgsim_envs.envs.layered_palpation.terms import commit_reward
+
+    spec = task_spec("SurgSim/LayeredPalpation-v0")
+    env = gym.make(spec.id, **spec.quick)
+    env.reset(seed=0)
+    _, r, term, _, info = env.step(np.array([0.0, 0.0, 0.0, -1.0], dtype=np.float32))
+    assert not term and list(info["reward_terms"]) == ["press_cost"] and r == -env.unwrapped.config.press_cost
+    _, r, term, _, info = env.step(np.array([0.0, 0.0, 0.0, 1.0], dtype=np.float32))
+    assert term and list(info["reward_terms"]) == ["press_cost", "commit"]
+    assert info["reward_terms"]["commit"] == commit_reward(info["distance_m"], env.unwrapped.config.size_scale)
+    assert r == float(sum(info["reward_terms"].values()))
+    assert commit_reward(0.0, 0.03) == 1.0 and commit_reward(1.0, 0.03) == -1.0
+    env.close()

@@ -19,7 +19,7 @@ Checks as the other tasks (:mod:`surgsim_envs.envs.checks`): config fields by na
 dtype, NaN), reset options. Rendering (``render_mode="rgb_array"``) and the dm_control loader
 (and ``"human"``, a MuJoCo viewer where a display exists) use a MuJoCo scene of the same wall (:mod:`surgsim_envs.envs.layered_palpation.scene`), built on first use;
 its clock runs ``1 / control_hz`` s per press (a nominal press rate: the physics is quasi-static).
-Forces in newtons, lengths in metres.
+Forces in newtons, lengths in metres. The reward terms are declared in :mod:`.terms`.
 """
 from __future__ import annotations
 
@@ -33,7 +33,9 @@ import numpy as np
 from surgsim_envs.envs.base import SurgSimEnv
 from surgsim_envs.envs.checks import apply_overrides, check_render_mode
 from surgsim_envs.envs.layered_palpation.config import LayeredPalpationConfig
-from surgsim_envs.envs.terms import ObsTerm, observation_space_of
+from surgsim_envs.envs.layered_palpation.terms import REWARD_TERMS
+from surgsim_envs.envs.terms import ObsTerm, RewardManager, observation_space_of
+from surgsim_envs.envs.terms.action import ActionTerm
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 
 
@@ -47,6 +49,8 @@ class LayeredPalpationEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 1}
     config_cls = LayeredPalpationConfig
     OPTIONS: tuple = ()
+    ACTION = ActionTerm("probe", 4, "[x, y, depth, commit]: press site over the patch, depth, commit")
+    REWARD_TERMS = REWARD_TERMS
     #: the shape/dtype/NaN checks of every other task
     check_action = SurgSimEnv.check_action
 
@@ -82,6 +86,7 @@ class LayeredPalpationEnv(gym.Env):
                                   ObsTerm("press_depth", "m", 1, 0.0, float(cfg.max_depth)),
                                   ObsTerm("probe_force", "N", 1, 0.0, math.inf)]
         self.observation_space, self._obs_names = observation_space_of(self.observation_terms)
+        self.rewards = RewardManager(REWARD_TERMS, cfg)
         self.nodule = np.zeros(3)
         self.presses = 0
         self.steps = 0
@@ -164,12 +169,9 @@ class LayeredPalpationEnv(gym.Env):
         force = max(force, 0.0)   # reactions are compressive; a round-off below 0 reads 0
         self.presses += 1
         self.steps += 1
-        dist = float(np.hypot(x - self.nodule[0], y - self.nodule[1]))
-        terminated = bool(a[3] > 0.0)
-        terms = {"press_cost": -float(cfg.press_cost)}
-        if terminated:
-            terms["commit"] = max(1.0 - dist / cfg.size_scale, -1.0)
-        reward = float(sum(terms.values()))
+        dist = self.distance = float(np.hypot(x - self.nodule[0], y - self.nodule[1]))
+        terminated = self.committed = bool(a[3] > 0.0)
+        reward, terms = self.rewards.compute(self)
         truncated = self.presses >= cfg.max_presses and not terminated
         self._show()
         if self.render_mode == "human":

@@ -49,9 +49,15 @@ class RewardManager:
                              (lambda c: 1.0)) for t in terms)
 
     def compute(self, env) -> tuple[float, dict[str, float]]:
-        """``(reward, {term name: weighted value})`` for the env's current step."""
+        """``(reward, {term name: weighted value})`` for the env's current step. A term whose
+        function returns None does not apply this step (e.g. a reward paid only on the step that
+        ends the episode) and is left out of both."""
         config = env.config
-        values = {name: float(fn(env, weight(config))) for name, fn, weight in self._calls}
+        values = {}
+        for name, fn, weight in self._calls:
+            v = fn(env, weight(config))
+            if v is not None:
+                values[name] = float(v)
         return float(sum(values.values())), values
 
 
