@@ -114,3 +114,14 @@ def test_register_refuses_a_different_spec_under_a_taken_id():
     with pytest.raises(ConfigError, match="register needs a TaskSpec"):
         register("SurgSim/Grasp-v0")
     assert isinstance(spec, TaskSpec)
+
+
+def test_tasks_sharing_a_scene_drive_the_same_tool():
+    """Scenarios drive a ready-made scene's tool (scenarios/phases.py SCENE_TOOL, read from the
+    registry): two tasks on one scene must not name different tools."""
+    from surgsim_envs.scenarios.phases import SCENE_TOOL
+
+    for spec in TASKS.values():
+        if spec.scene is not None:
+            assert SCENE_TOOL[spec.scene] == spec.tool, spec.id
+    assert SCENE_TOOL == {"palpation": "probe", "grasp": "grasper"}
