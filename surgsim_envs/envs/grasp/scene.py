@@ -153,7 +153,7 @@ class GraspSceneEnv(SurgSimEnv):
 
     def readings(self):
         """(wrist position (3,) m, per-jaw normal (3,) N, per-jaw tangential (3,) N, contact report),
-        read once per physics state (``_evaluate`` and ``_observe`` of a step share them; do not
+        read once per physics state (the step's ``_update``, its terms and ``_observe`` share them; do not
         modify them)."""
         sim = self.sim
         key = (sim, sim.steps, self.steps)         # reset() and the unstable path clear the key

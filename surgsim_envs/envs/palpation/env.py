@@ -48,7 +48,6 @@ from gymnasium import spaces
 from surgsim_envs import validate
 from surgsim_envs.envs.base import SurgSimEnv
 from surgsim_envs.envs.checks import check_explicit_step, check_range, require_capabilities, sample
-from surgsim_envs.envs.tissue_setup import integrator_for_range, sphere_mask, tissue_options
 from surgsim_envs.envs.palpation.config import RIGID_CONTACT_CLEARANCE, PalpationConfig
 from surgsim_envs.envs.palpation.terms import (REWARD_TERMS, TERMINATION_TERMS, cell_of, column_contrast,
                                               indentation_depth, is_new_site, localisation_error,
@@ -57,6 +56,7 @@ from surgsim_envs.envs.palpation.terms import (REWARD_TERMS, TERMINATION_TERMS, 
 from surgsim_envs.envs.terms import ObsTerm
 from surgsim_envs.envs.terms.action import ActionTerm, probe_target
 from surgsim_envs.envs.terms.force import vector_norm
+from surgsim_envs.envs.tissue_setup import integrator_for_range, sphere_mask, tissue_options
 from surgsim_envs.errors import ConfigError
 
 
@@ -186,7 +186,7 @@ class PalpationEnv(SurgSimEnv):
 
     def readings(self):
         """(probe position (3,) m, force on the probe (3,) N, indentation depth m), read once per
-        physics state (``_evaluate`` and ``_observe`` of a step share them; do not modify them)."""
+        physics state (the step's ``_update``, its terms and ``_observe`` share them; do not modify them)."""
         sim = self.sim
         key = (sim, sim.steps, self.steps)         # reset() and the unstable path clear the key
         if self._readings_key != key:

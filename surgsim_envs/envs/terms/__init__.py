@@ -4,8 +4,7 @@ termination terms and the action terms of the tools. A task's own term functions
 folder (``envs/<task>/terms.py``); its declarations list them once."""
 
 from surgsim_envs.envs.terms.observation import ObsTerm, observation_space_of
-from surgsim_envs.envs.terms.reward import RewardManager, RewardTerm, reward_from_terms
+from surgsim_envs.envs.terms.reward import RewardManager, RewardTerm
 from surgsim_envs.envs.terms.termination import TerminationTerm, any_terminated
 
-__all__ = ["ObsTerm", "observation_space_of", "RewardTerm", "RewardManager", "reward_from_terms",
-           "TerminationTerm", "any_terminated"]
+__all__ = ["ObsTerm", "observation_space_of", "RewardTerm", "RewardManager", "TerminationTerm", "any_terminated"]

@@ -59,9 +59,3 @@ class RewardManager:
             if v is not None:
                 values[name] = float(v)
         return float(sum(values.values())), values
-
-
-def reward_from_terms(terms: dict[str, float]) -> tuple[float, dict[str, float]]:
-    """``(sum, terms as floats)`` of weighted reward terms given as a dict, summed in its order."""
-    clean = {k: float(v) for k, v in terms.items()}
-    return float(sum(clean.values())), clean
