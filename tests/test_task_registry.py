@@ -125,3 +125,9 @@ def test_tasks_sharing_a_scene_drive_the_same_tool():
         if spec.scene is not None:
             assert SCENE_TOOL[spec.scene] == spec.tool, spec.id
     assert SCENE_TOOL == {"palpation": "probe", "grasp": "grasper"}
+
+
+def test_specs_hash_and_compare_by_value():
+    spec = task_spec("SurgSim/Palpation-v0")
+    assert hash(spec) == hash(dataclasses.replace(spec)) and spec == dataclasses.replace(spec)
+    assert spec != dataclasses.replace(spec, quick={"spacing": 0.01})

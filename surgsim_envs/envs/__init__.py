@@ -16,7 +16,8 @@ from __future__ import annotations
 from surgsim_envs.envs.registry import TASKS as _SPECS
 
 #: task id -> "module:Class" of the physics-rate tasks (derived from the registry,
-#: :mod:`surgsim_envs.envs.registry`, for the callers that read it)
+#: :mod:`surgsim_envs.envs.registry`, for the callers that read it; a task added later with
+#: ``registry.register`` is in the registry only)
 TASKS = {tid: spec.entry_point for tid, spec in _SPECS.items() if not spec.quasi_static}
 #: task id -> "module:Class" of the quasi-static tasks (one equilibrium solve per step: seconds, not
 #: microseconds; kept out of the generic physics-rate env tests)

@@ -77,7 +77,7 @@ class TaskSpec:
     max_episode_steps: int
     policy: str | None = None
     quasi_static: bool = False
-    quick: Mapping[str, Any] = field(default_factory=dict)
+    quick: Mapping[str, Any] = field(default_factory=dict, hash=False)   # a read-only view: not hashable
     expert: str | None = None
     dm_control: str = ""
 
@@ -198,6 +198,7 @@ def register_with_gymnasium(spec: TaskSpec) -> None:
 
     if spec.id in gym.registry:
         return
+    # the vector entry is a string (JSON-serialisable spec) that surgsim_envs.envs.__getattr__ resolves
     gym.register(id=spec.id, entry_point=spec.entry_point, disable_env_checker=True,
                  max_episode_steps=spec.max_episode_steps,
                  vector_entry_point=f"surgsim_envs.envs:make_vector|{spec.id}")
