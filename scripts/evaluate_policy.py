@@ -82,11 +82,11 @@ def main(argv=None) -> int:
 
     import surgsim_envs  # noqa: F401
     from surgsim_envs.errors import ConfigError
-    from surgsim_envs.policies import shipped_path
+    from surgsim_envs.envs.registry import shipped_policy_path
     from surgsim_envs.policies.npz_policy import NpzPolicy
 
     try:
-        path = shipped_path(args.task) if args.policy == "shipped" else args.policy
+        path = shipped_policy_path(args.task) if args.policy == "shipped" else args.policy
         out = {"task": args.task, "policy": str(path), "seeds": [args.seed_range.start, args.seed_range.stop - 1],
                "model": args.model or "task default"}
         scales = [None] if not args.noise_scales else [float(v) for v in args.noise_scales.split(",")]

@@ -59,7 +59,7 @@ def config_case():
 
 def run_config(case):
     """Build and validate a task config with one hostile field (what ``gym.make`` checks first)."""
-    from surgsim_envs.envs.base import apply_overrides
+    from surgsim_envs.envs.checks import apply_overrides
 
     task, field, value = case
     cls = config_classes()[task]

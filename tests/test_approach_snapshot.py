@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import surgsim_envs  # noqa: F401
-from surgsim_envs.envs.slippage import _no_pull
+from surgsim_envs.envs.slippage import no_pull
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.approach_snapshot import ApproachSnapshot
 
@@ -45,7 +45,7 @@ def test_the_snapshot_is_the_full_runs_rigid_state_before_any_contact(replayed):
     rest = sim.tissue().positions.copy()
     first_contact = None
     for k in range(1, steps + 1):                           # the full approach, one step at a time
-        u._run(1, goal, _no_pull)
+        u._run(1, goal, no_pull)
         if k == kept:
             assert np.array_equal(_state(sim), snap.state)  # bit for bit: time, qpos, qvel, warm start, ctrl, ...
             assert sim.steps == snap.steps == k
@@ -114,7 +114,7 @@ def test_nothing_is_kept_past_a_tissue_that_moved(replayed):
         chunks.append(n)
         if len(chunks) == 3:
             sim.tissue().velocities[:, 2] += 1e-3     # every node (some are pinned)
-        u._run(n, goal, _no_pull)
+        u._run(n, goal, no_pull)
 
     for margin, expected in ((0, 20), (50, 0)):
         chunks.clear()

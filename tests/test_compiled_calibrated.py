@@ -112,7 +112,7 @@ def test_sliver_mass_scaling_touches_only_sliver_nodes():
     by the organ surface: flat tets) a few nodes get mass, under 1 % in total, and the exact explicit limit
     of the linearised network rises by more than 1.3x (the top mode sat on two sliver nodes)."""
     from surgsim_envs import geometry
-    from surgsim_envs.envs.grasp_common import ORGAN_SPACING
+    from surgsim_envs.envs.grasp import ORGAN_SPACING
     from surgsim_envs.errors import ConfigError
     from surgsim_envs.tissue import make
     from surgsim_envs.tissue.calibrated_mass_spring import sliver_mass_factors

@@ -241,7 +241,7 @@ def test_subcycled_compiled_and_generic_loops_agree_bit_for_bit():
 
 
 def test_tissue_subcycles_is_checked():
-    from surgsim_envs.envs.grasp_scene import GraspSceneConfig
+    from surgsim_envs.envs.grasp import GraspSceneConfig
 
     with pytest.raises(ConfigError, match="tissue_subcycles"):
         _free_scene(0, True)

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import surgsim_envs  # noqa: F401
+from surgsim_envs.envs import TASKS
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError
 
 
@@ -40,7 +41,7 @@ def test_non_real_actions_are_rejected_by_name(palpation, action, kind):
         palpation.step(action)
 
 
-@pytest.mark.parametrize("task", ["SurgSim/Grasp-v0", "SurgSim/Slippage-v0", "SurgSim/Palpation-v0"])
+@pytest.mark.parametrize("task", sorted(TASKS))      # every physics-rate task of the registry
 def test_control_hz_outside_its_physical_range_is_rejected(task):
     """Grasp/Slippage accepted control_hz=1e9 (a control period of 1 ns, shorter than one physics step)."""
     with pytest.raises(ConfigError, match=r"control_hz=1000000000.0 Hz is outside its physical range \[.*\] Hz"):

@@ -7,15 +7,13 @@ import pytest
 
 import surgsim_envs  # noqa: F401
 from surgsim_envs.envs import MAX_EPISODE_STEPS, TASKS
+from surgsim_envs.envs.registry import task_spec
 from surgsim_envs.errors import ConfigError
-
-FAST = {"SurgSim/Palpation-v0": {"spacing": 0.02}, "SurgSim/Grasp-v0": {"resolution": 0.015},
-        "SurgSim/Slippage-v0": {"resolution": 0.015}, "SurgSim/PalpationPress-v0": {"spacing": 0.02}}
 
 
 @pytest.mark.parametrize("task", sorted(TASKS))
 def test_names_units_bounds_reward_terms_and_time_limit(task):
-    env = gym.make(task, **FAST[task])
+    env = gym.make(task, **task_spec(task).quick)
     u = env.unwrapped
     assert env.spec.max_episode_steps == MAX_EPISODE_STEPS[task] == u.max_episode_steps
     names = u.observation_names
@@ -41,7 +39,7 @@ def test_names_units_bounds_reward_terms_and_time_limit(task):
 
 def test_changed_episode_length_with_matching_time_limit_truncates_once_with_its_end_terms():
     env = gym.make("SurgSim/Palpation-v0", episode_seconds=0.1, min_report_seconds=0.1, max_episode_steps=10,
-                   **FAST["SurgSim/Palpation-v0"])
+                   **task_spec("SurgSim/Palpation-v0").quick)
     assert env.unwrapped.max_episode_steps == 10
     env.reset(seed=0)
     for k in range(10):
@@ -51,13 +49,10 @@ def test_changed_episode_length_with_matching_time_limit_truncates_once_with_its
 
 
 def test_registered_limits_match_the_default_configs():
-    from surgsim_envs.envs.grasp import GraspConfig
-    from surgsim_envs.envs.palpation import PalpationConfig
-    from surgsim_envs.envs.slippage import SlippageConfig
+    from surgsim_envs.envs.registry import TASKS as SPECS
 
-    for task, cfg in (("SurgSim/Palpation-v0", PalpationConfig()), ("SurgSim/Grasp-v0", GraspConfig()),
-                      ("SurgSim/Slippage-v0", SlippageConfig())):
-        assert MAX_EPISODE_STEPS[task] == round(cfg.episode_seconds * cfg.control_hz)
-    from surgsim_envs.envs.palpation_press import PalpationPressConfig
-
-    assert MAX_EPISODE_STEPS["SurgSim/PalpationPress-v0"] == PalpationPressConfig().max_presses   # one step = one press
+    for task, spec in SPECS.items():
+        cfg = spec.config_class()
+        # a press task's step is one press; the others' a control period
+        steps = cfg.max_presses if hasattr(cfg, "max_presses") else round(cfg.episode_seconds * cfg.control_hz)
+        assert MAX_EPISODE_STEPS[task] == spec.max_episode_steps == steps, task

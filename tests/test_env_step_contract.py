@@ -14,7 +14,7 @@ import pytest
 
 import surgsim_envs  # noqa: F401
 from surgsim_envs.envs.grasp import GraspConfig
-from surgsim_envs.envs.grasp_scene import MAX_SUBCYCLED_RIGID_DT, resolved_subcycles
+from surgsim_envs.envs.grasp import MAX_SUBCYCLED_RIGID_DT, resolved_subcycles
 from surgsim_envs.envs.slippage import SlippageConfig
 from surgsim_envs.envs.wrappers import InfoKeys
 from surgsim_envs.errors import ConfigError

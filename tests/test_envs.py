@@ -10,7 +10,7 @@ from gymnasium.utils.env_checker import check_env
 import surgsim_envs  # noqa: F401  (registers the tasks)
 from surgsim_envs.envs import TASKS, register_envs
 from surgsim_envs.envs.grasp import grasp_expert
-from surgsim_envs.envs.grasp_common import SlipTracker, excess_force_penalty, is_grasped
+from surgsim_envs.envs.grasp import SlipTracker, excess_force_penalty, is_grasped
 from surgsim_envs.envs.palpation import (damage_penalty, indentation_depth, localisation_error, localisation_reward,
                                          map_cell, palpation_expert, stiffness_estimate, stiffness_map,
                                          stiffness_weighted_estimate)
@@ -409,11 +409,11 @@ def test_task_resolution_auto(tmp_path, monkeypatch):
 
 
 def test_contact_reward_and_grasp_shaping_terms():
-    from surgsim_envs.envs.grasp_common import contact_reward
+    from surgsim_envs.envs.grasp import contact_reward
 
     assert contact_reward(np.array([0.1, 0.1, 0.0]), 0.03, 0.03) == pytest.approx(0.02)
     assert contact_reward(np.zeros(3), 0.03, 0.03) == 0.0
-    from surgsim_envs.envs.grasp_common import record_progress
+    from surgsim_envs.envs.grasp import record_progress
 
     # backing off and approaching again pays only the new record: total = start - best
     best, total = 0.02, 0.0

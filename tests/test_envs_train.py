@@ -2,10 +2,12 @@
 
 import pytest
 
+from surgsim_envs.envs import TASKS
+
 pytestmark = pytest.mark.train
 
 
-@pytest.mark.parametrize("env_id", ["SurgSim/Palpation-v0", "SurgSim/Grasp-v0", "SurgSim/Slippage-v0"])
+@pytest.mark.parametrize("env_id", sorted(TASKS))    # every physics-rate task of the registry
 def test_sb3_check_env(env_id):
     pytest.importorskip("stable_baselines3")
     import gymnasium as gym

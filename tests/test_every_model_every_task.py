@@ -10,11 +10,11 @@ import pytest
 import surgsim_envs  # noqa: F401
 from surgsim_envs import tissue
 from surgsim_envs.envs import TASKS
+from surgsim_envs.envs.registry import task_spec
 from surgsim_envs.tissue.capabilities import CapabilityError
 
-#: coarse lattices so each pair builds and steps in a few seconds
-COARSE = {"SurgSim/Palpation-v0": {"spacing": 0.02}, "SurgSim/Grasp-v0": {"resolution": 0.015},
-          "SurgSim/Slippage-v0": {"resolution": 0.015}, "SurgSim/PalpationPress-v0": {"spacing": 0.02}}
+#: coarse lattices (each task's quick overrides) so each pair builds and steps in a few seconds
+COARSE = {task: dict(task_spec(task).quick) for task in TASKS}
 
 
 def _env_class(task):
@@ -109,7 +109,7 @@ class _FakeTissue:
 
 
 def test_integrator_for_range_keeps_explicit_only_if_stable_over_the_whole_range():
-    from surgsim_envs.envs.base import integrator_for_range
+    from surgsim_envs.envs.tissue_setup import integrator_for_range
 
     t = _FakeTissue(5e-4)
     assert integrator_for_range(t, 4e-4, 1.2) is None          # 5e-4 / sqrt(1.2) = 4.56e-4 >= 4e-4

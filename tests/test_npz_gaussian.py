@@ -123,7 +123,7 @@ def test_scenario_rollout_reseeds_a_stochastic_policy_per_episode(tmp_path):
     """`surgsim run` with a stochastic .npz: each episode's sampler is reseeded with the episode's
     reset seed (scenario seed + episode), so episode 1 of a seed-5 run (reset seed 6) repeats
     episode 0 of a seed-6 run press for press (a sampler seeded once per run would not)."""
-    from surgsim_envs.policies import load_shipped
+    from surgsim_envs.envs.registry import load_shipped
     from surgsim_envs.scenarios.rollout import run_rollout
     from surgsim_envs.scenarios.loader import loads_scenario
 

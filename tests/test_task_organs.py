@@ -5,7 +5,11 @@ import numpy as np
 import pytest
 
 import surgsim_envs  # noqa: F401
+from surgsim_envs.envs.registry import TASKS
 from surgsim_envs.errors import ConfigError
+
+#: the tasks built on the grasp scene (their organ= option)
+GRASP_TASKS = [t for t, spec in TASKS.items() if spec.scene == "grasp"]
 
 trimesh = pytest.importorskip("trimesh")
 
@@ -18,7 +22,7 @@ def _bean(path):
     return mesh
 
 
-@pytest.mark.parametrize("task", ["SurgSim/Grasp-v0", "SurgSim/Slippage-v0"])
+@pytest.mark.parametrize("task", GRASP_TASKS)
 def test_grasp_tasks_take_a_mesh_file_as_organ(tmp_path, task):
     mesh = _bean(tmp_path / "bean.stl")
     env = gym.make(task, organ=str(tmp_path / "bean.stl"))

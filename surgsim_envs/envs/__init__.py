@@ -1,33 +1,30 @@
-"""Gymnasium tasks: ``SurgSim/Palpation-v0``, ``SurgSim/Grasp-v0``, ``SurgSim/Slippage-v0``.
+"""Gymnasium tasks: one folder per task (``palpation/``, ``grasp/``, ``slippage/``,
+``palpation_press/``, ``layered_palpation/``) and one :class:`~surgsim_envs.envs.registry.TaskSpec`
+each in :mod:`surgsim_envs.envs.registry`.
 
 >>> import gymnasium as gym, surgsim_envs
 >>> env = gym.make("SurgSim/Palpation-v0")          # doctest: +SKIP
 >>> obs, info = env.reset(seed=0)                   # doctest: +SKIP
 
-Config classes and scripted experts: :mod:`surgsim_envs.envs.palpation`,
-:mod:`surgsim_envs.envs.grasp`, :mod:`surgsim_envs.envs.slippage`. See docs/tasks.md.
+Shared machinery: :mod:`.base` (the env base class), :mod:`.terms` (observation, reward,
+termination and action terms), :mod:`.checks` (config checks), :mod:`.tissue_setup`. See
+docs/tasks.md and docs/adding_a_task.md.
 """
 
 from __future__ import annotations
 
-#: task id -> "module:Class"
-TASKS = {
-    "SurgSim/Palpation-v0": "surgsim_envs.envs.palpation:PalpationEnv",
-    "SurgSim/Grasp-v0": "surgsim_envs.envs.grasp:GraspEnv",
-    "SurgSim/Slippage-v0": "surgsim_envs.envs.slippage:SlippageEnv",
-    "SurgSim/PalpationPress-v0": "surgsim_envs.envs.palpation_press:PalpationPressEnv",
-}
-#: quasi-static tasks (one equilibrium solve per step: seconds, not microseconds; kept out of the
-#: generic physics-rate env tests)
-QUASI_STATIC_TASKS = {
-    "SurgSim/LayeredPalpation-v0": "surgsim_envs.envs.layered_palpation:LayeredPalpationEnv",
-}
+from surgsim_envs.envs.registry import TASKS as _SPECS
 
-#: task id -> control steps per episode of the default config (episode_seconds x control_hz); a
+#: task id -> "module:Class" of the physics-rate tasks (derived from the registry,
+#: :mod:`surgsim_envs.envs.registry`, for the callers that read it; a task added later with
+#: ``registry.register`` is in the registry only)
+TASKS = {tid: spec.entry_point for tid, spec in _SPECS.items() if not spec.quasi_static}
+#: task id -> "module:Class" of the quasi-static tasks (one equilibrium solve per step: seconds, not
+#: microseconds; kept out of the generic physics-rate env tests)
+QUASI_STATIC_TASKS = {tid: spec.entry_point for tid, spec in _SPECS.items() if spec.quasi_static}
+#: task id -> control steps per episode of the default config (``TaskSpec.max_episode_steps``); a
 #: test keeps these equal to the configs. A changed config needs gym.make(..., max_episode_steps=N).
-MAX_EPISODE_STEPS = {"SurgSim/Palpation-v0": 600, "SurgSim/Grasp-v0": 150, "SurgSim/Slippage-v0": 150,
-                     "SurgSim/PalpationPress-v0": 25,    # one step = one press
-                     "SurgSim/LayeredPalpation-v0": 30}  # one step = one quasi-static press
+MAX_EPISODE_STEPS = {tid: spec.max_episode_steps for tid, spec in _SPECS.items()}
 
 
 def make_vector(env_id: str, num_envs: int = 1, **kwargs):
@@ -52,30 +49,18 @@ def __getattr__(name: str):
         import functools
 
         env_id = name[len(_VECTOR_ENTRY):]
-        if env_id in TASKS or env_id in QUASI_STATIC_TASKS:
+        if env_id in _SPECS:
             return functools.partial(make_vector, env_id)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def register_envs() -> None:
-    """Register the SurgSim tasks with Gymnasium (idempotent), each with its
-    ``max_episode_steps`` (:data:`MAX_EPISODE_STEPS`; Gymnasium adds its TimeLimit wrapper, and
-    the env truncates at the same step itself, paying its end-of-episode terms) and
-    :func:`make_vector` as its ``vector_entry_point`` (``gym.make_vec(task, n)`` is the
-    shared-memory vector env; ``vectorization_mode="sync"``/``"async"`` give Gymnasium's).
+    """Register every task of the registry with Gymnasium (idempotent; see
+    :func:`surgsim_envs.envs.registry.register_with_gymnasium`)."""
+    from surgsim_envs.envs.registry import register_with_gymnasium
 
-    Gymnasium's passive env checker is off: after a first ``reset`` that raises (e.g. a bad
-    option) it keeps no reset data and every later ``step`` failed with a TypeError. The envs
-    check their own actions, options and outputs; ``gymnasium.utils.env_checker.check_env``
-    passes on every task (tests/test_envs.py)."""
-    import gymnasium as gym
-
-    for env_id, entry in {**TASKS, **QUASI_STATIC_TASKS}.items():
-        if env_id in gym.registry:
-            continue
-        gym.register(id=env_id, entry_point=entry, disable_env_checker=True,
-                     max_episode_steps=MAX_EPISODE_STEPS[env_id],
-                     vector_entry_point=f"{__name__}:{_VECTOR_ENTRY}{env_id}")
+    for spec in _SPECS.values():
+        register_with_gymnasium(spec)
 
 
 __all__ = ["TASKS", "QUASI_STATIC_TASKS", "MAX_EPISODE_STEPS", "make_vector", "register_envs"]

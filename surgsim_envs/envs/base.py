@@ -4,7 +4,12 @@
 and reused by every ``reset`` (only fields, friction and positions are re-randomised), checks
 actions (shape, NaN), applies the time limit, renders ("rgb_array" / "human") and fills ``info``
 with physical metrics (SI: m, s, N). Subclasses supply a config dataclass and implement
-``_build``, ``_randomise``, ``_apply_action``, ``_observe`` and ``_evaluate`` (reward terms).
+``_build``, ``_randomise``, ``_apply_action`` and ``_observe``, and declare their terms once
+(:mod:`surgsim_envs.envs.terms`): ``ACTION`` (the tool the action drives), ``REWARD_TERMS`` and
+``TERMINATION_TERMS``. A control step then runs: check the action, ``_apply_action`` (the
+physics), ``_update`` (the task's state for the step: samples, grasp, slip; returns info
+entries), the termination terms, ``_on_terminate`` if one fires, the reward terms (each value in
+``info["reward_terms"]``, summed in declared order), the time limit, ``_observe``.
 
 Configuration: ``gym.make("SurgSim/Palpation-v0", config=PalpationConfig(...))`` or keyword
 overrides of config fields (``gym.make(..., control_hz=50)``). ``reset(options=...)`` accepts only
@@ -19,255 +24,17 @@ simulation.
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 
-from surgsim_envs import validate
+from surgsim_envs.envs.checks import apply_overrides, check_render_mode
+from surgsim_envs.envs.terms.observation import observation_space_of
+from surgsim_envs.envs.terms.reward import RewardManager
+from surgsim_envs.envs.terms.termination import any_terminated
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError, TissueUnstableError
-
-
-@dataclass(frozen=True)
-class ObsTerm:
-    """One named observation term: ``size`` entries in ``unit``, physical bounds [low, high]
-    (+-inf where none exists, e.g. a contact force)."""
-
-    name: str
-    unit: str
-    size: int = 1
-    low: float = -math.inf
-    high: float = math.inf
-
-
-def observation_space_of(terms) -> tuple[gym.spaces.Box, list[str]]:
-    """``(Box, names)`` of a list of :class:`ObsTerm`: float32 bounds per entry and one
-    "name [unit]" string per index (``name[i] [unit]`` for multi-entry terms)."""
-    lows, highs, names = [], [], []
-    for t in terms:
-        lows += [t.low] * t.size
-        highs += [t.high] * t.size
-        names += [f"{t.name} [{t.unit}]"] if t.size == 1 else [f"{t.name}[{i}] [{t.unit}]" for i in range(t.size)]
-    box = gym.spaces.Box(np.array(lows, dtype=np.float32), np.array(highs, dtype=np.float32), dtype=np.float32)
-    return box, names
-
-
-def apply_overrides(config, overrides: dict[str, Any]):
-    """Copy of dataclass ``config`` with ``overrides``; ConfigError naming unknown fields."""
-    names = {f.name for f in dataclasses.fields(config)}
-    unknown = sorted(set(overrides) - names)
-    if unknown:
-        raise ConfigError(f"unknown {type(config).__name__} field(s) {unknown}; known fields: {sorted(names)}")
-    return dataclasses.replace(config, **overrides)
-
-
-def check_range(value, what: str, lo: float = -math.inf, hi: float = math.inf) -> tuple[float, float]:
-    """Validate a (low, high) range of finite numbers inside [lo, hi]; return it as floats."""
-    try:
-        if isinstance(value, (str, bytes)) or any(not validate.is_real_number(v) for v in value):
-            raise TypeError
-        a, b = (float(v) for v in value)
-    except (TypeError, ValueError, OverflowError):
-        raise ConfigError(f"{what} must be a (low, high) pair of numbers, got {validate.short_repr(value)}") from None
-    if not (math.isfinite(a) and math.isfinite(b) and lo <= a <= b <= hi):
-        raise ConfigError(f"{what}={validate.short_repr(value)} must satisfy {lo:g} <= low <= high <= {hi:g}")
-    return a, b
-
-
-def check_positive(value, what: str, hint: str = "") -> float:
-    """Validate a positive finite number (:func:`surgsim_envs.validate.positive`)."""
-    return validate.positive(value, what, fix=hint or "give a positive finite number")
-
-
-#: the largest reward weight, bonus or cost a task accepts: a weighted sum of a few hundred terms
-#: stays far from float overflow (a weight of 1e308 times a force of 2 N is inf, and inf - inf is NaN)
-MAX_REWARD_WEIGHT = 1e6
-#: the largest rendered frame side (px): 4096 x 4096 RGB is 50 MB per frame
-MAX_RENDER_PX = 4096
-
-
-def check_weights(config, keys, what: str) -> None:
-    """Every field of ``keys`` is a reward weight, bonus or cost: finite, in [0, MAX_REWARD_WEIGHT]
-    (the reward formula carries the sign)."""
-    for key in keys:
-        validate.weight(getattr(config, key), f"{what}.{key}", hi=MAX_REWARD_WEIGHT,
-                        fix=f"reward weights are magnitudes in [0, {MAX_REWARD_WEIGHT:g}] (the reward formula "
-                            "carries the sign)")
-
-
-def check_render_size(config, what: str) -> None:
-    """``render_width`` / ``render_height``: integers in [1, MAX_RENDER_PX] px; ``camera`` a name."""
-    for key in ("render_width", "render_height"):
-        validate.integer(getattr(config, key), f"{what}.{key}", lo=1, hi=MAX_RENDER_PX, unit="px",
-                         fix=f"frames are at most {MAX_RENDER_PX} px per side")
-    validate.text(config.camera, f"{what}.camera", fix="give a camera name of the scene, e.g. 'overview'")
-
-
-def check_integrator(config, what: str) -> None:
-    """``integrator``: a name the task's model has, or one some registered model has (the task then
-    takes the model's "auto" or default, as documented), or "auto"; never None, "" or a number."""
-    from surgsim_envs.tissue.registry import get as model_class, names as model_names
-
-    value = config.integrator
-    fix = "e.g. 'symplectic' (explicit, the default), 'implicit' or 'auto'"
-    validate.text(value, f"{what}.integrator", fix=fix)
-    if value in _integrator_names(model_class(config.model)):
-        return
-    known = sorted({n for m in model_names() for n in _integrator_names(model_class(m))})
-    validate.choice(value, f"{what}.integrator", known, fix=fix)
-
-
-def _integrator_names(cls) -> list[str]:
-    """The integrator names model class ``cls`` accepts (``integrators`` where it has no
-    ``integrator_names``, as :func:`tissue_options` reads them)."""
-    return cls.integrator_names() if hasattr(cls, "integrator_names") else list(getattr(cls, "integrators", ()))
-
-
-def check_episode_seconds(config, what: str) -> float:
-    """``episode_seconds`` in (0, validate.MAX_SIM_SECONDS] s."""
-    return validate.duration(config.episode_seconds, f"{what}.episode_seconds",
-                             fix=f"episodes longer than {validate.MAX_SIM_SECONDS:g} s of simulated time are refused "
-                                 "(hours of CPU per episode); e.g. 3.0")
-
-
-def check_task_resolution(config, what: str) -> None:
-    """Validate a task config's ``resolution`` (None, a spacing in m, or "auto"), its
-    ``error_tolerance`` (fraction) and ``step_budget_us`` (us per simulated ms): the last two are
-    used only by "auto" but checked always (a field that is set is a field that is valid)."""
-    from surgsim_envs.tissue.resolution import check_resolution
-
-    check_resolution(config.resolution, f"{what}.resolution")
-    check_positive(config.error_tolerance, f"{what}.error_tolerance", "a fraction, e.g. 0.6 for 60 %")
-    check_positive(config.step_budget_us, f"{what}.step_budget_us", "us of compute per simulated ms, e.g. 1000")
-
-
-def check_control_rate(config, what: str) -> None:
-    """``control_hz`` must give a control period between one physics step ``dt`` and 1000 physics
-    steps (the scene's substep limit), and no longer than the episode: the physical range is
-    ``[max(1 / episode_seconds, 1 / (1000 dt)), 1 / dt]`` Hz. ``dt`` and ``episode_seconds`` must be
-    valid positive numbers first."""
-    from surgsim_envs.scene.config import DT_RANGE, SUBSTEPS_RANGE
-
-    dt = check_positive(config.dt, f"{what}.dt", "the physics step in s, e.g. 4e-4")
-    if not DT_RANGE[0] <= dt <= DT_RANGE[1]:
-        raise ConfigError(f"{what}.dt={dt!r} s is outside the physics step range [{DT_RANGE[0]:g}, {DT_RANGE[1]:g}] s")
-    episode = check_episode_seconds(config, what)
-    hz = check_positive(config.control_hz, f"{what}.control_hz", "the control rate in Hz, e.g. 50")
-    lo, hi = max(1.0 / episode, 1.0 / (SUBSTEPS_RANGE[1] * dt)), 1.0 / dt
-    if not lo * (1 - 1e-9) <= hz <= hi * (1 + 1e-9):
-        raise ConfigError(f"{what}.control_hz={hz!r} Hz is outside its physical range [{lo:.4g}, {hi:.4g}] Hz: the "
-                          f"control period must be at least one physics step (dt={dt:g} s), at most "
-                          f"{SUBSTEPS_RANGE[1]} steps and at most the episode (episode_seconds={episode:g} s); e.g. 50 Hz")
-
-
-def sphere_mask(centroids: np.ndarray, centre, radius: float) -> np.ndarray:
-    """(T,) bool: elements whose rest centroid (``model.element_centroids()``, (T,3) m) lies within
-    ``radius`` m of ``centre`` (3,) m; at least the nearest one."""
-    d = np.linalg.norm(np.asarray(centroids) - np.asarray(centre, dtype=float)[None], axis=1)
-    mask = d < radius
-    if not mask.any():
-        mask[np.argmin(d)] = True
-    return mask
-
-
-def tissue_options(model: str, integrator: str) -> dict[str, Any]:
-    """Constructor options of a task's tissue: ``integrator`` if model ``model`` has it, else its
-    "auto" choice (explicit when stable, implicit otherwise), else the model's default."""
-    from surgsim_envs.tissue.registry import get as model_class
-
-    names = _integrator_names(model_class(model))
-    if integrator in names:
-        return {"integrator": integrator}
-    return {"integrator": "auto"} if "auto" in names else {}
-
-
-def explicit_stable_over(tissue, dt: float, max_scale: float) -> bool:
-    """True if tissue ``tissue`` (built, unscaled) steps explicitly at ``dt`` s with every element's
-    Young's modulus scaled by up to ``max_scale``: ``dt <= stable_dt()`` with the whole tissue at
-    ``max_scale`` (a bound for any local scaling up to it: the stiffest node limits the step). The
-    material is restored (``scale_material`` is relative to the build) before returning."""
-    tissue.scale_material("young", float(max_scale))
-    try:
-        return float(dt) <= tissue.stable_dt()
-    finally:
-        tissue.scale_material("young", 1.0)
-
-
-def integrator_for_range(tissue, dt: float, max_scale: float) -> str | None:
-    """The integrator a task must rebuild its tissue with, or None to keep the one built.
-
-    A task asks for "symplectic" by default (the explicit one: fast and, for the mass-spring tasks,
-    stable). If the built tissue steps with its explicit integrator (the first of the model's
-    ``auto_pair``) but ``dt`` exceeds its :meth:`stable_dt` somewhere in the stiffness
-    randomisation (Young's modulus scaled up to ``max_scale``), the task takes the model's "auto"
-    instead (explicit while stable at the current state, else implicit). A model without an
-    explicit/implicit pair keeps what it has, and the per-episode :func:`check_explicit_step` names
-    the problem. Decided from capability (``auto_pair``, ``stable_dt()``), never from a model name."""
-    pair = getattr(tissue, "auto_pair", None)
-    if pair is None or getattr(tissue, "integrator", None) != pair[0]:
-        return None
-    return None if explicit_stable_over(tissue, dt, max_scale) else "auto"
-
-
-def require_capabilities(model: str, capabilities, task: str) -> None:
-    """Before building: CapabilityError (a ConfigError naming model, capability and task) unless
-    tissue model ``model`` declares every one of ``capabilities`` (tissue contract v2)."""
-    from surgsim_envs.tissue.registry import get as model_class
-
-    cls = model_class(model)
-    for cap in capabilities:
-        cls.require(cap, task=task)
-    if "quasi_static" in getattr(cls, "capabilities", ()):
-        # a quasi-static model solves an equilibrium every step: the scene's penalty contact (forces
-        # that change with the positions) must enter that solve, or the solve chases the contact
-        cls.require("implicit_contact", task=f"{task} (a quasi-static model in a contact scene)")
-
-
-def check_explicit_step(tissue, dt: float, what: str) -> None:
-    """After a re-randomised material: ConfigError if the tissue steps explicitly (integrator
-    "symplectic") and ``dt`` exceeds its critical step (an implicit or "auto" model is safe)."""
-    if getattr(tissue, "integrator", None) != "symplectic":
-        return
-    crit = tissue.critical_dt()
-    if crit < dt:
-        raise ConfigError(f"{what} makes the explicit tissue step unstable (critical dt {crit:.2e} s < dt {dt:g} s); "
-                          "lower the stiffness ranges or dt, or use integrator 'auto'")
-
-
-def check_on_unstable(value, what: str) -> None:
-    """``on_unstable`` must be "raise" (default) or "terminate" (see the module docstring)."""
-    if value not in ("raise", "terminate"):
-        raise ConfigError(f"{what}.on_unstable={value!r}; choose 'raise' (default) or 'terminate' (end the "
-                          "episode with info['unstable'] instead of raising TissueUnstableError)")
-
-
-def sample(rng: np.random.Generator, value, what: str, lo: float = -math.inf, hi: float = math.inf) -> float:
-    """A number: ``value`` itself if scalar, else uniform in the (low, high) range ``value``."""
-    if validate.is_real_number(value):
-        return validate.real(value, what, lo=lo, hi=hi, fix=f"give a finite number in [{lo:g}, {hi:g}]")
-    a, b = check_range(value, what, lo, hi)
-    return float(rng.uniform(a, b)) if b > a else a
-
-
-def reward_from_terms(terms: dict[str, float]) -> tuple[float, dict[str, float]]:
-    """``(sum, terms as floats)`` of weighted reward terms: the reward and ``info["reward_terms"]``."""
-    clean = {k: float(v) for k, v in terms.items()}
-    return float(sum(clean.values())), clean
-
-
-def check_render_mode(render_mode, modes, task: str = "") -> None:
-    """Refuse a ``render_mode`` outside ``modes`` (None is always fine), and ``"human"`` without
-    a display (raised here; MuJoCo would exit the process later)."""
-    if render_mode is not None and render_mode not in modes:
-        where = f" by {task}" if task else ""
-        raise ConfigError(f"render_mode={render_mode!r} is not supported{where}; use one of {modes} or None")
-    if render_mode == "human":
-        from surgsim_envs.scene.display import require_display
-
-        require_display("render_mode='human'")
 
 
 class SurgSimEnv(gym.Env):
@@ -284,6 +51,12 @@ class SurgSimEnv(gym.Env):
     config_cls: ClassVar[type]
     #: names accepted in ``reset(options=...)``
     OPTIONS: ClassVar[tuple[str, ...]] = ()
+    #: the tool the action drives (an :class:`~surgsim_envs.envs.terms.action.ActionTerm`)
+    ACTION: ClassVar[Any] = None
+    #: reward terms in summation order (:class:`~surgsim_envs.envs.terms.RewardTerm`)
+    REWARD_TERMS: ClassVar[tuple] = ()
+    #: termination terms (:class:`~surgsim_envs.envs.terms.TerminationTerm`)
+    TERMINATION_TERMS: ClassVar[tuple] = ()
 
     def __init__(self, config=None, render_mode: str | None = None, *, human_pace: float | None = 1.0, **overrides):
         if config is None:
@@ -305,6 +78,7 @@ class SurgSimEnv(gym.Env):
         self._sims: dict[Any, Any] = {}
         self.sim = None
         self._readings_key = None      # tasks may cache their readings per physics state
+        self.rewards = RewardManager(self.REWARD_TERMS, self.config) if self.REWARD_TERMS else None
         self._build()
         self.steps = 0
         self.peak_force = 0.0
@@ -323,10 +97,24 @@ class SurgSimEnv(gym.Env):
     def _observe(self) -> np.ndarray:
         raise NotImplementedError
 
-    def _evaluate(self, action: np.ndarray) -> tuple[float, bool, dict[str, Any]]:
-        """(reward, terminated, info terms) after a control step; ``info terms["reward_terms"]`` is
-        {term name: weighted value} summing to the reward (:func:`reward_from_terms`)."""
+    def _update(self, action: np.ndarray) -> dict[str, Any]:
+        """The task's state after the physics of a control step (what its terms read); returns the
+        step's info entries."""
         raise NotImplementedError
+
+    def _on_terminate(self) -> dict[str, Any]:
+        """A termination term fired: end-of-episode state (read by the reward terms) and info."""
+        return {}
+
+    def _evaluate(self, action: np.ndarray) -> tuple[float, bool, dict[str, Any]]:
+        """(reward, terminated, info terms) after a control step from the declared terms;
+        ``info terms["reward_terms"]`` is {term name: weighted value} summing to the reward."""
+        terms = self._update(action)
+        terminated = any_terminated(self.TERMINATION_TERMS, self)
+        if terminated:
+            terms.update(self._on_terminate())
+        reward, terms["reward_terms"] = self.rewards.compute(self)
+        return reward, terminated, terms
 
     def _metrics(self) -> dict[str, Any]:
         return {}

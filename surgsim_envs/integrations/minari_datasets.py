@@ -35,25 +35,19 @@ import numpy as np
 
 from surgsim_envs.errors import ConfigError
 
-#: task id -> "module:function" of its scripted expert ``expert(env) -> policy(obs)``
-EXPERTS = {
-    "SurgSim/Palpation-v0": "surgsim_envs.envs.palpation:palpation_expert",
-    "SurgSim/PalpationPress-v0": "surgsim_envs.envs.palpation_press:press_expert",
-    "SurgSim/Grasp-v0": "surgsim_envs.envs.grasp:grasp_expert",
-    "SurgSim/Slippage-v0": "surgsim_envs.envs.slippage:slippage_expert",
-}
 #: episodes one recording may hold (each is kept in memory until the dataset is written)
 MAX_EPISODES = 10_000
 
 
 def _expert(task: str) -> Callable:
-    import importlib
+    """The task's scripted expert (``TaskSpec.expert`` in :mod:`surgsim_envs.envs.registry`)."""
+    from surgsim_envs.envs.registry import TASKS, expert
 
-    if task not in EXPERTS:
-        raise ConfigError(f"task {task!r} has no scripted expert; tasks with one: {sorted(EXPERTS)}. "
+    if task in TASKS and TASKS[task].expert is None:
+        raise ConfigError(f"task {task!r} has no scripted expert; tasks with one: "
+                          f"{sorted(t for t, s in TASKS.items() if s.expert)}. "
                           "Record it with --device random or --device policy:FILE.npz")
-    module, name = EXPERTS[task].split(":")
-    return getattr(importlib.import_module(module), name)
+    return expert(task)
 
 
 def action_source(task: str, device: str) -> Callable:

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from surgsim_envs.envs.registry import TASKS
 from surgsim_envs.errors import ConfigError
 
 
@@ -228,7 +229,9 @@ class Release(Phase):
 
 PHASE_TYPES: dict[str, type[Phase]] = {"approach": Approach, "close_jaws": CloseJaws, "hold": Hold, "pull": Pull,
                                        "press": Press, "palpate": Palpate, "release": Release}
-SCENE_TOOL = {"palpation": "probe", "grasp": "grasper"}
+#: ready-made scene -> the tool a scenario drives in it, from the task registry (each task names its
+#: scene and tool; the tasks sharing a scene drive the same tool there)
+SCENE_TOOL = {spec.scene: spec.tool for spec in TASKS.values() if spec.scene is not None}
 
 
 class PhaseContext:

@@ -140,9 +140,9 @@ def check_policy_reference(ref: str, base: Path | None = None, allow_code: bool 
                               f"built-in policies: {sorted(BUILTIN)}")
         return kind
     if kind == "shipped":
-        from surgsim_envs.policies import shipped_path
+        from surgsim_envs.envs.registry import shipped_policy_path
 
-        shipped_path(ref[len(SHIPPED_PREFIX):])     # ConfigError naming the shipped tasks
+        shipped_policy_path(ref[len(SHIPPED_PREFIX):])     # ConfigError naming the shipped tasks
         return kind
     if kind == "data":
         path = resolve_policy_file(ref, base)
@@ -183,7 +183,7 @@ def load_policy(ref: str, base: Path | None = None, allow_code: bool = False, tr
     if kind == "builtin":
         return BUILTIN[ref.rpartition(":")[2]]
     if kind == "shipped":
-        from surgsim_envs.policies import load_shipped
+        from surgsim_envs.envs.registry import load_shipped
 
         return load_shipped(ref[len(SHIPPED_PREFIX):])
     if kind == "data":

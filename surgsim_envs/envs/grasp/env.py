@@ -28,53 +28,21 @@ Tissue resolution: ``resolution`` None keeps the task's coarse lattice (spleen 1
 the task's model (mass-spring, symplectic) meeting ``error_tolerance`` and ``step_budget_us``
 (see :mod:`surgsim_envs.tissue.resolution`).
 """
-
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs.envs.base import ObsTerm, check_positive, check_range, check_weights, reward_from_terms, sample
-from surgsim_envs.envs.grasp_common import (contact_nodes, contact_reward, excess_force_penalty, is_grasped,
-                                            record_progress, slip_fraction)
-from surgsim_envs.envs.grasp_scene import GraspSceneConfig, GraspSceneEnv
-
-
-@dataclass
-class GraspConfig(GraspSceneConfig):
-    """Grasp-v0 settings (SI units): the shared grasp-scene fields (:class:`GraspSceneConfig`) plus
-    the task's target and reward. Ranges are (low, high) sampled uniformly per episode."""
-
-    tissue_subcycles: int | str = "auto"   # 2 tissue + contact steps of dt per MuJoCo step at the defaults
-    #                                        (MuJoCo at 0.8 ms; see resolved_subcycles); 1 = one each
-    max_step: float = 0.001            # m per control step (5 cm/s at 50 Hz)
-    workspace: float = 0.06            # m, wrist target |offset| from home per axis
-    target_offset_x: Sequence[float] = (0.012, 0.02)  # m, along the pull direction (out of the organ)
-    target_offset_z: Sequence[float] = (0.0, 0.005)   # m, lift
-    # reward
-    hold_force: float = 0.03           # N, a jaw "holds" above this normal force
-    damage_force: float = 1.0          # N per jaw
-    force_weight: float = 1.0
-    slip_weight: float = 0.1
-    progress_weight: float = 5.0
-    contact_weight: float = 0.03      # per step, times the fraction of jaws pressing on the tissue
-    drop_penalty: float = 0.5
-    success_bonus: float = 5.0
-    tolerance: float = 0.005           # m
-
-    def validate(self) -> None:
-        super().validate()
-        for key in ("max_step", "workspace", "hold_force", "damage_force", "tolerance"):
-            check_positive(getattr(self, key), f"GraspConfig.{key}")
-        check_weights(self, ("force_weight", "slip_weight", "progress_weight", "contact_weight", "drop_penalty",
-                             "success_bonus"), "GraspConfig")
-        within = f"(within +-workspace={self.workspace:g} m)"
-        check_range(self.target_offset_x, f"target_offset_x {within}", -self.workspace, self.workspace)
-        check_range(self.target_offset_z, f"target_offset_z {within}", -self.workspace, self.workspace)
+from surgsim_envs.envs.checks import sample
+from surgsim_envs.envs.grasp.config import GraspConfig
+from surgsim_envs.envs.grasp.scene import GraspSceneEnv
+from surgsim_envs.envs.grasp.terms import (GRASP_REWARD_TERMS, GRASP_TERMINATION_TERMS, contact_nodes, is_grasped,
+                                          record_progress, total_normal_force)
+from surgsim_envs.envs.terms import ObsTerm
+from surgsim_envs.envs.terms.action import ActionTerm, jaw_opening, wrist_target
+from surgsim_envs.envs.terms.force import vector_norm
 
 
 class GraspEnv(GraspSceneEnv):
@@ -83,6 +51,9 @@ class GraspEnv(GraspSceneEnv):
     config_cls = GraspConfig
     TASK_ID = "SurgSim/Grasp-v0"
     OPTIONS = ("organ", "mu", "young_scale", "target_offset_x", "target_offset_z")
+    ACTION = ActionTerm("grasper", 4, "[dx, dy, dz, close]: wrist target step (world frame), jaw opening")
+    REWARD_TERMS = GRASP_REWARD_TERMS
+    TERMINATION_TERMS = GRASP_TERMINATION_TERMS
 
     def _build(self) -> None:
         self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
@@ -107,22 +78,15 @@ class GraspEnv(GraspSceneEnv):
         self.goal_dist0 = max(self.prev_dist, 1e-6)
         self.best_dist = self.goal_dist0
 
-    def _clip_target(self, pos: np.ndarray) -> np.ndarray:
-        w = self.config.workspace
-        local = (self.frame.T @ (pos - self.home)).tolist()
-        local = np.array([w if v > w else (-w if v < -w else v) for v in local])   # = np.clip(local, -w, w)
-        return self.home + self.frame @ local
-
     def _apply_action(self, a: np.ndarray) -> None:
         c, g = self.config, self.gcfg
-        self.target = self._clip_target(self.target + a[:3] * c.max_step)
+        self.target = wrist_target(self.target, a[:3], c.max_step, self.home, self.frame, c.workspace)
         self.sim.set_tool_target(self.tool_name, self.target)
-        radius = g.open_radius - (float(a[3]) + 1.0) / 2.0 * (g.open_radius - g.min_radius)
-        self.sim.set_jaw_opening(self.tool_name, min(max(radius, g.min_radius), g.open_radius))
+        self.sim.set_jaw_opening(self.tool_name, jaw_opening(float(a[3]), g.open_radius, g.min_radius))
         self.sim.step()
 
     def _observe(self) -> np.ndarray:
-        pos, fn, ft, rep = self._readings()
+        pos, fn, ft, rep = self.readings()
         obs = np.empty(15, dtype=np.float32)
         obs[0:3] = pos
         obs[3:6] = self.goal - pos
@@ -141,51 +105,29 @@ class GraspEnv(GraspSceneEnv):
             if len(nodes):
                 self.slip.start(pos, self.sim.tissue().positions, nodes)
         self.slip_distance = self.slip.distance(pos, self.sim.tissue().positions)
-        f0, f1, f2 = fn.tolist()
-        total = f0 + f1 + f2                       # = np.sum(fn) (three entries: summed in order)
+        total = total_normal_force(fn)
         if total > self.peak_force:
             self.peak_force = total
         return grasped
 
-    def _evaluate(self, a: np.ndarray):
+    def _update(self, a: np.ndarray) -> dict[str, Any]:
+        """The grasp (and its slip), the distance to the target and its record while grasped, and
+        the step's outcome: ``succeeded`` (grasped within tolerance) or ``dropped`` (a grasp lost)."""
         c = self.config
-        pos, fn, ft, rep = self._readings()
-        grasped = self._update_grasp(pos, fn)
-        d = self.goal - pos
-        dist = math.sqrt(d.dot(d))                 # = np.linalg.norm(d) (its own formula), without the wrapper
-        rt = {"excess_force": excess_force_penalty(fn, c.damage_force, c.force_weight),
-              "contact": contact_reward(fn, c.hold_force, c.contact_weight), "progress": 0.0, "slip": 0.0,
-              "drop": 0.0, "success": 0.0}
+        pos, fn, ft, rep = self.readings()
+        self.grasped = grasped = self._update_grasp(pos, fn)
+        dist = vector_norm(self.goal - pos)
         terms: dict[str, Any] = {"grasped": grasped, "distance_to_target_m": dist}
-        terminated = False
+        self.progress_gain = 0.0
+        self.succeeded = self.dropped = False
         if grasped:
-            gain, self.best_dist = record_progress(self.best_dist, dist)
-            rt["progress"] = c.progress_weight * gain / self.goal_dist0
-            rt["slip"] = -c.slip_weight * slip_fraction(rep["slipping"], rep["contacts"])
+            self.progress_gain, self.best_dist = record_progress(self.best_dist, dist)
             self.was_grasped = True
             if dist <= c.tolerance:
-                rt["success"] = c.success_bonus
-                terminated = True
+                self.succeeded = True
                 terms["success"] = terms["is_success"] = True
         elif self.was_grasped and rep["contacts"] == 0:
-            rt["drop"] = -c.drop_penalty
-            terminated = True
+            self.dropped = True
             terms["dropped"] = True
         self.prev_dist = dist
-        reward, terms["reward_terms"] = reward_from_terms(rt)
-        return reward, terminated, terms
-
-
-def grasp_expert(env, close_action: float = 1.0, close_steps: int = 30):
-    """Scripted policy: close the jaws, wait, then move straight to the target."""
-    state = {"n": 0}
-
-    def policy(obs):
-        state["n"] += 1
-        if state["n"] <= close_steps:
-            return np.array([0, 0, 0, close_action], dtype=np.float32)
-        rel = obs[3:6]
-        step = env.unwrapped.config.max_step
-        return np.array([*np.clip(rel / step * 0.6, -0.6, 0.6), close_action], dtype=np.float32)
-
-    return policy
+        return terms

@@ -5,7 +5,7 @@ and resolution, jaw speed, friction and stiffness randomisation, rendering);
 :class:`GraspSceneEnv` owns one Simulation per organ, the per-episode randomisation of friction
 and stiffness (through ``model.scale_material``) and the grasper readings. Each task composes
 its own observation terms, reward terms and termination from these and the term functions of
-:mod:`surgsim_envs.envs.grasp_common`; neither task inherits the other.
+:mod:`surgsim_envs.envs.grasp.terms`; neither task inherits the other.
 """
 
 from __future__ import annotations
@@ -15,11 +15,13 @@ from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
-from surgsim_envs.envs.base import (SurgSimEnv, check_control_rate, check_explicit_step, check_integrator,
-                                   check_on_unstable, check_positive, check_render_size, check_range,
-                                   check_task_resolution, require_capabilities, sample)
+from surgsim_envs.envs.base import SurgSimEnv
+from surgsim_envs.envs.checks import (check_control_rate, check_explicit_step, check_integrator, check_on_unstable,
+                                     check_positive, check_range, check_render_size, check_task_resolution,
+                                     require_capabilities, sample)
+from surgsim_envs.envs.grasp.simulation import build_grasp_simulation, check_grasp_organ, organ_key
+from surgsim_envs.envs.grasp.terms import SlipTracker
 from surgsim_envs.errors import ConfigError
-from surgsim_envs.envs.grasp_common import SlipTracker, build_grasp_simulation, check_grasp_organ, organ_key
 
 
 @dataclass
@@ -149,9 +151,9 @@ class GraspSceneEnv(SurgSimEnv):
         self.slip_distance = 0.0
         self.was_grasped = False
 
-    def _readings(self):
+    def readings(self):
         """(wrist position (3,) m, per-jaw normal (3,) N, per-jaw tangential (3,) N, contact report),
-        read once per physics state (``_evaluate`` and ``_observe`` of a step share them; do not
+        read once per physics state (the step's ``_update``, its terms and ``_observe`` share them; do not
         modify them)."""
         sim = self.sim
         key = (sim, sim.steps, self.steps)         # reset() and the unstable path clear the key

@@ -14,109 +14,29 @@ depth (m), probe force (N, >= 0). Reward: -press_cost per press; on commit
 ``1 - distance / size_scale`` (clipped at -1). The episode also ends after ``max_presses``.
 ``info["success"]``: committed within ``nodule_radius`` of the nodule's centre (in x, y).
 
-Checks as the other tasks (:mod:`surgsim_envs.envs.base`): config fields by name, bound and fix
+Checks as the other tasks (:mod:`surgsim_envs.envs.checks`): config fields by name, bound and fix
 (ConfigError), keyword overrides in ``gym.make``, actions by ``SurgSimEnv.check_action`` (shape,
 dtype, NaN), reset options. Rendering (``render_mode="rgb_array"``) and the dm_control loader
-(and ``"human"``, a MuJoCo viewer where a display exists) use a MuJoCo scene of the same wall (:mod:`surgsim_envs.envs.layered_scene`), built on first use;
+(and ``"human"``, a MuJoCo viewer where a display exists) use a MuJoCo scene of the same wall (:mod:`surgsim_envs.envs.layered_palpation.scene`), built on first use;
 its clock runs ``1 / control_hz`` s per press (a nominal press rate: the physics is quasi-static).
-Forces in newtons, lengths in metres.
+Forces in newtons, lengths in metres. The reward terms are declared in :mod:`.terms`.
 """
-
 from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from surgsim_envs.envs.base import ObsTerm, SurgSimEnv, apply_overrides, check_render_mode, observation_space_of
+from surgsim_envs.envs.base import SurgSimEnv
+from surgsim_envs.envs.checks import apply_overrides, check_render_mode
+from surgsim_envs.envs.layered_palpation.config import LayeredPalpationConfig
+from surgsim_envs.envs.layered_palpation.terms import REWARD_TERMS
+from surgsim_envs.envs.terms import ObsTerm, RewardManager, observation_space_of
+from surgsim_envs.envs.terms.action import ActionTerm
 from surgsim_envs.errors import ConfigError, TissueUnstableError
-
-#: wall thickness of the default abdominal wall (m): presses stay well inside it
-MAX_DEPTH_LIMIT = 0.02
-#: largest lattice the task builds (nodes): a direct solve per press must stay interactive
-MAX_NODES = 60_000
-#: lattice spacing range (m)
-SPACING_RANGE = (0.002, 0.01)
-#: patch side range (m)
-SIZE_RANGE = (0.02, 0.3)
-CAMERAS = ("overview", "top", "side")
-
-
-def _finite_number(value, what: str, lo: float, hi: float, hint: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(float(value)) or not lo <= float(value) <= hi:
-        raise ConfigError(f"LayeredPalpationConfig.{what}={value!r} must be a finite number in [{lo:g}, {hi:g}]; "
-                          f"{hint}")
-    return float(value)
-
-
-def _integer(value, what: str, lo: int, hi: int, hint: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= int(value) <= hi:
-        raise ConfigError(f"LayeredPalpationConfig.{what}={value!r} must be an integer in [{lo}, {hi}]; {hint}")
-    return int(value)
-
-
-@dataclass
-class LayeredPalpationConfig:
-    """size (x, y) m of the wall patch; spacing m of its lattice; max_depth m; nodule radius m and
-    Young's modulus factor; press_cost per press; size_scale m of the commit reward; max_presses;
-    probe_radius m; control_hz presses per second of the nominal clock (render fps, dm_control
-    timestep); render_width/height px and camera ("overview", "top", "side") of rgb_array frames."""
-
-    size: tuple = (0.08, 0.06)
-    spacing: float = 0.005
-    max_depth: float = 0.008
-    nodule_radius: float = 0.008
-    nodule_factor: float = 30.0
-    press_cost: float = 0.01
-    size_scale: float = 0.03
-    max_presses: int = 30
-    probe_radius: float = 0.005
-    control_hz: float = 1.0
-    render_width: int = 480
-    render_height: int = 480
-    camera: str = "overview"
-
-    @property
-    def episode_seconds(self) -> float:
-        """s of the nominal clock in a full episode (``max_presses / control_hz``)."""
-        return self.max_presses / self.control_hz
-
-    def validate(self) -> None:
-        """ConfigError naming the field, its bound and the fix."""
-        size = self.size
-        if isinstance(size, (str, bytes)) or not hasattr(size, "__len__") or len(size) != 2:
-            raise ConfigError(f"LayeredPalpationConfig.size={size!r} must be a pair (x, y) of lengths in m, "
-                              "e.g. (0.08, 0.06)")
-        for k, v in enumerate(size):
-            _finite_number(v, f"size[{k}]", *SIZE_RANGE, "a patch side in m, e.g. 0.08")
-        spacing = _finite_number(self.spacing, "spacing", *SPACING_RANGE, "the lattice spacing in m, e.g. 0.005")
-        _finite_number(self.max_depth, "max_depth", 1e-4, MAX_DEPTH_LIMIT,
-                       "the deepest press in m (the wall is 29 mm thick), e.g. 0.008")
-        nod = _finite_number(self.nodule_radius, "nodule_radius", 1e-3, 0.05, "a radius in m, e.g. 0.008")
-        if min(size) <= 2 * nod:
-            raise ConfigError(f"LayeredPalpationConfig.nodule_radius={nod!r} m does not fit the patch {tuple(size)!r} "
-                              "m: every side must exceed 2 x nodule_radius; enlarge size or shrink the nodule")
-        _finite_number(self.nodule_factor, "nodule_factor", 1e-3, 1e4,
-                       "the nodule's Young's modulus factor, e.g. 30 (stiffer) or 0.2 (softer)")
-        _finite_number(self.press_cost, "press_cost", 0.0, 1e3, "a reward cost >= 0 per press, e.g. 0.01")
-        _finite_number(self.size_scale, "size_scale", 1e-3, 1.0, "the commit reward's length scale in m, e.g. 0.03")
-        _integer(self.max_presses, "max_presses", 1, 10_000, "presses per episode, e.g. 30")
-        _finite_number(self.probe_radius, "probe_radius", 1e-3, 0.05, "the probe tip radius in m, e.g. 0.005")
-        _finite_number(self.control_hz, "control_hz", 1e-3, 1e3, "nominal presses per second, e.g. 1")
-        _integer(self.render_width, "render_width", 16, 4096, "pixels, e.g. 480")
-        _integer(self.render_height, "render_height", 16, 4096, "pixels, e.g. 480")
-        if self.camera not in CAMERAS:
-            raise ConfigError(f"LayeredPalpationConfig.camera={self.camera!r}; choose one of {list(CAMERAS)}")
-        nodes = (size[0] / spacing + 1) * (size[1] / spacing + 1) * (0.029 / spacing + 1)
-        if nodes > MAX_NODES:
-            raise ConfigError(f"LayeredPalpationConfig: size {tuple(size)!r} m at spacing {spacing:g} m gives about "
-                              f"{nodes:,.0f} lattice nodes (limit {MAX_NODES:,}): each press solves them all; "
-                              "coarsen spacing or shrink size")
 
 
 _VOLUMES: dict = {}
@@ -129,6 +49,8 @@ class LayeredPalpationEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 1}
     config_cls = LayeredPalpationConfig
     OPTIONS: tuple = ()
+    ACTION = ActionTerm("probe", 4, "[x, y, depth, commit]: press site over the patch, depth, commit")
+    REWARD_TERMS = REWARD_TERMS
     #: the shape/dtype/NaN checks of every other task
     check_action = SurgSimEnv.check_action
 
@@ -164,6 +86,7 @@ class LayeredPalpationEnv(gym.Env):
                                   ObsTerm("press_depth", "m", 1, 0.0, float(cfg.max_depth)),
                                   ObsTerm("probe_force", "N", 1, 0.0, math.inf)]
         self.observation_space, self._obs_names = observation_space_of(self.observation_terms)
+        self.rewards = RewardManager(REWARD_TERMS, cfg)
         self.nodule = np.zeros(3)
         self.presses = 0
         self.steps = 0
@@ -192,7 +115,7 @@ class LayeredPalpationEnv(gym.Env):
     def sim(self):
         """The MuJoCo scene mirroring the wall and the probe (built on first use; see module docstring)."""
         if self._scene is None:
-            from surgsim_envs.envs.layered_scene import PressScene
+            from surgsim_envs.envs.layered_palpation.scene import PressScene
 
             cfg = self.config
             self._scene = PressScene(self.tissue, cfg.spacing, cfg.size, cfg.probe_radius, cfg.render_width,
@@ -246,12 +169,9 @@ class LayeredPalpationEnv(gym.Env):
         force = max(force, 0.0)   # reactions are compressive; a round-off below 0 reads 0
         self.presses += 1
         self.steps += 1
-        dist = float(np.hypot(x - self.nodule[0], y - self.nodule[1]))
-        terminated = bool(a[3] > 0.0)
-        terms = {"press_cost": -float(cfg.press_cost)}
-        if terminated:
-            terms["commit"] = max(1.0 - dist / cfg.size_scale, -1.0)
-        reward = float(sum(terms.values()))
+        dist = self.distance = float(np.hypot(x - self.nodule[0], y - self.nodule[1]))
+        terminated = self.committed = bool(a[3] > 0.0)
+        reward, terms = self.rewards.compute(self)
         truncated = self.presses >= cfg.max_presses and not terminated
         self._show()
         if self.render_mode == "human":

@@ -29,82 +29,19 @@ potential-based shaping on the estimate's error (as Palpation-v0; sums to ``shap
 phi_final``); ``- damage_weight`` per N of press force above ``damage_force``; at the end the
 localisation reward + ``success_bonus`` if the guess is within ``tolerance_mm`` (``info["success"]``).
 """
-
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
-from surgsim_envs import validate
-from surgsim_envs.envs.base import ObsTerm, check_positive, check_weights, reward_from_terms
-from surgsim_envs.envs.palpation import (PalpationConfig, PalpationEnv, damage_penalty, indentation_depth,
-                                        stiffness_map)
-from surgsim_envs.errors import ConfigError
-
-
-#: physics steps of one phase of a press (settle, hold): 10^5 steps are 100 s of simulated time at
-#: the default 1 ms step, and minutes of CPU for one env step
-MAX_PRESS_STEPS = 100_000
-#: presses per episode
-MAX_PRESSES = 10_000
-
-
-@dataclass
-class PalpationPressConfig(PalpationConfig):
-    """PalpationPress-v0 settings (SI units); slab, inclusion ranges and the localisation reward
-    are those of :class:`PalpationConfig` (its continuous-control fields are unused)."""
-
-    press_depth: float = 0.006       # m below the rest surface
-    clearance: float = 0.004         # m above the rest surface while moving between sites
-    move_speed: float = 1.0          # m/s, probe target rate while moving
-    press_speed: float = 0.5         # m/s, probe target rate while pressing
-    settle_steps: int = 8            # physics steps after the move before descending
-    hold_steps: int = 30             # physics steps from the start of the descent to the reading
-    average_steps: int = 10          # physics steps averaged for the stiffness sample
-    max_presses: int = 25            # presses per episode (the time limit)
-    min_presses: int = 1             # report is ignored before this many presses
-    press_cost: float = 0.02         # per press
-    cell_reward: float = 0.1         # first sample in each map cell
-    map_cells: int = 5
-
-    def validate(self) -> None:
-        super().validate()
-        what = "PalpationPressConfig"
-        for key in ("press_depth", "clearance"):
-            check_positive(getattr(self, key), f"{what}.{key}")
-        for key in ("move_speed", "press_speed"):
-            # the moves between presses take travel / move_speed / dt physics steps in one env step
-            validate.real(getattr(self, key), f"{what}.{key}", lo=1e-3, hi=100.0, unit="m/s",
-                          fix="probe speeds lie in [0.001, 100] m/s (slower moves take hours per press)")
-        fix = (f"a press runs settle_steps + hold_steps physics steps; at most {MAX_PRESS_STEPS:,} each "
-               f"({MAX_PRESS_STEPS * self.dt:g} s at dt={self.dt:g} s) so one env step cannot run for hours")
-        for key in ("settle_steps", "hold_steps", "average_steps"):
-            validate.steps(getattr(self, key), f"{what}.{key}", hi=MAX_PRESS_STEPS, fix=fix)
-        validate.integer(self.max_presses, f"{what}.max_presses", lo=1, hi=MAX_PRESSES,
-                         fix=f"presses per episode in [1, {MAX_PRESSES:,}], e.g. 25")
-        if self.average_steps > self.hold_steps:
-            raise ConfigError(f"{what}.average_steps={self.average_steps} must be <= hold_steps={self.hold_steps}")
-        validate.integer(self.min_presses, f"{what}.min_presses", lo=0, hi=self.max_presses,
-                         fix=f"it must lie in [0, max_presses={self.max_presses}]")
-        check_weights(self, ("press_cost",), what)
-        if self.press_depth <= self.press_min_depth:
-            raise ConfigError(f"press_depth={self.press_depth} m must exceed press_min_depth={self.press_min_depth} m "
-                              "(shallower presses give no stiffness sample)")
-
-
-def raster_order(cells: int) -> np.ndarray:
-    """Row-major cell indices in boustrophedon order (row 0 left to right, row 1 right to left, ...)."""
-    rows = [list(range(r * cells, (r + 1) * cells)) for r in range(cells)]
-    return np.array([i for r, row in enumerate(rows) for i in (row if r % 2 == 0 else row[::-1])], dtype=int)
-
-
-def cell_centre(index: int, cells: int, half_width: float) -> np.ndarray:
-    """(x, y) m of the centre of row-major map cell ``index`` (inverse of ``map_cell``)."""
-    w = 2 * half_width / cells
-    return np.array([-half_width + (index % cells + 0.5) * w, -half_width + (index // cells + 0.5) * w])
+from surgsim_envs.envs.palpation.env import PalpationEnv
+from surgsim_envs.envs.palpation.terms import indentation_depth, stiffness_map
+from surgsim_envs.envs.palpation_press.config import PalpationPressConfig
+from surgsim_envs.envs.palpation_press.terms import REWARD_TERMS, TERMINATION_TERMS, cell_centre, raster_order
+from surgsim_envs.envs.terms import ObsTerm
+from surgsim_envs.envs.terms.action import ActionTerm
 
 
 class PalpationPressEnv(PalpationEnv):
@@ -112,6 +49,9 @@ class PalpationPressEnv(PalpationEnv):
 
     config_cls = PalpationPressConfig
     TASK_ID = "SurgSim/PalpationPress-v0"
+    ACTION = ActionTerm("probe", 3, "[x, y, report]: the press site over the map (x, y) and report")
+    REWARD_TERMS = REWARD_TERMS
+    TERMINATION_TERMS = TERMINATION_TERMS
 
     def _build(self) -> None:
         super()._build()
@@ -195,45 +135,23 @@ class PalpationPressEnv(PalpationEnv):
                          float(np.mean(self.cell_k == 0.0)), self.contrast_seen,
                          min(1.0, self.steps / c.max_presses)], dtype=np.float32)
 
-    # -- reward ---------------------------------------------------------------------------------
-    def _evaluate(self, a: np.ndarray):
-        c = self.config
-        rt = {"damage": 0.0, "coverage": 0.0, "shaping": 0.0, "press_cost": 0.0, "localisation": 0.0}
-        terms: dict[str, Any] = {}
+    # -- step state (the terms in .terms read it) -----------------------------------------------
+    def _update(self, a: np.ndarray) -> dict[str, Any]:
+        """The press's stiffness sample (site, map cell, estimate, potential); nothing on a report."""
+        self.new_cell = self.finished_now = False
+        self.phi_before = self.phi
         if self.reported:
-            r, t = self._finish(self.sim.tool_position("probe"))
-            rt["localisation"] += r
-            terms.update(t)
-            reward, terms["reward_terms"] = reward_from_terms(rt)
-            return reward, True, terms
+            return {}
         x, y, fz, k = self.last
-        rt["press_cost"] = -c.press_cost
-        rt["damage"] = damage_penalty(np.array([0.0, 0.0, self.press_peak]), c.damage_force, c.damage_weight)
         if k > 0.0:
             xy = np.array([x, y])
             self.sites.append(xy)
             if k > self.best[2]:
                 self.best = (x, y, k)
-            self._record_sample(xy, k, rt)
-        terms.update({"press_force_z_N": fz, "stiffness_estimate_N_per_m": k,
-                      "estimate_xy_m": None if self.estimate is None else self.estimate.tolist()})
-        reward, terms["reward_terms"] = reward_from_terms(rt)
-        return reward, False, terms
+            self._record_sample(xy, k)
+        return {"press_force_z_N": fz, "stiffness_estimate_N_per_m": k,
+                "estimate_xy_m": None if self.estimate is None else self.estimate.tolist()}
 
-
-def press_expert(env) -> Any:
-    """Scripted policy: press the centre of every map cell in raster order (the observation's
-    ``next_unsampled_cell_xy``), report when all are sampled. Returns ``policy(obs) -> action``."""
-    u = env.unwrapped
-    hw = float(u.config.map_half_width)
-    names = u.observation_names
-    i_next, i_free = names.index("next_unsampled_cell_xy[0] [m]"), names.index("unsampled_fraction [1]")
-
-    def policy(obs):
-        obs = np.asarray(obs, dtype=float)
-        nxt, unsampled = obs[i_next:i_next + 2], obs[i_free]
-        if unsampled <= 0.0:
-            return np.array([0.0, 0.0, 1.0], dtype=np.float32)
-        return np.array([nxt[0] / hw, nxt[1] / hw, -1.0], dtype=np.float32)
-
-    return policy
+    def _on_terminate(self) -> dict[str, Any]:
+        """The report: the guess and its error (the localisation term pays it)."""
+        return self._finish(self.sim.tool_position("probe"))[1]

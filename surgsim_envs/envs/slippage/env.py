@@ -23,117 +23,24 @@ Actuation note: this task writes the jaw and pull actuator controls (``MjData.ct
 each physics step (it never calls ``set_jaw_opening``/``set_tool_target``, whose rate limiter
 would overwrite them).
 """
-
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
-from numba import njit
 from gymnasium import spaces
 
-from surgsim_envs import validate
-from surgsim_envs.envs.base import ObsTerm, check_positive, check_range, check_weights, reward_from_terms, sample
-from surgsim_envs.envs.grasp_scene import GraspSceneConfig, GraspSceneEnv
-from surgsim_envs.envs.grasp_common import contact_nodes
+from surgsim_envs.envs.checks import sample
+from surgsim_envs.envs.grasp.scene import GraspSceneEnv
+from surgsim_envs.envs.grasp.terms import contact_nodes
+from surgsim_envs.envs.slippage.config import SlippageConfig
+from surgsim_envs.envs.slippage.terms import (REWARD_TERMS, TERMINATION_TERMS, control_schedule, least_squeeze,
+                                             no_pull, pull_force)
+from surgsim_envs.envs.terms import ObsTerm
+from surgsim_envs.envs.terms.action import ActionTerm, jaw_closure
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.approach_snapshot import ApproachSnapshot
-
-
-#: s, the longest settle a reset runs (the default 0.4 s settles the grasp)
-MAX_SETTLE_SECONDS = 10.0
-
-
-@dataclass
-class SlippageConfig(GraspSceneConfig):
-    """Slippage-v0 settings (SI units): the shared grasp-scene fields (:class:`GraspSceneConfig`)
-    plus the pull and the task's own reward (no fields of Grasp-v0's reward)."""
-
-    episode_seconds: float = 3.0
-    dt: float = 4e-4                   # s; the squeezed, strain-stiffened tissue needs < 0.5 ms
-    mu: Sequence[float] = (0.3, 1.0)
-    young_scale: Sequence[float] = (0.8, 1.2)
-    closing_speed: float = 0.05
-    initial_closure: float = 0.7       # action value the jaws close to during the settle
-    settle_time: float = 0.4           # s
-    replay_approach: bool = True       # restore the settle's contact-free start from a snapshot (scene/approach_snapshot.py)
-    pull_rate: Sequence[float] = (0.03, 0.06)       # N/s
-    pull_amplitude: Sequence[float] = (0.0, 0.03)   # N
-    pull_frequency: Sequence[float] = (0.5, 2.0)   # Hz
-    max_pull: float = 3.0              # N, motor limit
-    pull_damping: float = 2.0          # N s/m on the wrist's along-axis joint
-    slip_weight: float = 1.0           # per mm of slip
-    squeeze_weight: float = 0.05       # per N of excess squeeze per step
-    drop_penalty: float = 5.0
-    hold_reward: float = 0.3           # per control step while the grasp holds (dropping early never pays)
-    max_slip: float = 0.015            # m, loss of grasp
-    slip_tolerance: float = 0.008      # m, success
-
-    def validate(self) -> None:
-        super().validate()
-        for key in ("max_pull", "pull_damping", "max_slip", "slip_tolerance"):
-            check_positive(getattr(self, key), f"SlippageConfig.{key}")
-        validate.duration(self.settle_time, "SlippageConfig.settle_time", hi=MAX_SETTLE_SECONDS,
-                          fix=f"the grasp settles in about 0.4 s; at most {MAX_SETTLE_SECONDS:g} s (each reset runs "
-                              "the whole settle)")
-        check_weights(self, ("slip_weight", "squeeze_weight", "drop_penalty", "hold_reward"), "SlippageConfig")
-        validate.boolean(self.replay_approach, "SlippageConfig.replay_approach")
-        validate.real(self.initial_closure, "SlippageConfig.initial_closure", lo=-1.0, hi=1.0,
-                      fix="an action value from fully open (-1) to closed (+1)")
-        check_range(self.pull_rate, "pull_rate", 0.0, 10.0)
-        check_range(self.pull_amplitude, "pull_amplitude", 0.0, 10.0)
-        check_range(self.pull_frequency, "pull_frequency", 0.0, 50.0)
-
-
-# ----------------------------------------------------------------------------------------------
-# term functions
-@njit(cache=True)
-def pull_force(t: float, rate: float, amplitude: float, frequency: float, phase: float) -> float:
-    """N, the pull at ``t`` s after the grasp: a ramp plus a sinusoid, never negative (compiled:
-    the control schedule :func:`_schedule` calls it per MuJoCo step)."""
-    return max(0.0, rate * t + amplitude * math.sin(2.0 * math.pi * frequency * t + phase))
-
-
-def least_squeeze(pull: float, mu: float) -> float:
-    """N, the smallest total normal force whose friction (mu * N) balances ``pull`` N."""
-    return abs(pull) / mu if mu > 0 else math.inf
-
-
-def excess_squeeze_penalty(normal_total: float, pull: float, mu: float, weight: float) -> float:
-    """-weight * (normal_total - least_squeeze)+ (N)."""
-    return -weight * max(0.0, normal_total - least_squeeze(pull, mu))
-
-
-def slip_penalty(slip_now: float, slip_before: float, weight_per_mm: float) -> float:
-    """-weight * increase of the slip distance in mm (no reward for slipping back)."""
-    return -weight_per_mm * max(0.0, slip_now - slip_before) * 1e3
-
-
-def _no_pull(t: float) -> float:
-    """The settle's pull: none (N)."""
-    return 0.0
-
-
-@njit(cache=True)
-def _schedule(values, jaw, jaw_goal, lim, t, dt, pulling, rate, amplitude, frequency, phase, t0, top):
-    """Fill ``values`` (K, 2) with the control schedule of :meth:`SlippageEnv._run`: column 0 the jaw
-    control moving from ``jaw`` towards ``jaw_goal`` by at most ``lim`` per MuJoCo step, column 1
-    (if ``pulling``) the pull ``min(top, pull_force(t - t0, rate, amplitude, frequency, phase))``, t
-    advancing by ``dt`` from ``t`` (as mj_step2 advances d.time). The same operations in the same
-    order as the Python loop it replaces (no fastmath), so the schedule is bit for bit the same."""
-    for k in range(values.shape[0]):
-        d = jaw_goal - jaw
-        if d < -lim:
-            d = -lim
-        if d > lim:
-            d = lim
-        jaw += d
-        values[k, 0] = jaw
-        if pulling:
-            values[k, 1] = min(top, pull_force(t - t0, rate, amplitude, frequency, phase))
-        t += dt
 
 
 class SlippageEnv(GraspSceneEnv):
@@ -142,6 +49,9 @@ class SlippageEnv(GraspSceneEnv):
     config_cls = SlippageConfig
     TASK_ID = "SurgSim/Slippage-v0"
     OPTIONS = ("organ", "mu", "young_scale", "pull_rate", "pull_amplitude", "pull_frequency")
+    ACTION = ActionTerm("grasper", 1, "[close]: jaw closure (the wrist is pulled by the task's motor)")
+    REWARD_TERMS = REWARD_TERMS
+    TERMINATION_TERMS = TERMINATION_TERMS
 
     def _build(self) -> None:
         self._approach = ApproachSnapshot()
@@ -175,14 +85,13 @@ class SlippageEnv(GraspSceneEnv):
 
     def _closure_ctrl(self, action_value: float) -> float:
         """Jaw actuator target (closing travel, m) of a closure action in [-1, 1]."""
-        g = self.gcfg
-        return (action_value + 1.0) / 2.0 * (g.open_radius - g.min_radius)
+        return jaw_closure(action_value, self.gcfg.open_radius, self.gcfg.min_radius)
 
     def _run(self, steps: int, jaw_goal: float, pull: callable) -> None:
         """``steps`` physics steps; before each, the jaw control moves towards ``jaw_goal`` by at most
         ``closing_speed * dt`` and the pull motor gets ``pull(t)`` (t the simulation time before the
         step; ``pull`` None: the episode's pull, :meth:`_pull_at`). Both schedules are computed ahead
-        (:func:`_schedule`) and run in one :meth:`Simulation.step_with_controls`."""
+        (:func:`control_schedule`) and run in one :meth:`Simulation.step_with_controls`."""
         sim = self.sim
         n = sim.tissue_subcycles          # controls change once per MuJoCo step of n physics steps
         dt = sim.dt * n
@@ -192,12 +101,12 @@ class SlippageEnv(GraspSceneEnv):
         jaw = float(sim.data.ctrl[self._jaw_act])
         t = float(sim.data.time)
         if pull is None:            # the episode's pull: schedule and pull in one compiled call
-            _schedule(values, jaw, jaw_goal, lim, t, dt, True, self.rate, self.amplitude, self.frequency, self.phase,
+            control_schedule(values, jaw, jaw_goal, lim, t, dt, True, self.rate, self.amplitude, self.frequency, self.phase,
                       self.t0, float(self.config.max_pull))
             if steps:
                 self.pull = float(values[-1, 1])
         else:
-            _schedule(values, jaw, jaw_goal, lim, t, dt, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            control_schedule(values, jaw, jaw_goal, lim, t, dt, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
             t_k = t
             for k in range(steps):
                 values[k, 1] = pull(t_k)
@@ -227,7 +136,7 @@ class SlippageEnv(GraspSceneEnv):
         With ``replay_approach`` the contact-free first part (the jaws travelling through air) is
         restored from a snapshot (:mod:`surgsim_envs.scene.approach_snapshot`), not simulated."""
         def run(n: int) -> None:
-            self._run(n, goal, _no_pull)
+            self._run(n, goal, no_pull)
 
         done = self._approach.skip(self.sim, ("settle", goal, steps), run, steps) if self.config.replay_approach else 0
         run(steps - done)
@@ -243,45 +152,27 @@ class SlippageEnv(GraspSceneEnv):
         self._run(self.substeps, self.jaw_goal, None)       # None: the episode's pull (compiled schedule)
 
     def _observe(self) -> np.ndarray:
-        pos, fn, ft, rep = self._readings()
+        pos, fn, ft, rep = self.readings()
         disp = float((pos - self.pos0) @ self.pull_dir)
         return np.array([self.sim.jaw_opening(self.tool_name), *fn, *ft, rep["slipping"], rep["contacts"],
                          self.pull, disp, self.slip_distance], dtype=np.float32)
 
-    def _evaluate(self, a: np.ndarray):
+    def _update(self, a: np.ndarray) -> dict[str, Any]:
+        """The slip since the last step, the jaws' total normal force and whether the grasp is lost
+        (no contact node, or slip beyond ``max_slip``)."""
         c = self.config
-        pos, fn, ft, rep = self._readings()
-        before = self.slip_distance
+        pos, fn, ft, rep = self.readings()
+        self.slip_before = self.slip_distance
         self.slip_distance = self.slip.distance(pos, self.sim.tissue().positions)
-        total = float(np.sum(fn))
+        self.normal_total = total = float(np.sum(fn))
         self.peak_force = max(self.peak_force, total)
-        rt = {"slip": slip_penalty(self.slip_distance, before, c.slip_weight),
-              "excess_squeeze": excess_squeeze_penalty(total, self.pull, self.mu, c.squeeze_weight),
-              "hold": 0.0, "drop": 0.0}
-        lost = rep["contacts"] == 0 or self.slip_distance > c.max_slip
+        self.lost = rep["contacts"] == 0 or self.slip_distance > c.max_slip
         terms: dict[str, Any] = {"pull_force_N": self.pull, "normal_force_N": total,
                                  "least_squeeze_N": least_squeeze(self.pull, self.mu)}
-        if lost:
-            rt["drop"] = -c.drop_penalty
+        if self.lost:
             terms["dropped"] = True
-        else:
-            rt["hold"] = c.hold_reward
-        reward, terms["reward_terms"] = reward_from_terms(rt)
-        return reward, bool(lost), terms
+        return terms
 
     def _on_truncate(self):
         ok = self.slip_distance <= self.config.slip_tolerance
         return 0.0, {"success": ok, "is_success": ok}
-
-
-def slippage_expert(env, base: float = 0.7, gain: float = 2.0, slip_gain: float = 0.1):
-    """Scripted policy: close in proportion to the pull force and tighten further while nodes slip."""
-    state = {"extra": 0.0}
-
-    def policy(obs):
-        slipping, pull = obs[7], obs[9]
-        if slipping > 0:
-            state["extra"] = min(1.0, state["extra"] + slip_gain)
-        return np.array([np.clip(base + gain * pull + state["extra"], -1.0, 1.0)], dtype=np.float32)
-
-    return policy

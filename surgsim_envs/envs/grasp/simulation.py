@@ -1,4 +1,4 @@
-"""Shared pieces of the grasp tasks: the coarse grasp scene and grasp-state terms.
+"""The coarse grasp scene of the grasp tasks (Grasp-v0, Slippage-v0).
 
 The scene is :func:`surgsim_envs.scene.grasp_config` with a coarse lattice (spleen 11 mm: 232
 nodes; liver lobe 15 mm: 296 nodes), the explicit (symplectic) integrator when it is stable over
@@ -7,8 +7,6 @@ step), else the model's "auto", built once per organ and cached by the env.
 """
 
 from __future__ import annotations
-
-import numpy as np
 
 from surgsim_envs.errors import ConfigError
 
@@ -58,10 +56,10 @@ def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: 
     ``step_budget_us`` (us per simulated ms); see :class:`surgsim_envs.scene.TissueConfig`).
     integrator: asked for (if the model has it); an explicit one that is not stable at ``dt`` over
     the whole stiffness randomisation (Young's modulus up to ``max_young_scale``) is replaced by
-    the model's "auto" (:func:`surgsim_envs.envs.base.integrator_for_range`).
+    the model's "auto" (:func:`surgsim_envs.envs.tissue_setup.integrator_for_range`).
     tissue_subcycles: tissue + contact steps of ``dt`` per MuJoCo step (see :class:`Simulation`).
     """
-    from surgsim_envs.envs.base import integrator_for_range, tissue_options
+    from surgsim_envs.envs.tissue_setup import integrator_for_range, tissue_options
     from surgsim_envs.scene import Simulation, grasp_config, grasp_scene
 
     check_grasp_organ(organ)
@@ -78,92 +76,3 @@ def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: 
         return sim
     t.options = {**t.options, "integrator": switch}
     return Simulation(grasp_scene(cfg), dt=dt, substeps=substeps, tissue_subcycles=tissue_subcycles)
-
-
-def _values(x) -> list:
-    """The entries of a small array-like as a flat list of Python numbers (per-step terms work on
-    three jaws: plain Python is several times faster than numpy calls on such tiny arrays)."""
-    if type(x) is list:
-        return x
-    return x.tolist() if type(x) is np.ndarray and x.ndim == 1 else np.asarray(x).ravel().tolist()
-
-
-def jaws_in_contact(normal: np.ndarray, threshold: float) -> int:
-    """Number of jaws whose normal force (N) exceeds ``threshold`` N."""
-    return sum(1 for f in _values(normal) if f > threshold)
-
-
-def is_grasped(normal: np.ndarray, threshold: float, min_jaws: int = 2) -> bool:
-    """A grasp holds when at least ``min_jaws`` jaws press with more than ``threshold`` N."""
-    return jaws_in_contact(normal, threshold) >= min_jaws
-
-
-def contact_reward(normal: np.ndarray, threshold: float, weight: float) -> float:
-    """weight * fraction of the three jaws pressing with more than ``threshold`` N (dense shaping:
-    closing on the tissue pays before the grasp is complete)."""
-    values = _values(normal)
-    return weight * jaws_in_contact(values, threshold) / max(len(values), 1)
-
-
-def record_progress(best: float, dist: float) -> tuple[float, float]:
-    """``(gain, new best)``: how far (m) ``dist`` beats the best (smallest) distance so far, never
-    negative. Summed over an episode the gains are at most the initial distance minus the final
-    best, whatever the path (no reward for backing off and approaching again)."""
-    gain = max(0.0, float(best) - float(dist))
-    return gain, min(float(best), float(dist))
-
-
-def excess_force_penalty(normal: np.ndarray, threshold: float, weight: float) -> float:
-    """-weight * sum over jaws of the normal force above the damage threshold (N)."""
-    total = 0.0
-    for f in _values(normal):
-        d = f - threshold
-        if d > 0.0:
-            total += d
-    return -weight * total
-
-
-def slip_fraction(slipping: int, contacts: int) -> float:
-    """Fraction of contact nodes sliding (0 without contact)."""
-    return float(slipping) / contacts if contacts > 0 else 0.0
-
-
-class SlipTracker:
-    """Relative displacement (m) between a grasper and the tissue nodes it grasped.
-
-    ``start(tool_pos, node_positions, nodes)`` remembers the grasped nodes; ``distance`` is then
-    ``|(tool - tool0) - (centroid - centroid0)|`` — how far the tissue slid along the jaws.
-    """
-
-    def __init__(self):
-        self.nodes = None
-        self.tool0 = None
-        self.centroid0 = None
-
-    @property
-    def active(self) -> bool:
-        return self.nodes is not None
-
-    def start(self, tool_pos: np.ndarray, positions: np.ndarray, nodes: np.ndarray) -> None:
-        nodes = np.asarray(nodes, dtype=np.int64)
-        if len(nodes) == 0:
-            raise ConfigError("SlipTracker.start needs at least one grasped node")
-        self.nodes = nodes
-        self.tool0 = np.asarray(tool_pos, dtype=float).copy()
-        self.centroid0 = positions[nodes].mean(axis=0)
-
-    def reset(self) -> None:
-        self.nodes = self.tool0 = self.centroid0 = None
-
-    def distance(self, tool_pos: np.ndarray, positions: np.ndarray) -> float:
-        if self.nodes is None:
-            return 0.0
-        rel = (np.asarray(tool_pos) - self.tool0) - (positions[self.nodes].mean(axis=0) - self.centroid0)
-        return float(np.linalg.norm(rel))
-
-
-def contact_nodes(sim, tissue_name: str | None = None) -> np.ndarray:
-    """Indices of tissue nodes that felt a contact force in the last physics step."""
-    name = tissue_name or next(iter(sim.contacts))
-    f = sim.contacts[name].result.forces
-    return np.flatnonzero(np.einsum("ij,ij->i", f, f) > 0.0)
