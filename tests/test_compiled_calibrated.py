@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import surgsim_envs  # noqa: F401  (registers the tasks)
-from surgsim_envs.scene.compiled_substeps import registered
+from surgsim_envs.scene.step.compiled import registered
 from surgsim_envs.scene.substeps_calibrated import subcycles_for
 from surgsim_envs.tissue.base import DT_SAFETY
 
@@ -162,7 +162,7 @@ def test_calibrated_table_is_keyed_and_follows_replaced_arrays():
     """The calibrated loop's address table is keyed (``substeps_calibrated.key`` with the array version),
     so it is not rebuilt between control steps that replace nothing, and a replaced positions array
     (a new non-scalar attribute) is repacked and stepped, not the freed old one."""
-    from surgsim_envs.scene.substeps_loop import SLOT_REST
+    from surgsim_envs.scene.step.loop import SLOT_REST
 
     env = gym.make("SurgSim/Palpation-v0", model="mass_spring_calibrated")
     try:

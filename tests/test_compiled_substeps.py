@@ -1,4 +1,4 @@
-"""The compiled substeps (scene/compiled_substeps.py, one numba call per control step) give exactly what the generic
+"""The compiled substeps (scene/step/compiled.py, one numba call per control step) give exactly what the generic
 per-substep loop gives: the same tissue state, contact forces, tool wrenches and MuJoCo state after
 many substeps, bit for bit; and the same errors with the same messages when the guard or the input
 check fails. Models, integrators or guards without a registered loop keep the generic loop."""
@@ -11,7 +11,7 @@ import pytest
 
 import surgsim_envs  # noqa: F401  (registers the tasks)
 from surgsim_envs.errors import ConfigError, NonFiniteInputError, TissueUnstableError
-from surgsim_envs.scene.compiled_substeps import key_of, registered
+from surgsim_envs.scene.step.compiled import key_of, registered
 from surgsim_envs.tissue.guard import StabilityGuard
 from surgsim_envs.tissue.mass_spring import MassSpringModel
 

@@ -14,7 +14,7 @@ from surgsim_envs.contact.report import ContactReport
 from surgsim_envs.contact.shapes import BOX, CAPSULE, CYLINDER, SPHERE, bounding_radius, local_outside
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.simulation import _report_rows
-from surgsim_envs.scene.substeps_loop import SLOT_REST
+from surgsim_envs.scene.step.loop import SLOT_REST
 from surgsim_envs.tissue.guard import all_finite, first_non_finite, max_speed_squared, speed_within
 
 

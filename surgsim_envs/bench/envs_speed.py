@@ -37,7 +37,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--compiled-vs-generic", action="store_true",
                         help="also time, alternately in this process, env steps and physics substeps with the "
-                             "compiled substeps (scene/compiled_substeps.py) and with the generic per-substep loop")
+                             "compiled substeps (scene/step/compiled.py) and with the generic per-substep loop")
     parser.add_argument("--async-baseline", action="store_true",
                         help="also time gym's AsyncVectorEnv with a trivial env and with envs that spin for this "
                              "task's measured env-step time (the pipe round-trip against ours), the same with the "
@@ -175,7 +175,7 @@ def _checked_physics_step(sim) -> None:
     """One physics step through the checked public calls (the loop before the prepared and compiled paths)."""
     import mujoco
 
-    from surgsim_envs.scene.simulation import _rate_limit, _write_rows, _zero_rows
+    from surgsim_envs.scene.step.kernels import rate_limit as _rate_limit, write_rows as _write_rows, zero_rows as _zero_rows
 
     m, d, dt = sim.model, sim.data, sim.dt
     if sim._moving:

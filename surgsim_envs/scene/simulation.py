@@ -16,7 +16,7 @@ and total linear momentum is conserved when nothing else acts (tests/test_moment
 No MuJoCo callbacks are used (never ``set_mjcb_passive``); tissue nodes are not MuJoCo dofs.
 
 When a compiled loop is registered for the scene's (contact model, tissue model, integrator)
-(:mod:`surgsim_envs.scene.compiled_substeps`; built in: ContactModel + MassSpringModel
+(:mod:`surgsim_envs.scene.step.compiled`; built in: ContactModel + MassSpringModel
 "symplectic" (the tasks' default) and "auto", and ContactModel + CalibratedMassSpringModel "symplectic", "auto"
 and "subcycled"), all substeps of a step run in one numba call, MuJoCo's C
 ``mj_step1``/``mj_step2`` included, in exactly this order and bit-for-bit the same result; every
@@ -30,86 +30,18 @@ import math
 
 import mujoco
 import numpy as np
-from numba import njit
 
 from surgsim_envs.contact import BOX, CAPSULE, CYLINDER, SPHERE, ContactModel, ContactParams
 from surgsim_envs.scene.contact_options import contact_params_for, static_friction_ratio
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.builder import Scene
-from surgsim_envs.scene.compiled_substeps import key_of
+from surgsim_envs.scene.step.compiled import compiled_substeps_for, key_of
+from surgsim_envs.scene.step.kernels import add_wrench, advance_geoms, gather_geoms, rate_limit, write_rows, zero_rows
 from surgsim_envs.scene.config import validate_step
 
 _KIND = {int(mujoco.mjtGeom.mjGEOM_SPHERE): SPHERE, int(mujoco.mjtGeom.mjGEOM_CAPSULE): CAPSULE,
          int(mujoco.mjtGeom.mjGEOM_BOX): BOX, int(mujoco.mjtGeom.mjGEOM_CYLINDER): CYLINDER}
 _EQ = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
-
-
-@njit(cache=True)
-def _gather_geoms(geom_ids, geom_body, body_root, bodies, geom_xpos, geom_xmat, cvel, subtree_com, xipos,
-                  out_pos, out_mat, out_vel, out_com):
-    """Copy the tool geoms' world poses and the velocity [w, v] of each geom origin (world frame)."""
-    for k in range(geom_ids.shape[0]):
-        g = geom_ids[k]
-        b = geom_body[k]
-        r = body_root[k]
-        for j in range(3):
-            out_pos[k, j] = geom_xpos[g, j]
-        for j in range(9):
-            out_mat[k, j] = geom_xmat[g, j]
-        wx, wy, wz = cvel[b, 0], cvel[b, 1], cvel[b, 2]
-        dx = geom_xpos[g, 0] - subtree_com[r, 0]
-        dy = geom_xpos[g, 1] - subtree_com[r, 1]
-        dz = geom_xpos[g, 2] - subtree_com[r, 2]
-        out_vel[k, 0] = wx
-        out_vel[k, 1] = wy
-        out_vel[k, 2] = wz
-        out_vel[k, 3] = cvel[b, 3] + wy * dz - wz * dy
-        out_vel[k, 4] = cvel[b, 4] + wz * dx - wx * dz
-        out_vel[k, 5] = cvel[b, 5] + wx * dy - wy * dx
-    for t in range(bodies.shape[0]):
-        for j in range(3):
-            out_com[t, j] = xipos[bodies[t], j]
-
-
-@njit(cache=True)
-def _rate_limit(ctrl, goal, rate, dt):
-    """Move ``ctrl`` towards ``goal`` by at most ``rate * dt`` per entry; True while any entry still moves."""
-    moving = False
-    for i in range(ctrl.shape[0]):
-        delta = goal[i] - ctrl[i]
-        lim = rate[i] * dt
-        if delta > lim:
-            delta = lim
-        elif delta < -lim:
-            delta = -lim
-        ctrl[i] += delta
-        if abs(goal[i] - ctrl[i]) > 1e-12:
-            moving = True
-    return moving
-
-
-@njit(cache=True)
-def _write_rows(xfrc, bodies, wrench):
-    for k in range(bodies.shape[0]):
-        for j in range(6):
-            xfrc[bodies[k], j] = wrench[k, j]
-
-
-@njit(cache=True)
-def _add_wrench(wrench, force, torque):
-    """``wrench[:, :3] += force; wrench[:, 3:] += torque`` for (T,6), (T,3), (T,3)."""
-    for k in range(wrench.shape[0]):
-        for j in range(3):
-            wrench[k, j] += force[k, j]
-            wrench[k, 3 + j] += torque[k, j]
-
-
-@njit(cache=True)
-def _advance_geoms(gpos, gpos0, gvel, s):
-    """``gpos = gpos0 + s * (linear velocity of each geom origin)`` (s in seconds)."""
-    for k in range(gpos.shape[0]):
-        for j in range(3):
-            gpos[k, j] = gpos0[k, j] + s * gvel[k, 3 + j]
 
 
 def _seq_sum(values: list, rows: list):
@@ -133,13 +65,6 @@ def _report_rows(r, rows: list) -> dict:
             "penetration": max(0.0, top)}
 
 
-@njit(cache=True)
-def _zero_rows(xfrc, bodies):
-    for k in range(bodies.shape[0]):
-        for j in range(6):
-            xfrc[bodies[k], j] = 0.0
-
-
 class Simulation:
     """Owns the MjModel/MjData, the tissue models and one ContactModel per tissue.
 
@@ -148,7 +73,7 @@ class Simulation:
         :data:`~surgsim_envs.scene.config.DT_RANGE`; substeps: physics steps per :meth:`step`.
     seed: seeds :attr:`rng` (the physics itself is deterministic).
     compiled_substeps: run the substeps of a step in one compiled call when a loop is registered
-        for the scene's (contact, tissue, integrator) (:mod:`surgsim_envs.scene.compiled_substeps`;
+        for the scene's (contact, tissue, integrator) (:mod:`surgsim_envs.scene.step.compiled`;
         same physics bit for bit); False, or no registered loop: the generic loop. The attribute
         :attr:`compiled_substeps` may be switched at any time.
     tissue_subcycles: n >= 1. With n > 1 MuJoCo steps the tools with ``n * dt`` while tissue and
@@ -188,7 +113,7 @@ class Simulation:
         self.seed = int(cfg.seed if seed is None else seed)
         self.rng = np.random.default_rng(self.seed)
         self._setup_contact_arrays()
-        v = self._views   # the arguments of _gather_geoms, bound once (views and buffers never change)
+        v = self._views   # the arguments of gather_geoms, bound once (views and buffers never change)
         self._gather_args = (self._geom_ids, self._geom_body, self._geom_root, self._bodies, v["geom_xpos"],
                              v["geom_xmat"], v["cvel"], v["subtree_com"], v["xipos"], self._gpos, self._gmat,
                              self._gvel, self._tcom)
@@ -348,7 +273,7 @@ class Simulation:
         self._physics_steps(int(round(duration / (self.dt * n))) * n)
 
     def _gather(self) -> None:
-        _gather_geoms(*self._gather_args)
+        gather_geoms(*self._gather_args)
 
     def physics_step(self, n: int = 1) -> None:
         """``n`` physics steps (default one) in the documented order (module docstring), in one
@@ -381,8 +306,6 @@ class Simulation:
         key = key_of(self)
         if key != self._runner_key:
             self._runner_key = key
-            from surgsim_envs.scene.compiled_substeps import compiled_substeps_for
-
             self._runner = compiled_substeps_for(self) if key is not None else None
         return self._runner
 
@@ -426,7 +349,7 @@ class Simulation:
             if ctrl_ids is not None:
                 ctrl[ctrl_ids] = ctrl_values[k]
             if self._moving:
-                self._moving = _rate_limit(ctrl, self._goal, self._rate, big)
+                self._moving = rate_limit(ctrl, self._goal, self._rate, big)
             mujoco.mj_step1(m, d)
             if not self._has_tools:
                 for tissue in self.tissues.values():
@@ -435,21 +358,21 @@ class Simulation:
                 mujoco.mj_step2(m, d)
                 self.steps += n
                 continue
-            _gather_geoms(*self._gather_args)
+            gather_geoms(*self._gather_args)
             np.copyto(gpos0, gpos)
             w[:] = 0.0
             for j in range(n):
                 if j:
-                    _advance_geoms(gpos, gpos0, gvel, j * h)
+                    advance_geoms(gpos, gpos0, gvel, j * h)
                 for tissue, contact in pairs:
                     res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
                     tissue.step_prevalidated(h, res.forces, res.stiffness)
                     contact.attribute_increment_prepared(tissue.integrated_external_forces)
-                    _add_wrench(w, res.tool_force, res.tool_torque)
+                    add_wrench(w, res.tool_force, res.tool_torque)
             w /= n
-            _write_rows(xfrc, bodies, w)
+            write_rows(xfrc, bodies, w)
             mujoco.mj_step2(m, d)
-            _zero_rows(xfrc, bodies)
+            zero_rows(xfrc, bodies)
             self.steps += n
 
     def _generic_steps(self, count: int) -> None:
@@ -468,7 +391,7 @@ class Simulation:
             tissues = list(self.tissues.values())
             for _ in range(count):
                 if self._moving:
-                    self._moving = _rate_limit(ctrl, goal, rate, dt)
+                    self._moving = rate_limit(ctrl, goal, rate, dt)
                 step1(m, d)
                 for tissue in tissues:
                     tissue.step(dt)
@@ -480,9 +403,9 @@ class Simulation:
         bodies, w, pairs = self._bodies, self._wrench, self._pairs
         for _ in range(count):
             if self._moving:
-                self._moving = _rate_limit(ctrl, goal, rate, dt)
+                self._moving = rate_limit(ctrl, goal, rate, dt)
             step1(m, d)
-            _gather_geoms(*gather_args)
+            gather_geoms(*gather_args)
             w[:] = 0.0
             for tissue, contact in pairs:
                 res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
@@ -491,14 +414,14 @@ class Simulation:
                 # the contact stiffness; the tools must get the reaction of exactly
                 # tissue.integrated_external_forces or momentum leaks (11-14 % measured).
                 contact.attribute_increment_prepared(tissue.integrated_external_forces)
-                _add_wrench(w, res.tool_force, res.tool_torque)
-            _write_rows(xfrc, bodies, w)
+                add_wrench(w, res.tool_force, res.tool_torque)
+            write_rows(xfrc, bodies, w)
             step2(m, d)
-            _zero_rows(xfrc, bodies)
+            zero_rows(xfrc, bodies)
             self.steps += 1
 
     def _advance_controls(self) -> None:
-        self._moving = _rate_limit(self._views["ctrl"], self._goal, self._rate, self.dt)
+        self._moving = rate_limit(self._views["ctrl"], self._goal, self._rate, self.dt)
 
     # ------------------------------------------------------------------------------------------
     # tool commands

@@ -1,6 +1,6 @@
 """Compiled substeps for :class:`CalibratedMassSpringModel` (``mass_spring_calibrated``) against
 :class:`ContactModel`, integrators "symplectic", "auto" and "subcycled": the mass-spring loop
-(:mod:`surgsim_envs.scene.substeps_loop`) with the model's own step and energy, which carry its
+(:mod:`surgsim_envs.scene.step.loop`) with the model's own step and energy, which carry its
 averaged-nodal-volume term instead of the per-tet one, and its sub-cycling.
 
 Step, as ``CalibratedMassSpringModel._advance`` with the choice of ``_pick``:
@@ -33,8 +33,8 @@ from numba import cfunc, njit
 from surgsim_envs.contact.model import ContactModel
 from surgsim_envs.scene import substeps_mass_spring as ms
 from surgsim_envs.scene.array_table import f8_1, f8_2, f8_3, i8_2
-from surgsim_envs.scene.compiled_substeps import NO_IDS, NO_VALUES, register_compiled_substeps
-from surgsim_envs.scene.substeps_loop import (COMMON_SLOTS, SubstepsRunner, TissueOps, energy_signature,
+from surgsim_envs.scene.step.compiled import NO_IDS, NO_VALUES, register_compiled_substeps
+from surgsim_envs.scene.step.loop import (COMMON_SLOTS, SubstepsRunner, TissueOps, energy_signature,
                                               step_arrays, step_signature, table_at)
 from surgsim_envs.tissue import nodal_volume_kernels as nvk
 from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS, DT_SAFETY, _max_ratio

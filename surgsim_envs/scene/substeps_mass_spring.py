@@ -1,7 +1,7 @@
 """Compiled substeps for the tasks' default pairing: :class:`ContactModel` against
 :class:`MassSpringModel`, integrators "symplectic" and "auto" (the loop is
-:func:`surgsim_envs.scene.substeps_loop.run_substeps`; this module supplies the model's table
-section, step and energy, and registers them in :mod:`surgsim_envs.scene.compiled_substeps`).
+:func:`surgsim_envs.scene.step.loop.run_substeps`; this module supplies the model's table
+section, step and energy, and registers them in :mod:`surgsim_envs.scene.step.compiled`).
 
 The step is ``MassSpringModel._advance``: symplectic (``symplectic_step_work`` with the spring
 pass's work buffer ``MassSpringModel.spring_work``) or, when "auto" picks it, the linearly implicit
@@ -19,8 +19,8 @@ from numba import cfunc, njit
 
 from surgsim_envs.contact.model import ContactModel
 from surgsim_envs.scene.array_table import b1_1, f8_1, f8_2, f8_3, i8_1, i8_2
-from surgsim_envs.scene.compiled_substeps import register_compiled_substeps
-from surgsim_envs.scene.substeps_loop import (COMMON_SLOTS, SubstepsRunner, TissueOps, energy_signature,
+from surgsim_envs.scene.step.compiled import register_compiled_substeps
+from surgsim_envs.scene.step.loop import (COMMON_SLOTS, SubstepsRunner, TissueOps, energy_signature,
                                               step_arrays, step_signature, table_at)
 from surgsim_envs.tissue.mass_spring import CG_MAX_ITER, MassSpringModel
 from surgsim_envs.tissue.msd_kernels import elastic_energy, implicit_step, symplectic_step_work, volume_energy

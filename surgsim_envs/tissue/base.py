@@ -108,7 +108,7 @@ class TissueModel(abc.ABC):
 
     #: bumped whenever an attribute is set to anything but a scalar (an array, list, dict, object):
     #: a compiled caller that keeps raw pointers to the model's arrays repacks them when it changes
-    #: (:class:`surgsim_envs.scene.substeps_loop.SubstepsRunner`); in-place writes keep it
+    #: (:class:`surgsim_envs.scene.step.loop.SubstepsRunner`); in-place writes keep it
     _array_version: int = 0
 
     def __setattr__(self, name: str, value) -> None:

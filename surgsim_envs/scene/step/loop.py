@@ -5,7 +5,7 @@ with the same kernels (so the result is bit-for-bit the generic loop's, tests/te
 
 1. scheduled controls (``ctrl_ids``/``ctrl_values``, e.g. Slippage's jaw and pull), then the rate
    limiter while a tool target moves;
-2. ``mj_step1``; the tool geoms' poses and velocities (``_gather_geoms``);
+2. ``mj_step1``; the tool geoms' poses and velocities (``gather_geoms``);
 3. contact (``contact_kernel_prepared``: ``ContactModel.compute_prepared``'s kernel);
 4. tissue: refuse non-finite contact input (hand back, Python raises ``NonFiniteInputError``), the
    model's step (a C function pointer, below), fixed nodes, time and step count, the guard's cheap checks
@@ -52,17 +52,16 @@ from surgsim_envs.scene.array_table import ArrayTable, _pointer, b1_1, f8_1, f8_
 import math
 
 from surgsim_envs.contact.model import _attribute_increment
-from surgsim_envs.scene.compiled_substeps import (AUTO_RECHECK, CONTACT_ERROR, DONE, GUARD_FAILED, NO_IDS, NO_VALUES,
-                                                  NON_FINITE_INPUT)
-from surgsim_envs.scene.mujoco_native import call_model_data, model_data_addresses
-from surgsim_envs.scene.simulation import (_add_wrench, _advance_geoms, _gather_geoms, _rate_limit, _write_rows,
-                                           _zero_rows)
+from surgsim_envs.scene.step.compiled import (AUTO_RECHECK, CONTACT_ERROR, DONE, GUARD_FAILED, NO_IDS, NO_VALUES,
+                                              NON_FINITE_INPUT)
+from surgsim_envs.scene.step.kernels import add_wrench, advance_geoms, gather_geoms, rate_limit, write_rows, zero_rows
+from surgsim_envs.scene.step.mujoco_native import call_model_data, model_data_addresses
 from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS, DT_SAFETY, _max_ratio
 from surgsim_envs.tissue.guard import all_finite, speed_within
 
 # ---------------------------------------------------------------------------------------------
 # address table layout (rows); the model's own section starts at COMMON_SLOTS
-SLOT_GATHER = 0            # 13: the arguments of _gather_geoms
+SLOT_GATHER = 0            # 13: the arguments of gather_geoms
 GATHER_KINDS = ["i8_1"] * 4 + ["f8_2"] * 9
 SLOT_CONTACT = 13          # 34: ContactModel.kernel_state() arrays (scalars in the last one)
 CONTACT_KINDS = ["i8_1", "i8_2", "f8_2", "i8_1", "i8_1", "i8_1", "f8_2", "f8_1", "f8_3", "u1_2", "f8_2", "f8_1",
@@ -228,9 +227,9 @@ def run_substeps(tab, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k, j, c
             for q in range(ctrl_ids.shape[0]):
                 ctrl[ctrl_ids[q]] = ctrl_values[k, q]
             if moving[0]:
-                moving[0] = _rate_limit(ctrl, goal, rate, big_dt)
+                moving[0] = rate_limit(ctrl, goal, rate, big_dt)
             call_model_data(step1, m_ptr, d_ptr)
-            _gather_geoms(*gather)
+            gather_geoms(*gather)
             for g in range(gpos.shape[0]):
                 for q in range(3):
                     gpos0[g, q] = gpos[g, q]
@@ -242,7 +241,7 @@ def run_substeps(tab, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k, j, c
                 if j > 0 and resume == 0 and auto_on and _recheck_due(auto, dt, counts[0]):
                     return AUTO_RECHECK, k, j
                 if j > 0:
-                    _advance_geoms(gpos, gpos0, gvel, j * dt)
+                    advance_geoms(gpos, gpos0, gvel, j * dt)
                 if contact_kernel_prepared(pos, vel, gpos, gmat, gvel, tcom, contact) != 0:
                     return CONTACT_ERROR, k, j
                 if not (all_finite(forces) and all_finite(stiffness)):
@@ -273,15 +272,15 @@ def run_substeps(tab, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k, j, c
                     _keep_good_state(ke + _call_energy(energy_fn, address, rows), pos, vel, energy, good_pos,
                                      good_vel, clock, snap)
             resume = 0
-            _add_wrench(wrench, tool_force, tool_torque)
+            add_wrench(wrench, tool_force, tool_torque)
             j += 1
         if n > 1:
             for t in range(wrench.shape[0]):
                 for q in range(6):
                     wrench[t, q] /= n
-        _write_rows(xfrc, bodies, wrench)
+        write_rows(xfrc, bodies, wrench)
         call_model_data(step2, m_ptr, d_ptr)
-        _zero_rows(xfrc, bodies)
+        zero_rows(xfrc, bodies)
         counts[1] += n
         k += 1
         j = 0

@@ -15,7 +15,7 @@ classes: a subclass, another integrator, another guard class, several tissues, o
 without tools keep the generic loop. The physics is the same operations in the same order, so
 results are bit-for-bit those of the generic loop (tests/test_compiled_substeps.py). Built in:
 ``MassSpringModel`` and ``CalibratedMassSpringModel`` with "symplectic" and "auto"
-(:mod:`surgsim_envs.scene.substeps_loop`: one loop, the model step through a function pointer).
+(:mod:`surgsim_envs.scene.step.loop`: one loop, the model step through a function pointer).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def register_compiled_substeps(contact_cls: type, tissue_cls: type, integrator: 
     """Offer ``factory(sim, tissue, contact, step_functions) -> runner`` for scenes whose only
     tissue is exactly ``tissue_cls`` stepping with ``integrator`` against exactly ``contact_cls``.
     The runner has ``run(count, ctrl_ids, ctrl_values)`` (see
-    :class:`surgsim_envs.scene.substeps_loop.SubstepsRunner`)."""
+    :class:`surgsim_envs.scene.step.loop.SubstepsRunner`)."""
     _REGISTRY[(contact_cls, tissue_cls, str(integrator))] = factory
 
 
@@ -64,7 +64,7 @@ def compiled_substeps_for(sim):
     factory = _REGISTRY.get(key) if key is not None else None
     if factory is None:
         return None
-    from surgsim_envs.scene.mujoco_native import step_functions
+    from surgsim_envs.scene.step.mujoco_native import step_functions
 
     try:
         fns = step_functions()
