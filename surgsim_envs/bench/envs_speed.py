@@ -125,7 +125,7 @@ def single_rate(env_id: str, steps: int, repeats: int, checked_loop: bool = Fals
            "reference_kernel_us": statistics.median(refs),
            "env_step_in_reference_kernels": 1e6 / statistics.median(rates) / statistics.median(refs),
            "load_avg_1min": os.getloadavg()[0]}
-    out["compiled_substeps"] = u.sim._compiled_runner() is not None
+    out["compiled_substeps"] = u.sim.compiled_runner() is not None
     if compiled_vs:
         out.update(compiled_vs_generic(env, repeats, rng, pal, steps))
     if checked_loop and u.sim._has_tools:

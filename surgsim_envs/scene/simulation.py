@@ -35,6 +35,7 @@ from surgsim_envs.contact import BOX, CAPSULE, CYLINDER, SPHERE, ContactModel, C
 from surgsim_envs.scene.contact_options import contact_params_for, static_friction_ratio
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.builder import Scene
+from surgsim_envs.scene.step.buffers import StepBuffers
 from surgsim_envs.scene.step.compiled import compiled_substeps_for, key_of
 from surgsim_envs.scene.step.kernels import add_wrench, advance_geoms, gather_geoms, rate_limit, write_rows, zero_rows
 from surgsim_envs.scene.config import validate_step
@@ -118,6 +119,9 @@ class Simulation:
                              v["geom_xmat"], v["cvel"], v["subtree_com"], v["xipos"], self._gpos, self._gmat,
                              self._gvel, self._tcom)
         self._setup_controls()
+        #: the arrays the step loops work on (bound once; see StepBuffers)
+        self.step_buffers = StepBuffers(self._gather_args, v["ctrl"], self._goal, self._rate, v["xfrc_applied"],
+                                        self._bodies, self._wrench)
         self.contacts: dict[str, ContactModel] = {}
         params = ContactParams(stiffness=cfg.contact.stiffness, damping=cfg.contact.damping,
                                tangential_stiffness=cfg.contact.tangential_stiffness)
@@ -299,7 +303,26 @@ class Simulation:
             raise ConfigError("control values contain NaN/inf; give finite numbers")
         self._physics_steps(len(vals) * self.tissue_subcycles, ids, vals)
 
-    def _compiled_runner(self):
+    @property
+    def pairs(self) -> list:
+        """[(tissue model, its ContactModel)] in scene order (the step loops' view of the scene)."""
+        return self._pairs
+
+    @property
+    def has_tool_geoms(self) -> bool:
+        """Whether the scene has tool geoms that touch tissue (else no contact runs)."""
+        return self._has_tools
+
+    @property
+    def controls_moving(self) -> bool:
+        """Whether an actuator target is still moving towards its goal (the rate limiter runs)."""
+        return self._moving
+
+    @controls_moving.setter
+    def controls_moving(self, value: bool) -> None:
+        self._moving = bool(value)
+
+    def compiled_runner(self):
         """The compiled loop for the current scene state, or None (generic loop)."""
         if not self.compiled_substeps:
             return None
@@ -315,7 +338,7 @@ class Simulation:
             raise ConfigError(f"with tissue_subcycles={n} the simulation advances in whole MuJoCo steps of {n} "
                               f"physics steps; {count} is not a multiple of {n} (choose substeps / durations "
                               f"that are)")
-        runner = self._compiled_runner() if count > 0 else None
+        runner = self.compiled_runner() if count > 0 else None
         if runner is not None:
             if ctrl_ids is None:
                 runner.run(count)
