@@ -15,12 +15,14 @@ Tools and tissue therefore see the same force over the same interval: action equ
 and total linear momentum is conserved when nothing else acts (tests/test_momentum.py).
 No MuJoCo callbacks are used (never ``set_mjcb_passive``); tissue nodes are not MuJoCo dofs.
 
-When a compiled loop is registered for the scene's (contact model, tissue model, integrator)
-(:mod:`surgsim_envs.scene.step.compiled`; built in: ContactModel + MassSpringModel
-"symplectic" (the tasks' default) and "auto", and ContactModel + CalibratedMassSpringModel "symplectic", "auto"
-and "subcycled"), all substeps of a step run in one numba call, MuJoCo's C
-``mj_step1``/``mj_step2`` included, in exactly this order and bit-for-bit the same result; every
-other scene runs the generic loop below (``Simulation(..., compiled_substeps=False)`` forces it).
+The order is written once in Python, :meth:`Simulation._reference_steps` (the reference loop; with
+``tissue_subcycles`` n > 1 each MuJoCo step carries n tissue steps, n = 1 is the one-to-one loop
+above). When the scene's tissue model has a compiled step (:mod:`surgsim_envs.scene.step.compiled`;
+built in: MassSpringModel "symplectic" (the tasks' default) and "auto", CalibratedMassSpringModel
+"symplectic", "auto" and "subcycled"), all substeps of a control step run instead in one numba call
+(:mod:`surgsim_envs.scene.step.loop`), MuJoCo's C ``mj_step1``/``mj_step2`` included: it mirrors
+the reference loop, bit for bit (tests/test_compiled_substeps.py);
+``Simulation(..., compiled_substeps=False)`` forces the reference loop.
 Units: m, s, kg, N, rad.
 """
 
@@ -75,10 +77,10 @@ class Simulation:
     seed: seeds :attr:`rng` (the physics itself is deterministic).
     compiled_substeps: run the substeps of a step in one compiled call when a loop is registered
         for the scene's (contact, tissue, integrator) (:mod:`surgsim_envs.scene.step.compiled`;
-        same physics bit for bit); False, or no registered loop: the generic loop. The attribute
+        same physics bit for bit); False, or no compiled step: the reference loop. The attribute
         :attr:`compiled_substeps` may be switched at any time.
     tissue_subcycles: n >= 1. With n > 1 MuJoCo steps the tools with ``n * dt`` while tissue and
-        contact step ``n`` times with ``dt`` inside each MuJoCo step (:meth:`_subcycled_steps`):
+        contact step ``n`` times with ``dt`` inside each MuJoCo step (:meth:`_reference_steps`):
         the tool geoms move along their velocity at the start of the MuJoCo step, and the tools get
         the time average of the ``n`` reactions, so the impulse they receive equals the impulse the
         tissue received (momentum conserved). Step counts stay in physics steps of ``dt`` and must
@@ -323,7 +325,7 @@ class Simulation:
         self._moving = bool(value)
 
     def compiled_runner(self):
-        """The compiled loop for the current scene state, or None (generic loop)."""
+        """The compiled loop for the current scene state, or None (the reference loop)."""
         if not self.compiled_substeps:
             return None
         key = key_of(self)
@@ -345,44 +347,51 @@ class Simulation:
             else:
                 runner.run(count, ctrl_ids, ctrl_values)
             return
-        if n > 1:
-            self._subcycled_steps(count // n, ctrl_ids, ctrl_values)
-            return
-        if ctrl_ids is None:
-            self._generic_steps(count)
-            return
-        ctrl = self._views["ctrl"]
-        for k in range(count):
-            ctrl[ctrl_ids] = ctrl_values[k]
-            self._generic_steps(1)
+        self._reference_steps(count // n, ctrl_ids, ctrl_values)
 
-    def _subcycled_steps(self, rigid_steps: int, ctrl_ids=None, ctrl_values=None) -> None:
-        """``rigid_steps`` MuJoCo steps of ``n * dt``, each with n tissue + contact steps of ``dt``
-        (the generic form of the compiled loop's sub-cycling; see ``tissue_subcycles``). Inside the
-        MuJoCo step the tool geoms translate with their velocity at its start (orientation and the
-        torque reference point held); the reaction written is the mean of the n reactions."""
+    def _reference_steps(self, rigid_steps: int, ctrl_ids=None, ctrl_values=None) -> None:
+        """``rigid_steps`` MuJoCo steps of ``n * dt`` (n = ``tissue_subcycles``), each with n tissue +
+        contact steps of ``dt``, in the documented order (module docstring): the reference loop, the
+        one place the physics order is written in Python (the compiled loop,
+        :mod:`surgsim_envs.scene.step.loop`, mirrors it). n = 1 is the documented one-to-one loop;
+        with n > 1 the tool geoms translate with their velocity at the start of the MuJoCo step
+        (orientation and the torque reference point held) and the reaction written is the mean of the
+        n reactions. ``ctrl_ids``/``ctrl_values``: before the k-th MuJoCo step
+        ``ctrl[ctrl_ids] = ctrl_values[k]``.
+
+        A handful of Python calls per step (measured: CHANGELOG.md "Env step: per-substep Python out of
+        the physics loop"): every array is bound once outside the loop (cached MjData views, the contact
+        buffers), the contact arguments were validated once in ``__init__`` (``ContactModel.prepare``)
+        and the tissue takes them through ``step_prevalidated`` (NaN/inf still refused, guard still
+        runs); the rate limiter, the reaction sum and write are numba kernels."""
         m, d, h, n = self.model, self.data, self.dt, self.tissue_subcycles
         big = h * n
         v = self._views
         ctrl, xfrc = v["ctrl"], v["xfrc_applied"]
+        goal, rate = self._goal, self._rate
+        step1, step2 = mujoco.mj_step1, mujoco.mj_step2
+        gather_args = self._gather_args
         gpos, gmat, gvel, tcom = self._gpos, self._gmat, self._gvel, self._tcom
         bodies, w, pairs = self._bodies, self._wrench, self._pairs
-        gpos0 = np.empty_like(gpos)
+        gpos0 = np.empty_like(gpos) if n > 1 else gpos
+        tissues = list(self.tissues.values())
+        has_tools = self._has_tools
         for k in range(rigid_steps):
             if ctrl_ids is not None:
                 ctrl[ctrl_ids] = ctrl_values[k]
             if self._moving:
-                self._moving = rate_limit(ctrl, self._goal, self._rate, big)
-            mujoco.mj_step1(m, d)
-            if not self._has_tools:
-                for tissue in self.tissues.values():
+                self._moving = rate_limit(ctrl, goal, rate, big)
+            step1(m, d)
+            if not has_tools:
+                for tissue in tissues:
                     for _ in range(n):
                         tissue.step(h)
-                mujoco.mj_step2(m, d)
+                step2(m, d)
                 self.steps += n
                 continue
-            gather_geoms(*self._gather_args)
-            np.copyto(gpos0, gpos)
+            gather_geoms(*gather_args)
+            if n > 1:
+                np.copyto(gpos0, gpos)
             w[:] = 0.0
             for j in range(n):
                 if j:
@@ -390,58 +399,17 @@ class Simulation:
                 for tissue, contact in pairs:
                     res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
                     tissue.step_prevalidated(h, res.forces, res.stiffness)
+                    # CONTRACT (tissue contract v2): an implicit integrator integrates forces + an increment
+                    # from the contact stiffness; the tools must get the reaction of exactly
+                    # tissue.integrated_external_forces or momentum leaks (11-14 % measured).
                     contact.attribute_increment_prepared(tissue.integrated_external_forces)
                     add_wrench(w, res.tool_force, res.tool_torque)
-            w /= n
-            write_rows(xfrc, bodies, w)
-            mujoco.mj_step2(m, d)
-            zero_rows(xfrc, bodies)
-            self.steps += n
-
-    def _generic_steps(self, count: int) -> None:
-        """``count`` physics steps, each in the documented order (module docstring), with a handful
-        of Python calls per step (measured: CHANGELOG.md "Env step: per-substep Python out of the physics loop"): every array the loop
-        touches is bound once outside it (cached MjData views, the contact buffers), the contact
-        arguments were validated once in ``__init__`` (``ContactModel.prepare``) and the tissue
-        takes them through ``step_prevalidated`` (NaN/inf still refused, guard still runs); the
-        rate limiter, the reaction sum and write are numba kernels."""
-        m, d, dt = self.model, self.data, self.dt
-        v = self._views
-        ctrl, xfrc = v["ctrl"], v["xfrc_applied"]
-        goal, rate = self._goal, self._rate
-        step1, step2 = mujoco.mj_step1, mujoco.mj_step2
-        if not self._has_tools:
-            tissues = list(self.tissues.values())
-            for _ in range(count):
-                if self._moving:
-                    self._moving = rate_limit(ctrl, goal, rate, dt)
-                step1(m, d)
-                for tissue in tissues:
-                    tissue.step(dt)
-                step2(m, d)
-                self.steps += 1
-            return
-        gather_args = self._gather_args
-        gpos, gmat, gvel, tcom = self._gpos, self._gmat, self._gvel, self._tcom
-        bodies, w, pairs = self._bodies, self._wrench, self._pairs
-        for _ in range(count):
-            if self._moving:
-                self._moving = rate_limit(ctrl, goal, rate, dt)
-            step1(m, d)
-            gather_geoms(*gather_args)
-            w[:] = 0.0
-            for tissue, contact in pairs:
-                res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
-                tissue.step_prevalidated(dt, res.forces, res.stiffness)
-                # CONTRACT (tissue contract v2): an implicit integrator integrates forces + an increment from
-                # the contact stiffness; the tools must get the reaction of exactly
-                # tissue.integrated_external_forces or momentum leaks (11-14 % measured).
-                contact.attribute_increment_prepared(tissue.integrated_external_forces)
-                add_wrench(w, res.tool_force, res.tool_torque)
+            if n > 1:
+                w /= n
             write_rows(xfrc, bodies, w)
             step2(m, d)
             zero_rows(xfrc, bodies)
-            self.steps += 1
+            self.steps += n
 
     def _advance_controls(self) -> None:
         self._moving = rate_limit(self._views["ctrl"], self._goal, self._rate, self.dt)
