@@ -17,7 +17,7 @@ Step, as ``CalibratedMassSpringModel._advance`` with the choice of ``_pick``:
 
 The Maxwell-branch coefficients: the first step of a loop call spans the interval since the last
 commit (``symplectic_kernel_state``), every later one the previous step's dt / n; the table carries
-them for dt / 1 .. dt / max(MAX_SUBCYCLES, n) (rows of ``_branch_coeffs``, so the same numbers the generic
+them for dt / 1 .. dt / max(MAX_SUBCYCLES, n) (rows of ``_branch_coeffs``, so the same numbers the Python
 step uses), and a state [n of the last step, its kind, n of "subcycled" or 0] whose first two entries
 :func:`committed` turns into the model's ``_pending_dt`` and :meth:`CalibratedCompiledStep.active_after`
 into ``active_integrator``.
@@ -189,7 +189,7 @@ def key(tissue, dt: float) -> tuple:
 
 class CalibratedCompiledStep(CompiledStep):
     """Reports the step "auto" took last (symplectic, subcycled or implicit), and runs integrator
-    "subcycled" in chunks: n = ``subcycle_count(dt)`` is evaluated in Python where the generic step
+    "subcycled" in chunks: n = ``subcycle_count(dt)`` is evaluated in Python where the Python step
     evaluates it (before the first step and every AUTO_RECHECK_STEPS steps, :meth:`plan`), and each
     chunk up to the next re-evaluation runs compiled with that n. With several tissue steps per
     MuJoCo step a re-evaluation can fall inside a MuJoCo step, where a loop call cannot stop: such

@@ -34,7 +34,7 @@ C-contiguous views of the same memory, no copy). Layout:
 
 Being calls through a pointer, the model's kernels are never inlined into the caller: with fastmath
 kernels, inlining changed the last bit of the calibrated model's volume forces; through the pointer
-the step runs the same code as when Python calls it (bit for bit the generic step).
+the step runs the same code as when Python calls it (bit for bit the model's Python step).
 """
 
 from __future__ import annotations
