@@ -411,9 +411,6 @@ class Simulation:
             zero_rows(xfrc, bodies)
             self.steps += n
 
-    def _advance_controls(self) -> None:
-        self._moving = rate_limit(self._views["ctrl"], self._goal, self._rate, self.dt)
-
     # ------------------------------------------------------------------------------------------
     # tool commands
     def tool(self, name: str):
