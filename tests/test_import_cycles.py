@@ -3,6 +3,7 @@ inside functions are deferred on purpose and not counted) form no cycle through 
 package checked. A cycle makes the import order matter and hides which module is the base of which."""
 
 import ast
+import functools
 import pathlib
 
 import pytest
@@ -44,6 +45,7 @@ def _top_level_imports(tree: ast.Module, deferred: bool = False):
             stack.extend(node.body)
 
 
+@functools.lru_cache(maxsize=2)
 def import_graph(deferred: bool = False) -> dict[str, set[str]]:
     """{module: modules of surgsim_envs it imports at module level (``deferred``: anywhere)};
     ``from a import b`` names the submodule ``a.b`` when there is one, else the module ``a``."""
