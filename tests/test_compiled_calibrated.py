@@ -1,4 +1,4 @@
-"""mass_spring_calibrated under integrator "auto" in the compiled substeps (scene/substeps_calibrated.py,
+"""mass_spring_calibrated under integrator "auto" in the compiled substeps (tissue/calibrated_mass_spring_compiled.py,
 the calibrated model): each step the loop takes is the one the generic loop takes (symplectic, "subcycled" n steps of
 dt / n, or implicit), with the same state, contact forces, tool wrenches, Maxwell-branch interval and
 guard reference. Equal to 1e-12 relative: bit for bit when numba compiles the kernels in the process,
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import surgsim_envs  # noqa: F401  (registers the tasks)
-from surgsim_envs.scene.compiled_substeps import registered
-from surgsim_envs.scene.substeps_calibrated import subcycles_for
+from surgsim_envs.scene.step.compiled import registered
+from surgsim_envs.tissue.calibrated_mass_spring_compiled import subcycles_for
 from surgsim_envs.tissue.base import DT_SAFETY
 
 
@@ -49,7 +49,7 @@ def test_auto_steps_compiled_as_the_generic_loop(kind):
     envs = _pair(**CASES[kind])
     s0, s1 = (e.unwrapped.sim for e in envs)
     assert s0.tissue().integrator == "auto"
-    assert s0._compiled_runner() is not None and s1._compiled_runner() is None
+    assert s0.compiled_runner() is not None and s1.compiled_runner() is None
     used = collections.Counter()
     touched = 0
     for a in _press(envs[0], 12):
@@ -65,7 +65,7 @@ def test_auto_steps_compiled_as_the_generic_loop(kind):
         assert (t0.steps, s0.steps, t0._pending_dt) == (t1.steps, s1.steps, t1._pending_dt)
         assert t0.active_integrator == t1.active_integrator
         # the reference (J) sums in another order in the kernel; at rest it is ~1e-31 J of rounding
-        assert t0.guard._energy_ref == pytest.approx(t1.guard._energy_ref, rel=1e-12, abs=1e-18)
+        assert t0.guard.state()[0] == pytest.approx(t1.guard.state()[0], rel=1e-12, abs=1e-18)
         used[t0.active_integrator] += 1
         touched += int(c0.report.contacts.sum())
     assert touched > 0, "no contact: the comparison would be vacuous"
@@ -143,8 +143,8 @@ def test_subcycled_integrator_runs_compiled_across_its_recheck():
     # 3 tissue steps per env step: the re-evaluation at step 100 falls inside an env step (loop call)
     envs = _pair(dt=2.5e-3, control_hz=400.0 / 3.0, young_scale=(1.0, 1.2), integrator="subcycled")
     s0, s1 = (e.unwrapped.sim for e in envs)
-    assert s0.tissue().integrator == "subcycled" and s0._compiled_runner() is not None
-    assert s1._compiled_runner() is None
+    assert s0.tissue().integrator == "subcycled" and s0.compiled_runner() is not None
+    assert s1.compiled_runner() is None
     assert s0.substeps == 3
     for a in _press(envs[0], 40):
         for e in envs:
@@ -159,30 +159,31 @@ def test_subcycled_integrator_runs_compiled_across_its_recheck():
 
 
 def test_calibrated_table_is_keyed_and_follows_replaced_arrays():
-    """The calibrated loop's address table is keyed (``substeps_calibrated.key`` with the array version),
-    so it is not rebuilt between control steps that replace nothing, and a replaced positions array
-    (a new non-scalar attribute) is repacked and stepped, not the freed old one."""
-    from surgsim_envs.scene.substeps_loop import SLOT_REST
+    """The calibrated loop's address table is keyed (``CompiledStep.table_key``: the state version,
+    the positions' identity, ``calibrated_mass_spring_compiled.key``), so it is not rebuilt between
+    control steps that replace nothing, and a replaced positions array is repacked and stepped, not
+    the freed old one."""
+    from surgsim_envs.scene.step.loop import POSITIONS_ROW
 
     env = gym.make("SurgSim/Palpation-v0", model="mass_spring_calibrated")
     try:
         env.reset(seed=0)
         sim = env.unwrapped.sim
-        tissue, runner = sim.tissue(), sim._compiled_runner()
-        assert runner is not None and runner.ops.key is not None
+        tissue, runner = sim.tissue(), sim.compiled_runner()
+        assert runner is not None
         act = np.array([0.0, 0.0, 0.5, -1.0], np.float32)
         for _ in range(3):
             env.step(act)
-        table, key = runner._table.table, runner._table._key
+        table, key = runner._table.table, runner._table.key
         env.step(act)
-        assert runner._table._key == key and runner._table.table is table      # nothing replaced: no repack
+        assert runner._table.key == key and runner._table.table is table      # nothing replaced: no repack
         lifted = tissue.positions + np.array([0.0, 0.0, 1e-4])
         lifted[tissue.fixed] = tissue.positions[tissue.fixed]
         tissue.positions = lifted
         before = lifted.copy()
         env.step(act)
         assert tissue.positions is lifted
-        assert runner._table.table[SLOT_REST + 18, 0] == lifted.ctypes.data
+        assert runner._table.table[POSITIONS_ROW, 0] == lifted.ctypes.data
         assert not np.array_equal(lifted, before), "the loop did not step the new positions array"
     finally:
         env.close()

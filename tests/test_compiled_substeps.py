@@ -1,4 +1,4 @@
-"""The compiled substeps (scene/compiled_substeps.py, one numba call per control step) give exactly what the generic
+"""The compiled substeps (scene/step/compiled.py, one numba call per control step) give exactly what the generic
 per-substep loop gives: the same tissue state, contact forces, tool wrenches and MuJoCo state after
 many substeps, bit for bit; and the same errors with the same messages when the guard or the input
 check fails. Models, integrators or guards without a registered loop keep the generic loop."""
@@ -11,7 +11,7 @@ import pytest
 
 import surgsim_envs  # noqa: F401  (registers the tasks)
 from surgsim_envs.errors import ConfigError, NonFiniteInputError, TissueUnstableError
-from surgsim_envs.scene.compiled_substeps import key_of, registered
+from surgsim_envs.scene.step.compiled import key_of, registered
 from surgsim_envs.tissue.guard import StabilityGuard
 from surgsim_envs.tissue.mass_spring import MassSpringModel
 
@@ -44,11 +44,12 @@ def _assert_same(s0, s1):
     for x, y in pairs:
         np.testing.assert_array_equal(x, y)
     assert (t0.time, t0.steps, s0.steps, s0.time) == (t1.time, t1.steps, s1.steps, s1.time)
-    g0, g1 = t0.guard, t1.guard
-    np.testing.assert_array_equal(g0._good_pos, g1._good_pos)
-    assert g0._good_time == g1._good_time
+    (e0, pos0, vel0, time0), (e1, pos1, vel1, time1) = t0.guard.state(), t1.guard.state()
+    np.testing.assert_array_equal(pos0, pos1)
+    np.testing.assert_array_equal(vel0, vel1)
+    assert time0 == time1
     # the energy reference is summed in another order in the kernel: equal to rounding
-    assert g0._energy_ref == pytest.approx(g1._energy_ref, rel=1e-12, abs=0.0)
+    assert e0 == pytest.approx(e1, rel=1e-12, abs=0.0)
 
 
 @pytest.mark.parametrize("task", ["SurgSim/Palpation-v0",
@@ -56,8 +57,8 @@ def _assert_same(s0, s1):
 def test_compiled_substeps_match_the_generic_loop_bit_for_bit(task):
     envs = _pair(task)
     s0, s1 = (e.unwrapped.sim for e in envs)
-    assert s0._compiled_runner() is not None, "the task's default tissue should have a compiled loop"
-    assert s1._compiled_runner() is None
+    assert s0.compiled_runner() is not None, "the task's default tissue should have a compiled loop"
+    assert s1.compiled_runner() is None
     touched = 0
     for a in _actions(envs[0], 25):
         outs = [e.step(a) for e in envs]
@@ -86,7 +87,7 @@ def test_calibrated_mass_spring_runs_compiled():
     envs = _pair("SurgSim/Palpation-v0", model="mass_spring_calibrated", spacing=0.01, dt=2.5e-4)
     s0, s1 = (e.unwrapped.sim for e in envs)
     assert type(s0.tissue()).__name__ == "CalibratedMassSpringModel" and s0.tissue().integrator == "symplectic"
-    assert s0._compiled_runner() is not None and s1._compiled_runner() is None
+    assert s0.compiled_runner() is not None and s1.compiled_runner() is None
     for a in _actions(envs[0], 30, seed=1):
         outs = [e.step(a) for e in envs]
         np.testing.assert_allclose(outs[0][0], outs[1][0], rtol=1e-5, atol=1e-6)    # float32 observations
@@ -99,7 +100,7 @@ def test_mass_spring_implicit_steps_give_the_tools_the_integrated_reaction():
     increment to the tools exactly as ContactModel.attribute_increment does (same wrenches, same
     tool motion), bit for bit."""
     a, b = _free_scene(1, True, integrator="auto", dt=5e-3), _free_scene(1, False, integrator="auto", dt=5e-3)
-    assert a._compiled_runner() is not None and b._compiled_runner() is None
+    assert a.compiled_runner() is not None and b.compiled_runner() is None
     p0 = a.momentum()
     differs = implicit = 0
     for _ in range(40):
@@ -157,25 +158,25 @@ def test_models_without_a_registered_loop_keep_the_generic_loop():
     env.reset(seed=0)
     sim = env.unwrapped.sim
     tissue = sim.tissue()
-    assert key_of(sim) is not None and sim._compiled_runner() is not None
+    assert key_of(sim) is not None and sim.compiled_runner() is not None
 
     class StricterGuard(StabilityGuard):
         pass
 
     tissue.guard = StricterGuard()
-    assert key_of(sim) is None and sim._compiled_runner() is None
+    assert key_of(sim) is None and sim.compiled_runner() is None
     tissue.guard = StabilityGuard()
     tissue.integrator = "implicit"
-    assert sim._compiled_runner() is None
+    assert sim.compiled_runner() is None
     tissue.integrator = "symplectic"
 
     class Calibrated(MassSpringModel):
         pass
 
     tissue.__class__ = Calibrated
-    assert sim._compiled_runner() is None
+    assert sim.compiled_runner() is None
     tissue.__class__ = MassSpringModel
-    assert sim._compiled_runner() is not None
+    assert sim.compiled_runner() is not None
 
 
 def test_step_with_controls_checks_its_schedule():
@@ -215,7 +216,7 @@ def test_subcycled_steps_conserve_momentum_through_an_impact(compiled):
     """The tool gets the mean of the n reactions over the n-times longer MuJoCo step: the same
     impulse the tissue got, so tool + tissue momentum is conserved (no damping, gravity or anchors)."""
     sim = _free_scene(4, compiled)
-    assert (sim._compiled_runner() is not None) == compiled
+    assert (sim.compiled_runner() is not None) == compiled
     assert sim.model.opt.timestep == pytest.approx(4 * sim.dt)
     p0 = sim.momentum()
     touched = 0

@@ -83,7 +83,7 @@ def test_contact_outputs_zero_after_the_probe_leaves_in_both_loops():
         e.reset(seed=3)
     envs[1].unwrapped.sim.compiled_substeps = False
     sims = [e.unwrapped.sim for e in envs]
-    assert sims[0]._compiled_runner() is not None and sims[1]._compiled_runner() is None
+    assert sims[0].compiled_runner() is not None and sims[1].compiled_runner() is None
     a = np.zeros(envs[0].action_space.shape, dtype=np.float32)
     a[-1] = -1.0
     touched = 0

@@ -14,7 +14,7 @@ from surgsim_envs.contact.report import ContactReport
 from surgsim_envs.contact.shapes import BOX, CAPSULE, CYLINDER, SPHERE, bounding_radius, local_outside
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.simulation import _report_rows
-from surgsim_envs.scene.substeps_loop import SLOT_REST
+from surgsim_envs.scene.step.loop import POSITIONS_ROW
 from surgsim_envs.tissue.guard import all_finite, first_non_finite, max_speed_squared, speed_within
 
 
@@ -142,24 +142,28 @@ def test_tool_target_fast_path_matches_the_checked_path():
 
 
 def test_replaced_tissue_arrays_reach_the_compiled_loop():
-    """The address table is keyed on the tissue's array version: assigning a new positions array
-    (any non-scalar attribute) must repack it, or the loop would step freed memory."""
+    """The address table is keyed on the tissue's state version and the identity of its positions:
+    assigning a new positions array must repack it, or the loop would step freed memory; reset()
+    replaces arrays and bumps the version (notify_changed())."""
     env = _env()
     sim = env.unwrapped.sim
     tissue = sim.tissue()
-    runner = sim._compiled_runner()
+    runner = sim.compiled_runner()
     assert runner is not None
     sim.step()
-    v0 = tissue._array_version
+    v0 = tissue.state_version
     tissue.time = 1.0                                   # a scalar: no bump
-    assert tissue._array_version == v0
+    assert tissue.state_version == v0
     lifted = tissue.positions + np.array([0.0, 0.0, 1e-4])
     lifted[tissue.fixed] = tissue.positions[tissue.fixed]
-    tissue.positions = lifted                           # a new array
-    assert tissue._array_version > v0
+    tissue.positions = lifted                           # a new array, followed by identity
     before = lifted.copy()
     sim.step()
     assert tissue.positions is lifted
-    assert runner._table.table[SLOT_REST + 18, 0] == lifted.ctypes.data
+    assert runner._table.table[POSITIONS_ROW, 0] == lifted.ctypes.data
     assert not np.array_equal(lifted, before), "the loop did not step the new positions array"
+    tissue.reset()
+    assert tissue.state_version > v0
+    sim.step()
+    assert runner._table.table[POSITIONS_ROW, 0] == tissue.positions.ctypes.data
     env.close()

@@ -39,7 +39,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--compiled-vs-generic", action="store_true",
                         help="also time, alternately in this process, env steps and physics substeps with the "
-                             "compiled substeps (scene/compiled_substeps.py) and with the generic per-substep loop")
+                             "compiled substeps (scene/step/compiled.py) and with the generic per-substep loop")
     parser.add_argument("--async-baseline", action="store_true",
                         help="also time gym's AsyncVectorEnv with a trivial env and with envs that spin for this "
                              "task's measured env-step time (the pipe round-trip against ours), the same with the "
@@ -77,8 +77,6 @@ def add_arguments(parser) -> None:
 def single_rate(env_id: str, steps: int, repeats: int, compiled_vs: bool = False) -> dict:
     """Median env steps/s of one env in this process, plus its timing settings."""
     import gymnasium as gym
-
-    from surgsim_envs.scene.compiled_substeps import compiled_substeps_for
 
     env = gym.make(env_id)
     u = env.unwrapped
@@ -118,7 +116,7 @@ def single_rate(env_id: str, steps: int, repeats: int, compiled_vs: bool = False
            "reference_kernel_us": statistics.median(refs),
            "env_step_in_reference_kernels": 1e6 / statistics.median(rates) / statistics.median(refs),
            "load_avg_1min": os.getloadavg()[0]}
-    out["compiled_substeps"] = u.sim.compiled_substeps and compiled_substeps_for(u.sim) is not None
+    out["compiled_substeps"] = u.sim.compiled_runner() is not None
     if compiled_vs:
         out.update(compiled_vs_generic(env, repeats, rng, pal, steps))
     env.close()

@@ -435,8 +435,8 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
 
 
 @njit(cache=True, nogil=True)
-def _attribute_increment(touched, integrated, forces, stiffness, node_tool_k, positions, tool_com,
-                         tool_force, tool_torque):
+def attribute_increment_kernel(touched, integrated, forces, stiffness, node_tool_k, positions, tool_com,
+                               tool_force, tool_torque):
     """Give each tool the reaction of its share (node_tool_k / stiffness) of the increment
     ``integrated - forces`` the tissue added to the contact force of every touched node."""
     T = tool_force.shape[0]
@@ -472,10 +472,10 @@ def _attribute_increment(touched, integrated, forces, stiffness, node_tool_k, po
 def contact_kernel_prepared(positions, velocities, gpos, gmat, gvel, tool_com, state):
     """:meth:`ContactModel.compute_prepared` from compiled code: ``state`` is
     :meth:`ContactModel.kernel_state`. Returns the kernel's status (0 = OK; else call
-    ``ContactModel._raise_kernel_error``). Same kernel, same result, and the positions and tool
+    ``ContactModel.raise_kernel_error``). Same kernel, same result, and the positions and tool
     centres are kept for :meth:`ContactModel.attribute_increment` as compute_prepared keeps them: the
     positions only of the node rows this call wrote (the rows with a contact stiffness > 0, the only
-    ones :func:`_attribute_increment` reads: every other row's stiffness is zero)."""
+    ones :func:`attribute_increment_kernel` reads: every other row's stiffness is zero)."""
     (cand, s_nodes, s_w, touched, kind, tool, size, mu, k_n, c_n, k_t, anchor_local, anchor_on,
      forces, stiffness, node_tool_k, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv, tool_fn, tool_ft, tool_ftv,
      contacts, slipping, penetration, last0, last1, err, com_copy, pos_copy, mu_s, c_imp, radius, vec3,
@@ -594,6 +594,9 @@ class ContactModel:
         self._vec3 = np.zeros((7, 3))          # kernel work rows (bounding box, 3-vectors)
         self._n_geoms = -1
         self._prepared = None
+        #: bumped by every :meth:`prepare` (and when the geom count changes): the arrays of
+        #: :meth:`kernel_state` may then be new objects
+        self.prepared_version = 0
         self._alloc_geoms(0)
 
     def _setup_samples(self, surface, subdivisions, spacing, rest_positions) -> None:
@@ -656,6 +659,7 @@ class ContactModel:
         C = self.n_points
         self._n_geoms = G
         self._prepared = None   # prepare() again: the geom count changed
+        self.prepared_version += 1
         self._anchor_local = np.zeros((C, G, 3))
         self._anchor_on = np.zeros((C, G), dtype=np.uint8)
         self.result.geom_normal_force = np.zeros(G)
@@ -763,6 +767,13 @@ class ContactModel:
         codes (G,), tool index per geom (G,), sizes (G,3) m and the time step dt (s), which fixes
         the penalty stiffness. The arrays are kept by reference (the caller's own buffers)."""
         self._prepared = self._constants(shape_kind, shape_tool, shape_size, dt)
+        self.prepared_version += 1
+
+    def raise_kernel_error(self) -> None:
+        """Raise the ConfigError for the error code the prepared kernel left (a compiled caller that
+        ran :func:`contact_kernel_prepared` itself and got a non-zero status)."""
+        kind, tool, size = self._prepared[:3]
+        self._raise_kernel_error(kind, tool, size)
 
     def compute_prepared(self, positions, velocities, shape_pos, shape_mat, shape_vel, tool_com) -> ContactResult:
         """:meth:`compute` for the scene's hot loop, after :meth:`prepare`: the same kernel and the
@@ -798,7 +809,7 @@ class ContactModel:
         """:meth:`attribute_increment` without the argument check (``integrated_forces`` a
         C-contiguous float64 (N,3) array, e.g. the tissue's ``integrated_external_forces``)."""
         r = self.result
-        _attribute_increment(self._touched, integrated_forces, r.forces, r.stiffness, self.node_tool_stiffness,
+        attribute_increment_kernel(self._touched, integrated_forces, r.forces, r.stiffness, self.node_tool_stiffness,
                              self._pos, self._com, r.tool_force, r.tool_torque)
 
     def attribute_increment(self, integrated_forces) -> None:
@@ -810,5 +821,5 @@ class ContactModel:
         integrator (torques taken at the node positions of the last :meth:`compute`)."""
         f = _array(integrated_forces, (self.n_nodes, 3), np.float64, "integrated_forces", "N")
         r = self.result
-        _attribute_increment(self._touched, f, r.forces, r.stiffness, self.node_tool_stiffness, self._pos,
+        attribute_increment_kernel(self._touched, f, r.forces, r.stiffness, self.node_tool_stiffness, self._pos,
                              self._com, r.tool_force, r.tool_torque)

@@ -15,12 +15,14 @@ Tools and tissue therefore see the same force over the same interval: action equ
 and total linear momentum is conserved when nothing else acts (tests/test_momentum.py).
 No MuJoCo callbacks are used (never ``set_mjcb_passive``); tissue nodes are not MuJoCo dofs.
 
-When a compiled loop is registered for the scene's (contact model, tissue model, integrator)
-(:mod:`surgsim_envs.scene.compiled_substeps`; built in: ContactModel + MassSpringModel
-"symplectic" (the tasks' default) and "auto", and ContactModel + CalibratedMassSpringModel "symplectic", "auto"
-and "subcycled"), all substeps of a step run in one numba call, MuJoCo's C
-``mj_step1``/``mj_step2`` included, in exactly this order and bit-for-bit the same result; every
-other scene runs the generic loop below (``Simulation(..., compiled_substeps=False)`` forces it).
+The order is written once in Python, :meth:`Simulation._reference_steps` (the reference loop; with
+``tissue_subcycles`` n > 1 each MuJoCo step carries n tissue steps, n = 1 is the one-to-one loop
+above). When the scene's tissue model has a compiled step (:mod:`surgsim_envs.scene.step.compiled`;
+built in: MassSpringModel "symplectic" (the tasks' default) and "auto", CalibratedMassSpringModel
+"symplectic", "auto" and "subcycled"), all substeps of a control step run instead in one numba call
+(:mod:`surgsim_envs.scene.step.loop`), MuJoCo's C ``mj_step1``/``mj_step2`` included: it mirrors
+the reference loop, bit for bit (tests/test_compiled_substeps.py);
+``Simulation(..., compiled_substeps=False)`` forces the reference loop.
 Units: m, s, kg, N, rad.
 """
 
@@ -30,86 +32,19 @@ import math
 
 import mujoco
 import numpy as np
-from numba import njit
 
 from surgsim_envs.contact import BOX, CAPSULE, CYLINDER, SPHERE, ContactModel, ContactParams
 from surgsim_envs.scene.contact_options import contact_params_for, static_friction_ratio
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.builder import Scene
-from surgsim_envs.scene.compiled_substeps import key_of
+from surgsim_envs.scene.step.buffers import StepBuffers
+from surgsim_envs.scene.step.compiled import compiled_substeps_for, key_of
+from surgsim_envs.scene.step.kernels import add_wrench, advance_geoms, gather_geoms, rate_limit, write_rows, zero_rows
 from surgsim_envs.scene.config import validate_step
 
 _KIND = {int(mujoco.mjtGeom.mjGEOM_SPHERE): SPHERE, int(mujoco.mjtGeom.mjGEOM_CAPSULE): CAPSULE,
          int(mujoco.mjtGeom.mjGEOM_BOX): BOX, int(mujoco.mjtGeom.mjGEOM_CYLINDER): CYLINDER}
 _EQ = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
-
-
-@njit(cache=True)
-def _gather_geoms(geom_ids, geom_body, body_root, bodies, geom_xpos, geom_xmat, cvel, subtree_com, xipos,
-                  out_pos, out_mat, out_vel, out_com):
-    """Copy the tool geoms' world poses and the velocity [w, v] of each geom origin (world frame)."""
-    for k in range(geom_ids.shape[0]):
-        g = geom_ids[k]
-        b = geom_body[k]
-        r = body_root[k]
-        for j in range(3):
-            out_pos[k, j] = geom_xpos[g, j]
-        for j in range(9):
-            out_mat[k, j] = geom_xmat[g, j]
-        wx, wy, wz = cvel[b, 0], cvel[b, 1], cvel[b, 2]
-        dx = geom_xpos[g, 0] - subtree_com[r, 0]
-        dy = geom_xpos[g, 1] - subtree_com[r, 1]
-        dz = geom_xpos[g, 2] - subtree_com[r, 2]
-        out_vel[k, 0] = wx
-        out_vel[k, 1] = wy
-        out_vel[k, 2] = wz
-        out_vel[k, 3] = cvel[b, 3] + wy * dz - wz * dy
-        out_vel[k, 4] = cvel[b, 4] + wz * dx - wx * dz
-        out_vel[k, 5] = cvel[b, 5] + wx * dy - wy * dx
-    for t in range(bodies.shape[0]):
-        for j in range(3):
-            out_com[t, j] = xipos[bodies[t], j]
-
-
-@njit(cache=True)
-def _rate_limit(ctrl, goal, rate, dt):
-    """Move ``ctrl`` towards ``goal`` by at most ``rate * dt`` per entry; True while any entry still moves."""
-    moving = False
-    for i in range(ctrl.shape[0]):
-        delta = goal[i] - ctrl[i]
-        lim = rate[i] * dt
-        if delta > lim:
-            delta = lim
-        elif delta < -lim:
-            delta = -lim
-        ctrl[i] += delta
-        if abs(goal[i] - ctrl[i]) > 1e-12:
-            moving = True
-    return moving
-
-
-@njit(cache=True)
-def _write_rows(xfrc, bodies, wrench):
-    for k in range(bodies.shape[0]):
-        for j in range(6):
-            xfrc[bodies[k], j] = wrench[k, j]
-
-
-@njit(cache=True)
-def _add_wrench(wrench, force, torque):
-    """``wrench[:, :3] += force; wrench[:, 3:] += torque`` for (T,6), (T,3), (T,3)."""
-    for k in range(wrench.shape[0]):
-        for j in range(3):
-            wrench[k, j] += force[k, j]
-            wrench[k, 3 + j] += torque[k, j]
-
-
-@njit(cache=True)
-def _advance_geoms(gpos, gpos0, gvel, s):
-    """``gpos = gpos0 + s * (linear velocity of each geom origin)`` (s in seconds)."""
-    for k in range(gpos.shape[0]):
-        for j in range(3):
-            gpos[k, j] = gpos0[k, j] + s * gvel[k, 3 + j]
 
 
 def _seq_sum(values: list, rows: list):
@@ -133,13 +68,6 @@ def _report_rows(r, rows: list) -> dict:
             "penetration": max(0.0, top)}
 
 
-@njit(cache=True)
-def _zero_rows(xfrc, bodies):
-    for k in range(bodies.shape[0]):
-        for j in range(6):
-            xfrc[bodies[k], j] = 0.0
-
-
 class Simulation:
     """Owns the MjModel/MjData, the tissue models and one ContactModel per tissue.
 
@@ -148,11 +76,11 @@ class Simulation:
         :data:`~surgsim_envs.scene.config.DT_RANGE`; substeps: physics steps per :meth:`step`.
     seed: seeds :attr:`rng` (the physics itself is deterministic).
     compiled_substeps: run the substeps of a step in one compiled call when a loop is registered
-        for the scene's (contact, tissue, integrator) (:mod:`surgsim_envs.scene.compiled_substeps`;
-        same physics bit for bit); False, or no registered loop: the generic loop. The attribute
+        for the scene's (contact, tissue, integrator) (:mod:`surgsim_envs.scene.step.compiled`;
+        same physics bit for bit); False, or no compiled step: the reference loop. The attribute
         :attr:`compiled_substeps` may be switched at any time.
     tissue_subcycles: n >= 1. With n > 1 MuJoCo steps the tools with ``n * dt`` while tissue and
-        contact step ``n`` times with ``dt`` inside each MuJoCo step (:meth:`_subcycled_steps`):
+        contact step ``n`` times with ``dt`` inside each MuJoCo step (:meth:`_reference_steps`):
         the tool geoms move along their velocity at the start of the MuJoCo step, and the tools get
         the time average of the ``n`` reactions, so the impulse they receive equals the impulse the
         tissue received (momentum conserved). Step counts stay in physics steps of ``dt`` and must
@@ -188,11 +116,14 @@ class Simulation:
         self.seed = int(cfg.seed if seed is None else seed)
         self.rng = np.random.default_rng(self.seed)
         self._setup_contact_arrays()
-        v = self._views   # the arguments of _gather_geoms, bound once (views and buffers never change)
+        v = self._views   # the arguments of gather_geoms, bound once (views and buffers never change)
         self._gather_args = (self._geom_ids, self._geom_body, self._geom_root, self._bodies, v["geom_xpos"],
                              v["geom_xmat"], v["cvel"], v["subtree_com"], v["xipos"], self._gpos, self._gmat,
                              self._gvel, self._tcom)
         self._setup_controls()
+        #: the arrays the step loops work on (bound once; see StepBuffers)
+        self.step_buffers = StepBuffers(self._gather_args, v["ctrl"], self._goal, self._rate, v["xfrc_applied"],
+                                        self._bodies, self._wrench)
         self.contacts: dict[str, ContactModel] = {}
         params = ContactParams(stiffness=cfg.contact.stiffness, damping=cfg.contact.damping,
                                tangential_stiffness=cfg.contact.tangential_stiffness)
@@ -348,7 +279,7 @@ class Simulation:
         self._physics_steps(int(round(duration / (self.dt * n))) * n)
 
     def _gather(self) -> None:
-        _gather_geoms(*self._gather_args)
+        gather_geoms(*self._gather_args)
 
     def physics_step(self, n: int = 1) -> None:
         """``n`` physics steps (default one) in the documented order (module docstring), in one
@@ -374,15 +305,32 @@ class Simulation:
             raise ConfigError("control values contain NaN/inf; give finite numbers")
         self._physics_steps(len(vals) * self.tissue_subcycles, ids, vals)
 
-    def _compiled_runner(self):
-        """The compiled loop for the current scene state, or None (generic loop)."""
+    @property
+    def pairs(self) -> list:
+        """[(tissue model, its ContactModel)] in scene order (the step loops' view of the scene)."""
+        return self._pairs
+
+    @property
+    def has_tool_geoms(self) -> bool:
+        """Whether the scene has tool geoms that touch tissue (else no contact runs)."""
+        return self._has_tools
+
+    @property
+    def controls_moving(self) -> bool:
+        """Whether an actuator target is still moving towards its goal (the rate limiter runs)."""
+        return self._moving
+
+    @controls_moving.setter
+    def controls_moving(self, value: bool) -> None:
+        self._moving = bool(value)
+
+    def compiled_runner(self):
+        """The compiled loop for the current scene state, or None (the reference loop)."""
         if not self.compiled_substeps:
             return None
         key = key_of(self)
         if key != self._runner_key:
             self._runner_key = key
-            from surgsim_envs.scene.compiled_substeps import compiled_substeps_for
-
             self._runner = compiled_substeps_for(self) if key is not None else None
         return self._runner
 
@@ -392,113 +340,76 @@ class Simulation:
             raise ConfigError(f"with tissue_subcycles={n} the simulation advances in whole MuJoCo steps of {n} "
                               f"physics steps; {count} is not a multiple of {n} (choose substeps / durations "
                               f"that are)")
-        runner = self._compiled_runner() if count > 0 else None
+        runner = self.compiled_runner() if count > 0 else None
         if runner is not None:
             if ctrl_ids is None:
                 runner.run(count)
             else:
                 runner.run(count, ctrl_ids, ctrl_values)
             return
-        if n > 1:
-            self._subcycled_steps(count // n, ctrl_ids, ctrl_values)
-            return
-        if ctrl_ids is None:
-            self._generic_steps(count)
-            return
-        ctrl = self._views["ctrl"]
-        for k in range(count):
-            ctrl[ctrl_ids] = ctrl_values[k]
-            self._generic_steps(1)
+        self._reference_steps(count // n, ctrl_ids, ctrl_values)
 
-    def _subcycled_steps(self, rigid_steps: int, ctrl_ids=None, ctrl_values=None) -> None:
-        """``rigid_steps`` MuJoCo steps of ``n * dt``, each with n tissue + contact steps of ``dt``
-        (the generic form of the compiled loop's sub-cycling; see ``tissue_subcycles``). Inside the
-        MuJoCo step the tool geoms translate with their velocity at its start (orientation and the
-        torque reference point held); the reaction written is the mean of the n reactions."""
+    def _reference_steps(self, rigid_steps: int, ctrl_ids=None, ctrl_values=None) -> None:
+        """``rigid_steps`` MuJoCo steps of ``n * dt`` (n = ``tissue_subcycles``), each with n tissue +
+        contact steps of ``dt``, in the documented order (module docstring): the reference loop, the
+        one place the physics order is written in Python (the compiled loop,
+        :mod:`surgsim_envs.scene.step.loop`, mirrors it). n = 1 is the documented one-to-one loop;
+        with n > 1 the tool geoms translate with their velocity at the start of the MuJoCo step
+        (orientation and the torque reference point held) and the reaction written is the mean of the
+        n reactions. ``ctrl_ids``/``ctrl_values``: before the k-th MuJoCo step
+        ``ctrl[ctrl_ids] = ctrl_values[k]``.
+
+        A handful of Python calls per step (measured: CHANGELOG.md "Env step: per-substep Python out of
+        the physics loop"): every array is bound once outside the loop (cached MjData views, the contact
+        buffers), the contact arguments were validated once in ``__init__`` (``ContactModel.prepare``)
+        and the tissue takes them through ``step_prevalidated`` (NaN/inf still refused, guard still
+        runs); the rate limiter, the reaction sum and write are numba kernels."""
         m, d, h, n = self.model, self.data, self.dt, self.tissue_subcycles
         big = h * n
         v = self._views
         ctrl, xfrc = v["ctrl"], v["xfrc_applied"]
+        goal, rate = self._goal, self._rate
+        step1, step2 = mujoco.mj_step1, mujoco.mj_step2
+        gather_args = self._gather_args
         gpos, gmat, gvel, tcom = self._gpos, self._gmat, self._gvel, self._tcom
         bodies, w, pairs = self._bodies, self._wrench, self._pairs
-        gpos0 = np.empty_like(gpos)
+        gpos0 = np.empty_like(gpos) if n > 1 else gpos
+        tissues = list(self.tissues.values())
+        has_tools = self._has_tools
         for k in range(rigid_steps):
             if ctrl_ids is not None:
                 ctrl[ctrl_ids] = ctrl_values[k]
             if self._moving:
-                self._moving = _rate_limit(ctrl, self._goal, self._rate, big)
-            mujoco.mj_step1(m, d)
-            if not self._has_tools:
-                for tissue in self.tissues.values():
+                self._moving = rate_limit(ctrl, goal, rate, big)
+            step1(m, d)
+            if not has_tools:
+                for tissue in tissues:
                     for _ in range(n):
                         tissue.step(h)
-                mujoco.mj_step2(m, d)
+                step2(m, d)
                 self.steps += n
                 continue
-            _gather_geoms(*self._gather_args)
-            np.copyto(gpos0, gpos)
+            gather_geoms(*gather_args)
+            if n > 1:
+                np.copyto(gpos0, gpos)
             w[:] = 0.0
             for j in range(n):
                 if j:
-                    _advance_geoms(gpos, gpos0, gvel, j * h)
+                    advance_geoms(gpos, gpos0, gvel, j * h)
                 for tissue, contact in pairs:
                     res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
                     tissue.step_prevalidated(h, res.forces, res.stiffness)
+                    # CONTRACT (tissue contract v2): an implicit integrator integrates forces + an increment
+                    # from the contact stiffness; the tools must get the reaction of exactly
+                    # tissue.integrated_external_forces or momentum leaks (11-14 % measured).
                     contact.attribute_increment_prepared(tissue.integrated_external_forces)
-                    _add_wrench(w, res.tool_force, res.tool_torque)
-            w /= n
-            _write_rows(xfrc, bodies, w)
-            mujoco.mj_step2(m, d)
-            _zero_rows(xfrc, bodies)
-            self.steps += n
-
-    def _generic_steps(self, count: int) -> None:
-        """``count`` physics steps, each in the documented order (module docstring), with a handful
-        of Python calls per step (measured: CHANGELOG.md "Env step: per-substep Python out of the physics loop"): every array the loop
-        touches is bound once outside it (cached MjData views, the contact buffers), the contact
-        arguments were validated once in ``__init__`` (``ContactModel.prepare``) and the tissue
-        takes them through ``step_prevalidated`` (NaN/inf still refused, guard still runs); the
-        rate limiter, the reaction sum and write are numba kernels."""
-        m, d, dt = self.model, self.data, self.dt
-        v = self._views
-        ctrl, xfrc = v["ctrl"], v["xfrc_applied"]
-        goal, rate = self._goal, self._rate
-        step1, step2 = mujoco.mj_step1, mujoco.mj_step2
-        if not self._has_tools:
-            tissues = list(self.tissues.values())
-            for _ in range(count):
-                if self._moving:
-                    self._moving = _rate_limit(ctrl, goal, rate, dt)
-                step1(m, d)
-                for tissue in tissues:
-                    tissue.step(dt)
-                step2(m, d)
-                self.steps += 1
-            return
-        gather_args = self._gather_args
-        gpos, gmat, gvel, tcom = self._gpos, self._gmat, self._gvel, self._tcom
-        bodies, w, pairs = self._bodies, self._wrench, self._pairs
-        for _ in range(count):
-            if self._moving:
-                self._moving = _rate_limit(ctrl, goal, rate, dt)
-            step1(m, d)
-            _gather_geoms(*gather_args)
-            w[:] = 0.0
-            for tissue, contact in pairs:
-                res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
-                tissue.step_prevalidated(dt, res.forces, res.stiffness)
-                # CONTRACT (tissue contract v2): an implicit integrator integrates forces + an increment from
-                # the contact stiffness; the tools must get the reaction of exactly
-                # tissue.integrated_external_forces or momentum leaks (11-14 % measured).
-                contact.attribute_increment_prepared(tissue.integrated_external_forces)
-                _add_wrench(w, res.tool_force, res.tool_torque)
-            _write_rows(xfrc, bodies, w)
+                    add_wrench(w, res.tool_force, res.tool_torque)
+            if n > 1:
+                w /= n
+            write_rows(xfrc, bodies, w)
             step2(m, d)
-            _zero_rows(xfrc, bodies)
-            self.steps += 1
-
-    def _advance_controls(self) -> None:
-        self._moving = _rate_limit(self._views["ctrl"], self._goal, self._rate, self.dt)
+            zero_rows(xfrc, bodies)
+            self.steps += n
 
     # ------------------------------------------------------------------------------------------
     # tool commands

@@ -36,7 +36,7 @@ AUTO_RECHECK_STEPS = 100
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _max_ratio(kc, masses):
+def max_ratio(kc, masses):
     """``np.max(kc / masses)`` as that expression gives it (NaN if any ratio is NaN, e.g. 0/0 at a
     massless interior node), and 0.0 when every ``kc`` is zero, without the temporary array."""
     best = -np.inf
@@ -57,10 +57,6 @@ def von_mises(sig: np.ndarray) -> np.ndarray:
     tr = np.trace(sig, axis1=1, axis2=2)
     dev = sig - tr[:, None, None] / 3.0 * np.eye(3)
     return np.sqrt(1.5 * np.einsum("tij,tij->t", dev, dev))
-
-
-#: attribute values that do not bump ``TissueModel._array_version``
-_SCALARS = (int, float, bool, str, type(None), np.generic)
 
 
 class TissueModel(abc.ABC):
@@ -106,15 +102,20 @@ class TissueModel(abc.ABC):
     #: derived from ``capabilities`` ("quasi_static")
     quasi_static: ClassVar[bool] = False
 
-    #: bumped whenever an attribute is set to anything but a scalar (an array, list, dict, object):
-    #: a compiled caller that keeps raw pointers to the model's arrays repacks them when it changes
-    #: (:class:`surgsim_envs.scene.substeps_loop.SubstepsRunner`); in-place writes keep it
-    _array_version: int = 0
+    #: module of the model's compiled step (tissue/compiled.py), for this exact class only (a
+    #: subclass that changes the physics does not inherit it); None: Python steps only
+    compiled_step_module: ClassVar[str | None] = None
 
-    def __setattr__(self, name: str, value) -> None:
-        if not isinstance(value, _SCALARS):
-            object.__setattr__(self, "_array_version", self._array_version + 1)
-        object.__setattr__(self, name, value)
+    #: bumped by :meth:`notify_changed` whenever the model replaces an array (reset, a material or
+    #: Dirichlet change, new buffers): a compiled caller that holds raw pointers to the model's arrays
+    #: repacks them when it moves; writes in place keep it
+    state_version: int = 0
+
+    def notify_changed(self) -> None:
+        """Tell compiled callers that arrays of the model were replaced (new objects): call after
+        assigning a new array to any attribute a compiled step reads. ``positions`` and
+        ``velocities`` are also followed by identity, so assigning those needs no call."""
+        self.state_version += 1
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -288,6 +289,8 @@ class TissueModel(abc.ABC):
                 self.masses = self._lumped_masses()
             self._on_material_changed(name)
             raise
+        finally:
+            self.notify_changed()
         if self.integrator == "auto":
             self._auto_crit = float("nan")   # re-evaluate critical_dt() at the next step
 
@@ -371,6 +374,7 @@ class TissueModel(abc.ABC):
             self.velocities[idx] = 0.0
         self._fixed_idx = np.flatnonzero(self.fixed)
         self._on_fixed_changed()
+        self.notify_changed()
 
     def release(self, nodes=None) -> None:
         """Free ``nodes`` (all if None) from their Dirichlet condition."""
@@ -380,6 +384,12 @@ class TissueModel(abc.ABC):
             self.fixed[self._as_indices(nodes, "released nodes")] = False
         self._fixed_idx = np.flatnonzero(self.fixed)
         self._on_fixed_changed()
+        self.notify_changed()
+
+    @property
+    def fixed_nodes(self) -> np.ndarray:
+        """(K,) int64 indices of the Dirichlet nodes (replaced, not written, when the set changes)."""
+        return self._fixed_idx
 
     def _on_fixed_changed(self) -> None:
         """Hook for models that cache factorisations depending on the fixed set."""
@@ -475,7 +485,7 @@ class TissueModel(abc.ABC):
         kc = np.asarray(stiffness, dtype=np.float64)
         if kc.shape != self.masses.shape:
             return 0.0
-        rate = _max_ratio(kc, self.masses)
+        rate = max_ratio(kc, self.masses)
         return rate if math.isfinite(rate) and rate > 0 else 0.0
 
     def _pick(self, dt: float, crit: float, contact_rate: float) -> str:
@@ -491,9 +501,29 @@ class TissueModel(abc.ABC):
         """Integrator for this step under "auto": critical_dt() is re-evaluated when dt changes,
         every AUTO_RECHECK_STEPS steps and after reset(); the contact stiffness is applied every step."""
         if dt != self._auto_dt or self.steps - self._auto_step >= AUTO_RECHECK_STEPS or not (self._auto_crit > 0):
-            self._auto_crit = float(self.critical_dt())
-            self._auto_dt, self._auto_step = dt, self.steps
+            self.refresh_critical_dt(dt)
         return self._pick(dt, self._auto_crit, self._contact_rate(stiffness))
+
+    def auto_decision(self) -> tuple[float, float, int]:
+        """(critical dt s, the dt it was evaluated for, the step count then) that integrator "auto"
+        decides with (NaN, NaN, 0 before the first evaluation)."""
+        return self._auto_crit, self._auto_dt, self._auto_step
+
+    def refresh_critical_dt(self, dt: float) -> tuple[float, float, int]:
+        """Re-evaluate ``critical_dt()`` for "auto" at the current state and step ``dt``, as a step
+        does when it is due (dt changed, every AUTO_RECHECK_STEPS steps, after reset()); returns
+        :meth:`auto_decision`."""
+        self._auto_crit = float(self.critical_dt())
+        self._auto_dt, self._auto_step = dt, self.steps
+        return self._auto_crit, self._auto_dt, self._auto_step
+
+    def record_compiled_step(self, dt: float, active: str | None) -> None:
+        """Bookkeeping after a compiled caller (tissue/compiled.py) stepped the model in place at
+        least once: the last step's ``dt`` (s) and, for integrator "auto", the concrete integrator
+        it took (``active``). The caller sets ``time`` and ``steps`` itself."""
+        self._last_dt = dt
+        if active is not None:
+            self._active = active
 
     def static_solve(self, forces: np.ndarray | None = None, **kwargs) -> np.ndarray:
         """Equilibrium positions under ``forces`` with the current Dirichlet nodes (if supported)."""
@@ -556,6 +586,7 @@ class TissueModel(abc.ABC):
         if self.integrator == "auto":
             self._active, self._auto_dt, self._auto_step, self._auto_crit = None, float("nan"), 0, float("nan")
         self._reset_state()
+        self.notify_changed()
 
     def _reset_state(self) -> None:
         """Hook: clear model-specific internal state (viscoelastic branches, history...)."""

@@ -82,6 +82,7 @@ class CalibratedMassSpringModel(MassSpringModel):
     """
 
     name: ClassVar[str] = "mass_spring_calibrated"
+    compiled_step_module: ClassVar[str | None] = "surgsim_envs.tissue.calibrated_mass_spring_compiled"
     summary: ClassVar[str] = ("mass-spring network (the grasping simulation paper) with spring constants and a nodal volume term "
                               "identified from linear elasticity (matches FEM at small strain), auto/symplectic/implicit")
     capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "implicit_contact", "viscoelastic"})
@@ -280,6 +281,7 @@ class CalibratedMassSpringModel(MassSpringModel):
         self._ngrad = np.zeros((len(self._ntets), 4, 3))
         self._nc = np.zeros(self.n_nodes)
         self._nsbuf = np.zeros(self.n_nodes)
+        self.notify_changed()
 
     # ---------------------------------------------------------------------------------------
     # Forces, energies, stiffness

@@ -106,6 +106,19 @@ class StabilityGuard:
         self._good_vel: np.ndarray | None = None
         self._good_time = 0.0
 
+    def state(self) -> tuple:
+        """(energy reference J, last good positions (N,3) m or None, velocities (N,3) m/s or None,
+        its time s): what :meth:`load_state` takes back (a compiled caller runs the checks itself,
+        writing the good state in place, and hands the scalars back)."""
+        return self._energy_ref, self._good_pos, self._good_vel, self._good_time
+
+    def load_state(self, energy_ref: float, good_pos, good_vel, good_time: float) -> None:
+        """Set what :meth:`state` returns: the largest (kinetic + elastic) energy seen (J) and the
+        last state that passed every check (arrays kept by reference; None: none yet)."""
+        self._energy_ref = energy_ref
+        self._good_pos, self._good_vel = good_pos, good_vel
+        self._good_time = good_time
+
     def check_inputs(self, model: "TissueModel", forces: np.ndarray, stiffness: np.ndarray | None = None) -> None:
         """Raise :class:`NonFiniteInputError` if ``forces`` (N,3) N or ``stiffness`` (N,) N/m hold
         NaN/inf (call before the step: the state stays as it was)."""

@@ -139,6 +139,7 @@ class MassSpringModel(TissueModel):
     """
 
     name: ClassVar[str] = "mass_spring"
+    compiled_step_module: ClassVar[str | None] = "surgsim_envs.tissue.mass_spring_compiled"
     summary: ClassVar[str] = ("nonlinear viscoelastic mass-spring-damper on tet edges (the grasping simulation paper): "
                               "cubic springs + Maxwell branches (+ optional volume term), auto/symplectic/implicit")
     integrators: ClassVar[tuple[str, ...]] = ("symplectic", "implicit")
@@ -265,7 +266,7 @@ class MassSpringModel(TissueModel):
             self._setup_volume_term(self.volume_stiffness)
         self._build_springs(self._overrides)
         self.inv_mass = 1.0 / self.masses
-        self._coeff_cache = {}     # a new dict (not clear()): bumps _array_version for compiled callers
+        self._coeff_cache = {}     # coefficients of the old springs (_apply_field then calls notify_changed())
 
     def _setup_volume_term(self, volume_stiffness) -> None:
         """Per-tet volume stiffness ``volume_kv`` (Pa) and rest volumes ``volume_rest`` (m^3)."""
@@ -321,7 +322,8 @@ class MassSpringModel(TissueModel):
                 ratio = np.where(x > 1e-12, -np.expm1(-x) / np.where(x > 1e-12, x, 1.0), 1.0 - 0.5 * x)
             out = (np.where(self.kM > 0, self.kM * ratio, 0.0), np.where(self.kM > 0, decay, 1.0))
         if len(self._coeff_cache) > 8:
-            self._coeff_cache = {}     # a new dict: bumps _array_version (the arrays it held are replaced)
+            self._coeff_cache = {}
+            self.notify_changed()      # the arrays it held are replaced
         self._coeff_cache[h] = out
         return out
 
@@ -382,6 +384,7 @@ class MassSpringModel(TissueModel):
         w = getattr(self, "_spring_work", None)
         if w is None or w.shape[1] != len(self.si):
             w = self._spring_work = np.empty((4, len(self.si)))
+            self.notify_changed()
         return w
 
     def committed_symplectic_steps(self, dt: float) -> None:
@@ -398,6 +401,7 @@ class MassSpringModel(TissueModel):
         self._cg = [np.zeros((n, 3)) for _ in range(5)]
         self._vgrad = np.zeros((len(self._vtets), 4, 3))
         self._vcoef = np.zeros(len(self._vtets))
+        self.notify_changed()
 
     def _reset_state(self) -> None:
         self._s[:] = 0.0
@@ -607,6 +611,7 @@ class MassSpringModel(TissueModel):
         self._dl[:] = np.linalg.norm(d, axis=1) - self.rest_lengths
         self._s[:] = 0.0
         self._pending_dt = 0.0
+        self.notify_changed()
         return self.positions.copy()
 
     def _relaxed_energy(self, x: np.ndarray, F: np.ndarray) -> float:

@@ -1,7 +1,6 @@
-"""Compiled substeps for the tasks' default pairing: :class:`ContactModel` against
-:class:`MassSpringModel`, integrators "symplectic" and "auto" (the loop is
-:func:`surgsim_envs.scene.substeps_loop.run_substeps`; this module supplies the model's table
-section, step and energy, and registers them in :mod:`surgsim_envs.scene.compiled_substeps`).
+"""The compiled step of :class:`MassSpringModel` (the tasks' default model), integrators
+"symplectic" and "auto" (the ABI: :mod:`surgsim_envs.tissue.compiled`; the scene's compiled substep
+loop calls it through a function pointer): its table section, step and energy.
 
 The step is ``MassSpringModel._advance``: symplectic (``symplectic_step_work`` with the spring
 pass's work buffer ``MassSpringModel.spring_work``) or, when "auto" picks it, the linearly implicit
@@ -17,15 +16,12 @@ from __future__ import annotations
 import numpy as np
 from numba import cfunc, njit
 
-from surgsim_envs.contact.model import ContactModel
-from surgsim_envs.scene.array_table import b1_1, f8_1, f8_2, f8_3, i8_1, i8_2
-from surgsim_envs.scene.compiled_substeps import register_compiled_substeps
-from surgsim_envs.scene.substeps_loop import (COMMON_SLOTS, SubstepsRunner, TissueOps, energy_signature,
-                                              step_arrays, step_signature, table_at)
-from surgsim_envs.tissue.mass_spring import CG_MAX_ITER, MassSpringModel
+from surgsim_envs.tissue.compiled import (MODEL_ROW, CompiledStep, b1_1, energy_signature, f8_1, f8_2, f8_3, i8_1,
+                                          i8_2, step_arrays, step_signature, table_at)
+from surgsim_envs.tissue.mass_spring import CG_MAX_ITER
 from surgsim_envs.tissue.msd_kernels import elastic_energy, implicit_step, symplectic_step_work, volume_energy
 
-#: the model's table section (after the loop's common slots), in :func:`unpack` order
+#: the model's table section (from ``MODEL_ROW``), in :func:`unpack` order
 KINDS = ["f8_1", "f8_1", "f8_1", "b1_1", "i8_1", "i8_1", "f8_1", "f8_1", "f8_1",   # inv_mass .. K2
          "f8_1", "f8_1", "f8_1", "f8_1", "f8_1", "f8_1", "f8_2",                   # kMg0 .. f_buf
          "i8_2", "f8_1", "f8_1", "f8_2", "f8_1", "f8_1",                           # tets, V0, kv, work, kM, masses
@@ -100,7 +96,7 @@ def step_c(address, rows, dt, first, implicit):
     """:func:`step` on the arrays of the address table at ``address`` (the loop's step pointer)."""
     tab = table_at(address, rows)
     pos, vel, fext, kc, integrated, auto = step_arrays(tab)
-    changed = step(pos, vel, fext, kc, integrated, dt, first != 0, implicit != 0, auto, unpack(tab, COMMON_SLOTS))
+    changed = step(pos, vel, fext, kc, integrated, dt, first != 0, implicit != 0, auto, unpack(tab, MODEL_ROW))
     return 1 if changed else 0
 
 
@@ -108,21 +104,13 @@ def step_c(address, rows, dt, first, implicit):
 def energy_c(address, rows):
     """:func:`energy` on the arrays of the address table at ``address`` (the loop's energy pointer)."""
     tab = table_at(address, rows)
-    return energy(step_arrays(tab)[0], unpack(tab, COMMON_SLOTS))
+    return energy(step_arrays(tab)[0], unpack(tab, MODEL_ROW))
 
 
 def key(tissue, dt: float) -> tuple:
-    """What :func:`arrays` depends on besides the tissue's ``_array_version``: the intervals of the
+    """What :func:`arrays` depends on besides the tissue's ``state_version``: the intervals of the
     Maxwell coefficients (first step, others) and the CG tolerance."""
     return (tissue._pending_dt, dt, tissue.cg_tol)
 
 
-OPS = TissueOps(step_c, energy_c, KINDS, arrays, committed, key)
-
-
-def runner(sim, tissue, contact, fns) -> SubstepsRunner:
-    return SubstepsRunner(sim, tissue, contact, fns, OPS)
-
-
-for _integrator in ("symplectic", "auto"):
-    register_compiled_substeps(ContactModel, MassSpringModel, _integrator, runner)
+COMPILED_STEP = CompiledStep(step_c, energy_c, KINDS, ("symplectic", "auto"), arrays, key, committed)

@@ -1,7 +1,7 @@
-"""Compiled substeps for :class:`CalibratedMassSpringModel` (``mass_spring_calibrated``) against
-:class:`ContactModel`, integrators "symplectic", "auto" and "subcycled": the mass-spring loop
-(:mod:`surgsim_envs.scene.substeps_loop`) with the model's own step and energy, which carry its
-averaged-nodal-volume term instead of the per-tet one, and its sub-cycling.
+"""The compiled step of :class:`CalibratedMassSpringModel` (``mass_spring_calibrated``), integrators
+"symplectic", "auto" and "subcycled" (the ABI: :mod:`surgsim_envs.tissue.compiled`): the mass-spring
+section (:mod:`surgsim_envs.tissue.mass_spring_compiled`) with the model's own step and energy, which
+carry its averaged-nodal-volume term instead of the per-tet one, and its sub-cycling.
 
 Step, as ``CalibratedMassSpringModel._advance`` with the choice of ``_pick``:
 
@@ -13,13 +13,14 @@ Step, as ``CalibratedMassSpringModel._advance`` with the choice of ``_pick``:
   dt / n ("subcycled"), else ``nodal_volume_kernels.implicit_step`` and the contact stiffness's
   implicit part taken out of ``integrated_external_forces`` (whose reaction the loop gives the tools);
 * integrator "subcycled": n steps of dt / n with n = ``subcycle_count(dt)``, given per chunk by
-  :class:`CalibratedRunner` (third entry of the step state).
+  :class:`CalibratedCompiledStep` (third entry of the step state).
 
 The Maxwell-branch coefficients: the first step of a loop call spans the interval since the last
 commit (``symplectic_kernel_state``), every later one the previous step's dt / n; the table carries
-them for dt / 1 .. dt / max(MAX_SUBCYCLES, n) (rows of ``_branch_coeffs``, so the same numbers the generic
+them for dt / 1 .. dt / max(MAX_SUBCYCLES, n) (rows of ``_branch_coeffs``, so the same numbers the Python
 step uses), and a state [n of the last step, its kind, n of "subcycled" or 0] whose first two entries
-:func:`committed` turns into the model's ``_pending_dt`` and the runner into ``active_integrator``.
+:func:`committed` turns into the model's ``_pending_dt`` and :meth:`CalibratedCompiledStep.active_after`
+into ``active_integrator``.
 Energy = springs and Maxwell branches (at the last step's interval) + the nodal volume term.
 """
 
@@ -30,15 +31,12 @@ import math
 import numpy as np
 from numba import cfunc, njit
 
-from surgsim_envs.contact.model import ContactModel
-from surgsim_envs.scene import substeps_mass_spring as ms
-from surgsim_envs.scene.array_table import f8_1, f8_2, f8_3, i8_2
-from surgsim_envs.scene.compiled_substeps import NO_IDS, NO_VALUES, register_compiled_substeps
-from surgsim_envs.scene.substeps_loop import (COMMON_SLOTS, SubstepsRunner, TissueOps, energy_signature,
-                                              step_arrays, step_signature, table_at)
+from surgsim_envs.tissue import mass_spring_compiled as ms
 from surgsim_envs.tissue import nodal_volume_kernels as nvk
-from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS, DT_SAFETY, _max_ratio
-from surgsim_envs.tissue.calibrated_mass_spring import MAX_SUBCYCLES, CalibratedMassSpringModel
+from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS, DT_SAFETY, max_ratio
+from surgsim_envs.tissue.calibrated_mass_spring import MAX_SUBCYCLES
+from surgsim_envs.tissue.compiled import (MODEL_ROW, CompiledStep, energy_signature, f8_1, f8_2, f8_3, i8_2,
+                                          step_arrays, step_signature, table_at)
 from surgsim_envs.tissue.mass_spring import CG_MAX_ITER, CG_TOLERANCE
 from surgsim_envs.tissue.msd_kernels import elastic_energy
 
@@ -103,7 +101,7 @@ def subcycles_for(dt, crit, kc, masses):
     if not (crit > 0) or not math.isfinite(crit):
         return 0
     n = math.ceil(dt / (DT_SAFETY * crit) - 1e-12)
-    rate = _max_ratio(kc, masses)
+    rate = max_ratio(kc, masses)
     if not (math.isfinite(rate) and rate > 0):
         rate = 0.0
     contact_ok = rate <= 0 or dt <= DT_SAFETY * 2.0 / math.sqrt(rate)
@@ -170,7 +168,7 @@ def step_c(address, rows, dt, first, implicit):
     """:func:`step` on the arrays of the address table at ``address`` (the loop's step pointer)."""
     tab = table_at(address, rows)
     pos, vel, fext, kc, integrated, auto = step_arrays(tab)
-    changed = step(pos, vel, fext, kc, integrated, dt, first != 0, implicit != 0, auto, unpack(tab, COMMON_SLOTS))
+    changed = step(pos, vel, fext, kc, integrated, dt, first != 0, implicit != 0, auto, unpack(tab, MODEL_ROW))
     return 1 if changed else 0
 
 
@@ -178,59 +176,40 @@ def step_c(address, rows, dt, first, implicit):
 def energy_c(address, rows):
     """:func:`energy` on the arrays of the address table at ``address`` (the loop's energy pointer)."""
     tab = table_at(address, rows)
-    return energy(step_arrays(tab)[0], unpack(tab, COMMON_SLOTS))
+    return energy(step_arrays(tab)[0], unpack(tab, MODEL_ROW))
 
 
 def key(tissue, dt: float) -> tuple:
-    """What :func:`arrays` depends on besides the tissue's ``_array_version`` (every buffer, cache and
-    coefficient row it returns is an attribute, so replacing one bumps the version): the mass-spring
-    section's intervals and CG tolerance (``substeps_mass_spring.key``) and the number of Maxwell rows
-    (``_state``'s third entry: n of integrator "subcycled")."""
+    """What :func:`arrays` depends on besides the tissue's ``state_version`` (every buffer the model
+    replaces calls ``notify_changed()``): the mass-spring section's intervals and CG tolerance
+    (``mass_spring_compiled.key``) and the number of Maxwell rows (``_state``'s third entry: n of
+    integrator "subcycled")."""
     return (tissue._pending_dt, dt, tissue.cg_tol, int(_state(tissue)[2]))
 
 
-OPS = TissueOps(step_c, energy_c, KINDS, arrays, committed, key)
+class CalibratedCompiledStep(CompiledStep):
+    """Reports the step "auto" took last (symplectic, subcycled or implicit), and runs integrator
+    "subcycled" in chunks: n = ``subcycle_count(dt)`` is evaluated in Python where the Python step
+    evaluates it (before the first step and every AUTO_RECHECK_STEPS steps, :meth:`plan`), and each
+    chunk up to the next re-evaluation runs compiled with that n. With several tissue steps per
+    MuJoCo step a re-evaluation can fall inside a MuJoCo step, where a loop call cannot stop: such
+    scenes keep the Python loop (:meth:`applies`)."""
 
+    def applies(self, tissue, rigid_subcycles: int) -> bool:
+        return not (tissue.integrator == "subcycled" and rigid_subcycles > 1)
 
-class CalibratedRunner(SubstepsRunner):
-    """:class:`SubstepsRunner` whose "auto" reports the step it took last (symplectic, subcycled or implicit),
-    and which runs integrator "subcycled" in chunks: n = ``subcycle_count(dt)`` is evaluated in Python where
-    the generic step evaluates it (before the first step and every AUTO_RECHECK_STEPS steps), and each chunk
-    up to the next re-evaluation runs compiled with that n. With ``tissue_subcycles`` > 1 a re-evaluation can
-    fall inside a MuJoCo step, where a loop call cannot stop: such scenes take the generic loop."""
-
-    def run(self, count: int, ctrl_ids=NO_IDS, ctrl_values=NO_VALUES) -> None:
-        tissue = self.tissue
+    def plan(self, tissue, dt: float) -> int | None:
         if tissue.integrator != "subcycled":
-            super().run(count, ctrl_ids, ctrl_values)
-            return
-        state, dt, per = _state(tissue), self.sim.dt, self.sim.tissue_subcycles
-        if per > 1:      # n may be re-evaluated inside a MuJoCo step, where a loop call cannot stop
-            self.sim._subcycled_steps(count // per, ctrl_ids if len(ctrl_ids) else None,
-                                      ctrl_values if len(ctrl_ids) else None)
-            return
-        done = 0
-        try:
-            while done < count:
-                state[2] = float(tissue.subcycle_count(dt))        # re-evaluates n as _advance would
-                until = max(AUTO_RECHECK_STEPS - (tissue.steps - tissue._sub_step), 1)
-                chunk = min(count - done, until)
-                values = ctrl_values[done:done + chunk] if len(ctrl_ids) else ctrl_values
-                super().run(chunk, ctrl_ids, values)
-                done += chunk
-        finally:
-            state[2] = 0.0
+            return None
+        _state(tissue)[2] = float(tissue.subcycle_count(dt))        # re-evaluates n as _advance would
+        return max(AUTO_RECHECK_STEPS - (tissue.steps - tissue._sub_step), 1)
 
-    def _sync(self, dt: float) -> None:
-        super()._sync(dt)
-        tissue = self.tissue
-        if self._counts[2] and tissue.integrator == "auto":
-            tissue._active = _KIND_NAMES[float(_state(tissue)[1])]
+    def finish(self, tissue) -> None:
+        _state(tissue)[2] = 0.0
+
+    def active_after(self, tissue, implicit: bool) -> str:
+        return _KIND_NAMES[float(_state(tissue)[1])]
 
 
-def runner(sim, tissue, contact, fns) -> SubstepsRunner:
-    return CalibratedRunner(sim, tissue, contact, fns, OPS)
-
-
-for _integrator in ("symplectic", "auto", "subcycled"):
-    register_compiled_substeps(ContactModel, CalibratedMassSpringModel, _integrator, runner)
+COMPILED_STEP = CalibratedCompiledStep(step_c, energy_c, KINDS, ("symplectic", "auto", "subcycled"), arrays, key,
+                                       committed)

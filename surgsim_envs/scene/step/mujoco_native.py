@@ -1,6 +1,6 @@
 """MuJoCo's ``mj_step1`` / ``mj_step2`` callable from numba-compiled code.
 
-The compiled substep loop (:mod:`surgsim_envs.scene.compiled_substeps`) runs every physics substep of a
+The compiled substep loop (:mod:`surgsim_envs.scene.step.compiled`) runs every physics substep of a
 control step in one numba call, so it must call MuJoCo without going back to Python. The Python
 bindings expose the C pointers of a model and its data (``MjModel._address``, ``MjData._address``)
 and ship the shared library they are linked against (``mujoco/libmujoco.so.*``); loading that same
