@@ -68,7 +68,7 @@ def kernel_split_us(model, dt: float, repeats: int) -> tuple[float, float]:
     state = model.symplectic_kernel_state(dt)
     (pos, si, sj, L0, K1, K2), (kMg, decay, s, dl, f_buf) = (state[0], *state[6:11]), state[13:18]
     work = model.spring_work()
-    ntets = getattr(model, "_ntets", None)
+    ntets = getattr(model, "volume_tets", None)      # the calibrated model's nodal volume term
     calls = [lambda: kern.spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s, dl, False, f_buf, work)]
     if ntets is not None:
         fvol = np.zeros_like(pos)

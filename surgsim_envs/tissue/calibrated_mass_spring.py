@@ -157,6 +157,12 @@ class CalibratedMassSpringModel(MassSpringModel):
         self._lanczos_ratio = None     # critical_dt() runs Lanczos again for the new constants
         self.volume_stiffness = "calibrated"
 
+    @property
+    def volume_tets(self) -> np.ndarray:
+        """(T, 4) node indices of the tets the nodal volume term visits (none where every node's
+        bulk term is zero)."""
+        return self._ntets
+
     def _build_springs(self, overrides) -> None:
         if overrides.get("K1") is not None:
             raise ConfigError("mass_spring_calibrated: K1 is set by the calibration (material.extra has 'K1'); "

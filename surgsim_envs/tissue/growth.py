@@ -184,7 +184,7 @@ class GrowthSolver:
         return cls(ops, ops.stiffness(), fixed_dofs, displacement, name=model.name)
 
     # ------------------------------------------------------------------------------------------
-    def _factor(self):
+    def factor(self):
         """Sparse LU of the free-DOF block of K (once), in a geometric nested-dissection order."""
         if self._lu is None:
             t0 = time.perf_counter()
@@ -208,7 +208,7 @@ class GrowthSolver:
         return self._lu
 
     def _solve_free(self, rhs_free: np.ndarray) -> np.ndarray:
-        lu = self._factor()
+        lu = self.factor()
         out = np.empty_like(rhs_free)
         out[self._perm] = lu.solve(rhs_free[self._perm])
         return out
@@ -292,7 +292,7 @@ class GrowthSolver:
                          fix=f"iterations of the growth loop, at most {MAX_GROWTH_ITERATIONS:,} (each is a solve)")
         ops = self.ops
         t0 = time.perf_counter()
-        self._factor()
+        self.factor()
         u = self.basic()
         basic = u.copy()
         sig0 = ops.stress(ops.strain(u))
