@@ -15,6 +15,7 @@ ROOT = pathlib.Path(surgsim_envs.__file__).parent
 RANK = {"errors": 0, "numba_cache": 0, "validate": 0.25, "materials": 0.5, "asset_files": 1, "policies": 1, "geometry": 1, "tissue": 2, "contact": 2, "scene": 3, "envs": 4, "haptics": 4,
         "planning": 3, "scenarios": 5, "bench": 5, "integrations": 5, "dm_control_suite": 5, "distributed": 5, "cli": 6}
 RANK["warmup"] = 5          # `surgsim warmup`: exercises the demo (scene) and the tasks (envs)
+RANK["batch"] = 4.5         # the batched Warp backend: sits on scene and on the tasks (their configs and terms)
 #: third-party packages a layer must not import
 FORBIDDEN = {"tissue": {"mujoco", "gymnasium"}, "geometry": {"mujoco", "gymnasium"},
              "contact": {"mujoco", "gymnasium"}}
