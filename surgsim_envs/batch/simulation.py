@@ -288,8 +288,9 @@ class BatchSimulation:
             mjw.reset_data(t.model, t.data, reset=wp.array(mask, dtype=bool))
             mjw.forward(t.model, t.data)
 
-    def set_young_factors(self, factors) -> None:
-        """Per-world, per-tet Young's modulus factors ``factors`` (W, T) relative to the template's
+    def set_young_factors(self, factors, worlds=None) -> None:
+        """Per-world, per-tet Young's modulus factors ``factors`` (W, T), or (len(worlds), T) for the
+        worlds listed, relative to the template's
         material (domain randomisation, e.g. a stiffer inclusion): every spring constant, Maxwell
         branch constant and volume stiffness is linear in the Young's moduli of the tets around it
         (docs/models/mass_spring.md), so each world's are the template's scaled by the volume-weighted
@@ -298,15 +299,27 @@ class BatchSimulation:
         in tests/test_batch_materials.py."""
         f = np.asarray(factors, dtype=np.float64)
         nt = self.topology.n_tets
-        if f.shape != (self.W, nt) or not np.all(np.isfinite(f)) or np.any(f <= 0):
-            raise ConfigError(f"factors must be positive finite ({self.W}, {nt}) per-tet Young's modulus factors, "
+        idx = np.arange(self.W) if worlds is None else np.asarray(worlds, dtype=np.int64).reshape(-1)
+        if f.shape != (len(idx), nt) or not np.all(np.isfinite(f)) or np.any(f <= 0):
+            raise ConfigError(f"factors must be positive finite ({len(idx)}, {nt}) per-tet Young's modulus factors, "
                               f"got shape {f.shape}")
+        if not len(idx):
+            return
         spring_w = self._spring_weights()
-        edge = spring_w @ f.T            # (E, W): volume-weighted mean factor of each spring's tets
+        edge = spring_w @ f.T            # (E, worlds): volume-weighted mean factor of each spring's tets
         base = self._base_fields
         for key in ("K1", "K2", "kM", "kMg"):
-            getattr(self.fields, key).assign(np.ascontiguousarray((base[key][:, None] * edge).T))
-        self.fields.kv.assign(np.ascontiguousarray(base["kv"][None, :] * f))
+            self._assign_rows(getattr(self.fields, key), idx, (base[key][:, None] * edge).T)
+        self._assign_rows(self.fields.kv, idx, base["kv"][None, :] * f)
+
+    def _assign_rows(self, arr, idx: np.ndarray, values: np.ndarray) -> None:
+        """``arr[idx] = values`` on the device (all rows at once when idx is every world)."""
+        if len(idx) == self.W and np.array_equal(idx, np.arange(self.W)):
+            arr.assign(np.ascontiguousarray(values))
+            return
+        host = arr.numpy()
+        host[idx] = values
+        arr.assign(host)
 
     def _spring_weights(self):
         """(E, T) sparse: row e holds the tets around spring e weighted by volume / their total."""
