@@ -180,12 +180,16 @@ class BatchSimulation:
     def _one_step(self) -> None:
         wp, mjw = self._wp, self._mjw
         W, dev = self.W, self.device
-        t, d, c, ts, topo, fl = self.tools, self.tools.data, self.contact, self.tissue_state, self.topology, self.fields
+        t, d, c, ts = self.tools, self.tools.data, self.contact, self.tissue_state
         dt = wp.float64(self.dt)
+        G, B, C = len(self.geom_ids), len(self.bodies), self._cand.shape[0]
+        mark = self._mark
         with wp.ScopedDevice(dev):
+            mark(None)
             wp.launch(rk.rate_limit, dim=W, inputs=[t.ctrl64, t.goal, t.rate, t.moving, dt, d.ctrl])
+            mark("rate_limit")
             mjw.step1(t.model, d)
-            G, B, C = len(self.geom_ids), len(self.bodies), self._cand.shape[0]
+            mark("mujoco_warp.step1")
             wp.launch(ck.gather_geoms, dim=(W, G), inputs=[self._geom_ids, self._geom_body, self._geom_root, self._bodies,
                                                           d.geom_xpos, d.geom_xmat, d.cvel, d.subtree_com, d.xipos,
                                                           c.gpos, c.gmat, c.gang, c.glin, c.tcom])
@@ -197,11 +201,35 @@ class BatchSimulation:
             wp.launch(ck.tool_sums, dim=(W, B), inputs=[ts.x, self._cand, self._tool, c.point_force, c.point_fn,
                                                        c.point_depth, c.tcom, c.tool_force, c.tool_torque, c.tool_fn,
                                                        c.tool_contacts, c.tool_depth])
+            mark("contact")
             self._tissue_step(dt)
+            mark("tissue")
             wp.launch(ck.write_reaction, dim=(W, B), inputs=[self._bodies, c.tool_force, c.tool_torque, d.xfrc_applied])
+            mark("reaction")
             mjw.step2(t.model, d)
             wp.launch(ck.zero_reaction, dim=(W, B), inputs=[self._bodies, d.xfrc_applied])
+            mark("mujoco_warp.step2")
         self.steps += 1
+
+    #: phase -> seconds spent in it (wall clock, device synchronised after each phase) while
+    #: profiling (:meth:`profile`); None: not profiling (no synchronisation between phases)
+    phase_seconds: dict | None = None
+
+    def profile(self, on: bool = True) -> None:
+        """Start (on) or stop timing the phases of every step into :attr:`phase_seconds` (the device
+        is synchronised after each phase, which costs time on a GPU: for the shares, not the totals)."""
+        self.phase_seconds = {} if on else None
+
+    def _mark(self, phase) -> None:
+        if self.phase_seconds is None:
+            return
+        import time
+
+        self._wp.synchronize_device(self.device)
+        now = time.perf_counter()
+        if phase is not None:
+            self.phase_seconds[phase] = self.phase_seconds.get(phase, 0.0) + now - self._t_mark
+        self._t_mark = now
 
     def _tissue_step(self, dt) -> None:
         wp = self._wp
