@@ -168,3 +168,22 @@ def test_one_world_on_cuda_matches_the_cpu_simulation():
     batch = BatchSimulation(env.sim, 1, device="cuda")
     worst, _ = _press(env.sim, batch, 200)
     assert worst[0] < POSITION_BOUND and worst[1] < POSITION_BOUND and worst[2] < FORCE_BOUND, worst
+
+
+def test_a_diverged_world_is_named(pair):
+    """A non-finite tissue state in one world is detected on the device and reported by name;
+    a reset clears it."""
+    from surgsim_envs.errors import TissueUnstableError
+
+    sim, batch = pair
+    batch.reset_worlds()
+    batch.check_stable()
+    v = batch.tissue_state.v.numpy()
+    v[0, int(np.flatnonzero(~sim.tissue().fixed)[0])] = np.inf
+    batch.tissue_state.v.assign(v)
+    batch.step(1)
+    with pytest.raises(TissueUnstableError, match=r"non-finite node positions in 1 of 1 batched worlds \(first: \[0\]\)"):
+        batch.check_stable()
+    batch.reset_worlds()
+    batch.check_stable()
+    assert np.all(np.isfinite(batch.tissue_positions()))

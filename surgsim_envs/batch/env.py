@@ -20,7 +20,9 @@ factors (:meth:`BatchSimulation.set_young_factors`).
 
 Autoreset: Gymnasium's NEXT_STEP mode (the default of ``SurgSimVectorEnv`` too): the step after a
 world's episode ended resets it (its action is ignored, reward 0, terminated/truncated False) and
-returns its first observation. Observations and rewards come back as numpy arrays;
+returns its first observation. A world whose tissue diverges raises
+:class:`~surgsim_envs.errors.TissueUnstableError` (config ``on_unstable="raise"``, the default) or
+ends its episode with ``info["unstable"]`` ("terminate"), as the single env. Observations and rewards come back as numpy arrays;
 :meth:`device_arrays` hands out the physics arrays on the device (Warp arrays: ``__dlpack__``,
 ``wp.to_torch``, ``wp.to_jax`` share them without copies).
 """
@@ -187,7 +189,17 @@ class BatchedPalpationEnv(VectorEnv):
         self.sim.step(self.substeps)
         self._readings = None
         self._steps[live] += 1
-        rewards, terminated, truncated, info = self._evaluate(a, live)
+        unstable = np.zeros(W, dtype=bool)
+        bad = self.sim.diverged_worlds()
+        if len(bad):
+            if c.on_unstable != "terminate":
+                self.sim.check_stable()
+            unstable[bad] = True          # as the single env: the episode ends, the world restarts from rest
+            self._reset_worlds(bad, {})
+        rewards, terminated, truncated, info = self._evaluate(a, live & ~unstable)
+        if unstable.any():
+            terminated |= unstable
+            info["unstable"], info["_unstable"] = unstable.copy(), unstable.copy()
         done_before = np.flatnonzero(self._autoreset)
         if len(done_before):
             self._reset_worlds(done_before, {})

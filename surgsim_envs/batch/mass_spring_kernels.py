@@ -76,8 +76,10 @@ def integrate_nodes(x: wp.array2d(dtype=wp.vec3d), v: wp.array2d(dtype=wp.vec3d)
                     node_corners: wp.array(dtype=wp.int32), f_spring: wp.array2d(dtype=wp.vec3d),
                     f_corner: wp.array2d(dtype=wp.vec3d), f_ext: wp.array2d(dtype=wp.vec3d),
                     inv_mass: wp.array(dtype=f64), b0: wp.array(dtype=f64), gravity: wp.vec3d,
-                    fixed: wp.array(dtype=wp.int32), dt: f64, fresh: wp.array(dtype=wp.int32)):
-    """Gather node i's forces and take its symplectic Euler step (fixed nodes stay)."""
+                    fixed: wp.array(dtype=wp.int32), dt: f64, fresh: wp.array(dtype=wp.int32),
+                    diverged: wp.array(dtype=wp.int32)):
+    """Gather node i's forces and take its symplectic Euler step (fixed nodes stay); a non-finite
+    position sets ``diverged[w]`` (every writer writes 1: no atomics needed)."""
     w, i = wp.tid()
     if i == 0:
         fresh[w] = 0          # read by spring_forces earlier in this step; the next step is not fresh
@@ -97,4 +99,7 @@ def integrate_nodes(x: wp.array2d(dtype=wp.vec3d), v: wp.array2d(dtype=wp.vec3d)
                   vi[2] + dt * ((f[2] + fe[2] - b * vi[2]) * im + gravity[2]))
     v[w, i] = vn
     xi = x[w, i]
-    x[w, i] = wp.vec3d(xi[0] + dt * vn[0], xi[1] + dt * vn[1], xi[2] + dt * vn[2])
+    xn = wp.vec3d(xi[0] + dt * vn[0], xi[1] + dt * vn[1], xi[2] + dt * vn[2])
+    x[w, i] = xn
+    if not (wp.isfinite(xn[0]) and wp.isfinite(xn[1]) and wp.isfinite(xn[2])):
+        diverged[w] = 1

@@ -167,6 +167,8 @@ class BatchSimulation:
                                    moving=wp.zeros(W, dtype=wp.int32, device=dev))
         self.steps = 0
         self._mjw, self._wp = mjw, wp
+        self._model_name = type(tissue).name
+        self._critical_dt = float(tissue.critical_dt())     # at rest, for the divergence message
 
     # ------------------------------------------------------------------------------------------
     # stepping
@@ -242,7 +244,7 @@ class BatchSimulation:
         wp.launch(msk.integrate_nodes, dim=(W, topo.n_nodes),
                   inputs=[ts.x, ts.v, topo.spring_start, topo.node_springs, topo.spring_sign, topo.corner_start,
                           topo.node_corners, self._f_spring, self._f_corner, c.f_ext, topo.inv_mass, topo.b0,
-                          wp.vec3d(*topo.gravity), topo.fixed, dt, ts.fresh])
+                          wp.vec3d(*topo.gravity), topo.fixed, dt, ts.fresh, ts.diverged])
 
     @property
     def _f_spring(self):
@@ -307,6 +309,7 @@ class BatchSimulation:
         ts, c, t = self.tissue_state, self.contact, self.tools
         with wp.ScopedDevice(self.device):
             for arr, value in ((ts.x, self.topology.rest), (ts.v, 0.0), (ts.s, 0.0), (ts.dl, 0.0), (ts.fresh, 1),
+                               (ts.diverged, 0),
                                (c.state, 0), (c.anchor, 0.0), (c.f_ext, 0.0), (c.tool_force, 0.0),
                                (c.tool_torque, 0.0), (c.tool_fn, 0.0), (c.tool_contacts, 0), (c.tool_depth, 0.0),
                                (t.ctrl64, 0.0), (t.goal, 0.0), (t.moving, 0)):
@@ -375,6 +378,20 @@ class BatchSimulation:
             total = np.asarray(m.sum(axis=1)).ravel()
             sw = self._spring_weight_matrix = sp.diags(1.0 / total) @ m
         return sw
+
+    def diverged_worlds(self) -> np.ndarray:
+        """Indices of the worlds whose tissue became non-finite since their last reset."""
+        return np.flatnonzero(self.tissue_state.diverged.numpy())
+
+    def check_stable(self) -> None:
+        """Raise :class:`~surgsim_envs.errors.TissueUnstableError` naming the diverged worlds, if any."""
+        bad = self.diverged_worlds()
+        if len(bad):
+            from surgsim_envs.errors import TissueUnstableError
+
+            raise TissueUnstableError(self._model_name, self.dt, self._critical_dt,
+                                      f"non-finite node positions in {len(bad)} of {self.W} batched worlds "
+                                      f"(first: {bad[:8].tolist()})")
 
     # ------------------------------------------------------------------------------------------
     # readouts (numpy copies; arrays() gives the device arrays)

@@ -56,6 +56,7 @@ class TissueState:
     s: object            # (W, E) float64, N: Maxwell branch force
     dl: object           # (W, E) float64, m: branch extension at the last commit
     fresh: object        # (W,) int32: 1 = branches just reset (next step uses a zero interval)
+    diverged: object     # (W,) int32: 1 = a node position became NaN/inf since the world's reset
 
     @classmethod
     def at_rest(cls, rest: np.ndarray, n_springs: int, W: int, device: str) -> "TissueState":
@@ -63,10 +64,10 @@ class TissueState:
         return cls(x=_put(wp, _tiled(rest, W), wp.vec3d, device), v=wp.zeros((W, len(rest)), dtype=wp.vec3d, device=device),
                    s=wp.zeros((W, n_springs), dtype=wp.float64, device=device),
                    dl=wp.zeros((W, n_springs), dtype=wp.float64, device=device),
-                   fresh=wp.ones(W, dtype=wp.int32, device=device))
+                   fresh=wp.ones(W, dtype=wp.int32, device=device), diverged=wp.zeros(W, dtype=wp.int32, device=device))
 
     def nbytes(self) -> int:
-        return sum(a.capacity for a in (self.x, self.v, self.s, self.dl, self.fresh))
+        return sum(a.capacity for a in (self.x, self.v, self.s, self.dl, self.fresh, self.diverged))
 
 
 @dataclass
