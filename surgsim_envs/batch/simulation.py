@@ -23,7 +23,6 @@ Anything else raises :class:`~surgsim_envs.batch.backend.BatchUnavailableError` 
 
 from __future__ import annotations
 
-import math
 
 import mujoco
 import numpy as np
