@@ -43,15 +43,16 @@ def pair():
 
 
 def _press(sim, batch, steps, slide=(0.005, 0.0)):
-    """Scripted press: the probe target 20 mm down (8 mm below the surface at the rate limit), then
-    a slide in x/y after half the steps. Returns the worst (tool m, tissue m, force relative)."""
+    """Scripted press: the probe target 10 mm down (its tip 8 mm below the rest surface, the task's
+    deepest press) at the 0.2 m/s rate limit, then a slide in x/y after half the steps. Returns the
+    worst (tool m, tissue m, force relative) and the largest force on the probe (N)."""
     sim.reset()
     batch.reset_worlds()
     home = np.array(sim.tool("probe").home)
-    worst = np.zeros(3)
+    worst, peak = np.zeros(3), 0.0
     for k in range(steps):
         if k in (0, steps // 2):
-            target = home + np.array([0.0, 0.0, -0.02])
+            target = home + np.array([0.0, 0.0, -0.01])
             if k:
                 target[:2] += slide
             sim.set_tool_target("probe", target, speed=0.2)
@@ -64,13 +65,14 @@ def _press(sim, batch, steps, slide=(0.005, 0.0)):
         scale = np.linalg.norm(fc)
         force = np.linalg.norm(fb - fc) / scale if scale > FORCE_FLOOR else np.linalg.norm(fb - fc) / FORCE_FLOOR
         worst = np.maximum(worst, [tool, tissue, force])
-    return worst, sim.tool_force("probe")
+        peak = max(peak, float(scale))
+    return worst, peak
 
 
 def test_one_world_matches_the_cpu_simulation_over_a_press(pair):
     sim, batch = pair
-    worst, force = _press(sim, batch, 200)
-    assert force[2] > 0.1, f"the press must load the probe (F_z = {force[2]:.3g} N)"
+    worst, peak = _press(sim, batch, 200)
+    assert peak > 0.1, f"the press must load the probe (peak {peak:.3g} N)"
     assert worst[0] < POSITION_BOUND, f"tool position differs by {worst[0]:.3g} m"
     assert worst[1] < POSITION_BOUND, f"tissue positions differ by {worst[1]:.3g} m"
     assert worst[2] < FORCE_BOUND, f"probe force differs by {worst[2]:.3g} of its magnitude"
@@ -79,8 +81,8 @@ def test_one_world_matches_the_cpu_simulation_over_a_press(pair):
 @pytest.mark.slow
 def test_one_world_matches_the_cpu_simulation_over_1000_steps(pair):
     sim, batch = pair
-    worst, force = _press(sim, batch, 1000, slide=(0.01, -0.005))
-    assert force[2] > 0.1
+    worst, peak = _press(sim, batch, 1000, slide=(0.01, -0.005))
+    assert peak > 0.1
     assert worst[0] < POSITION_BOUND and worst[1] < POSITION_BOUND, worst
     assert worst[2] < FORCE_BOUND, worst
 
@@ -187,3 +189,46 @@ def test_a_diverged_world_is_named(pair):
     batch.reset_worlds()
     batch.check_stable()
     assert np.all(np.isfinite(batch.tissue_positions()))
+
+
+@pytest.mark.slow
+def test_grasp_scene_matches_until_the_grasp_then_tracks_the_cpus_own_sensitivity():
+    """Grasp-v0's scene (box jaws, cylinder shaft, joint-coupled jaws, MuJoCo contacts, tissue
+    sub-cycling 2): the jaws close for 500 steps, then the wrist lifts 10 mm and the jaws meet the
+    tissue (first contact ~ step 506). Through step 540 the bounds of the press hold. Later the
+    stick/slip grasp is itself chaotic at the scale of MuJoCo Warp's float32 rounding: a 1e-9 m
+    perturbation of the CPU tissue at step 540 grows to ~2e-3 m by step 900 (measured), and the
+    batched tissue departs from the CPU's by that order too; the wrist stays within 1e-6 m."""
+    import gymnasium as gym
+
+    from surgsim_envs.batch.simulation import BatchSimulation
+
+    env = gym.make("SurgSim/Grasp-v0").unwrapped
+    env.reset(seed=0, options={"young_scale": 1.0})
+    sim = env.sim
+    batch = BatchSimulation(sim, 1, device="cpu")
+    assert batch.subcycles == 2
+    sim.reset()
+    tool = sim.tool("grasper")
+    jaw, g = tool.jaw_actuator_id, tool.config
+    sim.set_jaw_opening("grasper", g.min_radius)
+    batch.set_actuator_goals([jaw], [g.open_radius - g.min_radius])
+    early, wrist, peak = np.zeros(3), 0.0, 0.0
+    for k in range(0, 1000, 2):
+        if k == 500:
+            target = np.array(tool.home) + np.array([0.0, 0.0, 0.01])
+            sim.set_tool_target("grasper", target)
+            batch.set_tool_targets("grasper", target[None])
+        sim.physics_step(2)
+        batch.step(2)
+        wrist = max(wrist, np.abs(batch.tool_positions("grasper")[0] - sim.tool_position("grasper")).max())
+        fc, fb = sim.tool_force("grasper"), batch.tool_forces("grasper")[0]
+        peak = max(peak, float(np.linalg.norm(fc)))
+        if k < 540:
+            tissue = np.abs(batch.tissue_positions()[0] - sim.tissue().positions).max()
+            force = np.linalg.norm(fb - fc) / max(np.linalg.norm(fc), FORCE_FLOOR)
+            early = np.maximum(early, [wrist, tissue, force])
+    assert peak > 0.02, f"the jaws must load the tissue (peak {peak:.3g} N)"
+    assert early[0] < POSITION_BOUND and early[1] < POSITION_BOUND, early
+    assert early[2] < FORCE_BOUND, early
+    assert wrist < POSITION_BOUND, wrist

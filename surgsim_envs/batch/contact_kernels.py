@@ -1,7 +1,7 @@
 """Warp kernels of tool-tissue contact over W worlds (float64): the law of
 :mod:`surgsim_envs.contact.model` (penalty normal force with one-sided damping, Coulomb stick/slip
-friction with an anchor per (point, geom), :mod:`surgsim_envs.contact.friction`) for sphere and
-capsule tool geoms.
+friction with an anchor per (point, geom), :mod:`surgsim_envs.contact.friction`) for sphere,
+capsule, box and cylinder tool geoms.
 
 * :func:`gather_geoms`: one thread per (world, geom) copies MuJoCo Warp's float32 geom pose and
   the velocity of the geom origin (from the body's ``cvel`` about its root's ``subtree_com``, as
@@ -20,7 +20,7 @@ from __future__ import annotations
 import warp as wp
 
 f64 = wp.float64
-SPHERE, CAPSULE = 0, 1
+SPHERE, CAPSULE, BOX, CYLINDER = 0, 1, 2, 3
 
 
 @wp.kernel
@@ -48,11 +48,94 @@ def gather_geoms(geom_ids: wp.array(dtype=wp.int32), geom_body: wp.array(dtype=w
 
 
 @wp.func
-def _local_outside(kind: int, s0: f64, s1: f64, q: wp.vec3d) -> bool:
+def bounding_radius(kind: int, s0: f64, s1: f64, s2: f64) -> f64:
+    """Radius (m) of a sphere about the geom centre containing the shape (contact/shapes.py)."""
+    if kind == 0:
+        return s0
+    if kind == 1:
+        return s0 + s1
+    if kind == 2:
+        return wp.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    return wp.sqrt(s0 * s0 + s1 * s1)
+
+
+@wp.func
+def local_outside(kind: int, s0: f64, s1: f64, s2: f64, q: wp.vec3d) -> bool:
+    """Local point q outside (or on) the shape, without square roots (contact/shapes.py)."""
     if kind == 0:
         return q[0] * q[0] + q[1] * q[1] + q[2] * q[2] >= s0 * s0
-    sz = wp.min(wp.max(q[2], -s1), s1)
-    return q[0] * q[0] + q[1] * q[1] + (q[2] - sz) * (q[2] - sz) >= s0 * s0
+    if kind == 1:
+        sz = wp.min(wp.max(q[2], -s1), s1)
+        return q[0] * q[0] + q[1] * q[1] + (q[2] - sz) * (q[2] - sz) >= s0 * s0
+    if kind == 2:
+        return wp.abs(q[0]) >= s0 or wp.abs(q[1]) >= s1 or wp.abs(q[2]) >= s2
+    return wp.abs(q[2]) >= s1 or q[0] * q[0] + q[1] * q[1] >= s0 * s0
+
+
+@wp.func
+def local_sdf(kind: int, s0: f64, s1: f64, s2: f64, q: wp.vec3d) -> wp.vec4d:
+    """(local outward normal (3), signed distance m) of local point q to the shape at the origin:
+    the arithmetic of ``contact.shapes.local_sdf`` for SPHERE 0, CAPSULE 1, BOX 2, CYLINDER 3."""
+    zero = f64(0.0)
+    one = f64(1.0)
+    if kind == 0 or kind == 1:
+        sz = zero
+        if kind == 1:
+            sz = wp.min(wp.max(q[2], -s1), s1)
+        vx = q[0]
+        vy = q[1]
+        vz = q[2] - sz
+        nv = wp.sqrt(vx * vx + vy * vy + vz * vz)
+        if nv > f64(1e-300):
+            return wp.vec4d(vx / nv, vy / nv, vz / nv, nv - s0)
+        if kind == 0:
+            return wp.vec4d(zero, zero, one, nv - s0)
+        return wp.vec4d(one, zero, zero, nv - s0)
+    if kind == 2:
+        ax = wp.abs(q[0]) - s0
+        ay = wp.abs(q[1]) - s1
+        az = wp.abs(q[2]) - s2
+        if ax > zero or ay > zero or az > zero:
+            dx = q[0] - wp.min(wp.max(q[0], -s0), s0)
+            dy = q[1] - wp.min(wp.max(q[1], -s1), s1)
+            dz = q[2] - wp.min(wp.max(q[2], -s2), s2)
+            dist = wp.sqrt(dx * dx + dy * dy + dz * dz)
+            return wp.vec4d(dx / dist, dy / dist, dz / dist, dist)
+        if ax >= ay and ax >= az:
+            sx = one
+            if q[0] < zero:
+                sx = -one
+            return wp.vec4d(sx, zero, zero, ax)
+        if ay >= az:
+            sy = one
+            if q[1] < zero:
+                sy = -one
+            return wp.vec4d(zero, sy, zero, ay)
+        sz2 = one
+        if q[2] < zero:
+            sz2 = -one
+        return wp.vec4d(zero, zero, sz2, az)
+    rho = wp.sqrt(q[0] * q[0] + q[1] * q[1])
+    ex = one
+    ey = zero
+    if rho > f64(1e-300):
+        ex = q[0] / rho
+        ey = q[1] / rho
+    dr = rho - s0
+    dzc = wp.abs(q[2]) - s1
+    sgn = one
+    if q[2] < zero:
+        sgn = -one
+    if dr > zero or dzc > zero:
+        crho = wp.min(rho, s0)
+        dx = q[0] - ex * crho
+        dy = q[1] - ey * crho
+        dz = q[2] - wp.min(wp.max(q[2], -s1), s1)
+        dist = wp.sqrt(dx * dx + dy * dy + dz * dz)
+        return wp.vec4d(dx / dist, dy / dist, dz / dist, dist)
+    if dr >= dzc:
+        return wp.vec4d(ex, ey, zero, dr)
+    return wp.vec4d(zero, zero, sgn, dzc)
 
 
 @wp.kernel
@@ -75,32 +158,23 @@ def contact_points(x: wp.array2d(dtype=wp.vec3d), v: wp.array2d(dtype=wp.vec3d),
         point_depth[w, c, g] = f64(0.0)
         s0 = size[g, 0]
         s1 = size[g, 1]
+        s2 = size[g, 2]
         d = xi - gpos[w, g]
-        rg = s0
-        if kind[g] == 1:
-            rg = s0 + s1
+        rg = bounding_radius(kind[g], s0, s1, s2)
         if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] >= rg * rg:
             state[w, c, g] = 0
             continue
         R = gmat[w, g]
         q = wp.transpose(R) * d          # local = R^T (x - pos)
-        if _local_outside(kind[g], s0, s1, q):
+        if local_outside(kind[g], s0, s1, s2, q):
             state[w, c, g] = 0
             continue
-        sz = f64(0.0)
-        if kind[g] == 1:
-            sz = wp.min(wp.max(q[2], -s1), s1)
-        vl = wp.vec3d(q[0], q[1], q[2] - sz)
-        nv = wp.sqrt(vl[0] * vl[0] + vl[1] * vl[1] + vl[2] * vl[2])
-        nl = wp.vec3d(f64(0.0), f64(0.0), f64(1.0))
-        if kind[g] == 1:
-            nl = wp.vec3d(f64(1.0), f64(0.0), f64(0.0))
-        if nv > f64(1e-300):
-            nl = wp.vec3d(vl[0] / nv, vl[1] / nv, vl[2] / nv)
-        phi = nv - s0
+        sd = local_sdf(kind[g], s0, s1, s2, q)
+        phi = sd[3]
         if phi >= f64(0.0):
             state[w, c, g] = 0
             continue
+        nl = wp.vec3d(sd[0], sd[1], sd[2])
         n = R * nl
         depth = -phi
         om = gang[w, g]
@@ -192,11 +266,30 @@ def tool_sums(x: wp.array2d(dtype=wp.vec3d), cand: wp.array(dtype=wp.int32), too
 
 
 @wp.kernel
-def write_reaction(bodies: wp.array(dtype=wp.int32), tool_force: wp.array2d(dtype=wp.vec3d),
-                   tool_torque: wp.array2d(dtype=wp.vec3d), xfrc: wp.array2d(dtype=wp.spatial_vector)):
+def advance_geoms(gpos0: wp.array2d(dtype=wp.vec3d), glin: wp.array2d(dtype=wp.vec3d), s: f64,
+                  gpos: wp.array2d(dtype=wp.vec3d)):
+    """Tissue sub-cycling: geom origins moved along their velocity for ``s`` seconds (orientation held)."""
+    w, k = wp.tid()
+    gpos[w, k] = gpos0[w, k] + s * glin[w, k]
+
+
+@wp.kernel
+def add_wrench(tool_force: wp.array2d(dtype=wp.vec3d), tool_torque: wp.array2d(dtype=wp.vec3d),
+               sum_force: wp.array2d(dtype=wp.vec3d), sum_torque: wp.array2d(dtype=wp.vec3d)):
     w, t = wp.tid()
-    F = tool_force[w, t]
-    M = tool_torque[w, t]
+    sum_force[w, t] = sum_force[w, t] + tool_force[w, t]
+    sum_torque[w, t] = sum_torque[w, t] + tool_torque[w, t]
+
+
+@wp.kernel
+def write_reaction(bodies: wp.array(dtype=wp.int32), sum_force: wp.array2d(dtype=wp.vec3d),
+                   sum_torque: wp.array2d(dtype=wp.vec3d), n: f64, xfrc: wp.array2d(dtype=wp.spatial_vector)):
+    """The reaction (mean over ``n`` tissue sub-steps) into ``xfrc_applied``; the sums are cleared."""
+    w, t = wp.tid()
+    F = sum_force[w, t] / n
+    M = sum_torque[w, t] / n
+    sum_force[w, t] = wp.vec3d(f64(0.0), f64(0.0), f64(0.0))
+    sum_torque[w, t] = wp.vec3d(f64(0.0), f64(0.0), f64(0.0))
     xfrc[w, bodies[t]] = wp.spatial_vector(wp.float32(F[0]), wp.float32(F[1]), wp.float32(F[2]),
                                            wp.float32(M[0]), wp.float32(M[1]), wp.float32(M[2]))
 

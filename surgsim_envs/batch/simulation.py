@@ -16,8 +16,9 @@ Tools and tissue see the same force over the same interval, as on the CPU. Built
 :class:`~surgsim_envs.scene.Simulation` (the template: its MuJoCo model, its tissue's parameters
 and its contact law), so a one-world batch steps the same scene as the template.
 
-Supported now: one tissue of the mass-spring model with the symplectic integrator, sphere and
-capsule tool geoms, contact at the nodes (no embedded surface samples), explicit contact damping.
+Supported now: one tissue of the mass-spring model with the symplectic integrator (with tissue
+sub-cycling), sphere, capsule, box and cylinder tool geoms, contact at the nodes (no embedded
+surface samples), explicit contact damping.
 Anything else raises :class:`~surgsim_envs.batch.backend.BatchUnavailableError` naming it.
 """
 
@@ -36,7 +37,8 @@ from surgsim_envs.batch.state import (ContactState, MassSpringFields, MassSpring
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.tissue.mass_spring import MassSpringModel
 
-_GEOM_KIND = {int(mujoco.mjtGeom.mjGEOM_SPHERE): ck.SPHERE, int(mujoco.mjtGeom.mjGEOM_CAPSULE): ck.CAPSULE}
+_GEOM_KIND = {int(mujoco.mjtGeom.mjGEOM_SPHERE): ck.SPHERE, int(mujoco.mjtGeom.mjGEOM_CAPSULE): ck.CAPSULE,
+              int(mujoco.mjtGeom.mjGEOM_BOX): ck.BOX, int(mujoco.mjtGeom.mjGEOM_CYLINDER): ck.CYLINDER}
 #: upper bound of the worlds one batch holds (memory: about 1 kB per tissue node-world)
 MAX_WORLDS = 1 << 20
 
@@ -92,8 +94,8 @@ class BatchSimulation:
         self.device = device_name(device)
         self.W = W = int(worlds)
         self.dt = float(template.dt)
-        if template.tissue_subcycles != 1:
-            raise BatchUnavailableError("tissue_subcycles > 1 is not batched yet; build the template with 1")
+        #: tissue sub-steps of dt per MuJoCo step of n dt (the template's ``tissue_subcycles``)
+        self.subcycles = int(template.tissue_subcycles)
         if len(template.tissues) != 1:
             raise BatchUnavailableError(f"the batched backend steps one tissue per scene; this one has "
                                         f"{len(template.tissues)}")
@@ -113,7 +115,7 @@ class BatchSimulation:
             if t not in _GEOM_KIND:
                 name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g)
                 raise BatchUnavailableError(f"tool geom {name!r} (type {t}) is not batched yet: the batched contact "
-                                            "supports sphere and capsule geoms")
+                                            "supports sphere, capsule, box and cylinder geoms")
             kinds.append(_GEOM_KIND[t])
         if contact.n_samples:
             raise BatchUnavailableError(f"embedded surface contact samples ({contact.surface_subdivisions} "
@@ -122,7 +124,7 @@ class BatchSimulation:
             raise BatchUnavailableError("implicit contact damping is not batched yet (explicit damping only)")
         G, B = len(geoms), max(len(bodies), 1)
         self.geom_ids, self.bodies = geoms, bodies
-        self.tool_index = {name: [bodies.index(int(m.geom_bodyid[g])) for g in tool.geom_ids][0]
+        self.tool_index = {name: sorted({bodies.index(int(m.geom_bodyid[g])) for g in tool.geom_ids})
                            for name, tool in template.tools.items()}
         self.tool_body = {name: int(tool.body_id) for name, tool in template.tools.items()}
         self.tool_actuators = {name: [int(a) for a in tool.actuator_ids] for name, tool in template.tools.items()}
@@ -154,7 +156,7 @@ class BatchSimulation:
             template.reset()
             mjm = template.model
             self._mjm = mjm
-            mjm.opt.timestep = self.dt
+            mjm.opt.timestep = self.dt * self.subcycles
             rate = np.full(mjm.nu, np.inf)
             for tool in template.tools.values():
                 for a, r in tool.actuator_rates().items():
@@ -172,45 +174,60 @@ class BatchSimulation:
     # ------------------------------------------------------------------------------------------
     # stepping
     def step(self, n: int = 1) -> None:
-        """``n`` physics steps of every world (module docstring)."""
+        """``n`` physics steps of dt in every world (module docstring); with tissue sub-cycling
+        (``subcycles`` > 1) n must be a multiple of it (whole MuJoCo steps)."""
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise ConfigError(f"step(n): n must be a whole number of physics steps >= 0, got {n!r}")
-        for _ in range(int(n)):
+        if n % self.subcycles:
+            raise ConfigError(f"step(n): with tissue_subcycles={self.subcycles} the worlds advance in whole MuJoCo "
+                              f"steps of {self.subcycles} physics steps; {n} is not a multiple of it")
+        for _ in range(int(n) // self.subcycles):
             self._one_step()
 
     def _one_step(self) -> None:
+        """One MuJoCo step of n dt (n = ``subcycles``) with n tissue + contact sub-steps of dt, as
+        ``Simulation._subcycled_steps`` (n = 1: its generic loop): inside the MuJoCo step the geoms
+        move along their velocity at its start; the tools get the mean of the n reactions."""
         wp, mjw = self._wp, self._mjw
-        W, dev = self.W, self.device
+        W, dev, n = self.W, self.device, self.subcycles
         t, d, c, ts = self.tools, self.tools.data, self.contact, self.tissue_state
         dt = wp.float64(self.dt)
         G, B, C = len(self.geom_ids), len(self.bodies), self._cand.shape[0]
         mark = self._mark
         with wp.ScopedDevice(dev):
             mark(None)
-            wp.launch(rk.rate_limit, dim=W, inputs=[t.ctrl64, t.goal, t.rate, t.moving, dt, d.ctrl])
+            wp.launch(rk.rate_limit, dim=W, inputs=[t.ctrl64, t.goal, t.rate, t.moving, wp.float64(self.dt * n), d.ctrl])
             mark("rate_limit")
             mjw.step1(t.model, d)
             mark("mujoco_warp.step1")
             wp.launch(ck.gather_geoms, dim=(W, G), inputs=[self._geom_ids, self._geom_body, self._geom_root, self._bodies,
                                                           d.geom_xpos, d.geom_xmat, d.cvel, d.subtree_com, d.xipos,
                                                           c.gpos, c.gmat, c.gang, c.glin, c.tcom])
-            wp.launch(ck.contact_points, dim=(W, C), inputs=[ts.x, ts.v, self._cand, self._kind, self._tool, self._size,
-                                                            c.gpos, c.gmat, c.gang, c.glin, self._mu, self._mu_s,
-                                                            wp.float64(self._k_n), wp.float64(self._c_n),
-                                                            wp.float64(self._k_t), c.anchor, c.state, c.f_ext,
-                                                            c.point_force, c.point_fn, c.point_depth])
-            wp.launch(ck.tool_sums, dim=(W, B), inputs=[ts.x, self._cand, self._tool, c.point_force, c.point_fn,
-                                                       c.point_depth, c.tcom, c.tool_force, c.tool_torque, c.tool_fn,
-                                                       c.tool_contacts, c.tool_depth])
+            if n > 1:
+                wp.copy(c.gpos0, c.gpos)
             mark("contact")
-            self._tissue_step(dt)
-            mark("tissue")
-            wp.launch(ck.write_reaction, dim=(W, B), inputs=[self._bodies, c.tool_force, c.tool_torque, d.xfrc_applied])
+            for j in range(n):
+                if j:
+                    wp.launch(ck.advance_geoms, dim=(W, G), inputs=[c.gpos0, c.glin, wp.float64(j * self.dt), c.gpos])
+                wp.launch(ck.contact_points, dim=(W, C), inputs=[ts.x, ts.v, self._cand, self._kind, self._tool, self._size,
+                                                                c.gpos, c.gmat, c.gang, c.glin, self._mu, self._mu_s,
+                                                                wp.float64(self._k_n), wp.float64(self._c_n),
+                                                                wp.float64(self._k_t), c.anchor, c.state, c.f_ext,
+                                                                c.point_force, c.point_fn, c.point_depth])
+                wp.launch(ck.tool_sums, dim=(W, B), inputs=[ts.x, self._cand, self._tool, c.point_force, c.point_fn,
+                                                           c.point_depth, c.tcom, c.tool_force, c.tool_torque, c.tool_fn,
+                                                           c.tool_contacts, c.tool_depth])
+                wp.launch(ck.add_wrench, dim=(W, B), inputs=[c.tool_force, c.tool_torque, c.sum_force, c.sum_torque])
+                mark("contact")
+                self._tissue_step(dt)
+                mark("tissue")
+            wp.launch(ck.write_reaction, dim=(W, B), inputs=[self._bodies, c.sum_force, c.sum_torque, wp.float64(n),
+                                                            d.xfrc_applied])
             mark("reaction")
             mjw.step2(t.model, d)
             wp.launch(ck.zero_reaction, dim=(W, B), inputs=[self._bodies, d.xfrc_applied])
             mark("mujoco_warp.step2")
-        self.steps += 1
+        self.steps += n
 
     #: phase -> seconds spent in it (wall clock, device synchronised after each phase) while
     #: profiling (:meth:`profile`); None: not profiling (no synchronisation between phases)
@@ -294,6 +311,31 @@ class BatchSimulation:
             rate[np.ix_(idx, act)] = float(speed)
             t.rate.assign(rate)
 
+    def set_actuator_goals(self, actuators, goals, speed: float | None = None, worlds=None) -> None:
+        """Move actuators ``actuators`` (A,) ids towards ``goals`` ((W, A), or (A,) for every listed
+        world) at ``speed`` (units/s; None: their default rate), as :meth:`Simulation.set_actuator_goal`;
+        e.g. a grasper's jaw: goal = open_radius - radius."""
+        ids = np.asarray(actuators, dtype=np.int64).reshape(-1)
+        nu = self._mjm.nu
+        if len(ids) == 0 or ids.min() < 0 or ids.max() >= nu:
+            raise ConfigError(f"actuators must be ids in [0, {nu}), got {ids.tolist()}")
+        idx = np.arange(self.W) if worlds is None else np.asarray(worlds, dtype=np.int64).reshape(-1)
+        g = np.broadcast_to(np.asarray(goals, dtype=np.float64), (len(idx), len(ids)))
+        if not np.all(np.isfinite(g)):
+            raise ConfigError("actuator goals must be finite numbers")
+        t = self.tools
+        goal, moving = t.goal.numpy(), t.moving.numpy()
+        goal[np.ix_(idx, ids)] = g
+        moving[idx] = 1
+        t.goal.assign(goal)
+        t.moving.assign(moving)
+        if speed is not None:
+            if not (isinstance(speed, (int, float)) and speed > 0):
+                raise ConfigError(f"speed must be a positive number, or math.inf for no limit, got {speed!r}")
+            rate = t.rate.numpy()
+            rate[np.ix_(idx, ids)] = float(speed)
+            t.rate.assign(rate)
+
     def reset_worlds(self, worlds=None) -> None:
         """Back to the template's reset state in the listed worlds (all if None): tissue at rest,
         branches and contacts cleared, MuJoCo data reset (``reset_data`` + ``forward``), controls
@@ -311,6 +353,7 @@ class BatchSimulation:
                                (ts.diverged, 0),
                                (c.state, 0), (c.anchor, 0.0), (c.f_ext, 0.0), (c.tool_force, 0.0),
                                (c.tool_torque, 0.0), (c.tool_fn, 0.0), (c.tool_contacts, 0), (c.tool_depth, 0.0),
+                               (c.sum_force, 0.0), (c.sum_torque, 0.0),
                                (t.ctrl64, 0.0), (t.goal, 0.0), (t.moving, 0)):
                 a = arr.numpy()
                 a[mask] = value
@@ -399,8 +442,10 @@ class BatchSimulation:
         return self.tools.data.xpos.numpy()[:, self.tool_body[name]].astype(np.float64)
 
     def tool_forces(self, name: str) -> np.ndarray:
-        """(W, 3) N contact force ON tool ``name`` in the last physics step."""
-        return self.contact.tool_force.numpy()[:, self.tool_index[name]].copy()
+        """(W, 3) N contact force ON tool ``name`` (all its bodies) in the last physics step."""
+        idx = self.tool_index[name]
+        f = self.contact.tool_force.numpy()
+        return f[:, idx[0]] + 0.0 if len(idx) == 1 else np.zeros((self.W, 3)) + f[:, idx].sum(axis=1)
 
     def tissue_positions(self) -> np.ndarray:
         """(W, N, 3) m tissue node positions."""

@@ -126,6 +126,9 @@ class ContactState:
     tool_fn: object        # (W, B) float64, N: sum of normal force magnitudes
     tool_contacts: object  # (W, B) int32: points in contact
     tool_depth: object     # (W, B) float64, m: deepest penetration
+    sum_force: object      # (W, B) vec3d, N: reaction summed over the tissue sub-steps of a MuJoCo step
+    sum_torque: object     # (W, B) vec3d, N m
+    gpos0: object          # (W, G) vec3d, m: geom positions at the MuJoCo step's start (sub-cycling)
 
     @classmethod
     def zeros(cls, W: int, N: int, C: int, G: int, B: int, device: str) -> "ContactState":
@@ -136,7 +139,8 @@ class ContactState:
                    point_depth=z((W, C, G), wp.float64), gpos=z((W, G), wp.vec3d), gmat=z((W, G), wp.mat33d),
                    gang=z((W, G), wp.vec3d), glin=z((W, G), wp.vec3d), tcom=z((W, B), wp.vec3d),
                    tool_force=z((W, B), wp.vec3d), tool_torque=z((W, B), wp.vec3d), tool_fn=z((W, B), wp.float64),
-                   tool_contacts=z((W, B), wp.int32), tool_depth=z((W, B), wp.float64))
+                   tool_contacts=z((W, B), wp.int32), tool_depth=z((W, B), wp.float64),
+                   sum_force=z((W, B), wp.vec3d), sum_torque=z((W, B), wp.vec3d), gpos0=z((W, G), wp.vec3d))
 
     def nbytes(self) -> int:
         return sum(getattr(self, k).capacity for k in self.__dataclass_fields__)
