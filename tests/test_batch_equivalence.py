@@ -113,6 +113,12 @@ def test_worlds_step_independently():
     batch.step(40)
     x3 = batch.tissue_positions()
     np.testing.assert_array_equal(x3[2], x[0])      # replayed from rest: the same 40 steps, the same state
+    # per-world material written for one listed world only
+    k1 = batch.fields.K1.numpy().copy()
+    batch.set_young_factors(np.full((1, batch.topology.n_tets), 2.0), worlds=[1])
+    k1_new = batch.fields.K1.numpy()
+    np.testing.assert_allclose(k1_new[1], 2.0 * k1[1], rtol=1e-14)
+    np.testing.assert_array_equal(k1_new[[0, 2]], k1[[0, 2]])
 
 
 def test_young_factors_match_the_cpu_models_rederivation(pair):

@@ -30,6 +30,7 @@ import numpy as np
 
 from surgsim_envs.batch import contact_kernels as ck
 from surgsim_envs.batch import mass_spring_kernels as msk
+from surgsim_envs.batch import reset_kernels as rsk
 from surgsim_envs.batch import rigid_kernels as rk
 from surgsim_envs.batch.backend import BatchUnavailableError, device_name, require
 from surgsim_envs.batch.state import (ContactState, MassSpringFields, MassSpringTopology, TissueState, ToolState,
@@ -134,7 +135,9 @@ class BatchSimulation:
         with wp.ScopedDevice(dev):
             self.topology, self.fields = _mass_spring_parts(tissue, self.dt, W, dev)
             self._base_fields = {k: getattr(self.fields, k).numpy()[0].copy() for k in ("K1", "K2", "kM", "kMg", "kv")}
+            self._build_spring_weights(tissue)
             self.tissue_state = TissueState.at_rest(self.topology.rest, self.topology.n_springs, W, dev)
+            self._rest = _put(wp, self.topology.rest, wp.vec3d, dev)
             C = len(contact.candidate_nodes)
             self.contact = ContactState.zeros(W, tissue.n_nodes, C, G, B, dev)
             self._cand = _put(wp, contact.candidate_nodes.astype(np.int32), wp.int32, dev)
@@ -348,28 +351,28 @@ class BatchSimulation:
         if not mask.any():
             return
         ts, c, t = self.tissue_state, self.contact, self.tools
+        topo = self.topology
         with wp.ScopedDevice(self.device):
-            for arr, value in ((ts.x, self.topology.rest), (ts.v, 0.0), (ts.s, 0.0), (ts.dl, 0.0), (ts.fresh, 1),
-                               (ts.diverged, 0),
-                               (c.state, 0), (c.anchor, 0.0), (c.f_ext, 0.0), (c.tool_force, 0.0),
-                               (c.tool_torque, 0.0), (c.tool_fn, 0.0), (c.tool_contacts, 0), (c.tool_depth, 0.0),
-                               (c.sum_force, 0.0), (c.sum_torque, 0.0),
-                               (t.ctrl64, 0.0), (t.goal, 0.0), (t.moving, 0)):
-                a = arr.numpy()
-                a[mask] = value
-                arr.assign(a)
+            idx = wp.array(np.flatnonzero(mask).astype(np.int32), dtype=wp.int32)
+            k = idx.shape[0]
+            wp.launch(rsk.reset_nodes, dim=(k, topo.n_nodes), inputs=[idx, self._rest, ts.x, ts.v, c.f_ext])
+            wp.launch(rsk.reset_springs, dim=(k, topo.n_springs), inputs=[idx, ts.s, ts.dl])
+            wp.launch(rsk.reset_contacts, dim=(k, c.state.shape[1], c.state.shape[2]), inputs=[idx, c.state, c.anchor])
+            wp.launch(rsk.reset_world_scalars, dim=k, inputs=[idx, ts.fresh, ts.diverged, t.moving, t.ctrl64, t.goal,
+                                                              c.tool_force, c.tool_torque, c.tool_fn, c.tool_contacts,
+                                                              c.tool_depth, c.sum_force, c.sum_torque])
             mjw.reset_data(t.model, t.data, reset=wp.array(mask, dtype=bool))
             mjw.forward(t.model, t.data)
 
     def set_young_factors(self, factors, worlds=None) -> None:
         """Per-world, per-tet Young's modulus factors ``factors`` (W, T), or (len(worlds), T) for the
         worlds listed, relative to the template's
-        material (domain randomisation, e.g. a stiffer inclusion): every spring constant, Maxwell
-        branch constant and volume stiffness is linear in the Young's moduli of the tets around it
-        (docs/models/mass_spring.md), so each world's are the template's scaled by the volume-weighted
-        mean factor of the spring's tets (the tet's factor for the volume term). Needs a template of
-        uniform material (as the tasks build it); checked against the CPU model's own re-derivation
-        in tests/test_batch_materials.py."""
+        material when the batch was built (domain randomisation, e.g. a stiffer inclusion): every
+        spring constant, Maxwell branch constant and volume stiffness is linear in the Young's moduli
+        of the tets around it (docs/models/mass_spring.md), so each world's are the template's scaled
+        by the mean factor of the spring's tets weighted by E_t V_t (the tet's factor for the volume
+        term). Needs a template whose materials differ in Young's modulus only (as the tasks build
+        it); checked against the CPU model's own re-derivation in tests/test_batch_equivalence.py."""
         f = np.asarray(factors, dtype=np.float64)
         nt = self.topology.n_tets
         idx = np.arange(self.W) if worlds is None else np.asarray(worlds, dtype=np.int64).reshape(-1)
@@ -386,40 +389,48 @@ class BatchSimulation:
         self._assign_rows(self.fields.kv, idx, base["kv"][None, :] * f)
 
     def _assign_rows(self, arr, idx: np.ndarray, values: np.ndarray) -> None:
-        """``arr[idx] = values`` on the device (all rows at once when idx is every world)."""
+        """``arr[idx] = values`` on the device (all rows at once when idx is every world; else only
+        the listed rows travel)."""
+        wp = self._wp
         if len(idx) == self.W and np.array_equal(idx, np.arange(self.W)):
             arr.assign(np.ascontiguousarray(values))
             return
-        host = arr.numpy()
-        host[idx] = values
-        arr.assign(host)
+        with wp.ScopedDevice(self.device):
+            src = wp.array(np.ascontiguousarray(values, dtype=np.float64), dtype=wp.float64)
+            wp.launch(rsk.scatter_rows, dim=src.shape, inputs=[arr, wp.array(idx.astype(np.int32), dtype=wp.int32), src])
 
     def _spring_weights(self):
-        """(E, T) sparse: row e holds the tets around spring e weighted by volume / their total."""
-        sw = getattr(self, "_spring_weight_matrix", None)
-        if sw is None:
-            import scipy.sparse as sp
-
-            tissue = next(iter(self.template.tissues.values()))
-            fields = tissue.fields
-            for name in ("young", "poisson", "relax_fraction", "relax_time", "nonlinear", "density", "damping"):
-                vals = np.asarray(fields[name])
-                if vals.size and np.ptp(vals) > 1e-12 * np.abs(vals).max():
-                    raise ConfigError(f"set_young_factors needs a template of uniform material; its field {name!r} "
-                                      "varies (build the template without region materials)")
-            tets = np.asarray(tissue.volume.tets, dtype=np.int64)
-            vol = np.abs(np.asarray(tissue.volume.tet_volumes(), dtype=np.float64))
-            n = tissue.n_nodes
-            pairs = np.sort(np.stack([tets[:, [0, 0, 0, 1, 1, 2]].ravel(), tets[:, [1, 2, 3, 2, 3, 3]].ravel()], 1), 1)
-            si, sj = np.asarray(tissue.si, np.int64), np.asarray(tissue.sj, np.int64)
-            keys = np.minimum(si, sj) * n + np.maximum(si, sj)
-            order = np.argsort(keys)
-            edge = order[np.searchsorted(keys, pairs[:, 0] * n + pairs[:, 1], sorter=order)]
-            tet = np.repeat(np.arange(len(tets)), 6)
-            m = sp.csr_matrix((np.repeat(vol, 6), (edge, tet)), shape=(len(si), len(tets)))
-            total = np.asarray(m.sum(axis=1)).ravel()
-            sw = self._spring_weight_matrix = sp.diags(1.0 / total) @ m
+        """(E, T) sparse: row e holds the tets around spring e weighted by E_t V_t / their total
+        (the template's Young's moduli and volumes when the batch was built)."""
+        sw = self._spring_weight_matrix
+        if isinstance(sw, str):
+            raise ConfigError(sw)
         return sw
+
+    def _build_spring_weights(self, tissue) -> None:
+        """:meth:`_spring_weights` from the template tissue at build (or the reason it cannot be used)."""
+        import scipy.sparse as sp
+
+        fields = tissue.fields
+        for name in ("poisson", "relax_fraction", "relax_time", "nonlinear", "density", "damping"):
+            vals = np.asarray(fields[name])
+            if vals.size and np.ptp(vals) > 1e-12 * np.abs(vals).max():
+                self._spring_weight_matrix = (f"set_young_factors needs a template whose materials differ in Young's "
+                                              f"modulus only; its field {name!r} varies (build it without region "
+                                              "materials)")
+                return
+        tets = np.asarray(tissue.volume.tets, dtype=np.int64)
+        weight = np.abs(np.asarray(tissue.volume.tet_volumes(), dtype=np.float64)) * np.asarray(fields["young"])
+        n = tissue.n_nodes
+        pairs = np.sort(np.stack([tets[:, [0, 0, 0, 1, 1, 2]].ravel(), tets[:, [1, 2, 3, 2, 3, 3]].ravel()], 1), 1)
+        si, sj = np.asarray(tissue.si, np.int64), np.asarray(tissue.sj, np.int64)
+        keys = np.minimum(si, sj) * n + np.maximum(si, sj)
+        order = np.argsort(keys)
+        edge = order[np.searchsorted(keys, pairs[:, 0] * n + pairs[:, 1], sorter=order)]
+        tet = np.repeat(np.arange(len(tets)), 6)
+        m = sp.csr_matrix((np.repeat(weight, 6), (edge, tet)), shape=(len(si), len(tets)))
+        total = np.asarray(m.sum(axis=1)).ravel()
+        self._spring_weight_matrix = sp.diags(1.0 / total) @ m
 
     def diverged_worlds(self) -> np.ndarray:
         """Indices of the worlds whose tissue became non-finite since their last reset."""
