@@ -16,6 +16,7 @@ RANK = {"errors": 0, "numba_cache": 0, "validate": 0.25, "materials": 0.5, "asse
         "planning": 3, "scenarios": 5, "bench": 5, "integrations": 4.5, "cli": 6}
 RANK["warmup"] = 5          # `surgsim warmup`: exercises the demo (scene) and the tasks (envs)
 RANK["vector"] = 3.5         # the vector env: steps envs made by gymnasium.make, imports no task
+RANK["batch"] = 4.5         # the batched Warp backend: sits on scene and on the tasks (their configs and terms)
 #: third-party packages a layer must not import
 FORBIDDEN = {"tissue": {"mujoco", "gymnasium"}, "geometry": {"mujoco", "gymnasium"},
              "contact": {"mujoco", "gymnasium"}}

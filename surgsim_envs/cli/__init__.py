@@ -47,6 +47,7 @@ BENCH: dict[str, tuple[str, str]] = {
     "trajectory": ("surgsim_envs.bench.trajectory_check",
                    "record seeded task trajectories, or compare two records bit for bit"),
     "layers": ("surgsim_envs.bench.layers", "layered model (Lin et al. 2008) at haptic rate: step time, active nodes, force vs all-node"),
+    "batch": ("surgsim_envs.bench.batch_speed", "batched Warp backend: env and physics steps/s, memory, phase shares"),
 }
 
 

@@ -27,11 +27,29 @@ QUASI_STATIC_TASKS = {tid: spec.entry_point for tid, spec in _SPECS.items() if s
 MAX_EPISODE_STEPS = {tid: spec.max_episode_steps for tid, spec in _SPECS.items()}
 
 
+#: task id -> "module:Class" of its batched Warp vector env (``TaskSpec.batched``; the [batch] extra,
+#: docs/batch.md)
+BATCHED = {tid: spec.batched for tid, spec in _SPECS.items() if spec.batched}
+
+
 def make_vector(env_id: str, num_envs: int = 1, **kwargs):
     """Every task's ``vector_entry_point``: ``gym.make_vec(task, num_envs=n)`` (no
     ``vectorization_mode``) returns :class:`~surgsim_envs.vector.SurgSimVectorEnv`, the
     shared-memory multi-process vector env; its options (``workers=``, ``info_keys=``,
-    ``autoreset_mode=``, ...) go in make_vec's keyword arguments, next to the env's own."""
+    ``autoreset_mode=``, ...) go in make_vec's keyword arguments, next to the env's own.
+
+    With ``device=`` ("cpu", "cuda") it returns the task's batched Warp env instead (:data:`BATCHED`).
+    That package sits above this one (it reuses the tasks' configs and terms), so it is loaded by
+    its entry-point string, as Gymnasium loads entry points, not imported here."""
+    if "device" in kwargs:
+        if env_id not in BATCHED:
+            from surgsim_envs.errors import ConfigError
+
+            raise ConfigError(f"device= (the batched Warp backend) is available for {sorted(BATCHED)}, not {env_id!r}; "
+                              "leave device out for the multi-process vector env")
+        from gymnasium.envs.registration import load_env_creator
+
+        return load_env_creator(BATCHED[env_id])(num_envs=num_envs, **kwargs)
     from surgsim_envs.vector import SurgSimVectorEnv
 
     return SurgSimVectorEnv(env_id, num_envs, **kwargs)
@@ -63,4 +81,4 @@ def register_envs() -> None:
         register_with_gymnasium(spec)
 
 
-__all__ = ["TASKS", "QUASI_STATIC_TASKS", "MAX_EPISODE_STEPS", "make_vector", "register_envs"]
+__all__ = ["TASKS", "QUASI_STATIC_TASKS", "MAX_EPISODE_STEPS", "BATCHED", "make_vector", "register_envs"]

@@ -64,7 +64,8 @@ class TaskSpec:
     (seconds, not microseconds: kept out of the physics-rate test tables); quick: config overrides
     that make a small, fast instance for tests; expert: "module:function" of the scripted expert
     (``expert(env) -> policy(obs) -> action``; None: none); dm_control: the name the dm_control
-    loader knows it by.
+    loader knows it by; batched: "module:Class" of its batched Warp vector env (the [batch] extra,
+    docs/batch.md; ``gym.make_vec(id, n, device=...)``), None: none yet.
     """
 
     id: str
@@ -80,11 +81,12 @@ class TaskSpec:
     quick: Mapping[str, Any] = field(default_factory=dict, hash=False)   # a read-only view: not hashable
     expert: str | None = None
     dm_control: str = ""
+    batched: str | None = None
 
     def __post_init__(self):
         if not (isinstance(self.id, str) and self.id.count("/") == 1 and "-v" in self.id):
             raise ConfigError(f"TaskSpec.id={self.id!r} must look like 'Namespace/Name-v0'")
-        for name in ("entry_point", "config") + (("expert",) if self.expert is not None else ()):
+        for name in ("entry_point", "config") + tuple(n for n in ("expert", "batched") if getattr(self, n) is not None):
             value = getattr(self, name)
             if not (isinstance(value, str) and value.count(":") == 1 and all(value.split(":"))):
                 raise ConfigError(f"TaskSpec({self.id}).{name}={value!r} must be 'module:attribute'")
@@ -133,7 +135,8 @@ TASKS: dict[str, TaskSpec] = {spec.id: spec for spec in (
              "surgsim_envs.envs.palpation:PalpationConfig", scene="palpation", tool="probe", model="mass_spring",
              force_tolerance=ForceTolerance(0.1, why=_PALPATION_WHY), max_episode_steps=600,
              policy="palpation_v0.npz", quick={"spacing": 0.02},
-             expert="surgsim_envs.envs.palpation:palpation_expert"),
+             expert="surgsim_envs.envs.palpation:palpation_expert",
+             batched="surgsim_envs.batch.env:BatchedPalpationEnv"),
     TaskSpec("SurgSim/Grasp-v0", "surgsim_envs.envs.grasp:GraspEnv", "surgsim_envs.envs.grasp:GraspConfig",
              scene="grasp", tool="grasper", model="mass_spring",
              force_tolerance=ForceTolerance(0.1, why=(

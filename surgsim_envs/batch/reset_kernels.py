@@ -1,0 +1,69 @@
+"""Warp kernels that write a subset of worlds in place (resets, per-world parameters), so that a
+reset of a few worlds costs work on those worlds only, not a copy of every world's arrays."""
+
+from __future__ import annotations
+
+import warp as wp
+
+f64 = wp.float64
+
+
+@wp.kernel
+def scatter_rows(dst: wp.array2d(dtype=f64), worlds: wp.array(dtype=wp.int32), src: wp.array2d(dtype=f64)):
+    """``dst[worlds[k], j] = src[k, j]``."""
+    k, j = wp.tid()
+    dst[worlds[k], j] = src[k, j]
+
+
+@wp.kernel
+def reset_nodes(worlds: wp.array(dtype=wp.int32), rest: wp.array(dtype=wp.vec3d), x: wp.array2d(dtype=wp.vec3d),
+                v: wp.array2d(dtype=wp.vec3d), f_ext: wp.array2d(dtype=wp.vec3d)):
+    k, i = wp.tid()
+    w = worlds[k]
+    x[w, i] = rest[i]
+    v[w, i] = wp.vec3d()
+    f_ext[w, i] = wp.vec3d()
+
+
+@wp.kernel
+def reset_springs(worlds: wp.array(dtype=wp.int32), s: wp.array2d(dtype=f64), dl: wp.array2d(dtype=f64)):
+    k, e = wp.tid()
+    w = worlds[k]
+    s[w, e] = f64(0.0)
+    dl[w, e] = f64(0.0)
+
+
+@wp.kernel
+def reset_contacts(worlds: wp.array(dtype=wp.int32), state: wp.array3d(dtype=wp.int32),
+                   anchor: wp.array3d(dtype=wp.vec3d)):
+    k, c, g = wp.tid()
+    w = worlds[k]
+    state[w, c, g] = 0
+    anchor[w, c, g] = wp.vec3d()
+
+
+@wp.kernel
+def reset_world_scalars(worlds: wp.array(dtype=wp.int32), fresh: wp.array(dtype=wp.int32),
+                        diverged: wp.array(dtype=wp.int32), moving: wp.array(dtype=wp.int32),
+                        ctrl64: wp.array2d(dtype=f64), goal: wp.array2d(dtype=f64),
+                        tool_force: wp.array2d(dtype=wp.vec3d), tool_torque: wp.array2d(dtype=wp.vec3d),
+                        tool_fn: wp.array2d(dtype=f64), tool_contacts: wp.array2d(dtype=wp.int32),
+                        tool_depth: wp.array2d(dtype=f64), sum_force: wp.array2d(dtype=wp.vec3d),
+                        sum_torque: wp.array2d(dtype=wp.vec3d)):
+    """Per-world flags, controls and tool sums of the listed worlds back to their reset values."""
+    k = wp.tid()
+    w = worlds[k]
+    fresh[w] = 1
+    diverged[w] = 0
+    moving[w] = 0
+    for a in range(ctrl64.shape[1]):
+        ctrl64[w, a] = f64(0.0)
+        goal[w, a] = f64(0.0)
+    for t in range(tool_force.shape[1]):
+        tool_force[w, t] = wp.vec3d()
+        tool_torque[w, t] = wp.vec3d()
+        tool_fn[w, t] = f64(0.0)
+        tool_contacts[w, t] = 0
+        tool_depth[w, t] = f64(0.0)
+        sum_force[w, t] = wp.vec3d()
+        sum_torque[w, t] = wp.vec3d()

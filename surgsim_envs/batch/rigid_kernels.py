@@ -1,0 +1,33 @@
+"""Warp kernels of the tools' command side over W worlds: the rate limiter of
+``scene/simulation.py`` (each actuator target moves towards its goal by at most ``rate * dt``
+per step) on a float64 copy of the controls, written to MuJoCo Warp's float32 ``ctrl``."""
+
+from __future__ import annotations
+
+import warp as wp
+
+f64 = wp.float64
+
+
+@wp.kernel
+def rate_limit(ctrl64: wp.array2d(dtype=f64), goal: wp.array2d(dtype=f64), rate: wp.array2d(dtype=f64),
+               moving: wp.array(dtype=wp.int32), dt: f64, ctrl: wp.array2d(dtype=wp.float32)):
+    """One thread per world: ``moving[w]`` stays 1 while any target is more than 1e-12 from its goal."""
+    w = wp.tid()
+    if moving[w] == 0:
+        return
+    still = int(0)
+    for a in range(ctrl64.shape[1]):
+        c = ctrl64[w, a]
+        delta = goal[w, a] - c
+        lim = rate[w, a] * dt
+        if delta > lim:
+            delta = lim
+        elif delta < -lim:
+            delta = -lim
+        c = c + delta
+        ctrl64[w, a] = c
+        ctrl[w, a] = wp.float32(c)
+        if wp.abs(goal[w, a] - c) > f64(1e-12):
+            still = 1
+    moving[w] = still

@@ -1,0 +1,476 @@
+"""W copies of one scene stepped together on a Warp device: tissue and contact in Warp kernels
+(float64), tools in MuJoCo Warp (float32).
+
+One physics step, in the order of ``scene/simulation.py``'s generic loop (DESIGN.md "One physics
+step"), for all worlds at once:
+
+1. :func:`~surgsim_envs.batch.rigid_kernels.rate_limit` - actuator targets towards their goals;
+2. ``mujoco_warp.step1`` - tool kinematics and velocities at t (MuJoCo's ``mj_step1``);
+3. :func:`~surgsim_envs.batch.contact_kernels.gather_geoms`, ``contact_points``, ``tool_sums`` -
+   contact forces from the tissue at t and the tools at t, and their reaction per tool body;
+4. the tissue model's kernels (mass-spring: springs, volume term, node gather + symplectic Euler);
+5. :func:`~surgsim_envs.batch.contact_kernels.write_reaction` - the reaction into ``xfrc_applied``;
+6. ``mujoco_warp.step2`` - tools to t + dt with that reaction (``mj_step2``); the rows are cleared.
+
+Tools and tissue see the same force over the same interval, as on the CPU. Built from a CPU
+:class:`~surgsim_envs.scene.Simulation` (the template: its MuJoCo model, its tissue's parameters
+and its contact law), so a one-world batch steps the same scene as the template.
+
+Supported now: one tissue of the mass-spring model with the symplectic integrator (with tissue
+sub-cycling), sphere, capsule, box and cylinder tool geoms, contact at the nodes (no embedded
+surface samples), explicit contact damping.
+Anything else raises :class:`~surgsim_envs.batch.backend.BatchUnavailableError` naming it.
+"""
+
+from __future__ import annotations
+
+
+import mujoco
+import numpy as np
+
+from surgsim_envs.batch import contact_kernels as ck
+from surgsim_envs.batch import mass_spring_kernels as msk
+from surgsim_envs.batch import reset_kernels as rsk
+from surgsim_envs.batch import rigid_kernels as rk
+from surgsim_envs.batch.backend import BatchUnavailableError, device_name, require
+from surgsim_envs.batch.state import (ContactState, MassSpringFields, MassSpringTopology, TissueState, ToolState,
+                                      _put, _tiled, csr)
+from surgsim_envs.errors import ConfigError
+from surgsim_envs.tissue.mass_spring import MassSpringModel
+
+_GEOM_KIND = {int(mujoco.mjtGeom.mjGEOM_SPHERE): ck.SPHERE, int(mujoco.mjtGeom.mjGEOM_CAPSULE): ck.CAPSULE,
+              int(mujoco.mjtGeom.mjGEOM_BOX): ck.BOX, int(mujoco.mjtGeom.mjGEOM_CYLINDER): ck.CYLINDER}
+#: upper bound of the worlds one batch holds (memory: about 1 kB per tissue node-world)
+MAX_WORLDS = 1 << 20
+
+
+def _mass_spring_parts(tissue, dt: float, W: int, device: str):
+    """(topology, per-world fields) of a symplectic mass-spring tissue, every world its copy."""
+    wp, _ = require()
+    if not isinstance(tissue, MassSpringModel) or tissue.active_integrator != "symplectic":
+        raise BatchUnavailableError(
+            f"the batched backend steps the mass-spring model with the symplectic integrator; this scene's tissue is "
+            f"{type(tissue).__name__} with integrator {getattr(tissue, 'active_integrator', None)!r} (not batched yet)")
+    (_, _, inv_mass, b0, gravity, fixed, si, sj, L0, K1, K2, _, _, kMg, decay, _, _, _, tets, V0,
+     kv) = tissue.symplectic_kernel_state(dt)
+    n, ne, nt = tissue.n_nodes, len(si), len(tets)
+    spring_nodes = np.concatenate([si, sj])
+    sign = np.concatenate([np.ones(ne), -np.ones(ne)])
+    s_start, s_order = csr(spring_nodes, n)
+    corner_nodes = np.asarray(tets, dtype=np.int64).reshape(-1)
+    c_start, c_order = csr(corner_nodes, n)
+    rest = np.array(tissue.rest_positions, dtype=np.float64)
+    fx = np.asarray(tissue.fixed, dtype=bool)
+    rest[fx] = np.asarray(tissue.fixed_targets)[fx]
+    topo = MassSpringTopology(
+        si=_put(wp, si.astype(np.int32), wp.int32, device), sj=_put(wp, sj.astype(np.int32), wp.int32, device),
+        L0=_put(wp, L0, wp.float64, device), decay=_put(wp, decay, wp.float64, device),
+        tets=_put(wp, np.asarray(tets, dtype=np.int32).reshape(-1, 4), wp.int32, device),
+        V0=_put(wp, V0 if nt else np.ones(0), wp.float64, device),
+        inv_mass=_put(wp, inv_mass, wp.float64, device), b0=_put(wp, b0, wp.float64, device),
+        fixed=_put(wp, fx.astype(np.int32), wp.int32, device), gravity=tuple(float(g) for g in gravity),
+        spring_start=_put(wp, s_start, wp.int32, device), node_springs=_put(wp, (s_order % ne).astype(np.int32), wp.int32, device),
+        spring_sign=_put(wp, sign[s_order], wp.float64, device), corner_start=_put(wp, c_start, wp.int32, device),
+        node_corners=_put(wp, c_order, wp.int32, device), rest=rest, n_nodes=n, n_springs=ne, n_tets=nt)
+    fields = MassSpringFields(K1=_put(wp, _tiled(K1, W), wp.float64, device), K2=_put(wp, _tiled(K2, W), wp.float64, device),
+                              kM=_put(wp, _tiled(tissue.kM, W), wp.float64, device),
+                              kMg=_put(wp, _tiled(kMg, W), wp.float64, device),
+                              kv=_put(wp, _tiled(kv if nt else np.zeros(0), W), wp.float64, device))
+    return topo, fields
+
+
+class BatchSimulation:
+    """W worlds of the scene of ``template`` (a CPU :class:`~surgsim_envs.scene.Simulation`, at its
+    reset state) on Warp device ``device`` ("cpu" runs everywhere; "cuda" where a GPU exists).
+
+    Commands: :meth:`set_goals` (actuator goals per world, the rate limiter moves the controls as
+    the CPU scene does), :meth:`step` (physics steps), :meth:`reset_worlds`. Readouts as numpy
+    arrays (a copy) or the device arrays themselves (``.arrays()``; DLPack-capable Warp arrays).
+    """
+
+    def __init__(self, template, worlds: int, *, device: str = "cpu"):
+        wp, mjw = require()
+        if isinstance(worlds, bool) or not isinstance(worlds, (int, np.integer)) or not 1 <= worlds <= MAX_WORLDS:
+            raise ConfigError(f"worlds={worlds!r} must be an integer in [1, {MAX_WORLDS}] (scene copies)")
+        self.device = device_name(device)
+        self.W = W = int(worlds)
+        self.dt = float(template.dt)
+        #: tissue sub-steps of dt per MuJoCo step of n dt (the template's ``tissue_subcycles``)
+        self.subcycles = int(template.tissue_subcycles)
+        if len(template.tissues) != 1:
+            raise BatchUnavailableError(f"the batched backend steps one tissue per scene; this one has "
+                                        f"{len(template.tissues)}")
+        (tissue_name, tissue), = template.tissues.items()
+        contact = template.contacts[tissue_name]
+        self.template = template
+        m = template.model
+        if m.nmocap:
+            raise BatchUnavailableError("mocap-driven tools (haptic proxies) are not batched yet")
+        geoms, bodies = [], []
+        for tool in template.tools.values():
+            geoms += [int(g) for g in tool.geom_ids]
+        bodies = sorted({int(m.geom_bodyid[g]) for g in geoms})
+        kinds = []
+        for g in geoms:
+            t = int(m.geom_type[g])
+            if t not in _GEOM_KIND:
+                name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g)
+                raise BatchUnavailableError(f"tool geom {name!r} (type {t}) is not batched yet: the batched contact "
+                                            "supports sphere, capsule, box and cylinder geoms")
+            kinds.append(_GEOM_KIND[t])
+        if contact.n_samples:
+            raise BatchUnavailableError(f"embedded surface contact samples ({contact.surface_subdivisions} "
+                                        "subdivisions) are not batched yet; build the scene with surface_samples=None")
+        if contact.params.implicit_damping:
+            raise BatchUnavailableError("implicit contact damping is not batched yet (explicit damping only)")
+        G, B = len(geoms), max(len(bodies), 1)
+        self.geom_ids, self.bodies = geoms, bodies
+        self.tool_index = {name: sorted({bodies.index(int(m.geom_bodyid[g])) for g in tool.geom_ids})
+                           for name, tool in template.tools.items()}
+        self.tool_body = {name: int(tool.body_id) for name, tool in template.tools.items()}
+        self.tool_actuators = {name: [int(a) for a in tool.actuator_ids] for name, tool in template.tools.items()}
+        self.tool_home = {name: np.array(tool.home, dtype=float) for name, tool in template.tools.items()}
+        self.tool_frame = {name: np.array(tool.frame, dtype=float) for name, tool in template.tools.items()}
+        dev = self.device
+        with wp.ScopedDevice(dev):
+            self.topology, self.fields = _mass_spring_parts(tissue, self.dt, W, dev)
+            self._base_fields = {k: getattr(self.fields, k).numpy()[0].copy() for k in ("K1", "K2", "kM", "kMg", "kv")}
+            self._build_spring_weights(tissue)
+            self.tissue_state = TissueState.at_rest(self.topology.rest, self.topology.n_springs, W, dev)
+            self._rest = _put(wp, self.topology.rest, wp.vec3d, dev)
+            C = len(contact.candidate_nodes)
+            self.contact = ContactState.zeros(W, tissue.n_nodes, C, G, B, dev)
+            self._cand = _put(wp, contact.candidate_nodes.astype(np.int32), wp.int32, dev)
+            self._kind = _put(wp, np.array(kinds, dtype=np.int32), wp.int32, dev)
+            self._tool = _put(wp, np.array([bodies.index(int(m.geom_bodyid[g])) for g in geoms], np.int32), wp.int32, dev)
+            self._size = _put(wp, np.asarray(m.geom_size[geoms], dtype=np.float64).reshape(-1, 3), wp.float64, dev)
+            self._geom_ids = _put(wp, np.array(geoms, np.int32), wp.int32, dev)
+            self._geom_body = _put(wp, np.array([m.geom_bodyid[g] for g in geoms], np.int32), wp.int32, dev)
+            self._geom_root = _put(wp, np.array([m.body_rootid[m.geom_bodyid[g]] for g in geoms], np.int32), wp.int32, dev)
+            self._bodies = _put(wp, np.array(bodies, np.int32), wp.int32, dev)
+            mu = np.zeros(B) + float(contact.tool_friction[0])
+            mu[:len(contact.tool_friction)] = contact.tool_friction[:B]
+            mu_s = np.zeros(B) + float(contact.tool_static_friction[0])
+            mu_s[:len(contact.tool_static_friction)] = contact.tool_static_friction[:B]
+            self._mu, self._mu_s = _put(wp, mu, wp.float64, dev), _put(wp, mu_s, wp.float64, dev)
+            k_n = float(contact.stiffness_for(self.dt))
+            k_t = float(contact.params.tangential_stiffness or k_n)
+            self._k_n, self._c_n, self._k_t = k_n, float(contact.params.damping), k_t
+            template.reset()
+            mjm = template.model
+            self._mjm = mjm
+            mjm.opt.timestep = self.dt * self.subcycles
+            rate = np.full(mjm.nu, np.inf)
+            for tool in template.tools.values():
+                for a, r in tool.actuator_rates().items():
+                    rate[a] = r
+            self.tools = ToolState(model=mjw.put_model(mjm), data=mjw.put_data(mjm, template.data, nworld=W),
+                                   ctrl64=wp.zeros((W, mjm.nu), dtype=wp.float64, device=dev),
+                                   goal=wp.zeros((W, mjm.nu), dtype=wp.float64, device=dev),
+                                   rate=_put(wp, _tiled(rate, W), wp.float64, dev),
+                                   moving=wp.zeros(W, dtype=wp.int32, device=dev))
+        self.steps = 0
+        self._mjw, self._wp = mjw, wp
+        self._model_name = type(tissue).name
+        self._critical_dt = float(tissue.critical_dt())     # at rest, for the divergence message
+
+    # ------------------------------------------------------------------------------------------
+    # stepping
+    def step(self, n: int = 1) -> None:
+        """``n`` physics steps of dt in every world (module docstring); with tissue sub-cycling
+        (``subcycles`` > 1) n must be a multiple of it (whole MuJoCo steps)."""
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+            raise ConfigError(f"step(n): n must be a whole number of physics steps >= 0, got {n!r}")
+        if n % self.subcycles:
+            raise ConfigError(f"step(n): with tissue_subcycles={self.subcycles} the worlds advance in whole MuJoCo "
+                              f"steps of {self.subcycles} physics steps; {n} is not a multiple of it")
+        for _ in range(int(n) // self.subcycles):
+            self._one_step()
+
+    def _one_step(self) -> None:
+        """One MuJoCo step of n dt (n = ``subcycles``) with n tissue + contact sub-steps of dt, as
+        ``Simulation._subcycled_steps`` (n = 1: its generic loop): inside the MuJoCo step the geoms
+        move along their velocity at its start; the tools get the mean of the n reactions."""
+        wp, mjw = self._wp, self._mjw
+        W, dev, n = self.W, self.device, self.subcycles
+        t, d, c, ts = self.tools, self.tools.data, self.contact, self.tissue_state
+        dt = wp.float64(self.dt)
+        G, B, C = len(self.geom_ids), len(self.bodies), self._cand.shape[0]
+        mark = self._mark
+        with wp.ScopedDevice(dev):
+            mark(None)
+            wp.launch(rk.rate_limit, dim=W, inputs=[t.ctrl64, t.goal, t.rate, t.moving, wp.float64(self.dt * n), d.ctrl])
+            mark("rate_limit")
+            mjw.step1(t.model, d)
+            mark("mujoco_warp.step1")
+            wp.launch(ck.gather_geoms, dim=(W, G), inputs=[self._geom_ids, self._geom_body, self._geom_root, self._bodies,
+                                                          d.geom_xpos, d.geom_xmat, d.cvel, d.subtree_com, d.xipos,
+                                                          c.gpos, c.gmat, c.gang, c.glin, c.tcom])
+            if n > 1:
+                wp.copy(c.gpos0, c.gpos)
+            mark("contact")
+            for j in range(n):
+                if j:
+                    wp.launch(ck.advance_geoms, dim=(W, G), inputs=[c.gpos0, c.glin, wp.float64(j * self.dt), c.gpos])
+                wp.launch(ck.contact_points, dim=(W, C), inputs=[ts.x, ts.v, self._cand, self._kind, self._tool, self._size,
+                                                                c.gpos, c.gmat, c.gang, c.glin, self._mu, self._mu_s,
+                                                                wp.float64(self._k_n), wp.float64(self._c_n),
+                                                                wp.float64(self._k_t), c.anchor, c.state, c.f_ext,
+                                                                c.point_force, c.point_fn, c.point_depth])
+                wp.launch(ck.tool_sums, dim=(W, B), inputs=[ts.x, self._cand, self._tool, c.point_force, c.point_fn,
+                                                           c.point_depth, c.tcom, c.tool_force, c.tool_torque, c.tool_fn,
+                                                           c.tool_contacts, c.tool_depth])
+                wp.launch(ck.add_wrench, dim=(W, B), inputs=[c.tool_force, c.tool_torque, c.sum_force, c.sum_torque])
+                mark("contact")
+                self._tissue_step(dt)
+                mark("tissue")
+            wp.launch(ck.write_reaction, dim=(W, B), inputs=[self._bodies, c.sum_force, c.sum_torque, wp.float64(n),
+                                                            d.xfrc_applied])
+            mark("reaction")
+            mjw.step2(t.model, d)
+            wp.launch(ck.zero_reaction, dim=(W, B), inputs=[self._bodies, d.xfrc_applied])
+            mark("mujoco_warp.step2")
+        self.steps += n
+
+    #: phase -> seconds spent in it (wall clock, device synchronised after each phase) while
+    #: profiling (:meth:`profile`); None: not profiling (no synchronisation between phases)
+    phase_seconds: dict | None = None
+
+    def profile(self, on: bool = True) -> None:
+        """Start (on) or stop timing the phases of every step into :attr:`phase_seconds` (the device
+        is synchronised after each phase, which costs time on a GPU: for the shares, not the totals)."""
+        self.phase_seconds = {} if on else None
+
+    def _mark(self, phase) -> None:
+        if self.phase_seconds is None:
+            return
+        import time
+
+        self._wp.synchronize_device(self.device)
+        now = time.perf_counter()
+        if phase is not None:
+            self.phase_seconds[phase] = self.phase_seconds.get(phase, 0.0) + now - self._t_mark
+        self._t_mark = now
+
+    def _tissue_step(self, dt) -> None:
+        wp = self._wp
+        W, ts, topo, fl, c = self.W, self.tissue_state, self.topology, self.fields, self.contact
+        wp.launch(msk.spring_forces, dim=(W, topo.n_springs),
+                  inputs=[ts.x, topo.si, topo.sj, topo.L0, fl.K1, fl.K2, fl.kM, fl.kMg, topo.decay, ts.fresh, ts.s,
+                          ts.dl, self._f_spring])
+        if topo.n_tets:
+            wp.launch(msk.volume_forces, dim=(W, topo.n_tets), inputs=[ts.x, topo.tets, topo.V0, fl.kv, self._f_corner])
+        wp.launch(msk.integrate_nodes, dim=(W, topo.n_nodes),
+                  inputs=[ts.x, ts.v, topo.spring_start, topo.node_springs, topo.spring_sign, topo.corner_start,
+                          topo.node_corners, self._f_spring, self._f_corner, c.f_ext, topo.inv_mass, topo.b0,
+                          wp.vec3d(*topo.gravity), topo.fixed, dt, ts.fresh, ts.diverged])
+
+    @property
+    def _f_spring(self):
+        buf = getattr(self, "_f_spring_buf", None)
+        if buf is None:
+            wp = self._wp
+            buf = self._f_spring_buf = wp.zeros((self.W, self.topology.n_springs), dtype=wp.vec3d, device=self.device)
+        return buf
+
+    @property
+    def _f_corner(self):
+        buf = getattr(self, "_f_corner_buf", None)
+        if buf is None:
+            wp = self._wp
+            buf = self._f_corner_buf = wp.zeros((self.W, max(4 * self.topology.n_tets, 1)), dtype=wp.vec3d,
+                                                device=self.device)
+        return buf
+
+    # ------------------------------------------------------------------------------------------
+    # commands
+    def set_tool_targets(self, name: str, positions, speed: float | None = None, worlds=None) -> None:
+        """Move tool ``name``'s origin towards ``positions`` ((W, 3) m, world; or (len(worlds), 3)
+        for the worlds listed) at ``speed`` m/s (None: the tool's default rate), as
+        :meth:`Simulation.set_tool_target` does for one scene."""
+        if name not in self.tool_actuators:
+            raise ConfigError(f"unknown tool {name!r}; tools in this scene: {sorted(self.tool_actuators)}")
+        idx = np.arange(self.W) if worlds is None else np.asarray(worlds, dtype=np.int64).reshape(-1)
+        pos = np.asarray(positions, dtype=np.float64)
+        if pos.shape != (len(idx), 3) or not np.all(np.isfinite(pos)):
+            raise ConfigError(f"positions must be finite ({len(idx)}, 3) m, got shape {pos.shape}")
+        tool = self.template.tools[name]
+        local = (pos - self.tool_home[name]) @ self.tool_frame[name]     # = frame.T @ (p - home) per row
+        travel = float(tool.config.travel)
+        if np.abs(local).max(initial=0.0) > travel + 1e-12:
+            raise ConfigError(f"a target of tool {name!r} lies outside its reach of +-{travel} m about its home "
+                              f"{self.tool_home[name].round(4).tolist()} m; choose closer targets")
+        act = self.tool_actuators[name][:3]
+        t = self.tools
+        goal, moving = t.goal.numpy(), t.moving.numpy()
+        goal[np.ix_(idx, act)] = local
+        moving[idx] = 1
+        t.goal.assign(goal)
+        t.moving.assign(moving)
+        if speed is not None:
+            if not (isinstance(speed, (int, float)) and speed > 0):
+                raise ConfigError(f"speed must be a positive number (m/s), or math.inf for no limit, got {speed!r}")
+            rate = t.rate.numpy()
+            rate[np.ix_(idx, act)] = float(speed)
+            t.rate.assign(rate)
+
+    def set_actuator_goals(self, actuators, goals, speed: float | None = None, worlds=None) -> None:
+        """Move actuators ``actuators`` (A,) ids towards ``goals`` ((W, A), or (A,) for every listed
+        world) at ``speed`` (units/s; None: their default rate), as :meth:`Simulation.set_actuator_goal`;
+        e.g. a grasper's jaw: goal = open_radius - radius."""
+        ids = np.asarray(actuators, dtype=np.int64).reshape(-1)
+        nu = self._mjm.nu
+        if len(ids) == 0 or ids.min() < 0 or ids.max() >= nu:
+            raise ConfigError(f"actuators must be ids in [0, {nu}), got {ids.tolist()}")
+        idx = np.arange(self.W) if worlds is None else np.asarray(worlds, dtype=np.int64).reshape(-1)
+        g = np.broadcast_to(np.asarray(goals, dtype=np.float64), (len(idx), len(ids)))
+        if not np.all(np.isfinite(g)):
+            raise ConfigError("actuator goals must be finite numbers")
+        t = self.tools
+        goal, moving = t.goal.numpy(), t.moving.numpy()
+        goal[np.ix_(idx, ids)] = g
+        moving[idx] = 1
+        t.goal.assign(goal)
+        t.moving.assign(moving)
+        if speed is not None:
+            if not (isinstance(speed, (int, float)) and speed > 0):
+                raise ConfigError(f"speed must be a positive number, or math.inf for no limit, got {speed!r}")
+            rate = t.rate.numpy()
+            rate[np.ix_(idx, ids)] = float(speed)
+            t.rate.assign(rate)
+
+    def reset_worlds(self, worlds=None) -> None:
+        """Back to the template's reset state in the listed worlds (all if None): tissue at rest,
+        branches and contacts cleared, MuJoCo data reset (``reset_data`` + ``forward``), controls
+        and goals zero."""
+        wp, mjw = self._wp, self._mjw
+        mask = np.ones(self.W, dtype=bool)
+        if worlds is not None:
+            mask[:] = False
+            mask[np.asarray(worlds, dtype=np.int64).reshape(-1)] = True
+        if not mask.any():
+            return
+        ts, c, t = self.tissue_state, self.contact, self.tools
+        topo = self.topology
+        with wp.ScopedDevice(self.device):
+            idx = wp.array(np.flatnonzero(mask).astype(np.int32), dtype=wp.int32)
+            k = idx.shape[0]
+            wp.launch(rsk.reset_nodes, dim=(k, topo.n_nodes), inputs=[idx, self._rest, ts.x, ts.v, c.f_ext])
+            wp.launch(rsk.reset_springs, dim=(k, topo.n_springs), inputs=[idx, ts.s, ts.dl])
+            wp.launch(rsk.reset_contacts, dim=(k, c.state.shape[1], c.state.shape[2]), inputs=[idx, c.state, c.anchor])
+            wp.launch(rsk.reset_world_scalars, dim=k, inputs=[idx, ts.fresh, ts.diverged, t.moving, t.ctrl64, t.goal,
+                                                              c.tool_force, c.tool_torque, c.tool_fn, c.tool_contacts,
+                                                              c.tool_depth, c.sum_force, c.sum_torque])
+            mjw.reset_data(t.model, t.data, reset=wp.array(mask, dtype=bool))
+            mjw.forward(t.model, t.data)
+
+    def set_young_factors(self, factors, worlds=None) -> None:
+        """Per-world, per-tet Young's modulus factors ``factors`` (W, T), or (len(worlds), T) for the
+        worlds listed, relative to the template's
+        material when the batch was built (domain randomisation, e.g. a stiffer inclusion): every
+        spring constant, Maxwell branch constant and volume stiffness is linear in the Young's moduli
+        of the tets around it (docs/models/mass_spring.md), so each world's are the template's scaled
+        by the mean factor of the spring's tets weighted by E_t V_t (the tet's factor for the volume
+        term). Needs a template whose materials differ in Young's modulus only (as the tasks build
+        it); checked against the CPU model's own re-derivation in tests/test_batch_equivalence.py."""
+        f = np.asarray(factors, dtype=np.float64)
+        nt = self.topology.n_tets
+        idx = np.arange(self.W) if worlds is None else np.asarray(worlds, dtype=np.int64).reshape(-1)
+        if f.shape != (len(idx), nt) or not np.all(np.isfinite(f)) or np.any(f <= 0):
+            raise ConfigError(f"factors must be positive finite ({len(idx)}, {nt}) per-tet Young's modulus factors, "
+                              f"got shape {f.shape}")
+        if not len(idx):
+            return
+        spring_w = self._spring_weights()
+        edge = spring_w @ f.T            # (E, worlds): volume-weighted mean factor of each spring's tets
+        base = self._base_fields
+        for key in ("K1", "K2", "kM", "kMg"):
+            self._assign_rows(getattr(self.fields, key), idx, (base[key][:, None] * edge).T)
+        self._assign_rows(self.fields.kv, idx, base["kv"][None, :] * f)
+
+    def _assign_rows(self, arr, idx: np.ndarray, values: np.ndarray) -> None:
+        """``arr[idx] = values`` on the device (all rows at once when idx is every world; else only
+        the listed rows travel)."""
+        wp = self._wp
+        if len(idx) == self.W and np.array_equal(idx, np.arange(self.W)):
+            arr.assign(np.ascontiguousarray(values))
+            return
+        with wp.ScopedDevice(self.device):
+            src = wp.array(np.ascontiguousarray(values, dtype=np.float64), dtype=wp.float64)
+            wp.launch(rsk.scatter_rows, dim=src.shape, inputs=[arr, wp.array(idx.astype(np.int32), dtype=wp.int32), src])
+
+    def _spring_weights(self):
+        """(E, T) sparse: row e holds the tets around spring e weighted by E_t V_t / their total
+        (the template's Young's moduli and volumes when the batch was built)."""
+        sw = self._spring_weight_matrix
+        if isinstance(sw, str):
+            raise ConfigError(sw)
+        return sw
+
+    def _build_spring_weights(self, tissue) -> None:
+        """:meth:`_spring_weights` from the template tissue at build (or the reason it cannot be used)."""
+        import scipy.sparse as sp
+
+        fields = tissue.fields
+        for name in ("poisson", "relax_fraction", "relax_time", "nonlinear", "density", "damping"):
+            vals = np.asarray(fields[name])
+            if vals.size and np.ptp(vals) > 1e-12 * np.abs(vals).max():
+                self._spring_weight_matrix = (f"set_young_factors needs a template whose materials differ in Young's "
+                                              f"modulus only; its field {name!r} varies (build it without region "
+                                              "materials)")
+                return
+        tets = np.asarray(tissue.volume.tets, dtype=np.int64)
+        weight = np.abs(np.asarray(tissue.volume.tet_volumes(), dtype=np.float64)) * np.asarray(fields["young"])
+        n = tissue.n_nodes
+        pairs = np.sort(np.stack([tets[:, [0, 0, 0, 1, 1, 2]].ravel(), tets[:, [1, 2, 3, 2, 3, 3]].ravel()], 1), 1)
+        si, sj = np.asarray(tissue.si, np.int64), np.asarray(tissue.sj, np.int64)
+        keys = np.minimum(si, sj) * n + np.maximum(si, sj)
+        order = np.argsort(keys)
+        edge = order[np.searchsorted(keys, pairs[:, 0] * n + pairs[:, 1], sorter=order)]
+        tet = np.repeat(np.arange(len(tets)), 6)
+        m = sp.csr_matrix((np.repeat(weight, 6), (edge, tet)), shape=(len(si), len(tets)))
+        total = np.asarray(m.sum(axis=1)).ravel()
+        self._spring_weight_matrix = sp.diags(1.0 / total) @ m
+
+    def diverged_worlds(self) -> np.ndarray:
+        """Indices of the worlds whose tissue became non-finite since their last reset."""
+        return np.flatnonzero(self.tissue_state.diverged.numpy())
+
+    def check_stable(self) -> None:
+        """Raise :class:`~surgsim_envs.errors.TissueUnstableError` naming the diverged worlds, if any."""
+        bad = self.diverged_worlds()
+        if len(bad):
+            from surgsim_envs.errors import TissueUnstableError
+
+            raise TissueUnstableError(self._model_name, self.dt, self._critical_dt,
+                                      f"non-finite node positions in {len(bad)} of {self.W} batched worlds "
+                                      f"(first: {bad[:8].tolist()})")
+
+    # ------------------------------------------------------------------------------------------
+    # readouts (numpy copies; arrays() gives the device arrays)
+    def tool_positions(self, name: str) -> np.ndarray:
+        """(W, 3) m world position of tool ``name``'s origin (MuJoCo Warp's float32 ``xpos``)."""
+        return self.tools.data.xpos.numpy()[:, self.tool_body[name]].astype(np.float64)
+
+    def tool_forces(self, name: str) -> np.ndarray:
+        """(W, 3) N contact force ON tool ``name`` (all its bodies) in the last physics step."""
+        idx = self.tool_index[name]
+        f = self.contact.tool_force.numpy()
+        return f[:, idx[0]] + 0.0 if len(idx) == 1 else np.zeros((self.W, 3)) + f[:, idx].sum(axis=1)
+
+    def tissue_positions(self) -> np.ndarray:
+        """(W, N, 3) m tissue node positions."""
+        return self.tissue_state.x.numpy().copy()
+
+    def arrays(self) -> dict:
+        """The device arrays by name (Warp arrays: ``__dlpack__`` / ``wp.to_torch`` share them)."""
+        return {"tissue_positions": self.tissue_state.x, "tissue_velocities": self.tissue_state.v,
+                "contact_forces": self.contact.f_ext, "tool_force": self.contact.tool_force,
+                "tool_torque": self.contact.tool_torque, "xpos": self.tools.data.xpos, "qpos": self.tools.data.qpos}
+
+    def memory_bytes(self) -> dict:
+        """Bytes of the batched state on the device: tissue state, material fields, contact state,
+        work buffers (MuJoCo Warp's own data not counted)."""
+        fl = sum(getattr(self.fields, k).capacity for k in ("K1", "K2", "kM", "kMg", "kv"))
+        return {"tissue_state": self.tissue_state.nbytes(), "material_fields": fl, "contact": self.contact.nbytes(),
+                "work": self._f_spring.capacity + self._f_corner.capacity}

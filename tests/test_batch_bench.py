@@ -1,0 +1,22 @@
+"""``surgsim bench batch`` refuses bad arguments with a clear message (the figures themselves are
+measured by the command, never asserted)."""
+
+import pytest
+
+from surgsim_envs.bench.batch_speed import parse_worlds
+from surgsim_envs.cli import main
+from surgsim_envs.errors import ConfigError
+
+
+def test_world_counts_are_parsed_and_checked():
+    assert parse_worlds("1,256,4096") == [1, 256, 4096]
+    with pytest.raises(ConfigError, match=r"--worlds: 'x' is not an integer; give world counts like 1,256,4096"):
+        parse_worlds("1,x")
+    with pytest.raises(ConfigError, match=r"--worlds: 0 must lie in \[1, "):
+        parse_worlds("0")
+
+
+def test_cli_reports_a_bad_device(capsys):
+    pytest.importorskip("warp")
+    assert main(["bench", "batch", "--device", "tpu", "--worlds", "1"]) == 2
+    assert "device='tpu' must be 'cpu', 'cuda' or 'cuda:<index>'" in capsys.readouterr().err
