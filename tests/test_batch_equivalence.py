@@ -124,7 +124,7 @@ def test_worlds_step_independently():
 def test_young_factors_match_the_cpu_models_rederivation(pair):
     """A stiffer inclusion in one world: the batched springs, branches and volume term equal the CPU
     model's own after scale_material (which rebuilds them from the per-tet fields)."""
-    from surgsim_envs.envs.base import sphere_mask
+    from surgsim_envs.envs.tissue_setup import sphere_mask
     from surgsim_envs.tissue.registry import get as model_class
 
     sim, batch = pair

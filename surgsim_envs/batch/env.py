@@ -38,7 +38,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from surgsim_envs.batch.simulation import BatchSimulation
-from surgsim_envs.envs.base import sample, sphere_mask
+from surgsim_envs.envs.checks import sample
+from surgsim_envs.envs.tissue_setup import sphere_mask
 from surgsim_envs.envs.palpation import (PalpationEnv, is_new_site, localisation_error,
                                          localisation_reward, map_cell, stiffness_map,
                                          stiffness_weighted_estimate)

@@ -21,7 +21,7 @@ def indentation_depth(probe_z: float, surface_z: float, tip_radius: float) -> fl
 def stiffness_estimate(force_z: float, depth: float, min_depth: float) -> float:
     """Apparent stiffness F_z / depth (N/m) of a press deeper than ``min_depth`` m, else 0; always a
     Python float (the same IEEE quotient as with numpy scalars: one type in every step's info keeps
-    the vector env's info write plan, ``envs/vector_info.py``, from being rebuilt)."""
+    the vector env's info write plan, ``vector/info.py``, from being rebuilt)."""
     return float(force_z) / float(depth) if depth >= min_depth else 0.0
 
 
