@@ -84,3 +84,40 @@ def test_require_display_names_the_fix(monkeypatch):
         pytest.skip("the DISPLAY check applies on Linux")
     with pytest.raises(RenderingUnavailableError, match="DISPLAY.*rgb_array"):
         require_display()
+
+
+@pytest.mark.parametrize("task", ["SurgSim/Palpation-v0", "SurgSim/Grasp-v0", "SurgSim/Slippage-v0",
+                                  "SurgSim/PalpationPress-v0", "SurgSim/LayeredPalpation-v0"])
+@pytest.mark.parametrize("options", [5, [1, 2], "inclusion_position"])
+def test_reset_options_that_are_not_a_dict_are_refused_by_name(task, options):
+    """A list or a number as ``options`` raised a raw TypeError in four tasks."""
+    env = gym.make(task)
+    try:
+        with pytest.raises(ConfigError, match="reset options must be a dict"):
+            env.reset(seed=0, options=options)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("task, field, value, match", [
+    ("SurgSim/Palpation-v0", "tip_radius", 5e-324, r"tip_radius=5e-324 m must be >= 0.0001"),   # overflowed
+    ("SurgSim/Palpation-v0", "max_depth", 1e-9, r"max_depth=1e-09 m must be >= 0.0001"),
+    ("SurgSim/Grasp-v0", "tolerance", 5e-324, r"tolerance=5e-324 m must be >= 0.0001"),
+    ("SurgSim/Grasp-v0", "max_step", 1e-12, r"max_step=1e-12 m must be >= 1e-06"),
+    ("SurgSim/Grasp-v0", "closing_speed", 5e-324, r"closing_speed=5e-324 m/s must be >= 0.0001"),
+    ("SurgSim/PalpationPress-v0", "clearance", 5e-324, r"clearance=5e-324 m must be >= 0.0001"),
+    ("SurgSim/LayeredPalpation-v0", "spacing", 10 ** 400, r"spacing=1000000.*\.\.\. (m )?(must be finite|is outside)"),
+])
+def test_degenerate_sizes_are_refused_with_the_bound(task, field, value, match):
+    """Lengths of 1e-300 m were accepted (a probe tip of 5e-324 m then overflowed), and a 400-digit
+    integer raised a raw OverflowError."""
+    with pytest.raises(ConfigError, match=match):
+        gym.make(task, **{field: value})
+
+
+def test_an_exact_fraction_is_a_valid_length():
+    """A Fraction workspace raised a raw TypeError while the error message was formatted."""
+    from fractions import Fraction
+
+    env = gym.make("SurgSim/Grasp-v0", workspace=Fraction(3, 50))
+    env.close()

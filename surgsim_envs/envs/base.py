@@ -186,6 +186,9 @@ class SurgSimEnv(gym.Env):
     # -- Gymnasium API ----------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
+        if options is not None and not isinstance(options, dict):
+            raise ConfigError(f"reset options must be a dict of option name -> value or None, got "
+                              f"{type(options).__name__} {options!r:.60}; accepted options: {list(self.OPTIONS)}")
         options = dict(options or {})
         unknown = sorted(set(options) - set(self.OPTIONS))
         if unknown:

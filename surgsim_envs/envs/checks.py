@@ -40,6 +40,18 @@ def check_positive(value, what: str, hint: str = "") -> float:
     return validate.positive(value, what, fix=hint or "give a positive finite number")
 
 
+#: m, the smallest tool size, press depth, clearance or tolerance a task takes: the task lattices
+#: are millimetres apart, so anything under a tenth of a millimetre resolves nothing (and a probe tip
+#: of 1e-300 m overflows the surface sampling it sets)
+MIN_TASK_LENGTH = 1e-4
+
+
+def check_task_length(value, what: str, lo: float = MIN_TASK_LENGTH) -> float:
+    """A length (m) of a task's tool or geometry: finite, >= ``lo`` (default :data:`MIN_TASK_LENGTH`)."""
+    return validate.real(value, what, lo=lo, unit="m",
+                         fix=f"give a length in m of at least {lo:g} (lengths are SI: 5 mm is 0.005)")
+
+
 #: the largest reward weight, bonus or cost a task accepts: a weighted sum of a few hundred terms
 #: stays far from float overflow (a weight of 1e308 times a force of 2 N is inf, and inf - inf is NaN)
 MAX_REWARD_WEIGHT = 1e6

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
-from surgsim_envs.envs.checks import check_positive, check_range, check_weights
+from surgsim_envs.envs.checks import check_positive, check_range, check_task_length, check_weights
 from surgsim_envs.envs.grasp.scene import GraspSceneConfig
 
 
@@ -35,8 +35,11 @@ class GraspConfig(GraspSceneConfig):
         super().validate()
         for key in ("max_step", "workspace", "hold_force", "damage_force", "tolerance"):
             check_positive(getattr(self, key), f"GraspConfig.{key}")
+        check_task_length(self.tolerance, "GraspConfig.tolerance")
+        check_task_length(self.max_step, "GraspConfig.max_step", lo=1e-6)     # 1 um per control step at least
         check_weights(self, ("force_weight", "slip_weight", "progress_weight", "contact_weight", "drop_penalty",
                              "success_bonus"), "GraspConfig")
-        within = f"(within +-workspace={self.workspace:g} m)"
-        check_range(self.target_offset_x, f"target_offset_x {within}", -self.workspace, self.workspace)
-        check_range(self.target_offset_z, f"target_offset_z {within}", -self.workspace, self.workspace)
+        w = float(self.workspace)
+        within = f"(within +-workspace={w:g} m)"
+        check_range(self.target_offset_x, f"target_offset_x {within}", -w, w)
+        check_range(self.target_offset_z, f"target_offset_z {within}", -w, w)

@@ -16,6 +16,7 @@ from typing import Any, ClassVar, Sequence
 import numpy as np
 
 from surgsim_envs.envs.base import SurgSimEnv
+from surgsim_envs import validate
 from surgsim_envs.envs.checks import (check_control_rate, check_explicit_step, check_integrator, check_on_unstable,
                                      check_positive, check_range, check_render_size, check_task_resolution,
                                      require_capabilities, sample)
@@ -52,6 +53,8 @@ class GraspSceneConfig:
         what = type(self).__name__
         for key in ("control_hz", "dt", "episode_seconds", "closing_speed"):
             check_positive(getattr(self, key), f"{what}.{key}")
+        validate.real(self.closing_speed, f"{what}.closing_speed", lo=1e-4, unit="m/s",
+                      fix="the jaws' closing speed, at least 0.1 mm/s (the default is 0.03)")
         check_control_rate(self, what)
         check_task_resolution(self, what)
         check_on_unstable(self.on_unstable, what)

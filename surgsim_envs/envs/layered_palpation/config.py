@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 
@@ -22,16 +22,14 @@ CAMERAS = ("overview", "top", "side")
 
 
 def _finite_number(value, what: str, lo: float, hi: float, hint: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(float(value)) or not lo <= float(value) <= hi:
-        raise ConfigError(f"LayeredPalpationConfig.{what}={value!r} must be a finite number in [{lo:g}, {hi:g}]; "
-                          f"{hint}")
-    return float(value)
+    return validate.real(value, f"LayeredPalpationConfig.{what}", lo=lo, hi=hi,
+                         fix=f"give a finite number in [{lo:g}, {hi:g}]: {hint}")
 
 
 def _integer(value, what: str, lo: int, hi: int, hint: str) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= int(value) <= hi:
-        raise ConfigError(f"LayeredPalpationConfig.{what}={value!r} must be an integer in [{lo}, {hi}]; {hint}")
+        raise ConfigError(f"LayeredPalpationConfig.{what}={validate.short_repr(value)} must be an integer in "
+                          f"[{lo}, {hi}]; {hint}")
     return int(value)
 
 

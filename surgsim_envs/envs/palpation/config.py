@@ -9,7 +9,8 @@ import numpy as np
 
 from surgsim_envs import validate
 from surgsim_envs.envs.checks import (check_control_rate, check_integrator, check_on_unstable, check_positive,
-                                     check_range, check_render_size, check_task_resolution, check_weights)
+                                     check_range, check_render_size, check_task_length, check_task_resolution,
+                                     check_weights)
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.materials import get_material
 
@@ -79,6 +80,8 @@ class PalpationConfig:
                     "hover", "max_depth", "xy_limit", "press_min_depth", "sample_max_speed", "site_spacing", "damage_force",
                     "localisation_scale", "tolerance_mm", "map_half_width"):
             check_positive(getattr(self, key), f"PalpationConfig.{key}")
+        for key in ("tip_radius", "max_depth"):
+            check_task_length(getattr(self, key), f"PalpationConfig.{key}")
         check_control_rate(self, "PalpationConfig")
         check_weights(self, ("shaping_weight", "time_cost", "press_reward", "cell_reward", "damage_weight",
                              "localisation_weight", "success_bonus"), "PalpationConfig")

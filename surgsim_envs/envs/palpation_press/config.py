@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from surgsim_envs import validate
-from surgsim_envs.envs.checks import check_positive, check_weights
+from surgsim_envs.envs.checks import check_task_length, check_weights
 from surgsim_envs.envs.palpation.config import PalpationConfig
 from surgsim_envs.errors import ConfigError
 
@@ -38,7 +38,7 @@ class PalpationPressConfig(PalpationConfig):
         super().validate()
         what = "PalpationPressConfig"
         for key in ("press_depth", "clearance"):
-            check_positive(getattr(self, key), f"{what}.{key}")
+            check_task_length(getattr(self, key), f"{what}.{key}")
         for key in ("move_speed", "press_speed"):
             # the moves between presses take travel / move_speed / dt physics steps in one env step
             validate.real(getattr(self, key), f"{what}.{key}", lo=1e-3, hi=100.0, unit="m/s",
