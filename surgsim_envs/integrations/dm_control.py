@@ -53,17 +53,20 @@ def _snake(task_id: str) -> str:
     return re.sub(r"(?<!^)(?=[A-Z])", "_", task_id.split("/")[-1].split("-")[0]).lower()
 
 
-#: short name -> Gymnasium task id (the one task registry: every registered SurgSim task)
 def _names() -> dict[str, str]:
-    from surgsim_envs.envs import QUASI_STATIC_TASKS, TASKS
+    """short name -> Gymnasium task id, for every task of the task registry."""
+    from surgsim_envs.envs.registry import TASKS
 
-    return {_short(tid): tid for tid in {**TASKS, **QUASI_STATIC_TASKS}}
+    return {_short(tid): tid for tid in TASKS}
 
 
 def _aliases() -> dict[str, str]:
     """Every name :func:`load` accepts: the short names and their snake_case spellings."""
+    from surgsim_envs.envs.registry import TASKS
+
     table = _names()
-    return {**{_snake(tid): tid for tid in table.values()}, **table}
+    declared = {spec.dm_control: tid for tid, spec in TASKS.items() if spec.dm_control}   # TaskSpec.dm_control
+    return {**{_snake(tid): tid for tid in table.values()}, **declared, **table}
 
 
 def names() -> list[str]:
