@@ -48,3 +48,41 @@ def test_explicit_branches_relax_the_stress_of_a_held_shape():
     relaxed, instant = model.element_stress(), elastic.element_stress()
     big = np.abs(instant) > 0.1 * np.abs(instant).max()
     np.testing.assert_allclose(relaxed[big], 0.5 * instant[big], rtol=0.02)
+
+
+@pytest.mark.parametrize("formulation", ["anp", "standard"])
+def test_commit_forces_equals_stress_then_branch_then_element_forces(formulation):
+    """fem_viscous.commit_forces (one kernel) against its definition: corotated_stress, the branch
+    recursion in numpy and add_stress_forces, on a deformed, rotated state with a branch history."""
+    from surgsim_envs.tissue import fem_viscous as visc
+
+    vol = box_volume((0.02, 0.02, 0.01), 0.005)
+    m = tissue.make("fem", vol, VISCO, formulation=formulation)
+    rng = np.random.default_rng(3)
+    x = vol.nodes + 1e-3 * rng.standard_normal(vol.nodes.shape)
+    m._update_rotations(x, tol=1e-12)
+    nt = len(m.tets)
+    h0 = rng.standard_normal((nt, 3, 3))
+    h0 = h0 + h0.transpose(0, 2, 1)
+    s_prev = rng.standard_normal((nt, 3, 3))
+    s_prev = s_prev + s_prev.transpose(0, 2, 1)
+    decay, gamma = rng.uniform(0.5, 1.0, nt), rng.uniform(0.5, 1.0, nt)
+    keep, take = rng.uniform(0.5, 1.0, nt), rng.uniform(0.5, 1.0, nt)
+    g = m.relax_g
+    # reference
+    sig0 = np.empty((nt, 3, 3))
+    visc.corotated_stress(x, m.tets, m.dm_inv, m.tet_volume, m._rots, m.mu, m.lam, m._anp, m.kappa_node,
+                          m.node_volume, np.zeros(nt), np.zeros(m.n_nodes), sig0)
+    h_ref = decay[:, None, None] * h0 + gamma[:, None, None] * (sig0 - s_prev)
+    excess = g[:, None, None] * (keep[:, None, None] * h_ref - take[:, None, None] * sig0)
+    f_ref = np.ones((m.n_nodes, 3))
+    visc.add_stress_forces(m.tets, m.grads, m.tet_volume, m._rots, np.ascontiguousarray(excess), f_ref)
+    # kernel
+    h, sp = h0.copy(), s_prev.copy()
+    f = np.ones((m.n_nodes, 3))
+    visc.commit_forces(x, m.tets, m.dm_inv, m.tet_volume, m._rots, m.mu, m.lam, m._anp, m.kappa_node, m.node_volume,
+                       g, decay, gamma, h, sp, keep, take, np.empty((nt, 6)), np.empty(m.n_nodes), f)
+    np.testing.assert_allclose(h, h_ref, rtol=0, atol=1e-12 * np.abs(h_ref).max())
+    np.testing.assert_allclose(sp, sig0, rtol=0, atol=1e-12 * np.abs(sig0).max())
+    np.testing.assert_allclose(f, f_ref, rtol=0, atol=1e-12 * np.abs(f_ref - 1).max())
+    assert np.abs(f_ref - 1).max() > 1e-6

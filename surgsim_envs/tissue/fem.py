@@ -132,7 +132,6 @@ class TetFEMModel(TissueModel):
         # viscoelastic branch state (fem_viscous): h (T,3,3) Pa, sigma0 at the last commit, pending step
         self._h = np.zeros((t, 3, 3))
         self._sig_prev = np.zeros((t, 3, 3))
-        self._sig_now = np.zeros((t, 3, 3))
         self._trv = np.zeros(t)
         self._pnode = np.zeros(n)
         self._pending_dt = 0.0
@@ -352,14 +351,6 @@ class TetFEMModel(TissueModel):
         self._visco_cache[h] = out
         return out
 
-    def _commit_branches(self) -> np.ndarray:
-        """Bring h to the current state x_n (sigma0 with the current rotations); returns sigma0_n."""
-        sig0 = self._instant_stress(self.positions, self._sig_now)
-        self._h[:] = self._branch_state_at(sig0)
-        self._sig_prev[:] = sig0
-        self._pending_dt = 0.0
-        return sig0
-
     def elastic_energy(self) -> float:
         """Stored energy (J) at the current positions. The rotations are first iterated (same
         pass) until the Newton step is below 1e-6 rad: the energy is stationary in R at the polar
@@ -468,15 +459,16 @@ class TetFEMModel(TissueModel):
             return
         if self._visco:
             # branches committed at x_n; their extra stress enters as constant corotated element stress
-            sig0 = self._commit_branches()
-            g = self.relax_g[:, None, None]
+            decay, gamma = self._coeffs(self._pending_dt)[:2]
             if implicit:   # end-of-step stress c sigma0_{n+1} + g (decay h_n - gamma sigma0_n)
-                decay, gamma = self._coeffs(dt)[:2]
-                excess = g * (decay[:, None, None] * self._h - gamma[:, None, None] * sig0)
+                keep, take = self._coeffs(dt)[:2]
             else:          # stress at x_n: (1 - g) sigma0_n + g h_n
-                excess = g * (self._h - sig0)
+                keep = take = self._coeffs(0.0)[0]     # ones
+            eps, theta, _ = self._branch_work()
             forces = forces.copy()
-            self._add_branch_forces(forces, excess)
+            visc.commit_forces(self.positions, self.tets, self.dm_inv, self.tet_volume, self._rots, self.mu, self.lam,
+                               self._anp, self.kappa_node, self.node_volume, self.relax_g, decay, gamma, self._h,
+                               self._sig_prev, keep, take, eps, theta, forces)
             self._pending_dt = dt
         if not implicit:
             kern.symplectic_step(self.positions, self.velocities, forces, self.masses, self.alpha_node, self.gravity,

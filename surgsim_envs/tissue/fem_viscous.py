@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from surgsim_envs.tissue.fem_kernels import _element_rotation, _element_strain
+from surgsim_envs.tissue.fem_kernels import _element_rotation, _element_strain, _scatter_stress
 
 
 def branch_coefficients(h: float, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -235,3 +235,44 @@ def symplectic_step(x, v, fext, masses, alpha, gravity, fixed, dt, beta, corotat
         for k in range(3):
             v[i, k] = (v[i, k] + dt * ((fext[i, k] - out[i, k]) * inv_m + gravity[k])) * damp
             x[i, k] += dt * v[i, k]
+
+
+@njit(cache=True, error_model="numpy")
+def commit_forces(x, tets, dm_inv, vol, rots, mu, lam, anp, kappa_node, node_vol, g, decay, gamma, h, sig_prev,
+                  keep, take, eps, theta, out):
+    """Commit the branches at positions x (rotations ``rots``) and add their excess stress as element
+    forces to ``out`` (N,3) N, in two element passes.
+
+    sigma0 is :func:`corotated_stress` at x; then h <- decay h + gamma (sigma0 - sig_prev),
+    sig_prev <- sigma0 (``decay``/``gamma`` of the interval since the last commit), and the excess
+    stress is ``g (keep h - take sigma0)`` per element (``keep``, ``take`` (T,): 1 and 1 for the stress
+    at x_n of an explicit step; exp(-dt/tau) and gamma(dt) for the end-of-step stress of an implicit
+    one), added as ``out[a] -= V R excess grad N_a`` (:func:`add_stress_forces`). ``eps`` (T,6) and
+    ``theta`` (N,) are work buffers."""
+    nt = tets.shape[0]
+    if anp:
+        theta[:] = 0.0
+    for e in range(nt):
+        _element_strain(x, tets, dm_inv, rots, e, True, eps)
+        if anp:
+            q = 0.25 * vol[e] * (eps[e, 0] + eps[e, 1] + eps[e, 2])
+            for k in range(4):
+                theta[tets[e, k]] += q
+    if anp:
+        for a in range(theta.shape[0]):
+            theta[a] = kappa_node[a] * theta[a] / node_vol[a]
+    for e in range(nt):
+        m2 = 2.0 * mu[e]
+        tr = eps[e, 0] + eps[e, 1] + eps[e, 2]
+        if anp:
+            iso = 0.25 * (theta[tets[e, 0]] + theta[tets[e, 1]] + theta[tets[e, 2]] + theta[tets[e, 3]]) - m2 * tr / 3.0
+        else:
+            iso = lam[e] * tr
+        s0, s1, s2 = m2 * eps[e, 0] + iso, m2 * eps[e, 1] + iso, m2 * eps[e, 2] + iso
+        s3, s4, s5 = m2 * eps[e, 3], m2 * eps[e, 4], m2 * eps[e, 5]
+        _branch_element(e, s0, s1, s2, s3, s4, s5, g, decay, gamma, h, sig_prev)
+        ge, kh, ks = g[e], keep[e], take[e]
+        _scatter_stress(tets, dm_inv, vol, rots, e,
+                        -ge * (kh * h[e, 0, 0] - ks * s0), -ge * (kh * h[e, 1, 1] - ks * s1),
+                        -ge * (kh * h[e, 2, 2] - ks * s2), -ge * (kh * h[e, 0, 1] - ks * s3),
+                        -ge * (kh * h[e, 1, 2] - ks * s4), -ge * (kh * h[e, 2, 0] - ks * s5), out)
