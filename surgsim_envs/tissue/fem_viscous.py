@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from surgsim_envs.tissue.fem_kernels import _element_rotation, _element_strain, _scatter_stress
+from surgsim_envs.tissue.fem_kernels import _edge_gradient, _element_strain, _rotation_from_gradient, _scatter_stress
 
 
 def branch_coefficients(h: float, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -166,8 +166,8 @@ def symplectic_step(x, v, fext, masses, alpha, gravity, fixed, dt, beta, corotat
     since the last commit), adding the excess stress g (h_n - sigma0_n) as element forces
     (:func:`add_stress_forces`) and calling :func:`surgsim_envs.tissue.fem_kernels.symplectic_step`
     with ``parallel`` False. Fused, every tet is read twice instead of six times: the first loop
-    takes the instantaneous strain at x with the old rotation (kept in ``rots_old`` (T,3,3)),
-    updates the rotation and takes the elastic strain; the second forms both stresses, advances the
+    forms the deformation gradient once, takes from it the instantaneous strain with the old
+    rotation (kept in ``rots_old`` (T,3,3)), updates the rotation and takes the elastic strain; the second forms both stresses, advances the
     branch and scatters both force sets. Only the order of floating-point sums differs from the
     unfused sequence. Work buffers: ``eps_old`` (T,6), ``theta_old`` (N,); ``g``, ``decay``,
     ``gamma`` (T,); ``h``, ``sig_prev`` (T,3,3) Pa, updated in place.
@@ -189,12 +189,31 @@ def symplectic_step(x, v, fext, masses, alpha, gravity, fixed, dt, beta, corotat
         theta[:] = 0.0
         theta_old[:] = 0.0
     for e in range(nt):
-        for i in range(3):
-            for j in range(3):
-                rots_old[e, i, j] = rots[e, i, j]
-        _element_strain(x, tets, dm_inv, rots, e, True, eps_old)     # sigma0_n: the rotations of x_{n-1}
+        f00, f01, f02, f10, f11, f12, f20, f21, f22 = _edge_gradient(x, tets, dm_inv, e)
+        r00, r01, r02 = rots[e, 0, 0], rots[e, 0, 1], rots[e, 0, 2]
+        r10, r11, r12 = rots[e, 1, 0], rots[e, 1, 1], rots[e, 1, 2]
+        r20, r21, r22 = rots[e, 2, 0], rots[e, 2, 1], rots[e, 2, 2]
+        rots_old[e, 0, 0], rots_old[e, 0, 1], rots_old[e, 0, 2] = r00, r01, r02
+        rots_old[e, 1, 0], rots_old[e, 1, 1], rots_old[e, 1, 2] = r10, r11, r12
+        rots_old[e, 2, 0], rots_old[e, 2, 1], rots_old[e, 2, 2] = r20, r21, r22
+        # sigma0_n's strain sym(R^T F) - I with the rotations of x_{n-1} (as _element_strain)
+        h00 = r00 * f00 + r10 * f10 + r20 * f20
+        h11 = r01 * f01 + r11 * f11 + r21 * f21
+        h22 = r02 * f02 + r12 * f12 + r22 * f22
+        h01 = r00 * f01 + r10 * f11 + r20 * f21
+        h10 = r01 * f00 + r11 * f10 + r21 * f20
+        h12 = r01 * f02 + r11 * f12 + r21 * f22
+        h21 = r02 * f01 + r12 * f11 + r22 * f21
+        h20 = r02 * f00 + r12 * f10 + r22 * f20
+        h02 = r00 * f02 + r10 * f12 + r20 * f22
+        eps_old[e, 0] = h00 - 1.0
+        eps_old[e, 1] = h11 - 1.0
+        eps_old[e, 2] = h22 - 1.0
+        eps_old[e, 3] = 0.5 * (h01 + h10)
+        eps_old[e, 4] = 0.5 * (h12 + h21)
+        eps_old[e, 5] = 0.5 * (h20 + h02)
         if iters > 0:
-            _element_rotation(x, tets, dm_inv, rots, e, iters, rot_tol, eps, fused)
+            _rotation_from_gradient(f00, f01, f02, f10, f11, f12, f20, f21, f22, rots, e, iters, rot_tol, eps, fused)
         if not fused:
             _element_strain(y, tets, dm_inv, rots, e, True, eps)
         if anp:
