@@ -9,6 +9,9 @@ the tissue model's own ``step`` time for the same tissue and forces, same proces
 After each timed run a fixed reference kernel is timed (bench/reference_kernel.py):
 ``reference_kernel_us`` (median) and ``env_step_in_reference_kernels`` (the median env step over it),
 a figure that a slow minute of the shared host moves less than the step time itself.
+``default_over_plain``: the task's default env step over the same task on the plain ``mass_spring``
+network, the two stepped alternately in this process (bench/default_model_cost.py;
+``--no-model-ratio`` skips it).
 """
 
 from __future__ import annotations
@@ -72,6 +75,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--signal-options", action="store_true",
                         help="also time the per-step signal options for --workers processes (pipe byte, "
                              "semaphore pair, multiprocessing Connection)")
+    parser.add_argument("--no-model-ratio", action="store_true",
+                        help="skip the task's default env step against the same task on the plain mass_spring "
+                             "network, stepped alternately in this process (bench/default_model_cost.py)")
 
 
 def single_rate(env_id: str, steps: int, repeats: int, compiled_vs: bool = False) -> dict:
@@ -338,6 +344,18 @@ def async_rate(env_id: str, workers: int, steps: int, repeats: int, info_keys=No
     return statistics.median(rates)
 
 
+def _model_ratio(env_id: str, steps: int, repeats: int) -> dict:
+    """The task's default env step against the plain mass_spring network (bench/default_model_cost.py);
+    ``model_ratio_error`` instead where the task cannot be built on that network."""
+    from surgsim_envs.bench.default_model_cost import default_vs_plain
+    from surgsim_envs.errors import SurgSimError
+
+    try:
+        return default_vs_plain(env_id, steps, repeats)
+    except (SurgSimError, TypeError) as exc:
+        return {"model_ratio_error": f"{type(exc).__name__}: {exc}"}
+
+
 def _vector_envs_option(args):
     """``--vector-envs`` as a list of ints (None when not given); ConfigError naming a bad value."""
     counts = getattr(args, "vector_envs", None)
@@ -483,6 +501,8 @@ def run(args) -> int:
             rows.append(row)
             continue
         row = single_rate(t, args.steps, args.repeats, getattr(args, "compiled_vs_generic", False))
+        if not getattr(args, "no_model_ratio", False):
+            row.update(_model_ratio(t, args.steps, args.repeats))
         if vector:
             row.update(vector_row(t, args, 1e6 / row["steps_per_s"]))
         if args.workers:
@@ -512,14 +532,17 @@ def run(args) -> int:
     if not any("steps_per_s" in r for r in rows):
         return 0
     print(f"{'task':24s} {'steps/s':>8s} {'ctrl Hz':>8s} {'dt ms':>6s} {'sub':>4s} {'nodes':>6s} {'reset ms':>9s}"
-          f" {'async/s':>8s} {'speedup':>8s} {'overhead':>8s} {'ref us':>7s} {'step/ref':>8s}")
+          f" {'async/s':>8s} {'speedup':>8s} {'overhead':>8s} {'ref us':>7s} {'step/ref':>8s}"
+          f" {'default us':>10s} {'plain us':>8s} {'def/plain':>9s}")
     for r in rows:
         if "steps_per_s" not in r:
             continue
         print(f"{r['task']:24s} {r['steps_per_s']:8.0f} {r['control_hz']:8.0f} {r['physics_dt_s'] * 1e3:6.2f} "
               f"{r['substeps']:4d} {r['tissue_nodes']:6d} {r['reset_ms']:9.1f} "
               f"{r.get('async_steps_per_s', float('nan')):8.0f} {r.get('async_speedup', float('nan')):8.2f} "
-              f"{r['overhead_ratio']:8.2f} {r['reference_kernel_us']:7.1f} {r['env_step_in_reference_kernels']:8.2f}")
+              f"{r['overhead_ratio']:8.2f} {r['reference_kernel_us']:7.1f} {r['env_step_in_reference_kernels']:8.2f} "
+              f"{r.get('default_step_us', float('nan')):10.1f} {r.get('plain_step_us', float('nan')):8.1f} "
+              f"{r.get('default_over_plain', float('nan')):9.2f}")
     return 0
 
 

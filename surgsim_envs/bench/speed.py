@@ -11,6 +11,8 @@ loaded body can fall below its rest value (mass-spring at 245 nodes: 0.943 ms un
 against more than 1.25 ms at rest), so an explicit case that diverges is re-run from scratch at
 DT_SAFETY x the critical dt the guard reported (at most :data:`RETRIES` times); the row then says
 so in ``note``. A case that still fails keeps ``us_per_step: null`` and says why in ``error``.
+``--relax-ratio`` times instead each model with the liver preset against the same with
+relax_fraction 0, alternately in one process (bench/relax_cost.py).
 """
 
 from __future__ import annotations
@@ -200,11 +202,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sizes", default=",".join(map(str, DEFAULT_SIZES)),
                         help="comma-separated target node counts; default 250,1000,4000")
     parser.add_argument("--models", default=None, help="comma-separated model names (default: all registered)")
+    parser.add_argument("--relax-ratio", action="store_true",
+                        help="instead: each model (default fem, mass_spring, mass_spring_calibrated) with the liver "
+                             "preset (relax_fraction 0.5) against relax_fraction 0, stepped alternately in one "
+                             "process (bench/relax_cost.py)")
 
 
 def run(args: argparse.Namespace) -> int:
     sizes = parse_sizes(args.sizes)
     models = None if not args.models else [m.strip() for m in args.models.split(",") if m.strip()]
+    if getattr(args, "relax_ratio", False):
+        from surgsim_envs.bench import relax_cost
+
+        names = models or list(relax_cost.DEFAULT_MODELS)
+        classes = [c for n, c in available_models() if n in names]
+        rows = [relax_cost.relax_row(c, integ, size, args.repeats, args.steps, args.warmup)
+                for c in classes for integ in c.integrators for size in sizes]
+        print(json.dumps(rows, indent=2) if args.json else relax_cost.format_rows(rows))
+        return 0
     rows = run_bench(sizes, repeats=args.repeats, steps=args.steps, warmup=args.warmup, models=models)
     print(json.dumps(rows, indent=2) if args.json else format_table(rows))
     return 0

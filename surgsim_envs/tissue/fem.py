@@ -132,7 +132,6 @@ class TetFEMModel(TissueModel):
         # viscoelastic branch state (fem_viscous): h (T,3,3) Pa, sigma0 at the last commit, pending step
         self._h = np.zeros((t, 3, 3))
         self._sig_prev = np.zeros((t, 3, 3))
-        self._sig_now = np.zeros((t, 3, 3))
         self._trv = np.zeros(t)
         self._pnode = np.zeros(n)
         self._pending_dt = 0.0
@@ -322,6 +321,15 @@ class TetFEMModel(TissueModel):
     def _add_branch_forces(self, f, stress) -> None:
         visc.add_stress_forces(self.tets, self.grads, self.tet_volume, self._rots, np.ascontiguousarray(stress), f)
 
+    def _branch_work(self) -> tuple:
+        """Work buffers of the fused explicit step (:func:`fem_viscous.symplectic_step`): the strain at
+        x_n with the rotations before the step (T,6), its nodal volume change (N,), those rotations (T,3,3)."""
+        w = getattr(self, "_branch_buffers", None)
+        if w is None or w[0].shape[0] != len(self.tets):
+            t = len(self.tets)
+            w = self._branch_buffers = (np.zeros((t, 6)), np.zeros(self.n_nodes), np.zeros((t, 3, 3)))
+        return w
+
     def _coeffs(self, h: float):
         """Per-dt cache: (decay, gamma, c, mu_c, lam_c, kappa_node_c, kdiag_c, kdev_c), with c = 1 - g + g gamma
         the effective modulus factor of an implicit step of length h."""
@@ -342,14 +350,6 @@ class TetFEMModel(TissueModel):
             self._visco_cache.clear()
         self._visco_cache[h] = out
         return out
-
-    def _commit_branches(self) -> np.ndarray:
-        """Bring h to the current state x_n (sigma0 with the current rotations); returns sigma0_n."""
-        sig0 = self._instant_stress(self.positions, self._sig_now)
-        self._h[:] = self._branch_state_at(sig0)
-        self._sig_prev[:] = sig0
-        self._pending_dt = 0.0
-        return sig0
 
     def elastic_energy(self) -> float:
         """Stored energy (J) at the current positions. The rotations are first iterated (same
@@ -445,24 +445,37 @@ class TetFEMModel(TissueModel):
             if not kc.any():
                 kc = None
         implicit = self.active_integrator != "symplectic"
+        parallel = self._set_threads()
+        if self._visco and not implicit and not parallel:
+            # branches committed at x_n and the elastic forces in the same element passes (fem_viscous)
+            decay, gamma = self._coeffs(self._pending_dt)[:2]
+            visc.symplectic_step(self.positions, self.velocities, forces, self.masses, self.alpha_node, self.gravity,
+                                 self.fixed, dt, self.stiffness_damping, self.corotational, self.rotation_iters, 1e-12,
+                                 self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam, self._rots,
+                                 self._anp, self.kappa_node, self.node_volume, self._work, self._ybuf,
+                                 self._fbuf, self.relax_g, decay, gamma, self._h, self._sig_prev,
+                                 *self._branch_work())
+            self._pending_dt = dt
+            return
         if self._visco:
             # branches committed at x_n; their extra stress enters as constant corotated element stress
-            sig0 = self._commit_branches()
-            g = self.relax_g[:, None, None]
+            decay, gamma = self._coeffs(self._pending_dt)[:2]
             if implicit:   # end-of-step stress c sigma0_{n+1} + g (decay h_n - gamma sigma0_n)
-                decay, gamma = self._coeffs(dt)[:2]
-                excess = g * (decay[:, None, None] * self._h - gamma[:, None, None] * sig0)
+                keep, take = self._coeffs(dt)[:2]
             else:          # stress at x_n: (1 - g) sigma0_n + g h_n
-                excess = g * (self._h - sig0)
+                keep = take = self._coeffs(0.0)[0]     # ones
+            eps, theta, _ = self._branch_work()
             forces = forces.copy()
-            self._add_branch_forces(forces, excess)
+            visc.commit_forces(self.positions, self.tets, self.dm_inv, self.tet_volume, self._rots, self.mu, self.lam,
+                               self._anp, self.kappa_node, self.node_volume, self.relax_g, decay, gamma, self._h,
+                               self._sig_prev, keep, take, eps, theta, forces)
             self._pending_dt = dt
         if not implicit:
             kern.symplectic_step(self.positions, self.velocities, forces, self.masses, self.alpha_node, self.gravity,
                                  self.fixed, dt, self.stiffness_damping, self.corotational, self.rotation_iters, 1e-12,
                                  self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam, self._rots,
                                  self._anp, self.kappa_node, self.node_volume, self._work, self._ybuf,
-                                 self._fbuf, self._set_threads())
+                                 self._fbuf, parallel)
             return
         if self._visco:
             with self._effective_moduli(dt):

@@ -49,6 +49,12 @@ def _element_rotation(x, tets, dm_inv, rots, e, max_iter, tol, eps, want_strain)
     """Polar rotation of tet e (see :func:`update_rotations`); updates rots[e] in place.
     With ``want_strain`` also writes the corotated strain sym(R^T F) - I into eps[e] (eps (T, 6))."""
     f00, f01, f02, f10, f11, f12, f20, f21, f22 = _edge_gradient(x, tets, dm_inv, e)
+    _rotation_from_gradient(f00, f01, f02, f10, f11, f12, f20, f21, f22, rots, e, max_iter, tol, eps, want_strain)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _rotation_from_gradient(f00, f01, f02, f10, f11, f12, f20, f21, f22, rots, e, max_iter, tol, eps, want_strain):
+    """:func:`_element_rotation` for tet e with its deformation gradient F (row-major) given."""
     r00, r01, r02 = rots[e, 0, 0], rots[e, 0, 1], rots[e, 0, 2]
     r10, r11, r12 = rots[e, 1, 0], rots[e, 1, 1], rots[e, 1, 2]
     r20, r21, r22 = rots[e, 2, 0], rots[e, 2, 1], rots[e, 2, 2]
