@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from surgsim_envs.bench.speed import bench_volume
+from surgsim_envs.bench.speed_volume import bench_volume
 from surgsim_envs.tissue import registry
 from surgsim_envs.tissue.fractional import FractionalTetModel
 

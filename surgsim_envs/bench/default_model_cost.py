@@ -50,7 +50,7 @@ def default_vs_plain(env_id: str, steps: int, repeats: int) -> dict:
     same task on the plain network, stepped alternately in this process."""
     import gymnasium as gym
 
-    from surgsim_envs.bench.envs_speed import _actions
+    from surgsim_envs.bench.random_actions import random_actions as _actions
 
     default = gym.make(env_id)
     with plain_network():

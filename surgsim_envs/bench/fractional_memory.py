@@ -28,7 +28,7 @@ DEFAULT_MEMORIES = (5, 10, 20, 50, 100, 200, 500, 1000)
 
 
 def _block(target: int):
-    from surgsim_envs.bench.speed import bench_volume
+    from surgsim_envs.bench.speed_volume import bench_volume
 
     vol = bench_volume(target)
     z = vol.nodes[:, 2]

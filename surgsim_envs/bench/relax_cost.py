@@ -23,7 +23,7 @@ DEFAULT_MODELS = ("fem", "mass_spring", "mass_spring_calibrated")
 
 def relax_row(cls, integrator: str, target: int, repeats: int, steps: int, warmup: int, dt: float = 1e-3) -> dict:
     """``{"model", "integrator", "nodes", "dt_s", "viscoelastic_us", "elastic_us", "viscoelastic_over_elastic"}``."""
-    from surgsim_envs.bench.speed import _load, bench_volume
+    from surgsim_envs.bench.speed_volume import bench_volume, top_load as _load
 
     vol = bench_volume(target)
     z = vol.nodes[:, 2]

@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 
 from surgsim_envs.bench.material import is_explicit
-from surgsim_envs.errors import ConfigError, SurgSimError
+from surgsim_envs.bench.speed_volume import bench_volume, top_load as _load
+from surgsim_envs.errors import ConfigError
 
-SPACING = 0.005  # m
 DEFAULT_SIZES = (250, 1000, 4000)
 
 
@@ -58,31 +58,6 @@ def parse_sizes(text: str) -> list[int]:
     if not sizes or any(s < 8 for s in sizes):
         raise ConfigError(f"--sizes needs node counts >= 8, got {text!r}")
     return sizes
-
-
-def lattice_counts(target: int) -> tuple[int, int, int]:
-    """Nodes per axis (a, a, b) with b <= a and a*a*b closest to ``target`` (ties: most cube-like)."""
-    best = None
-    for a in range(2, int(math.isqrt(target)) + 2):
-        b = max(2, min(a, round(target / (a * a))))
-        key = (abs(a * a * b - target), a - b)
-        if best is None or key < best[0]:
-            best = (key, (a, a, b))
-    return best[1]
-
-
-def bench_volume(target: int):
-    """A box volume on a 5 mm lattice with about ``target`` nodes."""
-    from surgsim_envs.geometry import box_volume
-
-    counts = np.array(lattice_counts(target))
-    return box_volume(tuple((counts - 1) * SPACING), SPACING, name=f"bench{target}")
-
-
-def _load(model, top: np.ndarray) -> np.ndarray:
-    forces = np.zeros((model.n_nodes, 3))
-    forces[top, 2] = -0.5 / max(int(top.sum()), 1)
-    return forces
 
 
 RETRIES = 2
