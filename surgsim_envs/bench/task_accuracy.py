@@ -77,11 +77,30 @@ class ProbeSet:
 
 PALPATION_FULL = ProbeSet(
     inclusions=(Inclusion("5x lump, r 7 mm, 11 mm deep", (0.02, 0.0), 0.011, 0.007, 5.0),
-                Inclusion("3x lump, r 9 mm, 9 mm deep", (-0.015, 0.01), 0.009, 0.009, 3.0)),
+                Inclusion("3x lump, r 9 mm, 9 mm deep", (-0.01, 0.01), 0.009, 0.009, 3.0)),
     depths=(0.003, 0.005, 0.007), hold=0.5, spacings=(0.01, 0.0075, 0.005),
-    reference_spacings=(0.005, 0.004, 0.02 / 6, 0.02 / 7, 0.0025))
+    reference_spacings=(0.01, 0.005, 0.01 / 3, 0.0025))
 PALPATION_QUICK = ProbeSet(inclusions=PALPATION_FULL.inclusions[:1], depths=(0.004, 0.007), hold=0.5,
-                           spacings=(0.01,), reference_spacings=(0.01, 0.0075, 0.005, 0.004))
+                           spacings=(0.01,), reference_spacings=(0.01, 0.005, 0.01 / 3))
+
+#: The reference's spacings are 10 mm / n and every press site lies on a multiple of 10 mm from the slab's
+#: edge, so each site sits on a lattice node at every reference spacing: a sphere on a lattice reads a
+#: different force on a node and between nodes, and a sequence that mixes the two is not smooth enough
+#: to extrapolate (measured: observed orders 0.7-5.8 over 7.5, 5, 4, 3.33 mm with sites at (-0.015, 0.01) m).
+
+#: task id -> the force tolerance it declares (p95 force error against the reference, fraction) and why;
+#: ``scene_of``: a task that builds another task's scene is measured there
+FORCE_TOLERANCES: dict[str, dict] = {
+    "SurgSim/Palpation-v0": {
+        "tolerance": 0.10,
+        "reason": "the task is to find a lump by the force it adds: over the 5x lump of radius 7 mm, 11 mm deep, "
+                  "the reference reads 28 % more than at the mirror site (7 mm press; the 3x lumps the task also "
+                  "draws add less), so a model must keep its force error under about half of that; 10 % also "
+                  "keeps the 1.5 N damage threshold within 0.15 N"},
+    "SurgSim/PalpationPress-v0": {
+        "tolerance": 0.10, "scene_of": "SurgSim/Palpation-v0",
+        "reason": "Palpation-v0's scene and lumps, read as F / depth of single presses: the same contrast to keep"},
+}
 
 #: task id -> (full probe set, quick probe set); tasks not listed are reported as not covered
 PROBE_SETS: dict[str, tuple[ProbeSet, ProbeSet]] = {
@@ -269,28 +288,38 @@ def build_table(tasks: Iterable[str], models: Iterable[str], quick: bool = False
             for spacing in probes.spacings:
                 progress(f"{task}: {model} at {spacing * 1e3:.3g} mm")
                 rows.append(compare(measure(task, model, spacing, probes), reference, probes))
-    return {"rows": rows, "references": references, "not_covered": not_covered, "quick": bool(quick)}
+    tolerances = {t: v for t, v in FORCE_TOLERANCES.items() if v.get("scene_of", t) in references}
+    return {"rows": rows, "references": references, "not_covered": not_covered, "quick": bool(quick),
+            "tolerances": tolerances}
 
 
 def reference_summary(ref: dict) -> str:
     """One paragraph on a reference: spacings, nodes, cost, observed orders and the convergence check."""
-    state = "converged" if ref.get("reference_converged") else "NOT converged"
     orders = [p for p in ref["observed_order"].values() if math.isfinite(p)]
-    gaps = list(ref["finest_gap"].values())
     spacings = ", ".join(f"{h * 1e3:.3g}" for h in ref["spacings"])
     nodes = ", ".join(str(n) for n in ref["nodes"])
     cost = ", ".join(f"{t:.0f}" for t in ref["seconds"])
     text = (f"Reference: `{task_reference.REFERENCE_MODEL}` (elastic, friction on, contact stiffness "
             f"{task_reference.CONTACT_STIFFNESS_PER_AREA:.0e} N/m^3 per area, surface samples <= "
             f"{task_reference.SAMPLE_SPACING * 1e3:g} mm apart) at spacings {spacings} mm ({nodes} nodes; "
-            f"{cost} s each), Richardson-extrapolated per press from the three finest: {state}, the "
-            f"extrapolation moves by at most {100 * ref['reference_change']:.2g} % when the coarsest of four "
-            f"replaces the finest")
-    if orders:
-        text += (f"; observed order {min(orders):.2g}-{max(orders):.2g}; the finest spacing is "
-                 f"{100 * min(gaps):.2g}-{100 * max(gaps):.2g} % from the extrapolation")
-    if ref.get("not_extrapolated"):
-        text += f"; {len(ref['not_extrapolated'])} presses not in the asymptotic range (the finest force used)"
+            f"{cost} s each). ")
+    if ref["reference_converged"]:
+        text += (f"Converged: Richardson-extrapolated per press from the three finest; the extrapolation moves "
+                 f"by at most {100 * ref['reference_change']:.2g} % when the coarsest of four replaces the finest")
+    else:
+        gaps = [g for g in ref["finest_gap"].values() if g > 0]
+        text += (f"**Not converged**: the last refinement changed the forces by up to "
+                 f"{100 * ref['last_refinement_change']:.2g} %, so the errors below are against the finest "
+                 f"solution ({ref['spacings'][-1] * 1e3:.3g} mm). Richardson extrapolation from the three finest")
+        if orders:
+            text += (f" gives observed orders {min(orders):.2g}-{max(orders):.2g} and limits "
+                     f"{100 * min(gaps):.2g}-{100 * max(gaps):.2g} % from the finest" if gaps else "")
+        if ref.get("not_extrapolated"):
+            text += f" ({len(ref['not_extrapolated'])} presses outside the asymptotic range)"
+        check = [c for c in ref["extrapolation_change"].values() if math.isfinite(c)]
+        if check:
+            text += (f", but the extrapolation from the three coarsest differs from it by "
+                     f"{100 * min(check):.2g}-{100 * max(check):.2g} %: it is not yet reliable")
     return text + "."
 
 
@@ -342,12 +371,23 @@ def chart(table: dict, path: str | Path) -> None:
         ax.set_ylabel("force error against the reference, p95 (%)")
         ref = table["references"][task]
         state = "converged" if ref.get("reference_converged") else "not converged"
-        ax.set_title(f"{task}\nreference: {task_reference.REFERENCE_MODEL} extrapolated from "
-                     f"{ref['spacings'][-1] * 1e3:.3g} mm ({state})", fontsize=10)
+        where = "extrapolated" if ref["reference_converged"] else f"at {ref['spacings'][-1] * 1e3:.3g} mm"
+        ax.set_title(f"{task}\nreference: {task_reference.REFERENCE_MODEL} {where} ({state})", fontsize=10)
         ax.grid(True, alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _finite(value):
+    """``value`` with every non-finite float as None (strict JSON: an unknown change, an order not found)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def write(table: dict, out: str | Path) -> dict[str, Path]:
@@ -355,7 +395,7 @@ def write(table: dict, out: str | Path) -> dict[str, Path]:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": out / "task_accuracy.json", "md": out / "task_accuracy.md", "png": out / "task_accuracy.png"}
-    paths["json"].write_text(json.dumps(table, indent=1))
+    paths["json"].write_text(json.dumps(_finite(table), indent=1, allow_nan=False))
     paths["md"].write_text(markdown(table))
     chart(table, paths["png"])
     return paths

@@ -28,6 +28,8 @@ Richardson extrapolation: for each press, F(h) = F0 + C h^p through the three fi
 gives F0 and the observed order p; the coarsest spacing then checks it: the extrapolation from
 the three coarsest must agree with F0 (their difference is stated as ``extrapolation_change``;
 the reference counts as converged when it is under :data:`CONVERGED_CHANGE` for every press).
+A reference that is not converged is the finest solution computed, with the change of its last
+refinement and the extrapolations stated beside it.
 """
 
 from __future__ import annotations
@@ -55,6 +57,10 @@ REFERENCE_MODEL = "fem_static"
 #: s, hold at each depth of a reference descent, and the reading window at its end
 REFERENCE_HOLD = 0.1
 REFERENCE_WINDOW = 0.02
+#: the observed orders accepted by :func:`richardson` (linear tets with a curved contact: 1-2 expected);
+#: outside them the coarsest spacing is not in the asymptotic range (measured: 0.3 for a 3 mm press
+#: from 10, 5, 3.33 mm, which extrapolates to a negative force)
+MIN_ORDER, MAX_ORDER = 0.5, 4.0
 #: relative change of the extrapolated force when the coarsest spacing is swapped for the finest
 CONVERGED_CHANGE = 0.01
 
@@ -146,9 +152,11 @@ def reference_row(task: str, probes, spacing: float, material, make: Callable) -
 def richardson(h: Sequence[float], f: Sequence[float]) -> tuple[float, float]:
     """(F0, p) of F(h) = F0 + C h^p through three points (h descending, any ratios).
 
-    p solves (f1 - f2) / (f2 - f3) = (h1^p - h2^p) / (h2^p - h3^p) by bisection on [0.25, 6];
-    a sequence that does not converge monotonically (the differences change sign, or the
-    observed order lies outside that range) raises ConfigError: no extrapolation is then honest."""
+    p solves (f1 - f2) / (f2 - f3) = (h1^p - h2^p) / (h2^p - h3^p) by bisection on
+    [:data:`MIN_ORDER`, :data:`MAX_ORDER`]; a sequence that does not converge monotonically (the
+    differences change sign), an observed order outside that range (the coarsest spacing is not in
+    the asymptotic range) or a limit of the other sign than the forces raises ConfigError: no
+    extrapolation is then honest."""
     h1, h2, h3 = (float(x) for x in h)
     f1, f2, f3 = (float(x) for x in f)
     if not h1 > h2 > h3 > 0:
@@ -164,7 +172,7 @@ def richardson(h: Sequence[float], f: Sequence[float]) -> tuple[float, float]:
     def ratio(p: float) -> float:
         return (h1 ** p - h2 ** p) / (h2 ** p - h3 ** p)
 
-    lo, hi = 0.25, 6.0
+    lo, hi = MIN_ORDER, MAX_ORDER
     if not ratio(lo) <= target <= ratio(hi):          # the ratio rises with p
         raise ConfigError(f"forces {[f1, f2, f3]} at spacings {[h1, h2, h3]} m give an observed order outside "
                           f"[{lo}, {hi}] (difference ratio {target:.3g}); not in the asymptotic range")
@@ -173,24 +181,29 @@ def richardson(h: Sequence[float], f: Sequence[float]) -> tuple[float, float]:
         lo, hi = (mid, hi) if ratio(mid) < target else (lo, mid)
     p = 0.5 * (lo + hi)
     c = d23 / (h2 ** p - h3 ** p)
-    return f3 - c * h3 ** p, p
+    f0 = f3 - c * h3 ** p
+    if f0 * f3 <= 0.0:
+        raise ConfigError(f"forces {[f1, f2, f3]} at spacings {[h1, h2, h3]} m extrapolate to {f0:.3g}, the other "
+                          "sign; not in the asymptotic range")
+    return f0, p
 
 
 def extrapolate(rows: Sequence[dict]) -> dict:
-    """The reference from rows at four or more spacings (any order): per press the extrapolation
-    F0 of the three finest, its observed order, the change against the three coarsest' extrapolation
-    and the finest row's distance from F0. Returns a row (``forces_N`` = F0) with these per press."""
+    """The reference from rows at three or more spacings (any order): per press the extrapolation F0
+    of the three finest and its observed order; with a fourth, the change against the three
+    coarsest' extrapolation (with three only the change is unknown: not converged). Also the
+    finest row's distance from F0. Returns a row (``forces_N`` = F0) with these per press."""
     rows = sorted(rows, key=lambda r: -r["spacing"])
-    if len(rows) < 4:
-        raise ConfigError(f"the reference needs forces at 4 or more spacings (3 to extrapolate, 1 to check), "
-                          f"got {len(rows)}")
+    if len(rows) < 3:
+        raise ConfigError(f"the reference needs forces at 3 or more spacings to extrapolate (4 to check the "
+                          f"extrapolation), got {len(rows)}")
     h = [r["spacing"] for r in rows]
     forces, order, change, finest_gap, notes = {}, {}, {}, {}, {}
     for key in rows[-1]["forces_N"]:
         f = [r["forces_N"][key] for r in rows]
         try:
             f0, p = richardson(h[-3:], f[-3:])
-            g0, _ = richardson(h[-4:-1], f[-4:-1])
+            g0 = richardson(h[-4:-1], f[-4:-1])[0] if len(rows) > 3 else math.nan
         except ConfigError as exc:          # not in the asymptotic range: the finest force, flagged
             f0, p, g0 = f[-1], math.nan, math.nan
             notes[key] = str(exc)
@@ -198,9 +211,14 @@ def extrapolate(rows: Sequence[dict]) -> dict:
         change[key] = abs(f0 - g0) / abs(f0) if math.isfinite(g0) else math.inf
         finest_gap[key] = abs(f[-1] - f0) / abs(f0)
     worst = max(change.values())
-    return {"task": rows[-1]["task"], "model": f"{REFERENCE_MODEL} extrapolated", "spacing": 0.0,
-            "spacings": h, "nodes": [r["nodes"] for r in rows], "forces_N": forces,
+    converged = bool(worst < CONVERGED_CHANGE)
+    last = max(abs(a - b) / abs(b) for a, b in zip(rows[-2]["forces_N"].values(), rows[-1]["forces_N"].values()))
+    return {"task": rows[-1]["task"], "model": f"{REFERENCE_MODEL} extrapolated" if converged else REFERENCE_MODEL,
+            "spacing": 0.0 if converged else h[-1], "spacings": h, "nodes": [r["nodes"] for r in rows],
+            # not converged: the finest solution computed, labelled so, rather than an extrapolation
+            # that its own check does not support
+            "forces_N": forces if converged else dict(rows[-1]["forces_N"]), "extrapolated_N": forces,
+            "last_refinement_change": float(last),
             "forces_by_spacing": [r["forces_N"] for r in rows], "seconds": [r["seconds"] for r in rows],
             "observed_order": order, "extrapolation_change": change, "finest_gap": finest_gap,
-            "not_extrapolated": notes, "reference_change": float(worst),
-            "reference_converged": bool(worst < CONVERGED_CHANGE)}
+            "not_extrapolated": notes, "reference_change": float(worst), "reference_converged": converged}
