@@ -406,7 +406,8 @@ def add_arguments(parser) -> None:
                         help=f"comma-separated task ids (default: those with a probe set: {', '.join(PROBE_SETS)})")
     parser.add_argument("--models", default=None, help="comma-separated model names (default: all registered)")
     parser.add_argument("--quick", action="store_true",
-                        help="one inclusion, two depths, the task's default spacing, a two-step reference")
+                        help="one inclusion, two depths, the task's default spacing; the reference at three "
+                             "spacings (10, 5, 3.33 mm), extrapolated without a check: not converged")
     parser.add_argument("--out", default="surgsim-out/task-accuracy", help="output directory (JSON, markdown, PNG)")
     parser.add_argument("--json", action="store_true", help="also print the table as JSON")
 
