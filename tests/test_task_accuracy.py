@@ -47,3 +47,65 @@ def test_presses_in_the_palpation_scene_are_unilateral_rise_with_depth_and_feel_
     assert ta.monotone(f, PROBES.depths)
     assert ta.contrast(f, 1, 0.006)[0] > 1.0                      # a 5x stiffer lump feels stiffer
     assert 0.0 <= row["path_difference"] < 0.02                   # frictionless, elastic: one pose, one force
+
+
+# ----------------------------------------------------------------------------------------------
+# the reference: Richardson extrapolation and the quasi-static presses in the task's scene
+from surgsim_envs.bench import task_reference as tr  # noqa: E402
+
+
+def _trapezoid(n: int) -> float:
+    """Trapezoid rule for the integral of exp on [0, 1] with n intervals (error c2 h^2 + c4 h^4 + ...)."""
+    import numpy as np
+
+    x = np.linspace(0.0, 1.0, n + 1)
+    y = np.exp(x)
+    return float((y.sum() - 0.5 * (y[0] + y[-1])) / n)
+
+
+def test_richardson_finds_the_order_and_the_limit_of_a_known_discretisation():
+    """The trapezoid rule converges at order 2 to e - 1: from h = 1/4, 1/5, 1/6 the observed order is 2
+    and the extrapolation lands much nearer e - 1 than the finest rule (its h^4 term is what is left)."""
+    import math
+
+    exact = math.e - 1.0
+    h = [1 / 4, 1 / 5, 1 / 6]
+    f = [_trapezoid(n) for n in (4, 5, 6)]
+    f0, p = tr.richardson(h, f)
+    assert p == pytest.approx(2.0, abs=0.05)
+    assert abs(f0 - exact) < 0.02 * abs(f[-1] - exact)
+
+
+def test_richardson_refuses_a_sequence_that_is_not_converging_monotonically():
+    with pytest.raises(ConfigError, match="do not converge monotonically"):
+        tr.richardson([0.005, 0.004, 0.0033], [0.80, 0.70, 0.75])
+    with pytest.raises(ConfigError, match="descending"):
+        tr.richardson([0.004, 0.005, 0.0033], [0.8, 0.7, 0.65])
+
+
+def test_extrapolate_states_order_change_and_convergence_per_press():
+    """Two presses: one a smooth order-2 sequence (converged: the coarse and the fine triple agree), one
+    that wobbles (not extrapolated: the finest force is used and the reference is not converged)."""
+    import math
+
+    ns = (3, 4, 5, 6)
+    rows = [{"task": "T", "spacing": 1 / n, "nodes": n, "seconds": 1.0,
+             "forces_N": {"smooth": _trapezoid(n), "wobbly": 1.0 + 0.1 * (-1) ** n}} for n in ns]
+    ref = tr.extrapolate(rows[::-1])                       # any order in
+    assert ref["spacings"] == [1 / n for n in ns]
+    assert ref["observed_order"]["smooth"] == pytest.approx(2.0, abs=0.05)
+    assert ref["extrapolation_change"]["smooth"] < 1e-3
+    assert "wobbly" in ref["not_extrapolated"] and ref["forces_N"]["wobbly"] == rows[-1]["forces_N"]["wobbly"]
+    assert not ref["reference_converged"]
+    assert math.isinf(tr.extrapolate(rows[:3])["extrapolation_change"]["smooth"])   # unchecked: not converged
+    with pytest.raises(ConfigError, match="3 or more spacings"):
+        tr.extrapolate(rows[:2])
+
+
+def test_reference_presses_in_the_task_scene_rise_with_depth_and_feel_the_lump():
+    """One coarse reference row (10 mm): the quasi-static presses rise with depth, and a 5x lump raises
+    the force over it above the mirror site's; the contact stiffness per area is the reference's."""
+    row = tr.reference_row("SurgSim/Palpation-v0", PROBES, 0.01, "liver", ta._make)
+    f = row["forces_N"]
+    assert ta.monotone(f, PROBES.depths)
+    assert f["0/over/6mm"] > f["0/mirror/6mm"] > 0.0

@@ -11,7 +11,10 @@ quasi-static force is the mean F_z on the probe over the last 50 ms of the hold.
 * a stiffer inclusion never lowers the force above it (contrast C against contrast 1, the same
   press), and raises it where the reference (``fem``) does;
 * frictionless, the quasi-static force at a pose does not depend on how the probe got there
-  (straight down, or down beside the site and slid in at depth), within 2 %.
+  (straight down, or down beside the site and slid in at depth), within 2 %;
+* forces converge under refinement: the task-accuracy reference (quasi-static FEM with a contact
+  stiffness per unit area, surface samples, the task's friction) changes less with each refinement
+  at an observed order that Richardson extrapolation can use (bench/task_reference.py).
 
 The default model runs in the default test run (one case per invariant); every model under
 ``-m slow``. Models the task refuses (capability) are skipped by name.
@@ -60,10 +63,12 @@ def _accepted_models() -> list:
     return out
 
 
-def _env(model: str, material=None):
+def _env(model: str, material=None, resolution=None):
     kw = {"model": model}
     if material is not None:
         kw["material"] = material
+    if resolution is not None:
+        kw["resolution"] = resolution
     return gym.make(TASK, **kw)
 
 
@@ -155,9 +160,10 @@ def check_depth_monotone(model: str, site=(0.02, 0.0), depths=(0.002, 0.004, 0.0
     return forces
 
 
-def contrast_ratio(model: str, site=(0.02, 0.0), depth: float = 0.008, contrast: float = 5.0) -> float:
-    """F(contrast) / F(contrast 1) of the same press over the inclusion."""
-    env = _env(model)
+def contrast_ratio(model: str, site=(0.02, 0.0), depth: float = 0.008, contrast: float = 5.0, material=None,
+                   resolution=None) -> float:
+    """F(contrast) / F(contrast 1) of the same press over the inclusion (``resolution``: lattice spacing, m)."""
+    env = _env(model, material, resolution)
     _reset(env, contrast)
     stiff = press_force(env, site, depth)
     _reset(env, 1.0)
@@ -314,3 +320,60 @@ def test_the_inclusion_reaches_a_surface_only_model_in_palpation():
     env.close()
     # column 20 mm, sphere r 7 mm at 11 mm depth: 14 mm inside, 20 / (6 + 14 / 5)
     assert young[above] / np.median(young) == pytest.approx(20 / (6 + 14 / 5), rel=1e-9)
+
+
+# ----------------------------------------------------------------------------------------------
+# forces converge under refinement (the task-accuracy harness's reference)
+def reference_forces(spacings, depths=(0.005,)) -> list:
+    """The reference's forces (bench/task_reference.py) of presses over the reported inclusion and at
+    its mirror site, at each of ``spacings`` (m); the sites lie on a lattice node at every 10 mm / n."""
+    from surgsim_envs.bench import task_accuracy as ta
+    from surgsim_envs.bench import task_reference as tr
+
+    probes = ta.ProbeSet(inclusions=ta.PALPATION_FULL.inclusions[:1], depths=tuple(depths), hold=0.5, spacings=(),
+                         reference_spacings=tuple(spacings))
+    return [tr.reference_row(TASK, probes, h, "liver", ta._make)["forces_N"] for h in spacings]
+
+
+@pytest.mark.slow
+def test_reference_forces_converge_under_refinement():
+    """Over the reported lump and at its mirror site, a 5 mm press at 10, 5 and 3.33 mm: each refinement
+    changes the force less than half as much as the one before, monotonically, at an observed order
+    Richardson extrapolation can use (measured: 1.03, 0.54, 0.48 N over the lump, order 2.6; 0.60, 0.41,
+    0.36 N at the mirror site, order 1.3)."""
+    from surgsim_envs.bench import task_reference as tr
+
+    spacings = (0.01, 0.005, 0.01 / 3)
+    rows = reference_forces(spacings)
+    for key in rows[0]:
+        f = [r[key] for r in rows]
+        assert abs(f[1] - f[2]) < 0.5 * abs(f[0] - f[1]), f"{key}: {f} N at {spacings} m"
+        _, order = tr.richardson(spacings, f)
+        assert 0.5 <= order <= 4.0, f"{key}: observed order {order:.2f} from {f} N"
+
+
+#: the task-accuracy table's finest model spacing: models that lower the force over the lump there
+FINE_CONTRAST_XFAIL = {
+    "mass_spring": "at 5 mm the plain network with its capped volume term reads 0.965x the contrast-1 force over "
+                   "the 5x lump (7 mm press, elastic; measured); at 10 mm it reads about 2x. The sign flip the "
+                   "capped volume term removed at 10 mm returns on the finer lattice",
+}
+
+
+@pytest.mark.slow
+def test_quasi_static_fem_stiffer_inclusion_raises_the_force_at_5_mm():
+    """``fem_static`` (the cheapest FEM in the task, 1.2 ms per env step at 5 mm) reads more over the 5x lump
+    than with contrast 1 (measured 1.17x; about 8 s with its factorisation, so under -m slow; the default
+    run's representative is the default model's contrast test at 10 mm)."""
+    ratio = contrast_ratio("fem_static", depth=0.007, material={"preset": "liver", "relax_fraction": 0.0},
+                           resolution=0.005)
+    assert ratio > 1.05, f"fem_static at 5 mm: a 5x lump reads {ratio:.3f}x the contrast-1 force"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", _marked(MODELS, FINE_CONTRAST_XFAIL))
+def test_every_model_stiffer_inclusion_never_lowers_the_force_at_5_mm(model):
+    """The harness's finest model spacing (5 mm), its elastic material, a 7 mm press over the 5x lump:
+    never below the contrast-1 press (the reference reads 1.28x the mirror site there)."""
+    ratio = contrast_ratio(model, depth=0.007, material={"preset": "liver", "relax_fraction": 0.0}, resolution=0.005)
+    assert ratio >= 1.0 - NEVER_LOWER_SLACK, f"{model} at 5 mm: a 5x lump reads {ratio:.3f}x the contrast-1 force"

@@ -1,12 +1,20 @@
 """Forces in the scenes users meet, against a converged reference: ``surgsim bench task-accuracy``.
 
 For a task, a fixed scripted probe set drives the task's own scene (built by ``gym.make``, with
-the task's material, friction, time step and probe): presses straight down at several depths over
-an inclusion and at its mirror site, for two inclusions. Each press starts from a fresh reset
-(same seed and options), so presses do not see each other's history. Every registered model the
-task accepts runs the same set at each candidate lattice spacing, and so does the reference:
-``fem`` refined until the forces of two successive spacings differ by under 1 % (or the finest
-spacing is reached; the table then states the remaining change).
+the task's friction, time step and probe, and its material made elastic): presses straight down
+at several depths over an inclusion and at its mirror site, for two inclusions. Each press starts
+from a fresh reset (same seed and options), so presses do not see each other's history. Every
+registered model the task accepts runs the same set at each candidate lattice spacing.
+
+The reference (:mod:`surgsim_envs.bench.task_reference`) is quasi-static ``fem_static`` with a
+contact stiffness per unit area that does not change with the spacing and surface contact samples
+at most 1 mm apart, at four or more spacings, Richardson-extrapolated to zero spacing; it counts as
+converged when the extrapolation changes by under 1 % for every press when the finest spacing
+replaces the coarsest.
+
+The material is elastic (``relax_fraction`` 0) for every model and the reference: relaxation is
+each model's material law, checked against exact solutions elsewhere (``surgsim bench
+viscoelastic``, ``fractional-memory``); here the scene's geometry, contact and friction are tested.
 
 Per task x model x spacing it reports:
 
@@ -15,15 +23,15 @@ Per task x model x spacing it reports:
   press, ours and the reference's (a stiff lump must feel stiffer);
 * **monotone in depth**: whether the force rises with depth at every site;
 * **unilateral**: the largest pulling (tensile) force on the probe seen during any press, N;
-* **path independence**, frictionless and elastic (``relax_fraction`` 0, so no viscoelastic
-  history): the same pose reached straight down and by a pressed slide from 6 mm away (relative
-  difference);
+* **path independence**, frictionless: the same pose reached straight down and by a pressed
+  slide from 6 mm away (relative difference);
 * **cost**: median wall time of one env control step while pressing (us), and per simulated ms.
 
 Rows carry ``scene`` = the task id, ``error`` (the 95th percentile) and ``us_per_ms``, so
-:func:`surgsim_envs.tissue.resolution.choose` picks a task's cheapest model within its tolerance
-from the table this writes. Figures: ``docs/task_accuracy.md`` (table) and
-``docs/img/task_accuracy.png`` (error against cost, one panel per task).
+:func:`surgsim_envs.bench.choose.choose_task_model` picks a task's cheapest model within its
+tolerance from the table this writes (shipped as ``surgsim_envs/tissue/data/task_accuracy_table.json``).
+Figures: ``docs/task_accuracy.md`` (table) and ``docs/img/task_accuracy.png`` (error against cost,
+one panel per task).
 """
 
 from __future__ import annotations
@@ -37,10 +45,8 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from surgsim_envs.bench import task_reference
 from surgsim_envs.errors import ConfigError
-
-#: relative change of the reference's forces between two spacings taken as converged
-REFERENCE_CHANGE = 0.01
 
 
 @dataclass(frozen=True)
@@ -59,7 +65,8 @@ class Inclusion:
 
 @dataclass(frozen=True)
 class ProbeSet:
-    """A task's scripted presses: inclusions, depths (m), hold (s) and the spacings (m) tried."""
+    """A task's scripted presses: inclusions, depths (m), hold (s), the spacings (m) the models are
+    run at and the reference's spacings (m; four or more, see :mod:`task_reference`)."""
 
     inclusions: tuple[Inclusion, ...]
     depths: tuple[float, ...]
@@ -70,21 +77,35 @@ class ProbeSet:
 
 PALPATION_FULL = ProbeSet(
     inclusions=(Inclusion("5x lump, r 7 mm, 11 mm deep", (0.02, 0.0), 0.011, 0.007, 5.0),
-                Inclusion("3x lump, r 9 mm, 9 mm deep", (-0.015, 0.01), 0.009, 0.009, 3.0)),
+                Inclusion("3x lump, r 9 mm, 9 mm deep", (-0.01, 0.01), 0.009, 0.009, 3.0)),
     depths=(0.003, 0.005, 0.007), hold=0.5, spacings=(0.01, 0.0075, 0.005),
-    reference_spacings=(0.005, 0.004, 0.0033, 0.0025))
+    reference_spacings=(0.01, 0.005, 0.01 / 3, 0.0025))
 PALPATION_QUICK = ProbeSet(inclusions=PALPATION_FULL.inclusions[:1], depths=(0.004, 0.007), hold=0.5,
-                           spacings=(0.01,), reference_spacings=(0.0075, 0.005))
+                           spacings=(0.01,), reference_spacings=(0.01, 0.005, 0.01 / 3))
+
+#: The reference's spacings are 10 mm / n and every press site lies on a multiple of 10 mm from the slab's
+#: edge, so each site sits on a lattice node at every reference spacing: a sphere on a lattice reads a
+#: different force on a node and between nodes, and a sequence that mixes the two is not smooth enough
+#: to extrapolate (measured: observed orders 0.7-5.8 over 7.5, 5, 4, 3.33 mm with sites at (-0.015, 0.01) m).
+
+#: task id -> the force tolerance it declares (p95 force error against the reference, fraction) and why;
+#: ``scene_of``: a task that builds another task's scene is measured there
+FORCE_TOLERANCES: dict[str, dict] = {
+    "SurgSim/Palpation-v0": {
+        "tolerance": 0.10,
+        "reason": "the task is to find a lump by the force it adds: over the 5x lump of radius 7 mm, 11 mm deep, "
+                  "the reference reads 28 % more than at the mirror site (7 mm press; the 3x lumps the task also "
+                  "draws add less), so a model must keep its force error under about half of that; 10 % also "
+                  "keeps the 1.5 N damage threshold within 0.15 N"},
+    "SurgSim/PalpationPress-v0": {
+        "tolerance": 0.10, "scene_of": "SurgSim/Palpation-v0",
+        "reason": "Palpation-v0's scene and lumps, read as F / depth of single presses: the same contrast to keep"},
+}
 
 #: task id -> (full probe set, quick probe set); tasks not listed are reported as not covered
 PROBE_SETS: dict[str, tuple[ProbeSet, ProbeSet]] = {
     "SurgSim/Palpation-v0": (PALPATION_FULL, PALPATION_QUICK),
 }
-
-
-#: the reference's physics step at lattice spacing h: dt = h x this (s/m), at most the task's dt (an
-#: explicit FEM's critical step shrinks with h; 0.5 ms at 5 mm keeps it at half its critical step)
-REFERENCE_DT_PER_M = 0.1
 
 
 def _make(task: str, model: str, spacing: float, material=None, dt: float | None = None):
@@ -152,15 +173,28 @@ def _mirror(xy) -> tuple[float, float]:
     return (-float(xy[0]), -float(xy[1]))
 
 
+def task_material(task: str):
+    """The material a task builds its tissue from by default (its config's ``material``)."""
+    import importlib
+
+    import gymnasium as gym
+
+    import surgsim_envs.envs  # noqa: F401
+
+    module, name = gym.spec(task).entry_point.split(":")
+    return getattr(importlib.import_module(module), name).config_cls().material
+
+
 def measure(task: str, model: str, spacing: float, probes: ProbeSet, dt: float | None = None) -> dict:
     """One row: the presses of ``probes`` with ``model`` at ``spacing`` in ``task``'s scene (its
-    physics step ``dt``, default the task's). A model the task refuses, or one that goes unstable,
-    gives a row saying so instead of numbers."""
+    physics step ``dt``, default the task's; its material made elastic). A model the task refuses,
+    or one that goes unstable, gives a row saying so instead of numbers."""
     from surgsim_envs.tissue import TissueUnstableError
 
     head = {"task": task, "model": model, "spacing": float(spacing)}
+    material = task_reference.elastic(task_material(task))
     try:
-        env = _make(task, model, spacing, dt=dt)
+        env = _make(task, model, spacing, material=material, dt=dt)
     except ConfigError as exc:
         return {**head, "refused": str(exc).split("\n")[0]}
     presser = _Presser(env, probes.hold)
@@ -181,7 +215,7 @@ def measure(task: str, model: str, spacing: float, probes: ProbeSet, dt: float |
     env.close()
     # frictionless, elastic path independence at the middle depth over the first inclusion
     try:
-        flat = _make(task, model, spacing, material=_frictionless(env.config.material), dt=dt)
+        flat = _make(task, model, spacing, material=_frictionless(material), dt=dt)
         p = _Presser(flat, probes.hold)
         inc, depth = probes.inclusions[0], probes.depths[len(probes.depths) // 2]
         straight = p.press(inc, inc.position, depth)
@@ -228,35 +262,15 @@ def compare(row: dict, reference: dict, probes: ProbeSet) -> dict:
             "scene": row["task"], "integrator": "default"}
 
 
-def _reference_dt(task: str, spacing: float) -> float:
-    import gymnasium as gym
-
-    import surgsim_envs.envs  # noqa: F401
-
-    import importlib
-
-    module, name = gym.spec(task).entry_point.split(":")
-    task_dt = float(getattr(importlib.import_module(module), name).config_cls().dt)
-    return min(task_dt, REFERENCE_DT_PER_M * float(spacing))
-
-
 def converged_reference(task: str, probes: ProbeSet, progress: Callable[[str], None] = print) -> dict:
-    """``fem`` rows at the reference spacings until two successive ones differ by under 1 %."""
-    prev = None
+    """The reference of ``probes`` in ``task``: ``fem_static`` at ``probes.reference_spacings``,
+    extrapolated (:func:`task_reference.extrapolate`)."""
+    material = task_material(task)
+    rows = []
     for spacing in probes.reference_spacings:
-        progress(f"reference fem at {spacing * 1e3:.3g} mm")
-        row = measure(task, "fem", spacing, probes, dt=_reference_dt(task, spacing))
-        if "refused" in row:
-            raise ConfigError(f"{task}: the reference model fem is refused ({row['refused']})")
-        if prev is not None:
-            change = max(abs(row["forces_N"][k] - prev["forces_N"][k]) / max(abs(row["forces_N"][k]), 1e-9)
-                         for k in row["forces_N"])
-            row["reference_change"] = float(change)
-            row["reference_converged"] = bool(change < REFERENCE_CHANGE)
-            if change < REFERENCE_CHANGE:
-                return row
-        prev = row
-    return row  # the finest spacing, with the change it still made
+        progress(f"reference {task_reference.REFERENCE_MODEL} at {spacing * 1e3:.3g} mm")
+        rows.append(task_reference.reference_row(task, probes, spacing, material, _make))
+    return task_reference.extrapolate(rows)
 
 
 def build_table(tasks: Iterable[str], models: Iterable[str], quick: bool = False,
@@ -274,7 +288,39 @@ def build_table(tasks: Iterable[str], models: Iterable[str], quick: bool = False
             for spacing in probes.spacings:
                 progress(f"{task}: {model} at {spacing * 1e3:.3g} mm")
                 rows.append(compare(measure(task, model, spacing, probes), reference, probes))
-    return {"rows": rows, "references": references, "not_covered": not_covered, "quick": bool(quick)}
+    tolerances = {t: v for t, v in FORCE_TOLERANCES.items() if v.get("scene_of", t) in references}
+    return {"rows": rows, "references": references, "not_covered": not_covered, "quick": bool(quick),
+            "tolerances": tolerances}
+
+
+def reference_summary(ref: dict) -> str:
+    """One paragraph on a reference: spacings, nodes, cost, observed orders and the convergence check."""
+    orders = [p for p in ref["observed_order"].values() if math.isfinite(p)]
+    spacings = ", ".join(f"{h * 1e3:.3g}" for h in ref["spacings"])
+    nodes = ", ".join(str(n) for n in ref["nodes"])
+    cost = ", ".join(f"{t:.0f}" for t in ref["seconds"])
+    text = (f"Reference: `{task_reference.REFERENCE_MODEL}` (elastic, friction on, contact stiffness "
+            f"{task_reference.CONTACT_STIFFNESS_PER_AREA:.0e} N/m^3 per area, surface samples <= "
+            f"{task_reference.SAMPLE_SPACING * 1e3:g} mm apart) at spacings {spacings} mm ({nodes} nodes; "
+            f"{cost} s each). ")
+    if ref["reference_converged"]:
+        text += (f"Converged: Richardson-extrapolated per press from the three finest; the extrapolation moves "
+                 f"by at most {100 * ref['reference_change']:.2g} % when the coarsest of four replaces the finest")
+    else:
+        gaps = [g for g in ref["finest_gap"].values() if g > 0]
+        text += (f"**Not converged**: the last refinement changed the forces by up to "
+                 f"{100 * ref['last_refinement_change']:.2g} %, so the errors below are against the finest "
+                 f"solution ({ref['spacings'][-1] * 1e3:.3g} mm). Richardson extrapolation from the three finest")
+        if orders:
+            text += (f" gives observed orders {min(orders):.2g}-{max(orders):.2g} and limits "
+                     f"{100 * min(gaps):.2g}-{100 * max(gaps):.2g} % from the finest" if gaps else "")
+        if ref.get("not_extrapolated"):
+            text += f" ({len(ref['not_extrapolated'])} presses outside the asymptotic range)"
+        check = [c for c in ref["extrapolation_change"].values() if math.isfinite(c)]
+        if check:
+            text += (f", but the extrapolation from the three coarsest differs from it by "
+                     f"{100 * min(check):.2g}-{100 * max(check):.2g} %: it is not yet reliable")
+    return text + "."
 
 
 def markdown(table: dict) -> str:
@@ -282,9 +328,7 @@ def markdown(table: dict) -> str:
     out = []
     for task, ref in table["references"].items():
         out.append(f"### {task}\n")
-        state = "converged" if ref.get("reference_converged") else "not converged"
-        out.append(f"Reference: `fem` at {ref['spacing'] * 1e3:.3g} mm ({ref['nodes']} nodes), {state}: last "
-                   f"refinement changed the forces by {100 * ref.get('reference_change', math.nan):.2g} %.\n")
+        out.append(reference_summary(ref) + "\n")
         out.append("| model | spacing mm | nodes | error median % | error p95 % | contrast (ref) | rises with depth "
                    "| max pull N | path diff % | us / env step |")
         out.append("|---|---|---|---|---|---|---|---|---|---|")
@@ -324,14 +368,26 @@ def chart(table: dict, path: str | Path) -> None:
         ax.set_xscale("log")
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel("wall time per env step (us)")
-        ax.set_ylabel("force error against the reference fem, p95 (%)")
+        ax.set_ylabel("force error against the reference, p95 (%)")
         ref = table["references"][task]
         state = "converged" if ref.get("reference_converged") else "not converged"
-        ax.set_title(f"{task}\nreference: fem at {ref['spacing'] * 1e3:.3g} mm ({state})", fontsize=10)
+        where = "extrapolated" if ref["reference_converged"] else f"at {ref['spacings'][-1] * 1e3:.3g} mm"
+        ax.set_title(f"{task}\nreference: {task_reference.REFERENCE_MODEL} {where} ({state})", fontsize=10)
         ax.grid(True, alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _finite(value):
+    """``value`` with every non-finite float as None (strict JSON: an unknown change, an order not found)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def write(table: dict, out: str | Path) -> dict[str, Path]:
@@ -339,7 +395,7 @@ def write(table: dict, out: str | Path) -> dict[str, Path]:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": out / "task_accuracy.json", "md": out / "task_accuracy.md", "png": out / "task_accuracy.png"}
-    paths["json"].write_text(json.dumps(table, indent=1))
+    paths["json"].write_text(json.dumps(_finite(table), indent=1, allow_nan=False))
     paths["md"].write_text(markdown(table))
     chart(table, paths["png"])
     return paths
@@ -350,7 +406,8 @@ def add_arguments(parser) -> None:
                         help=f"comma-separated task ids (default: those with a probe set: {', '.join(PROBE_SETS)})")
     parser.add_argument("--models", default=None, help="comma-separated model names (default: all registered)")
     parser.add_argument("--quick", action="store_true",
-                        help="one inclusion, two depths, the task's default spacing, a two-step reference")
+                        help="one inclusion, two depths, the task's default spacing; the reference at three "
+                             "spacings (10, 5, 3.33 mm), extrapolated without a check: not converged")
     parser.add_argument("--out", default="surgsim-out/task-accuracy", help="output directory (JSON, markdown, PNG)")
     parser.add_argument("--json", action="store_true", help="also print the table as JSON")
 
