@@ -64,7 +64,7 @@ def test_the_shipped_table_declares_tolerances_and_its_choices_meet_them():
 def test_surgsim_models_says_which_models_meet_no_task_tolerance(capsys):
     import argparse
 
-    from surgsim_envs.tissue import models_cmd
+    from surgsim_envs.cli import models as models_cmd
 
     short = models_meeting_no_task(load_task_table())
     assert models_cmd.run(argparse.Namespace(json=True)) == 0
