@@ -88,18 +88,20 @@ PALPATION_QUICK = ProbeSet(inclusions=PALPATION_FULL.inclusions[:1], depths=(0.0
 #: different force on a node and between nodes, and a sequence that mixes the two is not smooth enough
 #: to extrapolate (measured: observed orders 0.7-5.8 over 7.5, 5, 4, 3.33 mm with sites at (-0.015, 0.01) m).
 
+def _declared(task_id: str, **extra) -> dict:
+    """The force tolerance ``task_id`` declares in the task registry (``TaskSpec.force_tolerance``)."""
+    from surgsim_envs.envs.registry import task_spec
+
+    tol = task_spec(task_id).force_tolerance
+    return {"tolerance": float(tol.value), "reason": tol.why, **extra}
+
+
 #: task id -> the force tolerance it declares (p95 force error against the reference, fraction) and why;
 #: ``scene_of``: a task that builds another task's scene is measured there
 FORCE_TOLERANCES: dict[str, dict] = {
-    "SurgSim/Palpation-v0": {
-        "tolerance": 0.10,
-        "reason": "the task is to find a lump by the force it adds: over the 5x lump of radius 7 mm, 11 mm deep, "
-                  "the reference reads 28 % more than at the mirror site (7 mm press; the 3x lumps the task also "
-                  "draws add less), so a model must keep its force error under about half of that; 10 % also "
-                  "keeps the 1.5 N damage threshold within 0.15 N"},
-    "SurgSim/PalpationPress-v0": {
-        "tolerance": 0.10, "scene_of": "SurgSim/Palpation-v0",
-        "reason": "Palpation-v0's scene and lumps, read as F / depth of single presses: the same contrast to keep"},
+    "SurgSim/Palpation-v0": _declared("SurgSim/Palpation-v0"),
+    # Palpation-v0's scene and lumps, read as F / depth of single presses: the same contrast to keep
+    "SurgSim/PalpationPress-v0": _declared("SurgSim/PalpationPress-v0", scene_of="SurgSim/Palpation-v0"),
 }
 
 #: task id -> (full probe set, quick probe set); tasks not listed are reported as not covered

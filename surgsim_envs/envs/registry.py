@@ -126,8 +126,10 @@ def _snake_name(task_id: str) -> str:
     return "".join("_" + ch.lower() if ch.isupper() and i else ch.lower() for i, ch in enumerate(name))
 
 
-_PALPATION_WHY = ("the inclusion is 3-5 x stiffer than the slab; with every press within 10 % the sampled "
-                  "contrast stays at least 3 x 0.9 / 1.1 = 2.5, so the stiffest site is still the inclusion's")
+_PALPATION_WHY = ("the task is to find a lump by the force it adds: over the 5x lump of radius 7 mm, 11 mm "
+                  "deep, the converged reference reads 28 % more than at the mirror site (7 mm press; the 3x "
+                  "lumps the task also draws add less), so a model must keep its force error under about half of "
+                  "that; 10 % also keeps the 1.5 N damage threshold within 0.15 N (docs/task_accuracy.md)")
 
 #: THE task registry: id -> spec (in registration order)
 TASKS: dict[str, TaskSpec] = {spec.id: spec for spec in (
