@@ -21,8 +21,8 @@ import mujoco
 import numpy as np
 
 from surgsim_envs.errors import ConfigError
-from surgsim_envs.scene.config import (CameraConfig, GrasperConfig, ProbeConfig, SceneConfig, TissueConfig,
-                                       validate_scene_config)
+from surgsim_envs.scene.config import CameraConfig, GrasperConfig, ProbeConfig, SceneConfig, TissueConfig
+from surgsim_envs.scene.config_check import validate_scene_config
 from surgsim_envs.scene.tissue_binding import TissueBinding
 from surgsim_envs.scene.visual import VisualTwin
 from surgsim_envs.scene.tools import ToolSpec, add_haptic_proxy, build_tool

@@ -17,6 +17,7 @@ from types import ModuleType
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.config import GrasperConfig, ProbeConfig
+from surgsim_envs.scene.tools import proxy
 from surgsim_envs.scene.tools.base import TOOL_CONAFFINITY, TOOL_CONTYPE, ToolSpec
 
 #: tool config class -> module path of its kind
@@ -58,8 +59,6 @@ def add_grasper(spec, cfg: GrasperConfig) -> ToolSpec:
 
 def add_haptic_proxy(spec, cfg, tool: ToolSpec) -> None:
     """Add a mocap proxy welded to ``tool`` (see :mod:`surgsim_envs.scene.tools.proxy`)."""
-    from surgsim_envs.scene.tools import proxy
-
     proxy.build(spec, cfg, tool)
 
 
