@@ -223,8 +223,6 @@ class SceneConfig:
 
     tools: a list of tool configs of any registered kind (:class:`ProbeConfig`,
     :class:`GrasperConfig`, or a plugin's; :mod:`surgsim_envs.scene.tools`), built in order.
-    ``probes`` and ``graspers`` are the older per-kind lists, still accepted and appended after
-    ``tools`` (:meth:`tool_configs`).
     dt: s, physics step (validated against :data:`DT_RANGE`); substeps: physics steps per
     control step (:meth:`Simulation.step`). gravity: m/s^2 for the MuJoCo (tool) world; tools are
     gravity-compensated. seed: seeds ``Simulation.rng``. rigid_contacts: False turns MuJoCo's
@@ -236,8 +234,6 @@ class SceneConfig:
     name: str = "scene"
     tissues: list[TissueConfig] = field(default_factory=list)
     tools: list[Any] = field(default_factory=list)
-    probes: list[ProbeConfig] = field(default_factory=list)
-    graspers: list[GrasperConfig] = field(default_factory=list)
     proxies: list[HapticProxyConfig] = field(default_factory=list)
     cameras: list[CameraConfig] = field(default_factory=_default_cameras)
     contact: ContactConfig = field(default_factory=ContactConfig)
@@ -250,24 +246,19 @@ class SceneConfig:
     render_width: int = 640
     render_height: int = 480
 
-    def tool_configs(self) -> list:
-        """Every tool config: ``tools``, then the older ``probes`` and ``graspers`` lists."""
-        return [*self.tools, *self.probes, *self.graspers]
-
     def tool(self, name: str):
         """The tool config called ``name`` (ConfigError listing the tools if there is none)."""
-        for t in self.tool_configs():
+        for t in self.tools:
             if t.name == name:
                 return t
-        raise ConfigError(f"scene '{self.name}' has no tool {name!r}; tools: {[t.name for t in self.tool_configs()]}")
+        raise ConfigError(f"scene '{self.name}' has no tool {name!r}; tools: {[t.name for t in self.tools]}")
 
     def replace_tool(self, name: str, new) -> None:
         """Put tool config ``new`` in the place of the tool called ``name``."""
-        for group in (self.tools, self.probes, self.graspers):
-            for i, t in enumerate(group):
-                if t.name == name:
-                    group[i] = new
-                    return
+        for i, t in enumerate(self.tools):
+            if t.name == name:
+                self.tools[i] = new
+                return
         raise ConfigError(f"scene '{self.name}' has no tool {name!r}")
 
 

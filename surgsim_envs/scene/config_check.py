@@ -38,7 +38,7 @@ def validate_scene_config(cfg: SceneConfig) -> None:
         if not isinstance(getattr(cfg, flag), bool):
             raise ConfigError(f"scene '{cfg.name}' {flag} must be True or False, got {getattr(cfg, flag)!r}")
     names: set[str] = set()
-    for group in (cfg.tissues, cfg.tool_configs(), cfg.proxies, cfg.cameras):
+    for group in (cfg.tissues, cfg.tools, cfg.proxies, cfg.cameras):
         for item in group:
             if not isinstance(item.name, str) or not item.name:
                 raise ConfigError(f"every scene object needs a non-empty name, got {item.name!r}")
@@ -54,9 +54,9 @@ def validate_scene_config(cfg: SceneConfig) -> None:
         vec(t.euler, 3, f"tissue '{t.name}' euler")
         vec(t.gravity, 3, f"tissue '{t.name}' gravity")
         vec(t.rgba, 4, f"tissue '{t.name}' rgba")
-    for t in cfg.tool_configs():
+    for t in cfg.tools:
         tool_kind(t).validate(t)
-    tools = {p.name: p for p in cfg.tool_configs()}
+    tools = {p.name: p for p in cfg.tools}
     driven = set()
     for h in cfg.proxies:
         if h.tool not in tools:

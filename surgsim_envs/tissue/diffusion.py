@@ -104,7 +104,6 @@ class DiffusionModel(TissueModel):
                               "and dents it; Zhong et al. 2016, explicit")
     integrators: ClassVar[tuple[str, ...]] = ("symplectic",)
     capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "surface_only", "static_solve"})
-    surface_only: ClassVar[bool] = True
     material_fields: ClassVar[tuple[str, ...]] = ("young", "density", "damping", "nonlinear", "omega")
     node_field_names: ClassVar[tuple[str, ...]] = ("displacement", "stress", "concentration", "omega")
     #: parameters ``surgsim fit --test indent`` searches besides young (bounds), see bench/fit.py

@@ -88,7 +88,6 @@ class LayeredModel(TissueModel):
     summary: ClassVar[str] = ("heterogeneous layered tissue (Lin et al. 2008): NBB springs from material layers, "
                               "constrained local static integration on active nodes, force accumulation")
     integrators: ClassVar[tuple[str, ...]] = ("local_static",)
-    quasi_static: ClassVar[bool] = True
     capabilities: ClassVar[frozenset] = frozenset({"forces", "implicit_contact", "quasi_static", "static_solve",
                                                    "unstructured_mesh"})
 
