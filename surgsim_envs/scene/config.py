@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 #: allowed physics time step range (s); the tissue models' stable regions lie inside it
@@ -273,10 +274,11 @@ def vec(value, n: int, what: str) -> tuple[float, ...]:
     return out
 
 
-def positive(value, what: str, hint: str, allow_inf: bool = False) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value) or value <= 0 \
-            or (math.isinf(value) and not allow_inf):
-        raise ConfigError(f"{what} must be a positive finite number, got {value!r}; {hint}")
+def rate_limit(value, name: str) -> float:
+    """A tool's default rate limit of target changes in m/s: > 0, or inf for none."""
+    if validate.is_real_number(value) and value == math.inf:
+        return math.inf
+    return validate.positive(value, name, unit="m/s", fix="give a speed in m/s, or inf for no limit")
 
 
 

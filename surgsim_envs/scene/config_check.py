@@ -7,8 +7,9 @@ value and its fix; the builders call it. It sits above the config dataclasses an
 
 from __future__ import annotations
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
-from surgsim_envs.scene.config import SceneConfig, TissueConfig, positive, validate_step, vec
+from surgsim_envs.scene.config import SceneConfig, TissueConfig, validate_step, vec
 from surgsim_envs.scene.tools import tool_kind
 from surgsim_envs.tissue.resolution import check_resolution
 
@@ -20,9 +21,9 @@ def validate_tissue_resolution(t: TissueConfig) -> None:
         raise ConfigError(f"tissue '{t.name}': model='auto' needs resolution='auto' (the table picks both); "
                           "or name a model such as 'mass_spring' or 'fem'")
     if t.resolution == "auto":
-        positive(t.error_tolerance, f"tissue '{t.name}' error_tolerance", "a fraction, e.g. 0.1 for 10 %")
-        positive(t.step_budget_us, f"tissue '{t.name}' step_budget_us",
-                  "microseconds of compute per simulated millisecond, e.g. 1000")
+        validate.positive(t.error_tolerance, f"tissue '{t.name}' error_tolerance", fix="a fraction, e.g. 0.1 for 10 %")
+        validate.positive(t.step_budget_us, f"tissue '{t.name}' step_budget_us",
+                          fix="microseconds of compute per simulated millisecond, e.g. 1000")
         if not isinstance(t.accuracy_scene, str) or not t.accuracy_scene:
             raise ConfigError(f"tissue '{t.name}' accuracy_scene={t.accuracy_scene!r}; give a benchmark scene "
                               "name such as 'indent'")
@@ -49,7 +50,8 @@ def validate_scene_config(cfg: SceneConfig) -> None:
     for t in cfg.tissues:
         validate_tissue_resolution(t)
         if t.spacing is not None:
-            positive(t.spacing, f"tissue '{t.name}' spacing", "try 0.005 (5 mm), or None for the organ's default")
+            validate.positive(t.spacing, f"tissue '{t.name}' spacing", unit="m",
+                              fix="try 0.005 (5 mm), or None for the organ's default")
         vec(t.position, 3, f"tissue '{t.name}' position")
         vec(t.euler, 3, f"tissue '{t.name}' euler")
         vec(t.gravity, 3, f"tissue '{t.name}' gravity")
@@ -68,8 +70,8 @@ def validate_scene_config(cfg: SceneConfig) -> None:
         if h.tool in driven:
             raise ConfigError(f"tool '{h.tool}' is driven by two haptic proxies; give each tool at most one")
         driven.add(h.tool)
-        positive(h.timeconst, f"haptic proxy '{h.name}' timeconst", "e.g. 0.01 s")
-        positive(h.dampratio, f"haptic proxy '{h.name}' dampratio", "1 is critical damping")
+        validate.positive(h.timeconst, f"haptic proxy '{h.name}' timeconst", unit="s", fix="e.g. 0.01 s")
+        validate.positive(h.dampratio, f"haptic proxy '{h.name}' dampratio", fix="1 is critical damping")
     for t in tools.values():
         if t.drive == "proxy" and t.name not in driven:
             raise ConfigError(f"tool '{t.name}' has drive='proxy' but no HapticProxyConfig(tool='{t.name}') drives it")

@@ -19,6 +19,7 @@ from typing import Any, ClassVar, Mapping
 import numpy as np
 from numba import njit
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.volume import Volume
 from surgsim_envs.tissue.capabilities import CAPABILITIES, CapabilityError, check_names
@@ -403,8 +404,8 @@ class TissueModel(abc.ABC):
         (-dF/dx per node, e.g. contact penalty springs); implicit integrators treat it implicitly.
         Raises :class:`TissueUnstableError` if the state diverges.
         """
-        if not (isinstance(dt, (float, int, np.floating)) and math.isfinite(dt) and dt > 0):
-            raise ConfigError(f"dt must be a positive number of seconds, got {dt!r}; default is 1e-3")
+        if not (isinstance(dt, (float, int, np.floating)) and math.isfinite(dt) and dt > 0):   # once per step:
+            validate.positive(dt, "dt", unit="s", fix="the default is 1e-3 s")              # the check inline
         if forces is None:
             forces = self.external_forces
         elif forces.shape != self.positions.shape:
