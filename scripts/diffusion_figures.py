@@ -120,7 +120,7 @@ def figure_scene(out: Path) -> None:
     cfg.tissues[0].spacing = 0.005
     sim = Simulation(palpation_scene(cfg))
     top = float(sim.tissue().positions[:, 2].max())
-    tip = float(cfg.probes[0].tip_radius)
+    tip = float(cfg.tool("probe").tip_radius)
     sim.set_tool_target("probe", [0.0, 0.0, top + tip - 0.006], speed=0.05)
     sim.run(0.6)
     with SceneRenderer(sim, 640, 480) as r:

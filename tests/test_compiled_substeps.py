@@ -204,7 +204,7 @@ def _free_scene(subcycles, compiled, integrator="symplectic", dt=5e-4):
                           position=(0.0, 0.0, 0.0), volume_options={"size": (0.04, 0.04, 0.02)},
                           options={"integrator": integrator})
     probe = ProbeConfig(name="probe", drive="free", tip_radius=0.008, position=(0.003, -0.002, 0.0185), mass=0.02)
-    cfg = SceneConfig(name="momentum", tissues=[tissue], probes=[probe], dt=dt, gravity=(0.0, 0.0, 0.0),
+    cfg = SceneConfig(name="momentum", tissues=[tissue], tools=[probe], dt=dt, gravity=(0.0, 0.0, 0.0),
                       floor=False, cameras=[])
     sim = Simulation(build_scene(cfg), tissue_subcycles=subcycles, compiled_substeps=compiled)
     sim.data.qvel[sim.tool("probe").dof_adr[2]] = -0.4      # moving down onto the tissue

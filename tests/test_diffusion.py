@@ -258,8 +258,8 @@ def test_non_manifold_surface_is_rejected():
         tissue.make("diffusion", flipped, "liver")
 
 
-@pytest.mark.parametrize("kw, match", [({"omega": 0.0}, "omega must be > 0"), ({"omega": -0.1}, "omega must be > 0"),
-                                       ({"omega": 0.08, "omega_long": -1.0}, "omega_long must be > 0"),
+@pytest.mark.parametrize("kw, match", [({"omega": 0.0}, "omega=0.0 must be > 0"), ({"omega": -0.1}, "omega=-0.1 must be > 0"),
+                                       ({"omega": 0.08, "omega_long": -1.0}, "omega_long=-1.0 must be > 0"),
                                        ({"load_time": 0.0}, "load_time"), ({"substeps": 0}, "substeps"),
                                        ({"scheme": "fd"}, "scheme")])
 def test_bad_parameters(kw, match):

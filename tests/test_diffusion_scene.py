@@ -14,7 +14,7 @@ def _sim():
                      position=(0.0, 0.0, 0.01), volume_options={"size": (0.06, 0.06, 0.02)},
                      options={"integrator": "symplectic"})
     probe = ProbeConfig(name="probe", tip_radius=0.008, position=(0.0, 0.0, 0.03), drive="proxy")
-    return Simulation(build_scene(SceneConfig(name="t", tissues=[t], probes=[probe],
+    return Simulation(build_scene(SceneConfig(name="t", tissues=[t], tools=[probe],
                                               proxies=[HapticProxyConfig(name="hand", tool="probe")], dt=5e-4,
                                               cameras=[])))
 

@@ -133,7 +133,7 @@ def test_bad_input_errors():
     cls = registry.get("fem_static")
     with pytest.raises(ConfigError, match="small-strain only"):
         cls(vol, ELASTIC, corotational=True)
-    with pytest.raises(ConfigError, match="cache_mb must be a positive number"):
+    with pytest.raises(ConfigError, match=r"fem_static: cache_mb=-1.0 MB must be > 0 MB"):
         cls(vol, ELASTIC, cache_mb=-1.0)
     with pytest.raises(ConfigError, match="fixed_dofs must be an"):
         cls(vol, ELASTIC, fixed_dofs=np.zeros((3, 3), dtype=bool))

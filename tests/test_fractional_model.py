@@ -194,7 +194,7 @@ def test_probe_scene_steps_with_the_fractional_model():
                         anchors=("bottom",), position=(0.0, 0.0, 0.01), volume_options={"size": (0.06, 0.06, 0.02)},
                         options={"integrator": "symplectic"})
     sim = Simulation(build_scene(SceneConfig(name="t", tissues=[slab], cameras=[], dt=2e-4,
-                                             probes=[ProbeConfig(name="probe", tip_radius=0.008, position=(0, 0, 0.03))])))
+                                             tools=[ProbeConfig(name="probe", tip_radius=0.008, position=(0, 0, 0.03))])))
     sim.set_tool_target("probe", [0.0, 0.0, 0.024])         # tip 4 mm into the 20 mm slab
     sim.step(1500)
     model = sim.tissue("slab")

@@ -16,7 +16,7 @@ def indentation_curve():
                           options={"integrator": "symplectic"})
     top = 0.02
     probe = ProbeConfig(name="probe", tip_radius=TIP, position=(0.0, 0.0, top + TIP + 0.001))
-    sim = Simulation(build_scene(SceneConfig(name="indent", tissues=[tissue], probes=[probe], dt=5e-4,
+    sim = Simulation(build_scene(SceneConfig(name="indent", tissues=[tissue], tools=[probe], dt=5e-4,
                                              floor=False, cameras=[])))
     forces, pens, depths = [], [], []
     for depth in DEPTHS:

@@ -387,7 +387,7 @@ def test_probe_scene_steps_with_the_layered_model():
 
     t = TissueConfig(name="wall", organ="abdominal_wall", model="layered", material=None, spacing=0.005,
                      volume_options={"size": (0.05, 0.05)}, position=(0, 0, 0.0145), anchors=("bottom",))
-    sim = Simulation(build_scene(SceneConfig(tissues=[t], probes=[ProbeConfig(position=(0, 0, 0.036))], dt=1e-3)))
+    sim = Simulation(build_scene(SceneConfig(tissues=[t], tools=[ProbeConfig(position=(0, 0, 0.036))], dt=1e-3)))
     tis = sim.tissue()
     top = tis.positions[:, 2].max()
     sim.set_tool_target("probe", (0, 0, top + 0.005 - 0.003), speed=0.05)

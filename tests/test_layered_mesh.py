@@ -86,7 +86,7 @@ def test_organ_scene_steps_with_the_layered_model(stiffness):
 
     t = TissueConfig(name="spleen", organ="spleen", model="layered", material="liver", spacing=0.012,
                      position=(0, 0, 0.02), anchors=("bottom",), options={"stiffness": stiffness})
-    sim = Simulation(build_scene(SceneConfig(tissues=[t], probes=[ProbeConfig(position=(0, 0, 0.046))], dt=1e-3)))
+    sim = Simulation(build_scene(SceneConfig(tissues=[t], tools=[ProbeConfig(position=(0, 0, 0.046))], dt=1e-3)))
     tis = sim.tissue()
     top = tis.positions[:, 2].max()
     sim.set_tool_target("probe", (0, 0, top + 0.005 - 0.004), speed=0.05)

@@ -13,7 +13,7 @@ def _free_scene(speed=-0.4):
                           anchors=(), position=(0.0, 0.0, 0.0), volume_options={"size": (0.04, 0.04, 0.02)},
                           options={"integrator": "symplectic"})
     probe = ProbeConfig(name="probe", drive="free", tip_radius=0.008, position=(0.003, -0.002, 0.0185), mass=0.02)
-    cfg = SceneConfig(name="momentum", tissues=[tissue], probes=[probe], dt=5e-4, gravity=(0.0, 0.0, 0.0),
+    cfg = SceneConfig(name="momentum", tissues=[tissue], tools=[probe], dt=5e-4, gravity=(0.0, 0.0, 0.0),
                       floor=False, cameras=[])
     sim = Simulation(build_scene(cfg))
     sim.data.qvel[sim.tool("probe").dof_adr[2]] = speed  # moving down onto the tissue

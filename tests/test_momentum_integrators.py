@@ -23,7 +23,7 @@ def _impact(model, integrator):
                           options=opts)
     probe = ProbeConfig(name="probe", drive="free", tip_radius=0.008, position=(0.007, -0.005, 0.0185),
                         mass=0.02, friction=0.8)
-    cfg = SceneConfig(name="momentum", tissues=[tissue], probes=[probe], dt=1e-3 if integrator == "implicit" else 2e-4,
+    cfg = SceneConfig(name="momentum", tissues=[tissue], tools=[probe], dt=1e-3 if integrator == "implicit" else 2e-4,
                       gravity=(0.0, 0.0, 0.0), floor=False, cameras=[])
     sim = Simulation(build_scene(cfg))
     dof = sim.tool("probe").dof_adr

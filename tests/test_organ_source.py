@@ -145,7 +145,7 @@ def test_scene_takes_a_mesh_path_or_a_volume(kidney_stl, kind):
     organ = str(kidney_stl) if kind == "path" else organ_volume(kidney_stl, spacing=0.006)
     cfg = SceneConfig(name="user_organ", tissues=[TissueConfig(name="kidney", organ=organ, spacing=0.006,
                                                                position=(0.0, 0.0, 0.02))],
-                      probes=[], cameras=[])
+                      tools=[], cameras=[])
     scene = build_scene(cfg)
     t = scene.tissues["kidney"]
     lo, hi = t.rest_positions.min(axis=0), t.rest_positions.max(axis=0)

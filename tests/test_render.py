@@ -22,7 +22,7 @@ def sim():
                           volume_options={"size": (0.06, 0.06, 0.02)}, options={"integrator": "symplectic"})
     probe = ProbeConfig(name="probe", tip_radius=0.008, position=(0.0, 0.0, 0.029), rgba=(0.2, 0.9, 0.2, 1.0))
     cams = [CameraConfig("top", (0.0, -0.0001, 0.12), (0.0, 0.0, 0.0), fovy=40.0)]
-    return Simulation(build_scene(SceneConfig(name="render", tissues=[tissue], probes=[probe], dt=5e-4,
+    return Simulation(build_scene(SceneConfig(name="render", tissues=[tissue], tools=[probe], dt=5e-4,
                                               cameras=cams, floor=True)))
 
 

@@ -54,7 +54,7 @@ def test_rigid_contacts_must_be_a_bool():
 
     from surgsim_envs.errors import ConfigError
     from surgsim_envs.scene.builder import palpation_config
-    from surgsim_envs.scene.config import validate_scene_config
+    from surgsim_envs.scene.config_check import validate_scene_config
 
     cfg = palpation_config()
     cfg.rigid_contacts = "no"

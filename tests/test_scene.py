@@ -21,7 +21,7 @@ def small_tissue(**kw):
 def probe_sim(**probe_kw):
     probe = ProbeConfig(**{"name": "probe", "tip_radius": 0.008, "position": (0.0, 0.0, 0.03), **probe_kw})
     proxies = [HapticProxyConfig(name="hand", tool="probe")] if probe.drive == "proxy" else []
-    return Simulation(build_scene(SceneConfig(name="t", tissues=[small_tissue()], probes=[probe], proxies=proxies,
+    return Simulation(build_scene(SceneConfig(name="t", tissues=[small_tissue()], tools=[probe], proxies=proxies,
                                               dt=5e-4, cameras=[])))
 
 
@@ -40,7 +40,7 @@ def test_unknown_tool_and_tissue_names_raise_config_error():
     with pytest.raises(ConfigError, match="unknown scene"):
         make_scene("appendectomy")
     with pytest.raises(ConfigError, match="does not exist"):
-        build_scene(SceneConfig(probes=[ProbeConfig(drive="proxy")], proxies=[HapticProxyConfig(tool="scalpel")]))
+        build_scene(SceneConfig(tools=[ProbeConfig(drive="proxy")], proxies=[HapticProxyConfig(tool="scalpel")]))
 
 
 def test_tissue_inside_a_tool_is_rejected():
@@ -56,7 +56,7 @@ def test_dt_and_substeps_out_of_range(dt, substeps):
 
 
 def test_simulation_rejects_bad_dt_override_and_unreachable_targets():
-    scene = build_scene(SceneConfig(tissues=[small_tissue()], probes=[ProbeConfig(position=(0, 0, 0.03))],
+    scene = build_scene(SceneConfig(tissues=[small_tissue()], tools=[ProbeConfig(position=(0, 0, 0.03))],
                                     dt=5e-4, cameras=[]))
     with pytest.raises(ConfigError, match="dt="):
         Simulation(scene, dt=1.0)
@@ -79,7 +79,7 @@ def test_probe_follows_its_target_at_the_set_speed():
 
 
 def test_grasper_jaws_close_in_parallel_at_the_set_speed():
-    cfg = SceneConfig(name="g", graspers=[GrasperConfig(position=(0.0, 0.0, 0.1), axis=(0, 0, -1), open_radius=0.03)],
+    cfg = SceneConfig(name="g", tools=[GrasperConfig(position=(0.0, 0.0, 0.1), axis=(0, 0, -1), open_radius=0.03)],
                       cameras=[])
     sim = Simulation(build_scene(cfg))
     tool = sim.tool("grasper")

@@ -191,7 +191,7 @@ def test_scene_probe_smaller_than_lattice_feels_the_surface():
         tissue = TissueConfig(name="slab", organ="slab", spacing=H, anchors=("bottom",), position=(0.0, 0.0, 0.01),
                               volume_options={"size": (0.06, 0.06, 0.02)}, options={"integrator": "symplectic"})
         probe = ProbeConfig(name="probe", tip_radius=TIP, position=(0.005, 0.005, 0.02 + TIP + 0.002))
-        sim = Simulation(build_scene(SceneConfig(name="small_tip", tissues=[tissue], probes=[probe], dt=5e-4,
+        sim = Simulation(build_scene(SceneConfig(name="small_tip", tissues=[tissue], tools=[probe], dt=5e-4,
                                                  contact=ContactConfig(surface_samples=samples))))
         sim.set_tool_target("probe", [0.005, 0.005, 0.02 + TIP - 0.002], speed=0.05)
         sim.run(0.15)

@@ -84,7 +84,7 @@ def press(name: str, spacing: float, depths=DEPTHS, time_steps: int = TIME_STEPS
         model.static_solve()
         forces.append(_reaction(model, nodes))
     solve_s = time.perf_counter() - t0
-    dt = 1e-3 if getattr(model, "quasi_static", False) else min(1e-3, float(model.stable_dt()))
+    dt = 1e-3 if model.has("quasi_static") else min(1e-3, float(model.stable_dt()))
     times = [math.nan]
     for k in range(time_steps + 1 if time_steps else 0):
         # the punch trembles by +-1 um (a hand-held tool): the held targets change every step

@@ -62,7 +62,7 @@ def run_ours(integrator: str, dt: float) -> dict:
                           volume_options={"size": (SIZE, SIZE, SIZE)}, options={"integrator": integrator})
     top = SIZE
     probe = ProbeConfig(name="probe", tip_radius=TIP, position=(0.0, 0.0, top + TIP + APPROACH), speed=float("inf"))
-    cfg = SceneConfig(name="bench_loop", tissues=[tissue], probes=[probe], dt=dt, gravity=(0.0, 0.0, 0.0),
+    cfg = SceneConfig(name="bench_loop", tissues=[tissue], tools=[probe], dt=dt, gravity=(0.0, 0.0, 0.0),
                       floor=False, cameras=[])
     sim = Simulation(build_scene(cfg))
     n = sim.tissue().n_nodes

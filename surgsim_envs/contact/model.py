@@ -46,6 +46,7 @@ from surgsim_envs.contact.friction import stick_slip
 from surgsim_envs.contact.report import ContactReport
 from surgsim_envs.contact.shapes import BOX, CAPSULE, CYLINDER, N_KINDS, bounding_radius, local_outside, world_sdf
 from surgsim_envs.contact.surface_points import check_surface, subdivisions_for_spacing, surface_samples
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 #: default explicit-stability ratio k_n dt^2 / m used by :func:`auto_stiffness`
@@ -66,10 +67,9 @@ def auto_stiffness(masses, dt: float, ratio: float = AUTO_STIFFNESS_RATIO) -> fl
     m = np.asarray(masses, dtype=np.float64).reshape(-1)
     if len(m) == 0 or not np.all(np.isfinite(m)) or np.any(m <= 0):
         raise ConfigError("auto stiffness needs positive finite node masses in kg (e.g. tissue.masses)")
-    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
-        raise ConfigError(f"dt must be a positive number of seconds, got {dt!r}")
-    if not (0.0 < ratio < 4.0):
-        raise ConfigError(f"ratio k_n dt^2/m must lie in (0, 4) for explicit stability, got {ratio!r}; use ~0.1")
+    validate.positive(dt, "dt", unit="s", fix="the time step of the contact, e.g. 1e-3")
+    validate.real(ratio, "ratio k_n dt^2/m", lo=0.0, hi=4.0, lo_open=True, hi_open=True,
+                  fix="(0, 4) keeps the explicit step stable; use ~0.1")
     return float(ratio * m.min() / (dt * dt))
 
 
@@ -98,14 +98,12 @@ class ContactParams:
         if isinstance(self.stiffness, str):
             if self.stiffness != "auto":
                 raise ConfigError(f"stiffness must be a number in N/m or 'auto', got {self.stiffness!r}")
-        elif not (_is_number(self.stiffness) and self.stiffness > 0):
-            raise ConfigError(f"stiffness must be > 0 N/m (typical 50-2000 per node) or 'auto', got {self.stiffness!r}")
-        if not (_is_number(self.damping) and self.damping >= 0):
-            raise ConfigError(f"damping must be >= 0 N s/m, got {self.damping!r}")
-        if self.tangential_stiffness is not None and not (
-                _is_number(self.tangential_stiffness) and self.tangential_stiffness > 0):
-            raise ConfigError(f"tangential_stiffness must be > 0 N/m or None (= stiffness), "
-                              f"got {self.tangential_stiffness!r}")
+        else:
+            validate.positive(self.stiffness, "stiffness", unit="N/m", fix="typical 50-2000 per node, or 'auto'")
+        validate.non_negative(self.damping, "damping", unit="N s/m", fix="0 = no contact damping")
+        if self.tangential_stiffness is not None:
+            validate.positive(self.tangential_stiffness, "tangential_stiffness", unit="N/m",
+                              fix="or None (= stiffness)")
         if not isinstance(self.implicit_damping, (bool, np.bool_)):
             raise ConfigError(f"implicit_damping must be True or False, got {self.implicit_damping!r}")
 
@@ -534,8 +532,7 @@ class ContactModel:
     def __init__(self, n_nodes: int, candidate_nodes, tool_friction, params: ContactParams | None = None,
                  node_masses=None, *, surface=None, surface_subdivisions: int | None = None,
                  sample_spacing: float | None = None, rest_positions=None, tool_static_friction=None):
-        if not (isinstance(n_nodes, (int, np.integer)) and n_nodes > 0):
-            raise ConfigError(f"n_nodes must be a positive integer, got {n_nodes!r}")
+        validate.integer(n_nodes, "n_nodes", lo=1, fix="the tissue's node count (tissue.n_nodes)")
         self.n_nodes = int(n_nodes)
         cand = np.asarray(candidate_nodes)
         if cand.dtype == bool:
@@ -719,8 +716,8 @@ class ContactModel:
         G = len(kind)
         tool = _array(shape_tool, (G,), np.int64, "shape_tool", "tool index per geom")
         size = _array(shape_size, (G, 3), np.float64, "shape_size", "m")
-        if not (_is_number(dt) and dt > 0):
-            raise ConfigError(f"dt must be a positive number of seconds, got {dt!r}")
+        if not (_is_number(dt) and dt > 0):          # once per step: the check inline, the message shared
+            validate.positive(dt, "dt", unit="s", fix="the time step of the contact, e.g. 1e-3")
         if G != self._n_geoms:
             self._alloc_geoms(G)
         k_n = self.stiffness_for(dt)

@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 #: most edge subdivisions accepted (n^2 contact points per node; 8 -> 64)
@@ -57,9 +58,7 @@ def typical_edge_length(positions, surface) -> float:
 def subdivisions_for_spacing(positions, surface, spacing: float, max_subdivisions: int = MAX_SUBDIVISIONS) -> int:
     """Edge subdivisions ``n`` so that contact points are at most ``spacing`` (m) apart on a typical
     edge: ``n = ceil(median_edge / spacing)``, clamped to [1, max_subdivisions]."""
-    if isinstance(spacing, bool) or not isinstance(spacing, (int, float, np.floating)) \
-            or not math.isfinite(spacing) or spacing <= 0:
-        raise ConfigError(f"sample_spacing must be a positive length in m (e.g. the tool tip radius), got {spacing!r}")
+    validate.positive(spacing, "sample_spacing", unit="m", fix="e.g. the tool tip radius")
     h = typical_edge_length(positions, surface)
     return int(min(max(math.ceil(h / float(spacing) - 1e-9), 1), max_subdivisions))
 
@@ -72,10 +71,7 @@ def surface_samples(surface, subdivisions: int) -> tuple[np.ndarray, np.ndarray]
     ``sum_j weights[s, j] * x[nodes[s, j]]``. There are ``E (n-1)`` edge samples (E unique edges)
     and ``F (n-1)(n-2)/2`` interior samples.
     """
-    if isinstance(subdivisions, bool) or not isinstance(subdivisions, (int, np.integer)) \
-            or not 1 <= subdivisions <= MAX_SUBDIVISIONS:
-        raise ConfigError(f"surface subdivisions must be an integer in [1, {MAX_SUBDIVISIONS}] "
-                          f"(1 = nodes only), got {subdivisions!r}")
+    validate.integer(subdivisions, "surface subdivisions", lo=1, hi=MAX_SUBDIVISIONS, fix="1 = nodes only")
     tri = np.asarray(surface, dtype=np.int64).reshape(-1, 3)
     n = int(subdivisions)
     nodes_out, w_out = [np.zeros((0, 3), np.int64)], [np.zeros((0, 3))]

@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from surgsim_envs.contact.kinematic_probe import KinematicProbe
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 #: active-set iterations before the press is reported unsettled (``probe.settled`` False)
@@ -86,10 +87,8 @@ class UnilateralProbe(KinematicProbe):
         is above now (it can save solves when the probe moves a little; not when it jumps) instead of from the rest
         surface the sphere covers; the solution is the same. Returns the contact nodes;
         ``force()`` is then the force on the probe (N)."""
-        if not (isinstance(max_iterations, (int, np.integer)) and not isinstance(max_iterations, bool)
-                and max_iterations >= 1):
-            raise ConfigError(f"max_iterations must be a positive integer, got {max_iterations!r}; default "
-                              f"{MAX_ACTIVE_SET_ITERATIONS}")
+        validate.integer(max_iterations, "max_iterations", lo=1,
+                         fix=f"give a positive integer; default {MAX_ACTIVE_SET_ITERATIONS}")
         c = np.asarray(centre, dtype=np.float64).reshape(-1)
         if c.shape != (3,) or not np.all(np.isfinite(c)):
             raise ConfigError(f"probe centre must be 3 finite numbers (m), got {centre!r}")

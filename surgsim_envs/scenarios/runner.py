@@ -61,7 +61,7 @@ def scene_config(sc: Scenario):
             raise ConfigError(f"scene.inclusion_xy needs organ 'slab_inclusion', got {tissue.organ!r}")
         tissue.volume_options = {**dict(tissue.volume_options),
                                  "inclusion_centre": (float(o.inclusion_xy[0]), float(o.inclusion_xy[1]), -0.002)}
-    for tool in cfg.tool_configs():
+    for tool in cfg.tools:
         if o.mu is not None:
             tool.friction = float(o.mu)
     cfg.seed = int(sc.meta.seed)

@@ -32,7 +32,7 @@ from typing import Callable, Hashable, NamedTuple
 import mujoco
 import numpy as np
 
-from surgsim_envs.errors import ConfigError
+from surgsim_envs import validate
 
 _SPEC = mujoco.mjtState.mjSTATE_INTEGRATION
 
@@ -59,10 +59,9 @@ class ApproachSnapshot:
 
     def __init__(self, margin_steps: int = 50, chunk_steps: int = 10, tolerance_m: float = 1e-9):
         for name, v, least in (("margin_steps", margin_steps, 0), ("chunk_steps", chunk_steps, 1)):
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
-                raise ConfigError(f"ApproachSnapshot: {name}={v!r} must be a whole number of physics steps (>= {least})")
-        if not (isinstance(tolerance_m, (int, float)) and np.isfinite(tolerance_m) and tolerance_m > 0):
-            raise ConfigError(f"ApproachSnapshot: tolerance_m={tolerance_m!r} must be a positive length in m")
+            validate.integer(v, f"ApproachSnapshot: {name}", lo=least, unit="physics steps",
+                             fix="give a whole number of physics steps")
+        validate.positive(tolerance_m, "ApproachSnapshot: tolerance_m", unit="m", fix="e.g. 1e-9")
         self.margin_steps = int(margin_steps)
         self.chunk_steps = int(chunk_steps)
         self.tolerance_m = float(tolerance_m)

@@ -21,8 +21,8 @@ import mujoco
 import numpy as np
 
 from surgsim_envs.errors import ConfigError
-from surgsim_envs.scene.config import (CameraConfig, GrasperConfig, ProbeConfig, SceneConfig, TissueConfig,
-                                       validate_scene_config)
+from surgsim_envs.scene.config import CameraConfig, GrasperConfig, ProbeConfig, SceneConfig, TissueConfig
+from surgsim_envs.scene.config_check import validate_scene_config
 from surgsim_envs.scene.tissue_binding import TissueBinding
 from surgsim_envs.scene.visual import VisualTwin
 from surgsim_envs.scene.tools import ToolSpec, add_haptic_proxy, build_tool
@@ -246,7 +246,7 @@ def build_scene(cfg: SceneConfig) -> Scene:
         # the surface flex goes only into the render twin (scene/visual.py): never into the physics model
         scene.bindings[tcfg.name] = TissueBinding(tcfg.name, model, rgba=tcfg.rgba, render_field=tcfg.render_field,
                                                   render_range=tcfg.render_range)
-    for tcfg in cfg.tool_configs():
+    for tcfg in cfg.tools:
         scene.tools[tcfg.name] = build_tool(spec, tcfg)
     for hcfg in cfg.proxies:
         tool = scene.tools[hcfg.tool]
@@ -350,7 +350,7 @@ def grasp_scene(cfg: SceneConfig | None = None, auto_place: bool = True) -> Scen
     (:func:`place_grasper_around_tip`), so any organ can be grasped.
     """
     cfg = copy.deepcopy(cfg if cfg is not None else grasp_config())
-    grasper = next((t for t in cfg.tool_configs() if isinstance(t, GrasperConfig)), None)
+    grasper = next((t for t in cfg.tools if isinstance(t, GrasperConfig)), None)
     if auto_place and grasper is not None and cfg.tissues:
         validate_scene_config(cfg)
         nodes = placed_volume(cfg.tissues[0]).nodes

@@ -1,8 +1,8 @@
 """Configuration dataclasses of a scene: tissues, tools, cameras and the step loop.
 
 Everything is data (SI units: m, kg, s, N, rad) so that scenes can be loaded from TOML files and
-compared. :func:`validate_scene_config` checks a whole :class:`SceneConfig` and raises
-:class:`~surgsim_envs.errors.ConfigError` naming the bad value and its fix; the builders call it.
+compared. :func:`surgsim_envs.scene.config_check.validate_scene_config` checks a whole
+:class:`SceneConfig` (this module holds the data and the field checks the tool kinds share).
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 #: allowed physics time step range (s); the tissue models' stable regions lie inside it
@@ -223,8 +224,6 @@ class SceneConfig:
 
     tools: a list of tool configs of any registered kind (:class:`ProbeConfig`,
     :class:`GrasperConfig`, or a plugin's; :mod:`surgsim_envs.scene.tools`), built in order.
-    ``probes`` and ``graspers`` are the older per-kind lists, still accepted and appended after
-    ``tools`` (:meth:`tool_configs`).
     dt: s, physics step (validated against :data:`DT_RANGE`); substeps: physics steps per
     control step (:meth:`Simulation.step`). gravity: m/s^2 for the MuJoCo (tool) world; tools are
     gravity-compensated. seed: seeds ``Simulation.rng``. rigid_contacts: False turns MuJoCo's
@@ -236,8 +235,6 @@ class SceneConfig:
     name: str = "scene"
     tissues: list[TissueConfig] = field(default_factory=list)
     tools: list[Any] = field(default_factory=list)
-    probes: list[ProbeConfig] = field(default_factory=list)
-    graspers: list[GrasperConfig] = field(default_factory=list)
     proxies: list[HapticProxyConfig] = field(default_factory=list)
     cameras: list[CameraConfig] = field(default_factory=_default_cameras)
     contact: ContactConfig = field(default_factory=ContactConfig)
@@ -250,24 +247,19 @@ class SceneConfig:
     render_width: int = 640
     render_height: int = 480
 
-    def tool_configs(self) -> list:
-        """Every tool config: ``tools``, then the older ``probes`` and ``graspers`` lists."""
-        return [*self.tools, *self.probes, *self.graspers]
-
     def tool(self, name: str):
         """The tool config called ``name`` (ConfigError listing the tools if there is none)."""
-        for t in self.tool_configs():
+        for t in self.tools:
             if t.name == name:
                 return t
-        raise ConfigError(f"scene '{self.name}' has no tool {name!r}; tools: {[t.name for t in self.tool_configs()]}")
+        raise ConfigError(f"scene '{self.name}' has no tool {name!r}; tools: {[t.name for t in self.tools]}")
 
     def replace_tool(self, name: str, new) -> None:
         """Put tool config ``new`` in the place of the tool called ``name``."""
-        for group in (self.tools, self.probes, self.graspers):
-            for i, t in enumerate(group):
-                if t.name == name:
-                    group[i] = new
-                    return
+        for i, t in enumerate(self.tools):
+            if t.name == name:
+                self.tools[i] = new
+                return
         raise ConfigError(f"scene '{self.name}' has no tool {name!r}")
 
 
@@ -282,10 +274,11 @@ def vec(value, n: int, what: str) -> tuple[float, ...]:
     return out
 
 
-def positive(value, what: str, hint: str, allow_inf: bool = False) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value) or value <= 0 \
-            or (math.isinf(value) and not allow_inf):
-        raise ConfigError(f"{what} must be a positive finite number, got {value!r}; {hint}")
+def rate_limit(value, name: str) -> float:
+    """A tool's default rate limit of target changes in m/s: > 0, or inf for none."""
+    if validate.is_real_number(value) and value == math.inf:
+        return math.inf
+    return validate.positive(value, name, unit="m/s", fix="give a speed in m/s, or inf for no limit")
 
 
 
@@ -298,72 +291,3 @@ def validate_step(dt: float, substeps: int) -> None:
     if isinstance(substeps, bool) or not isinstance(substeps, int) or not (slo <= substeps <= shi):
         raise ConfigError(f"substeps={substeps!r} is out of range: give an integer in [{slo}, {shi}] "
                           "(physics steps per control step; default 1)")
-
-
-def validate_tissue_resolution(t: TissueConfig) -> None:
-    """Check ``resolution``, ``model="auto"`` and the auto-selection limits of one tissue."""
-    from surgsim_envs.tissue.resolution import check_resolution
-
-    check_resolution(t.resolution, f"tissue '{t.name}' resolution")
-    if t.model == "auto" and t.resolution != "auto":
-        raise ConfigError(f"tissue '{t.name}': model='auto' needs resolution='auto' (the table picks both); "
-                          "or name a model such as 'mass_spring' or 'fem'")
-    if t.resolution == "auto":
-        positive(t.error_tolerance, f"tissue '{t.name}' error_tolerance", "a fraction, e.g. 0.1 for 10 %")
-        positive(t.step_budget_us, f"tissue '{t.name}' step_budget_us",
-                  "microseconds of compute per simulated millisecond, e.g. 1000")
-        if not isinstance(t.accuracy_scene, str) or not t.accuracy_scene:
-            raise ConfigError(f"tissue '{t.name}' accuracy_scene={t.accuracy_scene!r}; give a benchmark scene "
-                              "name such as 'indent'")
-
-
-def validate_scene_config(cfg: SceneConfig) -> None:
-    """Check a SceneConfig; raise ConfigError naming the first bad value and how to fix it."""
-    if not isinstance(cfg, SceneConfig):
-        raise ConfigError(f"expected a SceneConfig, got {type(cfg).__name__}")
-    validate_step(cfg.dt, cfg.substeps)
-    vec(cfg.gravity, 3, "gravity")
-    for flag in ("floor", "rigid_contacts"):
-        if not isinstance(getattr(cfg, flag), bool):
-            raise ConfigError(f"scene '{cfg.name}' {flag} must be True or False, got {getattr(cfg, flag)!r}")
-    names: set[str] = set()
-    for group in (cfg.tissues, cfg.tool_configs(), cfg.proxies, cfg.cameras):
-        for item in group:
-            if not isinstance(item.name, str) or not item.name:
-                raise ConfigError(f"every scene object needs a non-empty name, got {item.name!r}")
-            if item.name in names:
-                raise ConfigError(f"duplicate scene object name {item.name!r}; names of tissues, tools, proxies "
-                                  "and cameras must be unique")
-            names.add(item.name)
-    for t in cfg.tissues:
-        validate_tissue_resolution(t)
-        if t.spacing is not None:
-            positive(t.spacing, f"tissue '{t.name}' spacing", "try 0.005 (5 mm), or None for the organ's default")
-        vec(t.position, 3, f"tissue '{t.name}' position")
-        vec(t.euler, 3, f"tissue '{t.name}' euler")
-        vec(t.gravity, 3, f"tissue '{t.name}' gravity")
-        vec(t.rgba, 4, f"tissue '{t.name}' rgba")
-    from surgsim_envs.scene.tools import tool_kind
-
-    for t in cfg.tool_configs():
-        tool_kind(t).validate(t)
-    tools = {p.name: p for p in cfg.tool_configs()}
-    driven = set()
-    for h in cfg.proxies:
-        if h.tool not in tools:
-            raise ConfigError(f"haptic proxy '{h.name}' drives tool {h.tool!r}, which does not exist; "
-                              f"tools in this scene: {sorted(tools)}")
-        if tools[h.tool].drive != "proxy":
-            raise ConfigError(f"haptic proxy '{h.name}': tool '{h.tool}' has drive={tools[h.tool].drive!r}; "
-                              "set its drive='proxy'")
-        if h.tool in driven:
-            raise ConfigError(f"tool '{h.tool}' is driven by two haptic proxies; give each tool at most one")
-        driven.add(h.tool)
-        positive(h.timeconst, f"haptic proxy '{h.name}' timeconst", "e.g. 0.01 s")
-        positive(h.dampratio, f"haptic proxy '{h.name}' dampratio", "1 is critical damping")
-    for t in tools.values():
-        if t.drive == "proxy" and t.name not in driven:
-            raise ConfigError(f"tool '{t.name}' has drive='proxy' but no HapticProxyConfig(tool='{t.name}') drives it")
-    for c in cfg.cameras:
-        vec(c.position, 3, f"camera '{c.name}' position")
-        vec(c.target, 3, f"camera '{c.name}' target")

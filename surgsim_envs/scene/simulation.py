@@ -35,6 +35,7 @@ import numpy as np
 
 from surgsim_envs.contact import BOX, CAPSULE, CYLINDER, SPHERE, ContactModel, ContactParams
 from surgsim_envs.scene.contact_options import contact_params_for, static_friction_ratio
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.builder import Scene
 from surgsim_envs.scene.step.buffers import StepBuffers
@@ -98,10 +99,7 @@ class Simulation:
         self.dt = float(cfg.dt if dt is None else dt)
         self.substeps = cfg.substeps if substeps is None else substeps
         validate_step(self.dt, self.substeps)
-        if isinstance(tissue_subcycles, bool) or not isinstance(tissue_subcycles, (int, np.integer)) \
-                or not 1 <= tissue_subcycles <= 100:
-            raise ConfigError(f"tissue_subcycles must be an integer in [1, 100] (tissue steps per MuJoCo step), "
-                              f"got {tissue_subcycles!r}")
+        validate.integer(tissue_subcycles, "tissue_subcycles", lo=1, hi=100, fix="tissue steps per MuJoCo step")
         self.tissue_subcycles = int(tissue_subcycles)
         self.model = scene.model
         self.model.opt.timestep = self.dt * self.tissue_subcycles
@@ -273,8 +271,7 @@ class Simulation:
     def run(self, duration: float) -> None:
         """Advance by ``duration`` seconds (rounded to whole MuJoCo steps of ``tissue_subcycles``
         physics steps)."""
-        if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration >= 0):
-            raise ConfigError(f"duration must be a non-negative number of seconds, got {duration!r}")
+        validate.non_negative(duration, "duration", unit="s", fix="the simulated time to advance")
         n = self.tissue_subcycles
         self._physics_steps(int(round(duration / (self.dt * n))) * n)
 
@@ -284,8 +281,8 @@ class Simulation:
     def physics_step(self, n: int = 1) -> None:
         """``n`` physics steps (default one) in the documented order (module docstring), in one
         compiled call where the scene has one: the same physics as ``n`` calls of one step."""
-        if not (isinstance(n, (int, np.integer)) and n >= 0):
-            raise ConfigError(f"physics_step(n): n must be a whole number of steps >= 0, got {n!r}")
+        if not (isinstance(n, (int, np.integer)) and n >= 0):     # once per step: the check inline
+            validate.integer(n, "physics_step(n): n", lo=0, unit="steps", fix="give a whole number of steps")
         if n:
             self._physics_steps(int(n))
 

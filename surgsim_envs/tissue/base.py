@@ -19,6 +19,7 @@ from typing import Any, ClassVar, Mapping
 import numpy as np
 from numba import njit
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.volume import Volume
 from surgsim_envs.tissue.capabilities import CAPABILITIES, CapabilityError, check_names
@@ -97,11 +98,6 @@ class TissueModel(abc.ABC):
     #: constructor options the model needs where a tool presses a concentrated load into it (a probe
     #: tip about one lattice spacing wide): scenes that do so build it with these (tissue contract v2)
     point_load_options: ClassVar[Mapping[str, Any]] = {}
-    #: derived from ``capabilities`` ("surface_only"); kept as attributes for the base-class logic
-    surface_only: ClassVar[bool] = False
-    #: derived from ``capabilities`` ("quasi_static")
-    quasi_static: ClassVar[bool] = False
-
     #: module of the model's compiled step (tissue/compiled.py), for this exact class only (a
     #: subclass that changes the physics does not inherit it); None: Python steps only
     compiled_step_module: ClassVar[str | None] = None
@@ -119,15 +115,7 @@ class TissueModel(abc.ABC):
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
-        caps = check_names(cls.capabilities, f"model class {cls.__name__}")
-        # older plugins set the booleans; keep them and the capability set consistent
-        if cls.surface_only:
-            caps |= {"surface_only"}
-        if cls.quasi_static:
-            caps |= {"quasi_static"}
-        cls.capabilities = frozenset(caps)
-        cls.surface_only = "surface_only" in caps
-        cls.quasi_static = "quasi_static" in caps
+        cls.capabilities = frozenset(check_names(cls.capabilities, f"model class {cls.__name__}"))
 
     @classmethod
     def require(cls, capability: str, task: str = "this task") -> None:
@@ -148,12 +136,13 @@ class TissueModel(abc.ABC):
         if not isinstance(volume, Volume):
             raise ConfigError(f"volume must be a surgsim_envs.geometry.Volume, got {type(volume).__name__}; "
                               "build one with surgsim_envs.geometry.make_volume(...) or box_volume(...)")
-        if not self.surface_only:
+        surface_only = "surface_only" in self.capabilities
+        if not surface_only:
             volume.check()
         self.volume = volume
         self.material = get_material(material)
         self.region_materials = {int(k): get_material(v) for k, v in (region_materials or {}).items()}
-        labels = volume.node_labels if self.surface_only else volume.labels   # surface-only: per-node labels
+        labels = volume.node_labels if surface_only else volume.labels   # surface-only: per-node labels
         unknown = set(self.region_materials) - set(np.unique(labels).tolist())
         if unknown:
             raise ConfigError(f"region_materials labels {sorted(unknown)} do not occur in volume '{volume.name}' "
@@ -180,7 +169,7 @@ class TissueModel(abc.ABC):
         self._fields0 = {k: v.copy() for k, v in self.fields.items()}
         self.masses = self._lumped_masses()
         # surface-only models carry mass on surface nodes only (interior nodes of a tet volume stay still)
-        weighed = self.surface_nodes if self.surface_only else np.arange(n)
+        weighed = self.surface_nodes if surface_only else np.arange(n)
         if np.any(self.masses[weighed] <= 0):
             bad = int(weighed[np.flatnonzero(self.masses[weighed] <= 0)[0]])
             raise ConfigError(f"model '{self.name}': node {bad} has mass {self.masses[bad]:.3g} kg (isolated node?); "
@@ -204,7 +193,7 @@ class TissueModel(abc.ABC):
     # ---------------------------------------------------------------------------------------
     # Material fields and mass
     def _build_fields(self) -> dict[str, np.ndarray]:
-        labels = self.volume.labels if not self.surface_only else self.volume.node_labels
+        labels = self.volume.node_labels if "surface_only" in self.capabilities else self.volume.labels
         out = {}
         for key in ELEMENT_FIELDS:
             arr = np.full(len(labels), float(getattr(self.material, key)))
@@ -216,7 +205,7 @@ class TissueModel(abc.ABC):
     def _lumped_masses(self) -> np.ndarray:
         """Row-sum lumped mass (kg): each tet gives rho V / 4 to its nodes."""
         n = self.volume.n_nodes
-        if self.surface_only or len(self.volume.tets) == 0:
+        if "surface_only" in self.capabilities or len(self.volume.tets) == 0:
             raise NotImplementedError("surface-only models must override _lumped_masses")
         vol = self.volume.tet_volumes()
         m = np.zeros(n)
@@ -226,7 +215,7 @@ class TissueModel(abc.ABC):
     def element_centroids(self) -> np.ndarray:
         """(T,3) m rest centroids of the elements that carry the material fields (tets; for a
         surface-only model its nodes), to build masks for :meth:`scale_material`."""
-        if self.surface_only:
+        if "surface_only" in self.capabilities:
             return self.rest_positions.copy()
         return self.rest_positions[self.volume.tets].mean(axis=1)
 
@@ -415,8 +404,8 @@ class TissueModel(abc.ABC):
         (-dF/dx per node, e.g. contact penalty springs); implicit integrators treat it implicitly.
         Raises :class:`TissueUnstableError` if the state diverges.
         """
-        if not (isinstance(dt, (float, int, np.floating)) and math.isfinite(dt) and dt > 0):
-            raise ConfigError(f"dt must be a positive number of seconds, got {dt!r}; default is 1e-3")
+        if not (isinstance(dt, (float, int, np.floating)) and math.isfinite(dt) and dt > 0):   # once per step:
+            validate.positive(dt, "dt", unit="s", fix="the default is 1e-3 s")              # the check inline
         if forces is None:
             forces = self.external_forces
         elif forces.shape != self.positions.shape:

@@ -14,13 +14,13 @@ Units: stiffness N/m, compliance m/N, displacements m, forces N. numpy/scipy + n
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 #: default memory for cached compliance columns (MB); each node costs 72 x n_nodes bytes
@@ -70,8 +70,7 @@ class CondensedCompliance:
                               f"{k.shape} and {free.shape}")
         if not free.any():
             raise ConfigError("condensed compliance: every dof is fixed; nothing can move")
-        if not (isinstance(cache_mb, (int, float)) and math.isfinite(cache_mb) and cache_mb > 0):
-            raise ConfigError(f"cache_mb must be a positive number of megabytes, got {cache_mb!r}")
+        validate.positive(cache_mb, "cache_mb", unit="MB", fix="the memory of cached compliance rows, e.g. 256")
         self.n_nodes = n3 // 3
         self.free = free
         self.free_index = np.flatnonzero(free)

@@ -25,6 +25,7 @@ from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.geometry.volume import Volume
 from surgsim_envs.tissue import diffusion_operator as op
@@ -44,16 +45,6 @@ MAX_SUBSTEPS = 64
 #: curve (E 10 kPa, nu 0.45, 4 mm sphere, 20 mm slab) gave young 13,573.5 Pa (x 1.357) and omega
 #: 0.0438 (1.5 % RMS misfit). The accuracy chart (liver 4 kPa, 5 mm sphere, 30 mm slab) uses it.
 INDENT_CALIBRATION = {"omega": 0.043827, "length": "depth", "stiffness_factor": 13573.5 / 10000.0}
-
-
-def _positive(value, name: str, unit: str, fix: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"diffusion model: {name} must be a number ({unit}), got {value!r}; {fix}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise ConfigError(f"diffusion model: {name} must be > 0 {unit}, got {value!r}; {fix}")
-    return v
 
 
 def surface_view(volume: Volume) -> Volume:
@@ -104,7 +95,6 @@ class DiffusionModel(TissueModel):
                               "and dents it; Zhong et al. 2016, explicit")
     integrators: ClassVar[tuple[str, ...]] = ("symplectic",)
     capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "surface_only", "static_solve"})
-    surface_only: ClassVar[bool] = True
     material_fields: ClassVar[tuple[str, ...]] = ("young", "density", "damping", "nonlinear", "omega")
     node_field_names: ClassVar[tuple[str, ...]] = ("displacement", "stress", "concentration", "omega")
     #: parameters ``surgsim fit --test indent`` searches besides young (bounds), see bench/fit.py
@@ -124,15 +114,17 @@ class DiffusionModel(TissueModel):
         used = np.unique(surf.surface)
         lo, hi = surf.nodes[used].min(axis=0), surf.nodes[used].max(axis=0)
         ext = hi - lo
-        self.load_time = _positive(load_time, "load_time", "s", "try 0.05")
-        self.depth = _positive(depth if depth is not None else 0.5 * float(ext.min() if ext.min() > 0 else ext.max()),
-                               "depth", "m", "give the tissue depth under the surface, e.g. 0.02")
+        self.load_time = validate.positive(load_time, "diffusion model: load_time", unit="s", fix="try 0.05")
+        self.depth = validate.positive(depth if depth is not None else 0.5 * float(ext.min() if ext.min() > 0 else ext.max()),
+                                       "diffusion model: depth", unit="m",
+                                       fix="give the tissue depth under the surface, e.g. 0.02")
         if isinstance(length, str) and length == "depth":
             length = self.depth
-        self.length = _positive(length if length is not None else float(ext.max()), "length", "m",
-                                "give the body's size in m (or 'depth'), e.g. 0.1")
-        self.stiffness_factor = _positive(stiffness_factor, "stiffness_factor", "(dimensionless)",
-                                          "the bulk modulus is stiffness_factor x young / depth; 1 = uncalibrated")
+        self.length = validate.positive(length if length is not None else float(ext.max()), "diffusion model: length",
+                                        unit="m", fix="give the body's size in m (or 'depth'), e.g. 0.1")
+        self.stiffness_factor = validate.positive(
+            stiffness_factor, "diffusion model: stiffness_factor",
+            fix="the bulk modulus is stiffness_factor x young / depth; 1 = uncalibrated")
         if scheme not in SCHEMES:
             raise ConfigError(f"diffusion model: scheme={scheme!r}; choose one of {SCHEMES}")
         has_quads = getattr(surf, "quads", None) is not None
@@ -146,12 +138,9 @@ class DiffusionModel(TissueModel):
                               f"got {substeps!r}")
         self.auto_substeps = substeps == "auto"
         self.substeps = 1 if self.auto_substeps else int(substeps)
-        self.damping_ratio = float(damping_ratio)
-        if not (math.isfinite(self.damping_ratio) and self.damping_ratio >= 0):
-            raise ConfigError(f"diffusion model: damping_ratio must be >= 0, got {damping_ratio!r}; 1 = critical")
-        self.gradient_scale = float(gradient_scale)
-        if not (math.isfinite(self.gradient_scale) and self.gradient_scale >= 0):
-            raise ConfigError(f"diffusion model: gradient_scale must be >= 0, got {gradient_scale!r}")
+        self.damping_ratio = validate.non_negative(damping_ratio, "diffusion model: damping_ratio", fix="1 = critical")
+        self.gradient_scale = validate.non_negative(gradient_scale, "diffusion model: gradient_scale",
+                                                    fix="1 = as derived (eqs. 9.19-9.21), 0 = off")
         n = surf.n_nodes
         self._areas = op.control_areas(surf.nodes, surf.surface)
         self._normals = op.vertex_normals(surf.nodes, surf.surface)
@@ -194,7 +183,8 @@ class DiffusionModel(TissueModel):
             return tang / self._omega_in[:, None, None]
         om = np.asarray(omega, dtype=np.float64)
         if om.ndim == 0:
-            _positive(om, "omega", "(dimensionless)", "the paper uses 0.08-0.24; very low values give local deformation")
+            validate.positive(om.item(), "diffusion model: omega",
+                              fix="the paper uses 0.08-0.24; very low values give local deformation")
         elif om.shape != (n,) or not np.all(np.isfinite(om)) or np.any(om <= 0):
             raise ConfigError(f"diffusion model: omega must be a number > 0 or ({n},) array of numbers > 0 "
                               f"(one per node), got shape {om.shape}"
@@ -204,7 +194,7 @@ class DiffusionModel(TissueModel):
         if om.ndim != 0:
             raise ConfigError("diffusion model: omega_long needs a scalar omega (the latitudinal value); for "
                               "per-node anisotropy give omega_tensor")
-        w_long = _positive(omega_long, "omega_long", "(dimensionless)", "e.g. 0.24 with omega=0.08 (Fig. 9.3)")
+        w_long = validate.positive(omega_long, "diffusion model: omega_long", fix="e.g. 0.24 with omega=0.08 (Fig. 9.3)")
         lat, lon, s = op.lat_long_frames(self._normals, axis)
         return op.relative_tensors(self._normals, lat, lon, s, 1.0, w_long / float(om))
 

@@ -35,6 +35,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 import numba
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, StaticSolveError
 from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue import fem_kernels as kern
@@ -93,14 +94,11 @@ class TetFEMModel(TissueModel):
         super().__init__(volume, material, integrator=integrator, **base_kwargs)
         if stiffness_damping is None:
             stiffness_damping = float(self.material.extra.get("stiffness_damping", 0.0))
-        if not (math.isfinite(stiffness_damping) and stiffness_damping >= 0):
-            raise ConfigError(f"stiffness_damping (Rayleigh beta, s) must be >= 0, got {stiffness_damping!r}")
-        if not (math.isfinite(cg_tol) and 0 < cg_tol < 1):
-            raise ConfigError(f"cg_tol must lie in (0, 1), got {cg_tol!r}")
-        if not (isinstance(rotation_iters, (int, np.integer)) and rotation_iters >= 1):
-            raise ConfigError(f"rotation_iters must be an integer >= 1, got {rotation_iters!r}")
-        if not (isinstance(threads, (int, np.integer)) and not isinstance(threads, bool) and threads >= 1):
-            raise ConfigError(f"threads must be an integer >= 1 (1 = single-thread kernels), got {threads!r}")
+        validate.non_negative(stiffness_damping, "stiffness_damping", unit="s", fix="the Rayleigh beta; 0 = none")
+        validate.real(cg_tol, "cg_tol", lo=0.0, hi=1.0, lo_open=True, hi_open=True,
+                      fix="it is the relative CG residual, e.g. 1e-6")
+        validate.integer(rotation_iters, "rotation_iters", lo=1, fix="give an integer >= 1")
+        validate.integer(threads, "threads", lo=1, fix="1 = single-thread kernels")
         self.threads = min(int(threads), int(numba.config.NUMBA_NUM_THREADS))
         self._parallel = self.threads > 1
         self.corotational = bool(corotational)
@@ -682,10 +680,9 @@ class TetFEMModel(TissueModel):
         forces = np.asarray(forces, dtype=np.float64)
         if forces.shape != self.positions.shape or not np.all(np.isfinite(forces)):
             raise ConfigError(f"forces must be a finite array of shape {self.positions.shape}, got {forces.shape}")
-        if not (isinstance(max_iter, (int, np.integer)) and max_iter >= 1):
-            raise ConfigError(f"max_iter must be a positive integer, got {max_iter!r}")
-        if not (isinstance(tol, (int, float)) and math.isfinite(tol) and 0 < tol < 1):
-            raise ConfigError(f"fem.static_solve: tol={tol!r} must lie in (0, 1) (update / body size), e.g. 1e-9")
+        validate.integer(max_iter, "max_iter", lo=1, fix="give a positive integer")
+        validate.real(tol, "fem.static_solve: tol", lo=0.0, hi=1.0, lo_open=True, hi_open=True,
+                      fix="it is update / body size, e.g. 1e-9")
         load = forces + self.masses[:, None] * self.gravity[None, :]
         free = ~self.fixed
         free3 = np.repeat(free, 3)

@@ -36,6 +36,7 @@ from typing import ClassVar
 import numpy as np
 from numba import njit
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue.compliance import DEFAULT_CACHE_MB, CondensedCompliance
@@ -102,10 +103,8 @@ class QuasiStaticFEMModel(TetFEMModel):
             if key in base_kwargs:
                 raise ConfigError(f"fem_static has no option {key!r} (it has no dynamic integrator); options: "
                                   "formulation, fixed_dofs, cache_mb, fixed, gravity, region_materials")
-        if not (isinstance(cache_mb, (int, float)) and not isinstance(cache_mb, bool) and math.isfinite(cache_mb)
-                and cache_mb > 0):
-            raise ConfigError(f"fem_static: cache_mb must be a positive number of megabytes, got {cache_mb!r}")
-        self.cache_mb = float(cache_mb)
+        self.cache_mb = validate.positive(cache_mb, "fem_static: cache_mb", unit="MB",
+                                          fix="the memory of cached compliance rows, e.g. 256")
         self._comp: CondensedCompliance | None = None
         if base_kwargs.get("guard") is None:
             # a linear solve with a factorised SPD stiffness cannot diverge: an inverted element means

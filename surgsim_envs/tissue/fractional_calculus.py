@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import convolve
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 KINDS = ("caputo", "rl")
@@ -69,10 +70,7 @@ def l1_weights(q: float, n: int) -> np.ndarray:
 
 
 def check_order(q) -> float:
-    q = float(q)
-    if not (math.isfinite(q) and 0.0 <= q <= 1.0):
-        raise ConfigError(f"fractional order q must lie in [0, 1] (0 elastic, 1 viscous), got {q!r}")
-    return q
+    return validate.real(q, "fractional order q", lo=0.0, hi=1.0, fix="0 elastic, 1 viscous")
 
 
 # --------------------------------------------------------------------------------------------
@@ -105,8 +103,7 @@ class PiecewiseOrder:
     def uniform(cls, values, duration: float) -> "PiecewiseOrder":
         """N equal pieces over [0, duration] with orders ``values``."""
         values = np.atleast_1d(np.asarray(values, dtype=float))
-        if not (math.isfinite(duration) and duration > 0):
-            raise ConfigError(f"duration must be > 0 s, got {duration!r}")
+        validate.positive(duration, "duration", unit="s", fix="the time the pieces span")
         n = len(values)
         return cls(tuple(duration * np.arange(1, n) / n), tuple(values))
 
@@ -139,16 +136,14 @@ def _check_signal(f, h):
     f = np.asarray(f, dtype=float).ravel()
     if len(f) < 2 or not np.all(np.isfinite(f)):
         raise ConfigError(f"f must be a finite 1-D array of at least 2 samples, got shape {np.shape(f)}")
-    if not (isinstance(h, (int, float, np.floating)) and math.isfinite(h) and h > 0):
-        raise ConfigError(f"time step h must be a positive number of seconds, got {h!r}")
+    validate.positive(h, "time step h", unit="s", fix="the sampling interval of the signal")
     return f, float(h)
 
 
 def _memory(memory, n: int) -> int:
     if memory is None:
         return n
-    if not (isinstance(memory, (int, np.integer)) and memory >= 1):
-        raise ConfigError(f"memory (short-memory length L in steps) must be an integer >= 1 or None, got {memory!r}")
+    validate.integer(memory, "memory (short-memory length L in steps)", lo=1, fix="or None for the full history")
     return min(int(memory), n)
 
 

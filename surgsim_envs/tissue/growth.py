@@ -124,11 +124,6 @@ def mesh_volume(positions: np.ndarray, tets: np.ndarray) -> float:
 MAX_GROWTH_ITERATIONS = 100_000
 
 
-def _check_number(name, value, *, minimum=None, exclusive=True, fix=""):
-    lo = -math.inf if minimum is None else float(minimum)
-    return validate.real(value, name, lo=lo, lo_open=exclusive and minimum is not None, fix=fix)
-
-
 class GrowthSolver:
     """Basic-model and growth solves on one mesh and one set of Dirichlet conditions.
 
@@ -276,18 +271,16 @@ class GrowthSolver:
         equilibrate: make sigma_g self-equilibrated (module doc); False = the paper's literal k sigma_d0^+.
         callback: optional ``callback(iteration, growth)`` after each iteration (progress bars).
         """
-        k = _check_number("k (growth parameter)", k, minimum=0.0, exclusive=False,
-                          fix="k >= 0 scales the extra growth; the paper's optimum is 20")
+        k = validate.non_negative(k, "k (growth parameter)", fix="k >= 0 scales the extra growth; the paper's optimum is 20")
         auto, safe = self.alpha_bounds()
         if isinstance(alpha, str):
             if alpha != "auto":
                 raise ConfigError(f"alpha must be a positive number (1/Pa) or 'auto', got {alpha!r}")
             alpha = auto
-        alpha = _check_number("alpha (stability factor, 1/Pa)", alpha, minimum=0.0,
-                              fix=f"use alpha='auto' ({auto:.4g} 1/Pa here) or a value below {safe:.4g} 1/Pa")
-        tol = _check_number("tol", tol, minimum=0.0, fix="e.g. 1e-5 (relative growth per iteration)")
-        if tol >= 1:
-            raise ConfigError(f"tol must lie in (0, 1), got {tol!r}")
+        alpha = validate.positive(alpha, "alpha (stability factor, 1/Pa)",
+                                  fix=f"use alpha='auto' ({auto:.4g} 1/Pa here) or a value below {safe:.4g} 1/Pa")
+        tol = validate.real(tol, "tol", lo=0.0, hi=1.0, lo_open=True, hi_open=True,
+                            fix="e.g. 1e-5 (relative growth per iteration)")
         validate.integer(max_iter, "max_iter", lo=1, hi=MAX_GROWTH_ITERATIONS,
                          fix=f"iterations of the growth loop, at most {MAX_GROWTH_ITERATIONS:,} (each is a solve)")
         ops = self.ops

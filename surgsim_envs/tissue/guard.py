@@ -19,7 +19,7 @@ on dt and never leaves the model NaN.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numba import njit
@@ -80,8 +80,26 @@ def speed_within(pos, vel, max_speed2) -> bool:
     return not bad
 
 
-if TYPE_CHECKING:
-    from surgsim_envs.tissue.base import TissueModel
+class GuardedModel(Protocol):
+    """What the guard reads of a model: its name, step count, time (s), positions (N,3) m and
+    velocities (N,3) m/s (written back in place while the critical dt of the last good state is
+    evaluated; ``rest_positions`` too where the model has them), and the four estimates below.
+    :class:`~surgsim_envs.tissue.base.TissueModel` is one; the guard needs nothing else of it, so it
+    sits below the model base class."""
+
+    name: str
+    steps: int
+    time: float
+    positions: np.ndarray
+    velocities: np.ndarray
+
+    def critical_dt(self) -> float: ...
+
+    def inverted_elements(self) -> int: ...
+
+    def kinetic_energy(self) -> float: ...
+
+    def elastic_energy(self) -> float: ...
 
 
 class StabilityGuard:
@@ -119,7 +137,7 @@ class StabilityGuard:
         self._good_pos, self._good_vel = good_pos, good_vel
         self._good_time = good_time
 
-    def check_inputs(self, model: "TissueModel", forces: np.ndarray, stiffness: np.ndarray | None = None) -> None:
+    def check_inputs(self, model: GuardedModel, forces: np.ndarray, stiffness: np.ndarray | None = None) -> None:
         """Raise :class:`NonFiniteInputError` if ``forces`` (N,3) N or ``stiffness`` (N,) N/m hold
         NaN/inf (call before the step: the state stays as it was)."""
         for name, arr, unit in (("external forces", forces, "N"), ("contact stiffness", stiffness, "N/m")):
@@ -134,7 +152,7 @@ class StabilityGuard:
                     f"(t={model.time:.4g} s); the step was refused and the state is unchanged. Find what produced "
                     "the non-finite value (a contact or tool force, a user-supplied array) and pass finite numbers")
 
-    def _snapshot(self, model: "TissueModel") -> None:
+    def _snapshot(self, model: GuardedModel) -> None:
         if self._good_pos is None or self._good_pos.shape != model.positions.shape:
             self._good_pos = model.positions.copy()
             self._good_vel = model.velocities.copy()
@@ -143,7 +161,7 @@ class StabilityGuard:
             np.copyto(self._good_vel, model.velocities)
         self._good_time = float(model.time)
 
-    def critical_dt_of_last_good_state(self, model: "TissueModel") -> float:
+    def critical_dt_of_last_good_state(self, model: GuardedModel) -> float:
         """``model.critical_dt()`` evaluated on the last state that passed every check (the rest
         state when none has yet); the model's state is restored afterwards. NaN if it fails."""
         pos, vel = model.positions, model.velocities
@@ -171,7 +189,7 @@ class StabilityGuard:
                 np.copyto(vel, saved[1])
         return crit
 
-    def fail(self, model: "TissueModel", dt: float, reason: str) -> None:
+    def fail(self, model: GuardedModel, dt: float, reason: str) -> None:
         crit = self.critical_dt_of_last_good_state(model)
         if self._good_pos is not None:
             reason += f" (critical dt evaluated on the last good state, t={self._good_time:.4g} s)"
@@ -179,7 +197,7 @@ class StabilityGuard:
             reason += " (critical dt evaluated on the rest state)"
         raise TissueUnstableError(model.name, dt, crit, reason)
 
-    def check(self, model: "TissueModel", dt: float) -> None:
+    def check(self, model: GuardedModel, dt: float) -> None:
         vmax2 = max_speed_squared(model.positions, model.velocities)
         if not math.isfinite(vmax2):
             self.fail(model, dt, f"non-finite positions or velocities at t={model.time:.4g} s")

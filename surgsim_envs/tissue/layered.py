@@ -31,6 +31,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.layers import DIRECTIONS, LayeredVolume, layered_from_grid
 from surgsim_envs.tissue import layered_kernels as kern
@@ -88,7 +89,6 @@ class LayeredModel(TissueModel):
     summary: ClassVar[str] = ("heterogeneous layered tissue (Lin et al. 2008): NBB springs from material layers, "
                               "constrained local static integration on active nodes, force accumulation")
     integrators: ClassVar[tuple[str, ...]] = ("local_static",)
-    quasi_static: ClassVar[bool] = True
     capabilities: ClassVar[frozenset] = frozenset({"forces", "implicit_contact", "quasi_static", "static_solve",
                                                    "unstructured_mesh"})
 
@@ -115,9 +115,8 @@ class LayeredModel(TissueModel):
             material, region_materials = base, None
         if not (0.0 < float(max_compression) < 1.0):
             raise ConfigError(f"layered: max_compression must be in (0, 1), got {max_compression!r}")
-        for key, val in (("f_tol", f_tol), ("x_tol", x_tol)):
-            if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
-                raise ConfigError(f"layered: {key} must be > 0, got {val!r}")
+        validate.positive(f_tol, "layered: f_tol", unit="N", fix="the force threshold of the active set")
+        validate.positive(x_tol, "layered: x_tol", unit="m", fix="the displacement threshold of the iteration")
         if not (isinstance(omega, (int, float)) and 1.0 <= omega < 2.0):
             raise ConfigError(f"layered: omega must be in [1, 2) (1 = plain local static iteration), got {omega!r}")
         if stiffness not in STIFFNESS_FORMS:
@@ -125,10 +124,9 @@ class LayeredModel(TissueModel):
                               f"'elastic': linear elasticity of the snapped cells), got {stiffness!r}")
         if solver not in SOLVERS:
             raise ConfigError(f"layered: solver must be one of {SOLVERS}, got {solver!r}")
-        if not (isinstance(block_radius, (int, float)) and math.isfinite(block_radius) and block_radius > 0):
-            raise ConfigError(f"layered: block_radius must be a length > 0 m, got {block_radius!r}")
-        if not (isinstance(max_updates, (int, np.integer)) and max_updates >= 1):
-            raise ConfigError(f"layered: max_updates must be a positive integer, got {max_updates!r}")
+        validate.positive(block_radius, "layered: block_radius", unit="m",
+                          fix="the nodes within it of the contact are written each step")
+        validate.integer(max_updates, "layered: max_updates", lo=1, fix="give a positive integer")
         if region_materials is None:
             present = set(np.unique(volume.labels).tolist())  # a layer thinner than the lattice may own no tet
             region_materials = {k: volume.material_table[m] for k, m in enumerate(volume.layer_names) if k in present}
@@ -436,8 +434,8 @@ class LayeredModel(TissueModel):
         if (self.solver != "prefactored" or self._elastic or forces is not None or stiffness is not None
                 or self.external_forces is not self._ext_zero or self._seed_all):
             return super().step(dt, forces, stiffness)
-        if not (isinstance(dt, (float, int, np.floating)) and math.isfinite(dt) and dt > 0):
-            raise ConfigError(f"dt must be a positive number of seconds, got {dt!r}; default is 1e-3")
+        if not (isinstance(dt, (float, int, np.floating)) and math.isfinite(dt) and dt > 0):   # once per step:
+            validate.positive(dt, "dt", unit="s", fix="the default is 1e-3 s")              # the check inline
         pc = self._prefactored_solver()
         self._last_dt = float(dt)
         self._xversion += 1

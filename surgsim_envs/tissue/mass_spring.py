@@ -37,6 +37,7 @@ from typing import Any, ClassVar, Mapping
 import numpy as np
 from numba import njit
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, StaticSolveError
 from surgsim_envs.tissue import msd_kernels as kern
 from surgsim_envs.tissue.base import TissueModel
@@ -94,20 +95,16 @@ def _count_inverted(x: np.ndarray, tets: np.ndarray) -> int:
     return int(np.count_nonzero(np.linalg.det(e) <= 0.0))
 
 
+#: the fix quoted when a spring constant K1 is not > 0, and when another override is negative
+_K1_FIX = "it is a spring constant in N/m (leave it None to derive it from the material's Young's modulus)"
+_NON_NEGATIVE_FIX = "negative stiffness or damping injects energy; leave it None to derive it from the material"
+
+
 def _check_scalar(name: str, value: Any, *, positive: bool) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"mass_spring: {name}={value!r} must be a number (SI units)") from None
-    if not math.isfinite(x):
-        raise ConfigError(f"mass_spring: {name}={value!r} must be finite")
-    if positive and x <= 0:
-        raise ConfigError(f"mass_spring: {name}={value!r} must be > 0; it is a spring constant in N/m "
-                          "(leave it None to derive it from the material's Young's modulus)")
-    if x < 0:
-        raise ConfigError(f"mass_spring: {name}={value!r} must be >= 0 (negative stiffness or damping "
-                          "injects energy); leave it None to derive it from the material")
-    return x
+    """``value`` as a float: > 0 if ``positive`` (K1), else >= 0 (:mod:`surgsim_envs.validate`)."""
+    if positive:
+        return validate.positive(value, f"mass_spring: {name}", fix=_K1_FIX)
+    return validate.non_negative(value, f"mass_spring: {name}", fix=_NON_NEGATIVE_FIX)
 
 
 class MassSpringModel(TissueModel):
@@ -156,8 +153,8 @@ class MassSpringModel(TissueModel):
     def __init__(self, volume, material="liver", *, integrator=None, springs="edges",
                  K1=None, K2=None, b0=None, b1=None, volume_stiffness=None, cg_tol: float = CG_TOLERANCE,
                  **base_kwargs):
-        if not (isinstance(cg_tol, (int, float)) and math.isfinite(cg_tol) and 0 < cg_tol < 1):
-            raise ConfigError(f"mass_spring: cg_tol={cg_tol!r} must lie in (0, 1) (relative CG residual)")
+        validate.real(cg_tol, "mass_spring: cg_tol", lo=0.0, hi=1.0, lo_open=True, hi_open=True,
+                      fix="it is the relative CG residual, e.g. 1e-6")
         if springs != "edges":
             raise ConfigError(f"mass_spring: springs={springs!r} is not supported; use springs='edges' "
                               "(one spring per tet edge)")
@@ -565,10 +562,9 @@ class MassSpringModel(TissueModel):
         F = np.zeros((n, 3)) if forces is None else np.asarray(forces, dtype=np.float64)
         if F.shape != (n, 3) or not np.all(np.isfinite(F)):
             raise ConfigError(f"forces must be a finite ({n}, 3) array in N, got shape {F.shape}")
-        if not (math.isfinite(tol) and 0 < tol < 1):
-            raise ConfigError(f"mass_spring.static_solve: tol={tol!r} must lie in (0, 1) (relative residual)")
-        if not (isinstance(max_iter, (int, np.integer)) and max_iter >= 1):
-            raise ConfigError(f"mass_spring.static_solve: max_iter={max_iter!r} must be a positive integer")
+        validate.real(tol, "mass_spring.static_solve: tol", lo=0.0, hi=1.0, lo_open=True, hi_open=True,
+                      fix="it is the relative residual")
+        validate.integer(max_iter, "mass_spring.static_solve: max_iter", lo=1, fix="give a positive integer")
         F = F + self.masses[:, None] * self.gravity[None]
         fixed = self.fixed
         start = np.ascontiguousarray(self.rest_positions.copy())

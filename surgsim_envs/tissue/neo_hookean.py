@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, SurgSimError
 from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue import nodal_volume_kernels as nvk
@@ -53,7 +54,6 @@ class NeoHookeanModel(TissueModel):
     summary: ClassVar[str] = ("stable Neo-Hookean tets (Smith 2018) with averaged nodal volume, quasi-static "
                               "projected-Newton solve: large-strain hyperelasticity")
     integrators: ClassVar[tuple[str, ...]] = ("quasi_static",)
-    quasi_static: ClassVar[bool] = True
     capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "quasi_static", "static_solve"})
     #: material fields scale_material / set_field may change (the model re-derives its constants)
     material_fields: ClassVar[tuple[str, ...]] = ("young", "poisson")
@@ -61,14 +61,12 @@ class NeoHookeanModel(TissueModel):
     def __init__(self, volume, material="silicone", *, newton_tol: float = 1e-8, max_iter: int = 30,
                  c01_fraction: float = 0.0, **base_kwargs):
         super().__init__(volume, material, **base_kwargs)
-        if not (isinstance(c01_fraction, (int, float)) and 0.0 <= c01_fraction <= 1.0):
-            raise ConfigError(f"c01_fraction={c01_fraction!r} must lie in [0, 1] (share of the shear modulus "
-                              "carried by the Mooney-Rivlin I2 term; 0 = Neo-Hookean)")
+        validate.real(c01_fraction, "c01_fraction", lo=0.0, hi=1.0,
+                      fix="the share of the shear modulus carried by the Mooney-Rivlin I2 term; 0 = Neo-Hookean")
         self.c01_fraction = float(c01_fraction)
-        if not (math.isfinite(newton_tol) and 0 < newton_tol < 1):
-            raise ConfigError(f"newton_tol={newton_tol!r} must lie in (0, 1)")
-        if not (isinstance(max_iter, (int, np.integer)) and max_iter >= 1):
-            raise ConfigError(f"max_iter={max_iter!r} must be a positive integer")
+        validate.real(newton_tol, "newton_tol", lo=0.0, hi=1.0, lo_open=True, hi_open=True,
+                      fix="a relative residual, e.g. 1e-8")
+        validate.integer(max_iter, "max_iter", lo=1, fix="Newton iterations per load increment, e.g. 30")
         self.newton_tol, self.max_iter = float(newton_tol), int(max_iter)
         self.tets = np.ascontiguousarray(volume.tets, dtype=np.int64)
         self.grads, self.tet_volume, _ = asm.shape_gradients(self.rest_positions, self.tets)

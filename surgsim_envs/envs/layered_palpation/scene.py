@@ -30,7 +30,7 @@ class PressScene:
         self.home = np.array([0.0, 0.0, float(rest[:, 2].max()) + 0.03])
         tc = TissueConfig(name="wall", organ="abdominal_wall", model="layered", material=None, spacing=spacing,
                           volume_options={"size": tuple(size)}, position=(0.0, 0.0, z_mid), anchors=("bottom",))
-        cfg = SceneConfig(tissues=[tc], probes=[ProbeConfig(position=tuple(self.home), drive="free",
+        cfg = SceneConfig(tissues=[tc], tools=[ProbeConfig(position=tuple(self.home), drive="free",
                                                             tip_radius=radius)],
                           dt=1e-3, render_width=int(render_width), render_height=int(render_height))
         self.sim = sim = Simulation(build_scene(cfg))

@@ -17,6 +17,7 @@ from types import ModuleType
 
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.config import GrasperConfig, ProbeConfig
+from surgsim_envs.scene.tools import proxy
 from surgsim_envs.scene.tools.base import TOOL_CONAFFINITY, TOOL_CONTYPE, ToolSpec
 
 #: tool config class -> module path of its kind
@@ -46,22 +47,10 @@ register_tool(ProbeConfig, "surgsim_envs.scene.tools.probe")
 register_tool(GrasperConfig, "surgsim_envs.scene.tools.grasper")
 
 
-def add_probe(spec, cfg: ProbeConfig) -> ToolSpec:
-    """Add a probe to ``spec`` (same as ``build_tool``)."""
-    return build_tool(spec, cfg)
-
-
-def add_grasper(spec, cfg: GrasperConfig) -> ToolSpec:
-    """Add a three-jaw grasper to ``spec`` (same as ``build_tool``)."""
-    return build_tool(spec, cfg)
-
-
 def add_haptic_proxy(spec, cfg, tool: ToolSpec) -> None:
     """Add a mocap proxy welded to ``tool`` (see :mod:`surgsim_envs.scene.tools.proxy`)."""
-    from surgsim_envs.scene.tools import proxy
-
     proxy.build(spec, cfg, tool)
 
 
-__all__ = ["ToolSpec", "TOOL_CONTYPE", "TOOL_CONAFFINITY", "register_tool", "tool_kind", "build_tool", "add_probe",
-           "add_grasper", "add_haptic_proxy"]
+__all__ = ["ToolSpec", "TOOL_CONTYPE", "TOOL_CONAFFINITY", "register_tool", "tool_kind", "build_tool",
+           "add_haptic_proxy"]

@@ -19,9 +19,10 @@ import mujoco
 import numpy as np
 
 from surgsim_envs.errors import ConfigError
-from surgsim_envs.scene.config import GrasperConfig, positive, vec
+from surgsim_envs.scene.config import GrasperConfig, rate_limit, vec
 from surgsim_envs.scene.tools.base import (_SLIDE, TOOL_CONAFFINITY, TOOL_CONTYPE, ToolSpec, _mat2quat,
                                            _rotation_to, _slide_drive)
+from surgsim_envs.validate import positive
 
 KIND = "grasper"
 DRIVES = ("position", "proxy", "free")
@@ -77,9 +78,9 @@ class GrasperTool(ToolSpec):
 def validate(g: GrasperConfig) -> None:
     """ConfigError naming the first bad field of grasper ``g``."""
     for key in ("open_radius", "min_radius", "jaw_length", "jaw_width", "jaw_thickness", "shaft_radius",
-                "shaft_length", "closing_speed", "kp", "jaw_kp", "mass", "jaw_mass", "travel", "speed"):
-        positive(getattr(g, key), f"grasper '{g.name}' {key}", "give a positive number in SI units",
-                 allow_inf=key == "speed")
+                "shaft_length", "closing_speed", "kp", "jaw_kp", "mass", "jaw_mass", "travel"):
+        positive(getattr(g, key), f"grasper '{g.name}' {key}", fix="give a positive number in SI units")
+    rate_limit(g.speed, f"grasper '{g.name}' speed")
     if g.min_radius >= g.open_radius:
         raise ConfigError(f"grasper '{g.name}': min_radius={g.min_radius} m must be < open_radius={g.open_radius} m")
     if g.jaw_width / 2 >= g.min_radius * math.sqrt(3):

@@ -12,8 +12,10 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from surgsim_envs.scene.config import ProbeConfig, positive, vec
+from surgsim_envs.errors import ConfigError
+from surgsim_envs.scene.config import ProbeConfig, rate_limit, vec
 from surgsim_envs.scene.tools.base import _HINGE, TOOL_CONAFFINITY, TOOL_CONTYPE, ToolSpec, _slide_drive
+from surgsim_envs.validate import positive
 
 KIND = "probe"
 DRIVES = ("position", "proxy", "free")
@@ -31,13 +33,11 @@ class ProbeTool(ToolSpec):
 def validate(p: ProbeConfig) -> None:
     """ConfigError naming the first bad field of probe ``p``."""
     for key, hint in (("tip_radius", "e.g. 0.005 (5 mm)"), ("rod_radius", "e.g. 0.003"), ("rod_length", "e.g. 0.1"),
-                      ("kp", "e.g. 2e4 N/m"), ("mass", "e.g. 0.05 kg"), ("travel", "e.g. 0.2 m"),
-                      ("speed", "m/s, inf for no limit")):
-        positive(getattr(p, key), f"probe '{p.name}' {key}", hint, allow_inf=key == "speed")
+                      ("kp", "e.g. 2e4 N/m"), ("mass", "e.g. 0.05 kg"), ("travel", "e.g. 0.2 m")):
+        positive(getattr(p, key), f"probe '{p.name}' {key}", fix=hint)
+    rate_limit(p.speed, f"probe '{p.name}' speed")
     vec(p.position, 3, f"probe '{p.name}' position")
     if p.drive not in DRIVES:
-        from surgsim_envs.errors import ConfigError
-
         raise ConfigError(f"probe '{p.name}' drive={p.drive!r}; choose 'position', 'proxy' or 'free'")
 
 
