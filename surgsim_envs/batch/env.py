@@ -40,13 +40,14 @@ from gymnasium.vector.utils import batch_space
 from surgsim_envs.batch.simulation import BatchSimulation
 from surgsim_envs.envs.checks import sample
 from surgsim_envs.envs.tissue_setup import sphere_mask
+from surgsim_envs.batch.world_view import WorldView
 from surgsim_envs.envs.palpation import (PalpationEnv, is_new_site, localisation_error,
                                          localisation_reward, map_cell, stiffness_map,
                                          stiffness_weighted_estimate)
+from surgsim_envs.envs.palpation.terms import localisation_potential
+from surgsim_envs.envs.terms.reward import RewardManager
 from surgsim_envs.errors import ConfigError
 
-#: reward terms in the order the single env sums them (its dict order)
-REWARD_TERMS = ("damage", "coverage", "shaping", "time", "press_site", "localisation")
 
 
 class _WorldTask:
@@ -64,9 +65,15 @@ class _WorldTask:
         self.estimate = None
         self.contrast_seen = 1.0
         self.cell_k = np.zeros(self.n_cells)
-        self.phi = 0.0
+        self.phi = self.phi_before = 0.0
+        self.new_cell = self.new_site = self.finished_now = False
         self.guess = None
         self.error = None
+
+    def begin_step(self) -> None:
+        """Clear the step's events and keep the potential at the step's start (the single env's ``_update``)."""
+        self.new_cell = self.new_site = self.finished_now = False
+        self.phi_before = self.phi
 
 
 class BatchedPalpationEnv(VectorEnv):
@@ -98,6 +105,10 @@ class BatchedPalpationEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, W)
         self.action_space = batch_space(self.single_action_space, W)
         self.observation_names = self.template.observation_names
+        # the reward terms the single env declares (names, order, weight fields, functions)
+        self.rewards = RewardManager(type(self.template).REWARD_TERMS, c)
+        self.reward_term_names = self.rewards.names
+        self._view = WorldView(c, self.template.control_dt)
         self.substeps = self.template.substeps
         self.control_dt = self.template.control_dt
         self.max_episode_steps = self.template.max_episode_steps
@@ -222,9 +233,8 @@ class BatchedPalpationEnv(VectorEnv):
         pos, force, depth = self._read()
         fmag = np.sqrt(np.einsum("ij,ij->i", force, force))
         self._peak = np.where(live, np.maximum(self._peak, fmag), self._peak)
-        terms = {name: np.zeros(W) for name in REWARD_TERMS}
-        terms["damage"] = -c.damage_weight * np.maximum(0.0, fmag - c.damage_force)
-        terms["time"][:] = -c.time_cost
+        for w in np.flatnonzero(live):
+            self._tasks[w].begin_step()
         pressing = depth >= c.press_min_depth
         k = np.where(pressing, force[:, 2] / np.where(pressing, depth, 1.0), 0.0)      # stiffness_estimate
         better = live & (k > self._best[:, 2])
@@ -234,13 +244,12 @@ class BatchedPalpationEnv(VectorEnv):
         self._prev_tip = np.where(live[:, None], pos, self._prev_tip)
         quasi_static = speed <= c.sample_max_speed
         for w in np.flatnonzero(live & (k > 0.0) & quasi_static):
-            self._record_sample(w, pos[w, :2].copy(), float(k[w]), terms)
+            self._record_sample(w, pos[w, :2].copy(), float(k[w]))
         for w in np.flatnonzero(live & pressing & quasi_static):
             task = self._tasks[w]
             if is_new_site(pos[w, :2], task.sites, c.site_spacing):
                 task.sites.append(pos[w, :2].copy())
-                if len(task.sites) <= c.max_rewarded_sites:
-                    terms["press_site"][w] += c.press_reward
+                task.new_site = len(task.sites) <= c.max_rewarded_sites
         self._report_held = np.where(a[:, 3] > 0.0, self._report_held + 1, 0)
         terminated = live & (self._report_held >= c.report_hold_steps) & (self._steps * self.control_dt >= c.min_report_seconds)
         truncated = live & ~terminated & (self._steps >= self.max_episode_steps)
@@ -248,12 +257,17 @@ class BatchedPalpationEnv(VectorEnv):
         for w in np.flatnonzero(terminated | truncated):
             r = self._finish(w, pos[w])
             if terminated[w]:
-                terms["localisation"][w] += r
+                self._tasks[w].finished_now = True       # the localisation term pays the report
             else:
-                final[w] = r
+                final[w] = r                             # as the single env's "final" entry
+        terms = {name: np.zeros(W) for name in self.reward_term_names}
         reward = np.zeros(W)
-        for name in REWARD_TERMS:           # the single env's sum order, entry by entry
-            reward = reward + terms[name]
+        view = self._view
+        for w in np.flatnonzero(live):       # the single env's term functions, summed in declared order
+            view.point((pos[w], force[w], float(depth[w])), self._tasks[w], self._steps[w], self._report_held[w])
+            reward[w], values = self.rewards.compute(view)
+            for name, v in values.items():
+                terms[name][w] = v
         reward = reward + final
         for name in terms:
             terms[name] = np.where(live, terms[name], 0.0)
@@ -268,23 +282,21 @@ class BatchedPalpationEnv(VectorEnv):
             info["is_success"], info["_is_success"] = ok.copy(), ended.copy()
         return np.where(live, reward, 0.0), terminated, truncated, info
 
-    def _record_sample(self, w: int, xy: np.ndarray, k: float, terms: dict) -> None:
+    def _record_sample(self, w: int, xy: np.ndarray, k: float) -> None:
         """The single env's sample bookkeeping for world ``w`` (coverage, estimate, contrast, shaping)."""
         c, task = self.config, self._tasks[w]
         task.samples_xy.append(xy)
         task.samples_k.append(k)
         cell = map_cell(xy, int(c.map_cells), float(c.map_half_width))
         if task.cell_k[cell] == 0.0:
-            terms["coverage"][w] += c.cell_reward
+            task.new_cell = True
         task.cell_k[cell] = max(task.cell_k[cell], k)
         ks = np.array(task.samples_k)
         task.estimate = stiffness_weighted_estimate(np.array(task.samples_xy), ks)
         med = float(np.median(ks))
         task.contrast_seen = float(ks.max()) / med if med > 0 else 1.0
         err = localisation_error(task.estimate, task.inclusion["centre"][:2])
-        phi = 1.0 - min(err / c.localisation_scale, 1.0)
-        terms["shaping"][w] += c.shaping_weight * (phi - task.phi)
-        task.phi = phi
+        task.phi = localisation_potential(err, c.localisation_scale)
 
     def _finish(self, w: int, pos: np.ndarray) -> float:
         c, task = self.config, self._tasks[w]
