@@ -9,6 +9,7 @@ import dataclasses
 import io
 import json
 import math
+import struct
 import tempfile
 import zipfile
 from pathlib import Path
@@ -41,12 +42,13 @@ hostile_value = st.one_of(
 # -- config fields ----------------------------------------------------------------------------------
 def config_classes() -> dict:
     from surgsim_envs.envs.grasp import GraspConfig
+    from surgsim_envs.envs.layered_palpation.config import LayeredPalpationConfig
     from surgsim_envs.envs.palpation import PalpationConfig
     from surgsim_envs.envs.palpation_press import PalpationPressConfig
     from surgsim_envs.envs.slippage import SlippageConfig
 
     return {"Palpation-v0": PalpationConfig, "PalpationPress-v0": PalpationPressConfig, "Grasp-v0": GraspConfig,
-            "Slippage-v0": SlippageConfig}
+            "Slippage-v0": SlippageConfig, "LayeredPalpation-v0": LayeredPalpationConfig}
 
 
 def config_case():
@@ -108,6 +110,107 @@ def make_action(case):
 def run_action(env, case):
     obs, reward, terminated, truncated, info = env.step(make_action(case))
     return obs, reward
+
+
+#: every registered task whose actions are fuzzed (one env each, reused across cases)
+ACTION_TASKS = ("Palpation-v0", "PalpationPress-v0", "Grasp-v0", "Slippage-v0", "LayeredPalpation-v0")
+
+
+def task_action_case():
+    """(task, action case): an action of any shape and dtype, or the task's own shape filled with a
+    hostile value."""
+    return st.tuples(st.sampled_from(ACTION_TASKS), action_case())
+
+
+def run_task_action(envs: dict, case):
+    """Step task ``case[0]``'s env (reset first: a terminated episode is not the case under test)
+    with the hostile action ``case[1]``."""
+    task, action = case
+    env = envs[task]
+    env.reset(seed=0)
+    return run_action(env, action)
+
+
+# -- UDP pose packets ------------------------------------------------------------------------------
+TEST_KEY = bytes(range(32))
+
+
+def udp_case():
+    """Random datagrams, or well-formed headers whose every field is drawn hostile, sent with or
+    without the authentication tag a keyed session requires."""
+    any_float = st.floats(allow_nan=True, allow_infinity=True, width=64)
+    fields = st.tuples(st.integers(0, 2**32 - 1), st.integers(0, 2**32 - 1), any_float,
+                       st.tuples(any_float, any_float, any_float), st.tuples(any_float, any_float, any_float, any_float),
+                       st.integers(0, 2**32 - 1), st.floats(width=32, allow_nan=True, allow_infinity=True))
+    return st.one_of(st.tuples(st.just("bytes"), st.binary(max_size=200), st.booleans()),
+                     st.tuples(st.just("fields"), fields, st.booleans()))
+
+
+def run_udp(case):
+    """Decode one datagram as the teleop bridge does (keyed when ``case[2]``)."""
+    from surgsim_envs.haptics.pose_protocol import POSE_STRUCT, decode_pose, encode_pose
+
+    kind, payload, keyed = case
+    key = TEST_KEY if keyed else None
+    if kind == "bytes":
+        data = payload
+    else:
+        session, seq, ts, pos, quat, buttons, grip = payload
+        data = POSE_STRUCT.pack(b"SSHP", 2, 1, session, seq, ts, *pos, *quat, buttons, grip)
+        if keyed:       # the body re-sealed with the session key: only the values are hostile
+            try:
+                data = encode_pose(seq, ts, pos, quat, buttons, grip, session=session, key=key)
+            except (ValueError, OverflowError, struct.error):
+                pass
+    p = decode_pose(data, key=key)
+    return [p.timestamp, *p.position, *p.quaternion, p.grip]
+
+
+# -- mesh files ------------------------------------------------------------------------------------
+def valid_vtk(binary: bool) -> bytes:
+    """A two-tet legacy VTK unstructured grid, ASCII or binary."""
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0], [1, 1, 1.0]])
+    cells = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+    head = b"# vtk DataFile Version 3.0\nt\n" + (b"BINARY" if binary else b"ASCII") + b"\nDATASET UNSTRUCTURED_GRID\n"
+    if binary:
+        raw = np.hstack([np.full((2, 1), 4), cells]).astype(">i4").tobytes()
+        return (head + b"POINTS 5 double\n" + pts.astype(">f8").tobytes() + b"\nCELLS 2 10\n" + raw
+                + b"\nCELL_TYPES 2\n" + np.full(2, 10).astype(">i4").tobytes() + b"\n")
+    body = "POINTS 5 float\n" + "\n".join(" ".join(map(str, p)) for p in pts) + "\nCELLS 2 10\n"
+    body += "\n".join("4 " + " ".join(map(str, c)) for c in cells) + "\nCELL_TYPES 2\n10\n10\n"
+    return head + body.encode()
+
+
+def mesh_case():
+    """A valid VTK tet mesh with byte edits and a truncation, or random bytes under a surface suffix."""
+    edits = st.lists(st.tuples(st.integers(0, 10_000), st.binary(min_size=1, max_size=8)), max_size=6)
+    return st.one_of(st.tuples(st.just(".vtk"), st.tuples(st.booleans(), edits, st.integers(0, 400))),
+                     st.tuples(st.sampled_from([".stl", ".obj", ".ply", ".off"]), st.binary(max_size=400)))
+
+
+def run_mesh(case):
+    """Load the hostile file with the project's loaders (tet mesh or surface)."""
+    from surgsim_envs.geometry.loaders import load_surface, load_tet_mesh
+
+    suffix, arg = case
+    if suffix == ".vtk":
+        binary, edits, cut = arg
+        data = bytearray(valid_vtk(binary))
+        for pos, chunk in edits:
+            p = pos % (len(data) + 1)
+            data[p:p + len(chunk)] = chunk
+        if cut:
+            data = data[:max(len(data) - cut, 0)]
+    else:
+        data = bytearray(arg)
+    with tempfile.TemporaryDirectory() as tmp:
+        f = Path(tmp) / f"fuzz{suffix}"
+        f.write_bytes(bytes(data))
+        if suffix == ".vtk":
+            vol = load_tet_mesh(f)
+            return [vol.nodes, vol.tet_volumes()]
+        mesh = load_surface(f)
+        return [np.asarray(mesh.vertices)]
 
 
 # -- CLI flags ------------------------------------------------------------------------------------
