@@ -65,6 +65,15 @@ def test_short_soak_of_palpation_is_clean():
     assert row["steps"] == 120 and row["episodes"] >= 1 and 0 <= row["max_peak_force_N"] <= 50.0
 
 
+def test_short_soak_of_layered_palpation_reads_its_press_force():
+    """LayeredPalpation-v0 reports the press force as ``force_N`` (no episode peak): the soak's force
+    bound must read it, not pass it as unreported."""
+    row = soak("SurgSim/LayeredPalpation-v0", 30, seed=3)
+    bad = {k: row[k] for k in ("nan", "exceptions", "unstable", "obs_out_of_space", "force_out_of_bounds")}
+    assert bad == dict.fromkeys(bad, 0), row["exception_messages"]
+    assert 0.0 < row["max_peak_force_N"] <= 50.0
+
+
 def test_soak_rejects_bad_arguments():
     with pytest.raises(ConfigError, match="unknown task 'SurgSim/Nope-v0'"):
         soak("SurgSim/Nope-v0", 10)

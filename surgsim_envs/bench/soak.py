@@ -9,8 +9,10 @@ Every control step takes a uniformly random action from the action space; every 
   is reset (or rebuilt if reset fails) and the run goes on. A tissue divergence is counted
   separately as ``unstable`` (``TissueUnstableError`` or ``info["unstable"]``);
 * ``obs_out_of_space``: observations outside the declared observation space;
-* ``force_out_of_bounds``: steps whose ``info["peak_force_N"]`` is non-finite, negative or above
-  ``--force-bound`` N (default 50 N: tools pressing on soft tissue stay within a few N);
+* ``force_out_of_bounds``: steps whose tool force (``info["peak_force_N"]``, the episode's peak, or
+  ``info["force_N"]`` where a task reports the press force instead: :data:`FORCE_KEYS`) is
+  non-finite, negative or above ``--force-bound`` N (default 50 N: tools pressing on soft tissue
+  stay within a few N);
 * memory: resident set size (RSS, from ``/proc/self/statm``) after the first episode and at the
   end; ``rss_growth_mb`` is their difference, ``rss_slope_mb_per_100k`` the least-squares slope
   of RSS samples taken every ``--sample-every`` steps.
@@ -32,6 +34,10 @@ from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 
 FORCE_BOUND_N = 50.0
+
+#: info keys of a step's tool force, first present wins: the episode peak (physics-rate tasks) or the
+#: force of the press (quasi-static LayeredPalpation-v0)
+FORCE_KEYS = ("peak_force_N", "force_N")
 
 
 def rss_mb() -> float:
@@ -142,7 +148,7 @@ def soak(task: str, steps: int, seed: int = 0, force_bound: float = FORCE_BOUND_
                 c.nan += 1
             elif not env.observation_space.contains(obs):
                 c.obs_out_of_space += 1
-            peak = info.get("peak_force_N")
+            peak = next((info[k] for k in FORCE_KEYS if info.get(k) is not None), None)
             if peak is not None:
                 if not (math.isfinite(peak) and 0.0 <= peak <= force_bound):
                     c.force_out_of_bounds += 1
