@@ -51,10 +51,11 @@ def _hint(fix: str) -> str:
 
 
 def is_real_number(value: Any) -> bool:
-    """True for int / float / numpy real scalars (0-d real arrays included), False for bool,
-    complex, strings and arrays with entries."""
+    """True for int / float / numpy real scalars, False for bool, complex, strings and arrays
+    (0-d arrays included: a config keeps the value it is given, and ``round()``, ``len()`` or JSON
+    of a 0-d array fail later; ``float(x)`` or ``x.item()`` gives the number)."""
     if isinstance(value, np.ndarray):
-        return value.ndim == 0 and value.dtype.kind in "fiu"
+        return False
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
@@ -62,8 +63,9 @@ def real(value: Any, name: str, *, lo: float = -math.inf, hi: float = math.inf, 
          fix: str = "", lo_open: bool = False, hi_open: bool = False) -> float:
     """``value`` as a finite float in [lo, hi] (``lo_open`` / ``hi_open``: exclusive bound)."""
     if not is_real_number(value):
+        kind = "a 0-d array (pass float(x))" if isinstance(value, np.ndarray) and value.ndim == 0 else type(value).__name__
         raise ConfigError(f"{_label(name, value, unit)} must be a real number (int or float), not "
-                          f"{type(value).__name__}{_hint(fix)}")
+                          f"{kind}{_hint(fix)}")
     try:
         v = float(value)
     except OverflowError:
@@ -172,6 +174,32 @@ def path(value: Any, name: str, *, must_exist: bool = True, kind: str = "file", 
         ok = p.is_file() if kind == "file" else p.is_dir()
         if not ok:
             raise ConfigError(f"{name}={str(p)!r} is not an existing {kind}{_hint(fix)}")
+    return p
+
+
+def writable_folder(value: Any, name: str, fix: str = "") -> Path:
+    """``value`` as the Path of a folder to write in: created if missing, and it must take a file
+    (checked by writing and removing one). Checked before a long command runs, so it cannot fail
+    on its output at the end."""
+    folder = path(value, name, must_exist=False)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".surgsim-write-check-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise ConfigError(f"{name}={str(folder)!r}: cannot write there ({exc.strerror or exc})"
+                          f"{_hint(fix or 'give a writable folder')}") from None
+    return folder
+
+
+def writable_file(value: Any, name: str, fix: str = "") -> Path:
+    """``value`` as the Path of a file to be written: not a folder, in a folder
+    :func:`writable_folder` accepts."""
+    p = path(value, name, must_exist=False)
+    if p.is_dir():
+        raise ConfigError(f"{name}={str(p)!r} is a folder; give a file path{_hint(fix)}")
+    writable_folder(p.parent, f"the folder of {name}={str(p)!r}", fix=fix or "give a path in a writable folder")
     return p
 
 

@@ -100,12 +100,12 @@ def test_reset_options_that_are_not_a_dict_are_refused_by_name(task, options):
 
 
 @pytest.mark.parametrize("task, field, value, match", [
-    ("SurgSim/Palpation-v0", "tip_radius", 5e-324, r"tip_radius=5e-324 m must be >= 0.0001"),   # overflowed
-    ("SurgSim/Palpation-v0", "max_depth", 1e-9, r"max_depth=1e-09 m must be >= 0.0001"),
-    ("SurgSim/Grasp-v0", "tolerance", 5e-324, r"tolerance=5e-324 m must be >= 0.0001"),
-    ("SurgSim/Grasp-v0", "max_step", 1e-12, r"max_step=1e-12 m must be >= 1e-06"),
+    ("SurgSim/Palpation-v0", "tip_radius", 5e-324, r"tip_radius=5e-324 m is outside \[0.0001, 1\] m"),   # overflowed
+    ("SurgSim/Palpation-v0", "max_depth", 1e-9, r"max_depth=1e-09 m is outside \[0.0001, 1\] m"),
+    ("SurgSim/Grasp-v0", "tolerance", 5e-324, r"tolerance=5e-324 m is outside \[0.0001, 1\] m"),
+    ("SurgSim/Grasp-v0", "max_step", 1e-12, r"max_step=1e-12 m is outside \[1e-06, 1\] m"),
     ("SurgSim/Grasp-v0", "closing_speed", 5e-324, r"closing_speed=5e-324 m/s must be >= 0.0001"),
-    ("SurgSim/PalpationPress-v0", "clearance", 5e-324, r"clearance=5e-324 m must be >= 0.0001"),
+    ("SurgSim/PalpationPress-v0", "clearance", 5e-324, r"clearance=5e-324 m is outside \[0.0001, 1\] m"),
     ("SurgSim/LayeredPalpation-v0", "spacing", 10 ** 400, r"spacing=1000000.*\.\.\. (m )?(must be finite|is outside)"),
 ])
 def test_degenerate_sizes_are_refused_with_the_bound(task, field, value, match):
@@ -120,4 +120,32 @@ def test_an_exact_fraction_is_a_valid_length():
     from fractions import Fraction
 
     env = gym.make("SurgSim/Grasp-v0", workspace=Fraction(3, 50))
+    env.close()
+
+
+@pytest.mark.parametrize("task, kwargs, message", [
+    ("SurgSim/Palpation-v0", {"slab_size": np.array(0.002)}, r"slab_size=array\(0.002\) must be three positive lengths"),
+    ("SurgSim/LayeredPalpation-v0", {"size": np.array(0.002)}, r"size=array\(0.002\) must be a pair"),
+    ("SurgSim/LayeredPalpation-v0", {"control_hz": np.array(2.0)}, r"not a 0-d array \(pass float\(x\)\)"),
+    ("SurgSim/Palpation-v0", {"tip_radius": 1.7976931348623157e308}, r"tip_radius=1.7976931348623157e\+308 m is outside \[0.0001, 1\] m"),
+    ("SurgSim/PalpationPress-v0", {"map_half_width": 1e300}, r"map_half_width=1e\+300 m is outside"),
+    ("SurgSim/Grasp-v0", {"resolution": 1e-320}, r"resolution=1e-320 must be 'auto', a spacing in m in \[0.0001, 0.1\)"),
+])
+def test_numpy_0d_values_and_extreme_lengths_are_refused_by_name(task, kwargs, message):
+    """A 0-d array passed validation and then failed len() / round(); a 1.8e308 m probe tip
+    overflowed the surface sampling, a 1e300 m press map gave NaN observations, a subnormal
+    resolution overflowed the node count: each is refused up front with the field and its bound."""
+    with pytest.raises(ConfigError, match=message):
+        gym.make(task, **kwargs)
+
+
+@pytest.mark.parametrize("seed, message", [(-1, r"reset seed=-1 is outside \[0, "), ("a", "reset seed='a' must be an integer"),
+                                           (1.5, "reset seed=1.5 must be an integer")])
+def test_reset_refuses_bad_seeds_by_name_and_takes_numpy_integers(seed, message):
+    env = gym.make("SurgSim/PalpationPress-v0")
+    with pytest.raises(ConfigError, match=message):
+        env.reset(seed=seed)
+    a = env.reset(seed=np.int64(3))[0]
+    b = env.reset(seed=3)[0]
+    assert np.array_equal(a, b)
     env.close()

@@ -112,3 +112,17 @@ def test_bench_speed_steps_are_bounded_by_argparse(capsys):
         main(["bench", "speed", "--steps", "1000000000000"])
     assert exc.value.code == 2
     assert "expected a positive integer of at most 1,000,000" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["bench", "trajectory", "--record", "{blocked}/x.pkl", "--steps", "2"], "--record"),
+    (["bench", "soak", "--task", "SurgSim/PalpationPress-v0", "--steps", "10", "--out", "{blocked}/soak.json"], "--out"),
+    (["record", "SurgSim/PalpationPress-v0", "--episodes", "1", "--out", "{blocked}/data"], "--out"),
+])
+def test_unwritable_outputs_are_refused_before_the_run(argv, flag, capsys, tmp_path):
+    """An output under a path that is a file (so no folder can be made there) was a raw
+    FileNotFoundError, for --record only after every trajectory had run: now exit 2 naming it."""
+    blocked = tmp_path / "a_file"
+    blocked.write_text("")
+    code, err = _run([a.replace("{blocked}", str(blocked)) for a in argv], capsys)
+    assert code == 2 and flag in err and "cannot write" in err and "Traceback" not in err, err

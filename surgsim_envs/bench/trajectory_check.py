@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import pickle
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 DEFAULT_TASKS = ("SurgSim/Palpation-v0", "SurgSim/Grasp-v0", "SurgSim/Slippage-v0")
@@ -118,6 +119,7 @@ def run(args) -> int:
         return 0 if all(d is None for d in result.values()) else 1
     if args.steps <= 0:
         raise ConfigError(f"--steps must be a positive integer, got {args.steps}")
+    validate.writable_file(args.record, "--record")
     from surgsim_envs.envs import QUASI_STATIC_TASKS
     from surgsim_envs.envs import TASKS as PHYSICS_RATE_TASKS
 

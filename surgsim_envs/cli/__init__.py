@@ -103,3 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     except SurgSimError as exc:
         print(f"surgsim {args.cli_command}: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:   # a path the command reads or writes: name it instead of a traceback
+        where = f" {exc.filename!r}" if getattr(exc, "filename", None) else ""
+        print(f"surgsim {args.cli_command}: error: cannot use{where}: {exc.strerror or exc}; give a path to an "
+              "existing file to read, or a writable folder to write to (--out)", file=sys.stderr)
+        return 2

@@ -15,6 +15,7 @@ import os
 import sys
 
 from surgsim_envs.bench.soak import FORCE_BOUND_N, soak
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 
@@ -62,6 +63,7 @@ def run(args) -> int:
 
         if args.out is None:
             raise ConfigError("--workers > 1 and --resume need --out FILE.json (where the counts are kept)")
+        validate.writable_file(args.out, "--out")
         rows = run_parallel(tasks, args.steps, args.seed, args.workers, args.out, args.resume, args.force_bound,
                             args.max_seconds, args.sample_every, args.checkpoint_every,
                             progress=not args.quiet and not args.json)

@@ -34,6 +34,7 @@ from surgsim_envs.envs.checks import apply_overrides, check_render_mode
 from surgsim_envs.envs.terms.observation import observation_space_of
 from surgsim_envs.envs.terms.reward import RewardManager
 from surgsim_envs.envs.terms.termination import any_terminated
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, RenderingUnavailableError, TissueUnstableError
 
 
@@ -185,7 +186,7 @@ class SurgSimEnv(gym.Env):
 
     # -- Gymnasium API ----------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        super().reset(seed=seed)
+        super().reset(seed=None if seed is None else validate.seed(seed, "reset seed"))
         if options is not None and not isinstance(options, dict):
             raise ConfigError(f"reset options must be a dict of option name -> value or None, got "
                               f"{type(options).__name__} {options!r:.60}; accepted options: {list(self.OPTIONS)}")

@@ -44,12 +44,16 @@ def check_positive(value, what: str, hint: str = "") -> float:
 #: are millimetres apart, so anything under a tenth of a millimetre resolves nothing (and a probe tip
 #: of 1e-300 m overflows the surface sampling it sets)
 MIN_TASK_LENGTH = 1e-4
+#: m, the largest tool size, press depth, workspace or tolerance a task takes: its scenes are
+#: organs and slabs of centimetres (a probe tip of 1e308 m overflows the surface sampling it sets)
+MAX_TASK_LENGTH = 1.0
 
 
-def check_task_length(value, what: str, lo: float = MIN_TASK_LENGTH) -> float:
-    """A length (m) of a task's tool or geometry: finite, >= ``lo`` (default :data:`MIN_TASK_LENGTH`)."""
-    return validate.real(value, what, lo=lo, unit="m",
-                         fix=f"give a length in m of at least {lo:g} (lengths are SI: 5 mm is 0.005)")
+def check_task_length(value, what: str, lo: float = MIN_TASK_LENGTH, hi: float = MAX_TASK_LENGTH) -> float:
+    """A length (m) of a task's tool or geometry: finite, in [``lo``, ``hi``] (defaults
+    :data:`MIN_TASK_LENGTH`, :data:`MAX_TASK_LENGTH`)."""
+    return validate.real(value, what, lo=lo, hi=hi, unit="m",
+                         fix=f"give a length in m in [{lo:g}, {hi:g}] (lengths are SI: 5 mm is 0.005)")
 
 
 #: the largest reward weight, bonus or cost a task accepts: a weighted sum of a few hundred terms

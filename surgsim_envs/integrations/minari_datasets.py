@@ -33,6 +33,7 @@ from typing import Callable
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 #: episodes one recording may hold (each is kept in memory until the dataset is written)
@@ -229,6 +230,7 @@ def add_arguments(parser) -> None:
 def run(args) -> int:
     from tqdm import tqdm
 
+    validate.writable_folder(args.out, "--out", fix="give a writable folder for the Minari datasets")
     bar = tqdm(total=args.episodes, desc=f"recording {args.task}", unit="episode")
     dataset = record(args.task, args.device, args.episodes, args.seed, args.out, noise=args.noise,
                      progress=lambda k: bar.update(k - bar.n))

@@ -110,13 +110,19 @@ def choose(error_tolerance: float, step_budget_us: float, scene: str = "indent",
                   float(best["us_per_ms"]), float(best.get("dt", math.nan)), scene)
 
 
+#: m, the finest spacing a resolution may ask for: a tenth of a millimetre (a 1 cm organ at that
+#: spacing is already 10^6 nodes; a subnormal spacing overflows every node count)
+MIN_SPACING = 1e-4
+
+
 def check_resolution(resolution, what: str = "resolution") -> None:
-    """Raise ConfigError unless ``resolution`` is None, ``"auto"`` or a spacing in m in (0, 0.1)."""
+    """Raise ConfigError unless ``resolution`` is None, ``"auto"`` or a spacing in m in
+    [MIN_SPACING, 0.1)."""
     if resolution is None or (isinstance(resolution, str) and resolution == "auto"):
         return
-    if not validate.is_real_number(resolution) or not 0 < resolution < 0.1:   # NaN fails the comparison
-        raise ConfigError(f"{what}={validate.short_repr(resolution)} must be 'auto', a spacing in m between 0 and "
-                          "0.1 (e.g. 0.005), or None for the default")
+    if not validate.is_real_number(resolution) or not MIN_SPACING <= resolution < 0.1:   # NaN fails the comparison
+        raise ConfigError(f"{what}={validate.short_repr(resolution)} must be 'auto', a spacing in m in "
+                          f"[{MIN_SPACING:g}, 0.1) (e.g. 0.005), or None for the default")
 
 
 def resolve_resolution(resolution, *, model: str | None = None, error_tolerance: float = 0.1,

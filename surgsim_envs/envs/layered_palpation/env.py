@@ -36,6 +36,7 @@ from surgsim_envs.envs.layered_palpation.config import LayeredPalpationConfig
 from surgsim_envs.envs.layered_palpation.terms import REWARD_TERMS
 from surgsim_envs.envs.terms import ObsTerm, RewardManager, observation_space_of
 from surgsim_envs.envs.terms.action import ActionTerm
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 
 
@@ -135,7 +136,7 @@ class LayeredPalpationEnv(gym.Env):
         if unknown:
             raise ConfigError(f"unknown reset option(s) {unknown} for LayeredPalpationEnv; it accepts none "
                               "(the nodule is placed from the seed)")
-        super().reset(seed=seed)
+        super().reset(seed=None if seed is None else validate.seed(seed, "reset seed"))
         cfg = self.config
         self.probe.move_to((1e3, 1e3, 1e3))    # lifted: every node free
         self.tissue.reset()

@@ -82,6 +82,9 @@ class PalpationConfig:
             check_positive(getattr(self, key), f"PalpationConfig.{key}")
         for key in ("tip_radius", "max_depth"):
             check_task_length(getattr(self, key), f"PalpationConfig.{key}")
+        for key in ("hover", "max_xy_step", "xy_limit", "press_min_depth", "site_spacing", "localisation_scale",
+                    "map_half_width"):     # positive above; bounded here (1e308 m overflows the geometry)
+            check_task_length(getattr(self, key), f"PalpationConfig.{key}", lo=0.0)
         check_control_rate(self, "PalpationConfig")
         check_weights(self, ("shaping_weight", "time_cost", "press_reward", "cell_reward", "damage_weight",
                              "localisation_weight", "success_bonus"), "PalpationConfig")
@@ -126,7 +129,8 @@ MAX_TASK_NODES = 1_000_000
 
 def check_slab_size(value, what: str) -> np.ndarray:
     """(3,) float array of a slab's positive finite side lengths in m (each at most 1 m)."""
-    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 3:
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") \
+            or (isinstance(value, np.ndarray) and value.ndim == 0) or len(value) != 3:
         raise ConfigError(f"{what}={value!r} must be three positive lengths in m, e.g. (0.1, 0.1, 0.02)")
     return np.array([validate.positive(v, f"{what}[{i}]", hi=1.0, unit="m", fix="slab sides are lengths in (0, 1] m")
                      for i, v in enumerate(value)])
