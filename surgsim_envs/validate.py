@@ -203,6 +203,21 @@ def writable_file(value: Any, name: str, fix: str = "") -> Path:
     return p
 
 
+def name_list(text: Any, name: str, known: Iterable[str], fix: str = "") -> list[str] | None:
+    """A comma-separated list of names, each one of ``known`` (None or "" gives None: all); a
+    typo is refused by name before a long run, never skipped into an empty result."""
+    if text is None or (isinstance(text, str) and not text.strip()):
+        return None
+    if not isinstance(text, str):
+        raise ConfigError(f"{name}={short_repr(text)} must be comma-separated names{_hint(fix)}")
+    known = list(known)
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    unknown = [t for t in names if t not in known]
+    if unknown or not names:
+        raise ConfigError(f"{name}={text!r}: unknown name(s) {unknown}; choose from {known}{_hint(fix)}")
+    return names
+
+
 def seed(value: Any, name: str = "seed") -> int:
     """A random seed: an integer in [0, 2**63 - 1] (numpy's SeedSequence refuses negatives)."""
     return integer(value, name, lo=0, hi=2**63 - 1, fix="give a non-negative integer seed")

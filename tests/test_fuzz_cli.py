@@ -4,6 +4,7 @@ bound and the fix, before anything runs or is written (never a traceback, never 
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -126,3 +127,30 @@ def test_unwritable_outputs_are_refused_before_the_run(argv, flag, capsys, tmp_p
     blocked.write_text("")
     code, err = _run([a.replace("{blocked}", str(blocked)) for a in argv], capsys)
     assert code == 2 and flag in err and "cannot write" in err and "Traceback" not in err, err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["grow", "--spacing", "1e308"], r"--spacing=1e\+308 m is outside \[0.0015, 0.02\] m"),
+    (["grow", "--translation-mm", "1e308"], r"--translation-mm=1e\+308 mm is outside \[-30, 30\] mm"),
+    (["grow", "--rotation-deg", "1e308"], r"--rotation-deg=1e\+308 deg is outside"),
+    (["grow", "--alpha", "nan"], r"--alpha='nan' must be a positive finite number"),
+    (["material", "indent", "--width", "1e308"], r"--width=1e\+308 m is outside \[0.0001, 0.5\] m"),
+    (["material", "relax", "--spacing", "1e308"], r"--spacing=1e\+308 m is outside"),
+    (["material", "slip", "--mu", "1e308"], r"--mu=1e\+308 is outside \[0, 5\]"),
+    (["material", "slip", "--max-pull-time", "1e308"], r"--max-pull-time=1e\+308 s is outside"),
+    (["material", "slip", "--material", "abc"], r"--material 'abc'"),
+    (["bench", "speed", "--models", "abc"], r"--models='abc': unknown name\(s\) \['abc'\]"),
+    (["bench", "accuracy", "--models", "abc"], r"--models='abc': unknown name\(s\) \['abc'\]"),
+    (["bench", "envs", "--spin-us", "nan"], r"--spin-us=nan us must be finite"),
+    (["bench", "envs", "--vector-envs", "-1"], r"--vector-envs='-1': each env count must lie in \[1, 1024\]"),
+    (["bench", "envs", "--vector-spin-us", "1e308"], r"--vector-spin-us=1e\+308 us is outside"),
+    (["bench", "haptics", "--duration", "1e308"], r"--duration=1e\+308 s is outside \(0, 600\] s"),
+    (["bench", "haptics-flood", "--flood-rate", "-1"], r"--flood-rate=-1.0 is outside \[0, 1e\+07\]"),
+    (["bench", "haptics-flood", "--pose-hz", "1e308"], r"--pose-hz=1e\+308 Hz is outside"),
+])
+def test_out_of_range_flags_are_refused_before_the_run(argv, message, capsys):
+    """Each was accepted (and ran for hours, overflowed or raised a raw error, or was ignored): now
+    exit 2 naming the flag, its bound and the fix."""
+    code, err = _run(argv, capsys)
+    assert code == 2 and "Traceback" not in err, err
+    assert re.search(message, err), err

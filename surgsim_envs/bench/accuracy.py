@@ -199,7 +199,10 @@ def run(args: argparse.Namespace) -> int:
         from surgsim_envs.bench.accuracy_layered import run_scene
 
         return run_scene(args)
-    models = None if not args.models else [m.strip() for m in args.models.split(",") if m.strip()]
+    from surgsim_envs import tissue, validate
+
+    models = validate.name_list(args.models, "--models",
+                                list(tissue.names()) + ["mujoco_flex_full", "mujoco_flex_trilinear"])
     rows = sweep(models, QUICK_SPACINGS if args.quick else SPACINGS)
     if not getattr(args, "no_baselines", False):
         full = models is None or "mujoco_flex_full" in models

@@ -28,6 +28,7 @@ import numpy as np
 from surgsim_envs.bench.random_actions import random_actions
 from surgsim_envs.bench.reference_kernel import reference_kernel_us
 from surgsim_envs.bench.spin_env import SpinEnv
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 #: s, an async step that takes longer than this raises instead of hanging
@@ -356,15 +357,51 @@ def _model_ratio(env_id: str, steps: int, repeats: int) -> dict:
         return {"model_ratio_error": f"{type(exc).__name__}: {exc}"}
 
 
+#: us, the longest stand-in step time or poll the vector figures take (a second per step is not a
+#: stand-in for a task, and a timed run of it would take hours)
+MAX_SPIN_US = 1e6
+
+
 def _vector_envs_option(args):
-    """``--vector-envs`` as a list of ints (None when not given); ConfigError naming a bad value."""
+    """``--vector-envs`` as a list of ints in [1, 1024] (None when not given); ConfigError naming a bad value."""
     counts = getattr(args, "vector_envs", None)
     if counts is None:
         return None
     try:
-        return [int(c) for c in str(counts).split(",") if c.strip()]
+        out = [int(c) for c in str(counts).split(",") if c.strip()]
     except ValueError:
         raise ConfigError(f"--vector-envs takes env counts (integers), comma-separated, got {counts!r}") from None
+    if not out or any(not 1 <= c <= 1024 for c in out):
+        raise ConfigError(f"--vector-envs={counts!r}: each env count must lie in [1, 1024], e.g. 2,4,8")
+    return out
+
+
+def _spin_stand_ins(args) -> list:
+    """``--spin-us`` as a list of 'task' or step times in us in (0, MAX_SPIN_US]; ConfigError naming a bad one."""
+    out = []
+    for s in str(args.spin_us).split(","):
+        s = s.strip()
+        if not s:
+            continue
+        if s == "task":
+            out.append(s)
+            continue
+        try:
+            v = float(s)
+        except ValueError:
+            raise ConfigError(f"--spin-us takes step times in us or 'task', got {s!r}") from None
+        out.append(validate.real(v, "--spin-us", lo=0.0, hi=MAX_SPIN_US, lo_open=True, unit="us",
+                                 fix=f"stand-in step times in (0, {MAX_SPIN_US:g}] us or 'task', e.g. task,300"))
+    return out
+
+
+def check_vector_args(args) -> None:
+    """Validate the --vector options whether or not --vector is given (an option that is set is valid)."""
+    _spin_stand_ins(args)
+    _vector_envs_option(args)
+    for key in ("vector_spin_us", "vector_worker_spin_us"):
+        validate.real(getattr(args, key, 0.0), "--" + key.replace("_", "-"), lo=0.0, hi=MAX_SPIN_US, unit="us",
+                      fix=f"a poll time in [0, {MAX_SPIN_US:g}] us, e.g. 0")
 
 
 def vector_row(env_id: str, args, step_us: float | None = None) -> dict:
@@ -374,19 +411,13 @@ def vector_row(env_id: str, args, step_us: float | None = None) -> dict:
     if args.workers < 1:
         raise ConfigError(f"--vector needs --workers >= 1, got {args.workers}")
     spin = []
-    for s in str(args.spin_us).split(","):
-        s = s.strip()
-        if not s:
-            continue
+    for s in _spin_stand_ins(args):
         if s == "task":
             if step_us is None:
                 step_us = 1e6 / single_rate_quick(env_id, args.steps, args.repeats)
             spin.append(step_us)
         else:
-            try:
-                spin.append(float(s))
-            except ValueError:
-                raise ConfigError(f"--spin-us takes step times in us or 'task', got {s!r}") from None
+            spin.append(s)
     row = {"task": env_id, "task_step_us": step_us}
     counts = _vector_envs_option(args)
     row.update(vector_compare(env_id, args.workers, args.steps, args.repeats, spin, task_info(env_id),
@@ -480,13 +511,12 @@ def run(args) -> int:
     import surgsim_envs  # noqa: F401
     from surgsim_envs.envs import TASKS
 
-    from surgsim_envs import validate
-
     # the action arrays of a timed run are allocated up front: 10^12 steps asked for 29 TiB
     validate.integer(args.steps, "--steps", lo=1, hi=MAX_BENCH_STEPS,
                      fix=f"env steps per timed run, at most {MAX_BENCH_STEPS:,} (their actions are allocated up front)")
     validate.integer(args.repeats, "--repeats", lo=1, hi=100, fix="timed runs per figure, e.g. 3")
     validate.integer(args.workers, "--workers", lo=0, hi=1024, fix="async vector env size, 0 to skip")
+    check_vector_args(args)
     tasks = list(TASKS) if args.tasks == "all" else [t.strip() for t in args.tasks.split(",")]
     unknown = [t for t in tasks if t not in TASKS]
     if unknown:

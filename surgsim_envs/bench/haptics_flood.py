@@ -28,6 +28,7 @@ import time
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
 
@@ -206,14 +207,24 @@ def poll_cost(max_drain: int, max_poll_s: float, polls: int = 300, queue: int = 
             "poll_max_ms": float(t.max()), "reads_per_poll_median": float(np.median(reads))}
 
 
+#: s, the longest servo run of one figure (two runs per call)
+MAX_RUN_S = 600.0
+
+
 def run_bench(duration: float = 5.0, flooders: int = 1, pose_hz: float = 1000.0, scene: bool = False,
               fake_work: float = 3e-4, max_drain: int = 32, max_poll_s: float = 2e-4, flood_rate: float = 0.0,
               spin_s: float = 2e-4, priority: bool = True, servo: str = "thread") -> dict:
     """A quiet run, then a flooded one; returns both rows and the machine load."""
     if servo not in ("thread", "process"):
         raise ConfigError(f"--servo must be 'thread' or 'process', got {servo!r}")
-    if not (duration > 0 and flooders >= 1 and pose_hz > 0):
-        raise ConfigError(f"--duration, --flooders and --pose-hz must be > 0, got {duration}, {flooders}, {pose_hz}")
+    validate.duration(duration, "--duration", hi=MAX_RUN_S, fix=f"seconds of servo per run in (0, {MAX_RUN_S:g}], e.g. 5")
+    validate.integer(flooders, "--flooders", lo=1, hi=64, fix="garbage-sending processes in [1, 64], e.g. 1")
+    validate.rate(pose_hz, "--pose-hz", hi=1e5, fix="genuine pose packets per second in (0, 1e5], e.g. 1000")
+    validate.real(fake_work, "--fake-work", lo=0.0, hi=0.1, unit="s", fix="busy work per fake physics step, e.g. 3e-4")
+    validate.integer(max_drain, "--max-drain", lo=1, hi=1_000_000, fix="datagrams per servo tick, e.g. 32")
+    validate.real(max_poll_s, "--max-poll-s", lo=0.0, hi=1.0, lo_open=True, unit="s", fix="reading time per tick, e.g. 2e-4")
+    validate.real(flood_rate, "--flood-rate", lo=0.0, hi=1e7, fix="datagrams/s per flooder, 0 = as fast as it can")
+    validate.real(spin_s, "--spin-s", lo=0.0, hi=0.1, unit="s", fix="polling time before each servo deadline, e.g. 2e-4")
     import sys
 
     def say(text: str) -> None:      # stage messages, not a bar: redraws would disturb the timed servo

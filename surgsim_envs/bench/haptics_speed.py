@@ -19,7 +19,7 @@ import sys
 
 import numpy as np
 
-from surgsim_envs.errors import ConfigError
+from surgsim_envs import validate
 
 #: slab organ at this spacing: 17 x 17 x 4 = 1,156 nodes (a node under the probe axis)
 SCENE_SPACING = 0.00625
@@ -49,8 +49,10 @@ def run_bench(duration: float = 3.0, depth: float = 0.004, fake: bool = False, f
     """Run the threaded servo with the probe in contact; returns the JSON row."""
     from surgsim_envs.haptics import DeviceLimits, DeviceMapping, ScriptedDevice, ServoConfig, ServoLoop, TrajectorySpec
 
-    if not (duration > 0 and depth > 0):
-        raise ConfigError(f"--duration and --depth must be > 0, got {duration} s and {depth} m")
+    validate.duration(duration, "--duration", hi=600.0, fix="seconds of servo in (0, 600], e.g. 3")
+    validate.real(depth, "--depth", lo=0.0, hi=0.02, lo_open=True, unit="m", fix="a press depth in (0, 0.02] m, e.g. 0.004")
+    validate.rate(rate_hz, "--rate", hi=1e5, fix="a servo rate in (0, 1e5] Hz, e.g. 1000")
+    validate.real(fake_work, "--fake-work", lo=0.0, hi=0.1, unit="s", fix="busy work per fake physics step, e.g. 3e-4")
     phys, info, contact_z, home = _build_physics(fake, fake_work)
     bottom = contact_z - depth - home[2]  # device frame (origin at home)
     mapping = DeviceMapping(origin=tuple(home))

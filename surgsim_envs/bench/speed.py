@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from surgsim_envs import validate
 from surgsim_envs.bench.material import is_explicit
 from surgsim_envs.bench.speed_volume import bench_volume, top_load as _load
 from surgsim_envs.errors import ConfigError
@@ -185,7 +186,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     sizes = parse_sizes(args.sizes)
-    models = None if not args.models else [m.strip() for m in args.models.split(",") if m.strip()]
+    models = validate.name_list(args.models, "--models", [n for n, _ in available_models()])
     if getattr(args, "relax_ratio", False):
         from surgsim_envs.bench import relax_cost
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 
@@ -38,7 +39,6 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from surgsim_envs.planning.validation_report import comparison_figure
-    from surgsim_envs.errors import ConfigError
     from surgsim_envs.geometry.state_file import save_state
     from surgsim_envs.geometry.surface_error import surface_error
     from surgsim_envs.planning.maxillofacial import DistractionCase
@@ -46,8 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from surgsim_envs.tissue.growth import GrowthSolver, mesh_volume
 
     alpha = args.alpha if args.alpha == "auto" else _float(args.alpha, "--alpha")
-    if not (args.spacing > 0 and args.reference_spacing > 0):
-        raise ConfigError("--spacing and --reference-spacing must be > 0 m (e.g. 0.004)")
+    check_args(args)
     case = DistractionCase(translation=args.translation_mm * 1e-3, rotation_deg=args.rotation_deg)
     os.makedirs(args.out, exist_ok=True)
     model = case.model(args.spacing, args.nu)
@@ -91,10 +90,41 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+#: m, the mesh spacings the synthetic case takes: finer than 1.5 mm is a sparse LU of millions of
+#: dofs (hours), coarser than 2 cm leaves the face a few elements thick (no skin left to compare)
+SPACING_RANGE = (0.0015, 0.02)
+#: |distraction| the case takes: the paper's distractions are several mm and degrees; beyond these
+#: the prescribed bone move inverts the linear (small-strain) mesh
+MAX_TRANSLATION_MM, MAX_ROTATION_DEG = 30.0, 30.0
+
+
+def check_args(args) -> None:
+    """ConfigError naming any flag outside the range the case can take, before anything runs."""
+    from surgsim_envs import validate
+
+    for flag, value in (("--spacing", args.spacing), ("--reference-spacing", args.reference_spacing)):
+        validate.real(value, flag, lo=SPACING_RANGE[0], hi=SPACING_RANGE[1], unit="m",
+                      fix=f"a mesh spacing in [{SPACING_RANGE[0]:g}, {SPACING_RANGE[1]:g}] m, e.g. 0.004")
+    for flag, value in (("--nu", args.nu), ("--truth-nu", args.truth_nu)):
+        validate.real(value, flag, lo=0.0, hi=0.499, fix="a Poisson ratio in [0, 0.499], e.g. 0.25")
+    for flag, value in (("--k", args.k), ("--truth-k", args.truth_k)):
+        validate.real(value, flag, lo=0.0, hi=1e4, fix="the growth parameter k in [0, 1e4], e.g. 20")
+    validate.real(args.tol, "--tol", lo=0.0, hi=1.0, lo_open=True, hi_open=True,
+                  fix="a relative growth per iteration in (0, 1), e.g. 1e-5")
+    validate.integer(args.max_iter, "--max-iter", lo=1, hi=100_000, fix="iterations, e.g. 500")
+    validate.real(args.translation_mm, "--translation-mm", lo=-MAX_TRANSLATION_MM, hi=MAX_TRANSLATION_MM, unit="mm",
+                  fix=f"a distraction translation within +-{MAX_TRANSLATION_MM:g} mm, e.g. 8")
+    validate.real(args.rotation_deg, "--rotation-deg", lo=-MAX_ROTATION_DEG, hi=MAX_ROTATION_DEG, unit="deg",
+                  fix=f"a distraction rotation within +-{MAX_ROTATION_DEG:g} degrees, e.g. 8")
+
+
 def _float(text, name):
     from surgsim_envs.errors import ConfigError
 
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
         raise ConfigError(f"{name} must be a number (1/Pa) or 'auto', got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise ConfigError(f"{name}={text!r} must be a positive finite number (1/Pa) or 'auto'")
+    return value

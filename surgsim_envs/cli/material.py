@@ -22,7 +22,13 @@ from surgsim_envs.errors import ConfigError
 
 
 def parse_sets(items, base: str):
-    """--set key=value pairs on top of preset ``base`` -> material dict."""
+    """--set key=value pairs on top of preset ``base`` -> material dict (the preset checked by name)."""
+    from surgsim_envs.materials import get_material
+
+    try:
+        get_material(base)
+    except (ConfigError, TypeError, ValueError, KeyError) as exc:
+        raise ConfigError(f"--material {base!r}: {exc}") from None
     out = {"preset": base}
     for item in items or []:
         key, sep, value = item.partition("=")
@@ -39,7 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="test", metavar="TEST", required=True)
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--model", default="fem", help="registered model name (default fem)")
-    common.add_argument("--material", default="liver", help="material preset the --set values modify")
+    common.add_argument("--material", default=None,
+                        help="material preset the --set values modify (default liver; slip: a 20 kPa gel)")
     common.add_argument("--set", action="append", metavar="KEY=VALUE", help="material field, e.g. young=5000")
     common.add_argument("--integrator", default=None, help="model integrator (default: the test's choice)")
     common.add_argument("--spacing", type=float, default=None, help="mesh spacing in m")
@@ -78,15 +85,48 @@ def _slip_progress(every_s: float = 10.0):
     return report
 
 
+#: ranges the rigs take: sizes of centimetres, strains and depths of a material test, times of
+#: seconds (each beyond them is a typo that would allocate millions of nodes or run for hours)
+LENGTH_RANGE = (1e-4, 0.5)        # m: radius, depth, thickness, width
+SPACING_RANGE = (5e-4, 0.05)      # m
+MU_RANGE = (0.0, 5.0)
+TIME_RANGE = (0.0, 600.0)         # s: the longest pull (relax bounds its own ramp + hold)
+
+
+def check_args(args) -> None:
+    """ConfigError naming any flag outside its range, before a rig is built."""
+    from surgsim_envs import validate
+
+    if args.spacing is not None:
+        validate.real(args.spacing, "--spacing", lo=SPACING_RANGE[0], hi=SPACING_RANGE[1], unit="m",
+                      fix=f"a mesh spacing in [{SPACING_RANGE[0]:g}, {SPACING_RANGE[1]:g}] m, e.g. 0.003")
+    lengths = {"indent": ("radius", "depth", "thickness", "width"), "relax": (), "slip": ()}[args.test]
+    for key in lengths:
+        value = getattr(args, key)
+        if value is not None:
+            validate.real(value, f"--{key}", lo=LENGTH_RANGE[0], hi=LENGTH_RANGE[1], unit="m",
+                          fix=f"a length in [{LENGTH_RANGE[0]:g}, {LENGTH_RANGE[1]:g}] m (SI: 5 mm is 0.005)")
+    if args.test == "indent":
+        validate.integer(args.points, "--points", lo=2, hi=200, fix="a number of depths, e.g. 12")
+    if args.test == "relax":
+        validate.real(args.strain, "--strain", lo=0.0, hi=0.5, lo_open=True, fix="a compressive strain in (0, 0.5], e.g. 0.05")
+    if args.test == "slip":
+        validate.real(args.mu, "--mu", lo=MU_RANGE[0], hi=MU_RANGE[1], fix="a friction coefficient in [0, 5], e.g. 0.6")
+        if args.max_pull_time is not None:
+            validate.real(args.max_pull_time, "--max-pull-time", lo=TIME_RANGE[0], hi=TIME_RANGE[1], unit="s",
+                          lo_open=True, fix=f"seconds in (0, {TIME_RANGE[1]:g}], e.g. 5")
+
+
 def run(args: argparse.Namespace) -> int:
     from surgsim_envs.bench import material as mt
 
+    check_args(args)
     opts = {}
     if args.integrator:
         opts["integrator"] = args.integrator
     if args.spacing:
         opts["spacing"] = args.spacing
-    mat = parse_sets(args.set, args.material)
+    mat = parse_sets(args.set, args.material or "liver")
     if args.test == "indent":
         from tqdm import tqdm
 
@@ -113,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
         if args.max_pull_time is not None:      # the ramp runs at least PULL_TIME unless told less
             opts["max_pull_time"] = args.max_pull_time
             opts["pull_time"] = min(mt.PULL_TIME, args.max_pull_time)
-        res = mt.slip(args.model, mat if args.set else None, mu=args.mu, progress=_slip_progress(), **opts)
+        res = mt.slip(args.model, mat if (args.set or args.material) else None, mu=args.mu, progress=_slip_progress(), **opts)
         out = {"pull": res.pull.tolist(), "normal_sum": res.normal_sum.tolist(), "slip_onset_pull": res.slip_onset_pull,
                "slip_onset_normal": res.slip_onset_normal, "held_pull": res.held_pull,
                "held_normal": res.held_normal, "normal_start": res.normal_start, "mu": res.mu,

@@ -49,7 +49,7 @@ class VideoWriter:
             raise ConfigError(f"fps must be > 0, got {fps!r}")
         if codec not in ("auto", "h264", "mp4v"):
             raise ConfigError(f"codec={codec!r}; choose 'auto', 'h264' or 'mp4v'")
-        self.path = Path(path)
+        self.path = Path(path).absolute()   # absolute: a relative path such as "-1/x.mp4" is not an ffmpeg option
         self.path.parent.mkdir(parents=True, exist_ok=True)
         w, h = int(size[0]), int(size[1])
         if codec == "h264" and not h264_available():
