@@ -154,3 +154,22 @@ def test_out_of_range_flags_are_refused_before_the_run(argv, message, capsys):
     code, err = _run(argv, capsys)
     assert code == 2 and "Traceback" not in err, err
     assert re.search(message, err), err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["bench", "soak", "--task", "SurgSim/PalpationPress-v0", "--steps", "5", "--seed", "-1"], r"--seed=-1 is outside \[0, "),
+    (["bench", "soak", "--task", "SurgSim/PalpationPress-v0", "--steps", "5", "--checkpoint-every", "-1"],
+     r"--checkpoint-every=-1 is outside \[1, "),
+    (["bench", "soak", "--task", "SurgSim/PalpationPress-v0", "--steps", "5", "--force-bound", "1e308"],
+     r"--force-bound=1e\+308 N is outside \(0, 10000\] N"),
+    (["bench", "memory", "--duration", "nan"], r"--duration=nan s must be finite"),
+    (["bench", "memory", "--nodes", "-1"], r"--nodes=-1 is outside \[8, "),
+    (["bench", "memory", "--repeats", "-1"], r"--repeats=-1 is outside \[1, 100\]"),
+    (["bench", "layers", "--spacing", "1e308"], r"--spacing=1e\+308 m is outside \[0.001, 0.02\] m"),
+    (["bench", "layers", "--depth", "-1"], r"--depth=-1.0 m is outside \(0, 0.015\] m"),
+    (["bench", "layers", "--speed", "nan"], r"--speed=nan m/s must be finite"),
+    (["bench", "layers", "--block-radius", "1e308"], r"--block-radius=1e\+308 m is outside"),
+])
+def test_bench_flags_out_of_range_are_refused_before_the_run(argv, message, capsys):
+    code, err = _run(argv, capsys)
+    assert code == 2 and "Traceback" not in err and re.search(message, err), err

@@ -156,7 +156,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from surgsim_envs import validate
+
     mems = _memories(args.memories)
+    validate.integer(args.nodes, "--nodes", lo=8, hi=1_000_000, fix="the cost block's node count, e.g. 1000")
+    validate.integer(args.error_nodes, "--error-nodes", lo=8, hi=100_000, fix="the error block's node count, e.g. 250")
+    validate.duration(args.duration, "--duration", hi=600.0, fix="a creep duration in (0, 600] s, e.g. 2")
+    validate.integer(args.repeats, "--repeats", lo=1, hi=100, fix="timed repeats per L, e.g. 7")
     err = creep_error(mems, nodes=args.error_nodes, duration=args.duration)
     cost = step_cost(mems, nodes=args.nodes, repeats=args.repeats, integrator=args.integrator)
     load = os.getloadavg()

@@ -118,6 +118,16 @@ def run(args) -> int:
     validate.integer(args.steps, "--steps", lo=1, hi=MAX_PROBE_STEPS,
                      fix=f"1 ms steps of probe motion, at most {MAX_PROBE_STEPS:,}")
     validate.integer(args.samples, "--samples", lo=0, hi=args.steps, fix="steps compared with the all-node solution")
+    validate.real(args.spacing, "--spacing", lo=1e-3, hi=0.02, unit="m",
+                  fix="a lattice spacing in [0.001, 0.02] m, e.g. 0.002 (finer is millions of nodes)")
+    validate.real(args.depth, "--depth", lo=0.0, hi=0.015, lo_open=True, unit="m",
+                  fix="a press depth in (0, 0.015] m (the wall is 29 mm thick), e.g. 0.004")
+    validate.real(args.speed, "--speed", lo=0.0, hi=1.0, unit="m/s", fix="a probe speed in [0, 1] m/s, e.g. 0.01")
+    validate.real(args.block_radius, "--block-radius", lo=0.0, hi=0.06, unit="m",
+                  fix="a block radius in [0, 0.06] m (the patch is 12 cm wide), e.g. 0.002")
+    validate.integer(args.max_updates, "--max-updates", lo=1, hi=10_000_000, fix="node updates per step, e.g. 20000")
+    if args.out:
+        validate.writable_file(args.out, "--out")
     res = run_bench(args.spacing, args.steps, args.depth, args.speed, args.max_updates, args.samples,
                     solver=args.solver, block_radius=args.block_radius, prefetch_rows=args.prefetch_rows,
                     stiffness=args.stiffness)

@@ -54,6 +54,13 @@ def run(args) -> int:
         return 0
     if args.sample_every < 1:
         raise ConfigError(f"--sample-every must be >= 1, got {args.sample_every}")
+    validate.seed(args.seed, "--seed")
+    validate.integer(args.checkpoint_every, "--checkpoint-every", lo=1, hi=10**9, fix="steps between checkpoints, e.g. 10000")
+    validate.real(args.force_bound, "--force-bound", lo=0.0, hi=1e4, lo_open=True, unit="N",
+                  fix="the largest plausible tool force in (0, 1e4] N, e.g. 50")
+    if args.max_seconds != math.inf:
+        validate.duration(args.max_seconds, "--max-seconds", hi=30 * 86400.0,
+                          fix="a wall-time limit in (0, 30 days] s, or leave it out for none")
     tasks = sorted(k for k in gym.registry if k.startswith("SurgSim/")) if args.task == "all" else [args.task]
     for t in tasks:
         if t not in gym.registry:
