@@ -51,11 +51,11 @@ def _hint(fix: str) -> str:
 
 
 def is_real_number(value: Any) -> bool:
-    """True for int / float / numpy real scalars, False for bool, complex, strings and arrays
-    (0-d arrays included: a config keeps the value it is given, and ``round()``, ``len()`` or JSON
-    of a 0-d array fail later; ``float(x)`` or ``x.item()`` gives the number)."""
+    """True for int / float / numpy real scalars (0-d real arrays included: the library's own
+    vectorised arithmetic passes them), False for bool, complex, strings and arrays with entries.
+    Configs refuse 0-d arrays where they are given (:func:`config_value`)."""
     if isinstance(value, np.ndarray):
-        return False
+        return value.ndim == 0 and value.dtype.kind in "fiu"
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
@@ -63,9 +63,8 @@ def real(value: Any, name: str, *, lo: float = -math.inf, hi: float = math.inf, 
          fix: str = "", lo_open: bool = False, hi_open: bool = False) -> float:
     """``value`` as a finite float in [lo, hi] (``lo_open`` / ``hi_open``: exclusive bound)."""
     if not is_real_number(value):
-        kind = "a 0-d array (pass float(x))" if isinstance(value, np.ndarray) and value.ndim == 0 else type(value).__name__
         raise ConfigError(f"{_label(name, value, unit)} must be a real number (int or float), not "
-                          f"{kind}{_hint(fix)}")
+                          f"{type(value).__name__}{_hint(fix)}")
     try:
         v = float(value)
     except OverflowError:
@@ -201,6 +200,24 @@ def writable_file(value: Any, name: str, fix: str = "") -> Path:
         raise ConfigError(f"{name}={str(p)!r} is a folder; give a file path{_hint(fix)}")
     writable_folder(p.parent, f"the folder of {name}={str(p)!r}", fix=fix or "give a path in a writable folder")
     return p
+
+
+def has_length(value: Any, n: int) -> bool:
+    """True if ``value`` is a sequence (not a string, not a 0-d array) of exactly ``n`` entries."""
+    if isinstance(value, (str, bytes)) or (isinstance(value, np.ndarray) and value.ndim == 0):
+        return False
+    try:
+        return len(value) == n
+    except TypeError:
+        return False
+
+
+def config_value(value: Any, name: str) -> Any:
+    """``value`` unchanged, unless it is a 0-d numpy array: a config keeps what it is given, and
+    ``round()``, ``len()`` or JSON of a 0-d array fail later, far from the cause."""
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        raise ConfigError(f"{name}={short_repr(value)} is a 0-d array; pass the number itself (float(x) or x.item())")
+    return value
 
 
 def name_list(text: Any, name: str, known: Iterable[str], fix: str = "") -> list[str] | None:

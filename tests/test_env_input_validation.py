@@ -124,9 +124,9 @@ def test_an_exact_fraction_is_a_valid_length():
 
 
 @pytest.mark.parametrize("task, kwargs, message", [
-    ("SurgSim/Palpation-v0", {"slab_size": np.array(0.002)}, r"slab_size=array\(0.002\) must be three positive lengths"),
-    ("SurgSim/LayeredPalpation-v0", {"size": np.array(0.002)}, r"size=array\(0.002\) must be a pair"),
-    ("SurgSim/LayeredPalpation-v0", {"control_hz": np.array(2.0)}, r"not a 0-d array \(pass float\(x\)\)"),
+    ("SurgSim/Palpation-v0", {"slab_size": np.array(0.002)}, r"slab_size=array\(0.002\) is a 0-d array"),
+    ("SurgSim/LayeredPalpation-v0", {"size": np.array(0.002)}, r"size=array\(0.002\) is a 0-d array"),
+    ("SurgSim/LayeredPalpation-v0", {"control_hz": np.array(2.0)}, r"control_hz=array\(2.\) is a 0-d array; pass the number itself"),
     ("SurgSim/Palpation-v0", {"tip_radius": 1.7976931348623157e308}, r"tip_radius=1.7976931348623157e\+308 m is outside \[0.0001, 1\] m"),
     ("SurgSim/PalpationPress-v0", {"map_half_width": 1e300}, r"map_half_width=1e\+300 m is outside"),
     ("SurgSim/Grasp-v0", {"resolution": 1e-320}, r"resolution=1e-320 must be 'auto', a spacing in m in \[0.0001, 0.1\)"),

@@ -16,8 +16,9 @@ def test_real_accepts_numbers_in_range_and_returns_floats():
     assert validate.real(3, "x", lo=0, hi=5) == 3.0 and isinstance(validate.real(3, "x"), float)
     assert validate.real(np.float32(0.5), "x", lo=0, hi=1) == 0.5
     assert validate.real(np.int64(2), "x") == 2.0
-    with pytest.raises(ConfigError, match=r"not a 0-d array \(pass float\(x\)\)"):
-        validate.real(np.array(0.25), "x")     # kept as given by a config, a 0-d array fails round() / len() later
+    assert validate.real(np.array(0.25), "x") == 0.25           # a 0-d array is a scalar (configs refuse it)
+    with pytest.raises(ConfigError, match=r"x=array\(0.25\) is a 0-d array; pass the number itself"):
+        validate.config_value(np.array(0.25), "x")
     with pytest.raises(ConfigError, match="not ndarray"):
         validate.real(np.array([0.25]), "x")
 

@@ -19,6 +19,8 @@ def apply_overrides(config, overrides: dict[str, Any]):
     unknown = sorted(set(overrides) - names)
     if unknown:
         raise ConfigError(f"unknown {type(config).__name__} field(s) {unknown}; known fields: {sorted(names)}")
+    for key, value in overrides.items():
+        validate.config_value(value, f"{type(config).__name__}.{key}")
     return dataclasses.replace(config, **overrides)
 
 

@@ -62,8 +62,7 @@ class LayeredPalpationConfig:
     def validate(self) -> None:
         """ConfigError naming the field, its bound and the fix."""
         size = self.size
-        if isinstance(size, (str, bytes)) or not hasattr(size, "__len__") \
-                or (isinstance(size, np.ndarray) and size.ndim == 0) or len(size) != 2:
+        if not validate.has_length(size, 2):
             raise ConfigError(f"LayeredPalpationConfig.size={size!r} must be a pair (x, y) of lengths in m, "
                               "e.g. (0.08, 0.06)")
         for k, v in enumerate(size):

@@ -129,8 +129,7 @@ MAX_TASK_NODES = 1_000_000
 
 def check_slab_size(value, what: str) -> np.ndarray:
     """(3,) float array of a slab's positive finite side lengths in m (each at most 1 m)."""
-    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") \
-            or (isinstance(value, np.ndarray) and value.ndim == 0) or len(value) != 3:
+    if not validate.has_length(value, 3):
         raise ConfigError(f"{what}={value!r} must be three positive lengths in m, e.g. (0.1, 0.1, 0.02)")
     return np.array([validate.positive(v, f"{what}[{i}]", hi=1.0, unit="m", fix="slab sides are lengths in (0, 1] m")
                      for i, v in enumerate(value)])

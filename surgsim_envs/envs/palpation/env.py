@@ -136,7 +136,7 @@ class PalpationEnv(SurgSimEnv):
         y = sample(rng, xy, "inclusion_xy", -half, half)
         if options.get("inclusion_position") is not None:
             value = options["inclusion_position"]
-            if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
+            if not validate.has_length(value, 2):
                 raise ConfigError(f"inclusion_position must be (x, y) m inside +-{half} m, "
                                   f"got {validate.short_repr(value)}")
             x, y = (validate.real(v, f"inclusion_position[{i}]", lo=-half, hi=half, unit="m",
