@@ -143,7 +143,7 @@ class MassSpringModel(TissueModel):
     auto_pair: ClassVar[tuple[str, str] | None] = ("symplectic", "implicit")
     default_integrator: ClassVar[str | None] = "auto"
     capabilities: ClassVar[frozenset[str]] = frozenset(
-        {"forces", "unstructured_mesh", "implicit_contact", "viscoelastic", "static_solve"})
+        {"forces", "unstructured_mesh", "implicit_contact", "viscoelastic", "static_solve", "subsurface_stiffness"})
     material_fields: ClassVar[tuple[str, ...]] = ("young", "poisson", "density", "damping", "relax_fraction",
                                                   "relax_time", "nonlinear")
     #: a probe pressing one surface node collapses the plain network's tets (module docstring): the

@@ -49,7 +49,7 @@ from surgsim_envs import validate
 from surgsim_envs.envs.base import SurgSimEnv
 from surgsim_envs.envs.checks import check_explicit_step, check_range, require_capabilities, sample
 from surgsim_envs.envs.palpation.config import RIGID_CONTACT_CLEARANCE, PalpationConfig
-from surgsim_envs.envs.palpation.terms import (REWARD_TERMS, TERMINATION_TERMS, cell_of, column_contrast,
+from surgsim_envs.envs.palpation.terms import (REWARD_TERMS, TERMINATION_TERMS, cell_of,
                                               indentation_depth, is_new_site, localisation_error,
                                               localisation_potential, localisation_reward, normalised_map,
                                               stiffness_estimate, weighted_estimate)
@@ -66,7 +66,9 @@ class PalpationEnv(SurgSimEnv):
 
     config_cls = PalpationConfig
     TASK_ID = "SurgSim/Palpation-v0"
-    REQUIRES = ("forces",)      # tissue capabilities the task needs (contract v2)
+    #: tissue capabilities the task needs (contract v2): a probe must feel an inclusion below the surface,
+    #: so a surface-only model (whose interior carries nothing) is refused by name
+    REQUIRES = ("forces", "subsurface_stiffness")
     ACTION = ActionTerm("probe", 4, "[vx, vy, press, report]: target step (x, y), depth, report")
     REWARD_TERMS = REWARD_TERMS
     TERMINATION_TERMS = TERMINATION_TERMS
@@ -148,13 +150,8 @@ class PalpationEnv(SurgSimEnv):
         scale = sample(rng, get("young_scale"), "young_scale", 0.1, 10.0)
         centre = np.array([x, y, self.surface_z - depth])
         tissue = self.sim.tissue()
-        if "surface_only" in getattr(tissue, "capabilities", ()):
-            # a surface-only model's elements are its surface nodes, each standing for the column of tissue
-            # under it: the inclusion reaches it as that column's series stiffness (the sphere lies below)
-            tissue.scale_material("young", scale * column_contrast(self.centroids, centre, radius, contrast, 0.0))
-        else:
-            tissue.scale_material("young", scale)             # the contract's only way to change stiffness
-            tissue.scale_material("young", scale * contrast, mask=sphere_mask(self.centroids, centre, radius))
+        tissue.scale_material("young", scale)             # the contract's only way to change stiffness
+        tissue.scale_material("young", scale * contrast, mask=sphere_mask(self.centroids, centre, radius))
         self.sim.reset(seed=int(rng.integers(2**31)))
         check_explicit_step(tissue, self.sim.dt, f"Palpation: stiffness contrast {contrast:.2f} x young_scale "
                                                  f"{scale:.2f}")
