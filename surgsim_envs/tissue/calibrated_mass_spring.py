@@ -93,6 +93,7 @@ class CalibratedMassSpringModel(MassSpringModel):
     integrators: ClassVar[tuple[str, ...]] = ("symplectic", "implicit", "subcycled")
     #: the calibrated volume term already keeps tets under a concentrated load from collapsing
     point_load_options: ClassVar[Mapping[str, Any]] = {}
+    implicit_point_load_options: ClassVar[Mapping[str, Any]] = {}
 
     def __init__(self, volume, material="liver", *, integrator=None, K2=None, b0=None, b1=None,
                  mass_scaling: float | None = MASS_SCALING_RATIO, **base_kwargs):

@@ -106,7 +106,10 @@ class PalpationEnv(SurgSimEnv):
         stiffest = check_range(c.young_scale, "young_scale")[1] * check_range(c.stiffness_contrast, "contrast")[1]
         switch = integrator_for_range(self.sim.tissue(), c.dt, stiffest)   # inclusion: young_scale x contrast
         if switch is not None:
-            t.options = {**t.options, "integrator": switch}
+            # the explicit step is unstable over the stiffness range: the model steps implicitly, so the
+            # point-load options that only kept its explicit step give way to its implicit ones
+            t.options = {**t.options, "integrator": switch,
+                         **getattr(model_class(c.model), "implicit_point_load_options", {})}
             self.sim = Simulation(palpation_scene(cfg), dt=c.dt, substeps=self.substeps)
         self.centroids = self.sim.tissue().element_centroids()     # (T,3) m, rest frame: inclusion masks
         self.home = np.asarray(p.position, dtype=float)
