@@ -429,3 +429,15 @@ def test_mass_spring_at_5_mm_stiffer_inclusion_raises_the_force_and_inverts_no_t
         assert ratio.min() > 0.0, f"contrast {contrast}: a 7 mm press inverts a tet (volume ratio {ratio.min():.3f})"
     env.close()
     assert forces[0] >= 1.05 * forces[1], f"mass_spring at 5 mm: a 5x lump reads {forces[0]:.4f} N, contrast 1 {forces[1]:.4f} N"
+
+
+def test_palpation_gives_mass_spring_the_full_volume_term_whenever_it_steps_implicitly():
+    """The capped volume term only keeps the explicit step: the default 10 mm task (explicit) keeps it;
+    an implicit step asked for, or the switch the task makes on the 5 mm lattice, gets the material's nu."""
+    cases = [({}, "symplectic", "capped"), ({"integrator": "implicit"}, "implicit", "auto"),
+             ({"resolution": 0.005}, "auto", "auto")]
+    for kw, integrator, term in cases:
+        env = gym.make(TASK, model="mass_spring", **kw)
+        t = env.unwrapped.sim.tissue()
+        assert (t.integrator, t.volume_stiffness) == (integrator, term), kw
+        env.close()

@@ -90,6 +90,9 @@ class PalpationEnv(SurgSimEnv):
         # from outside the package may not declare any)
         t.options = {**tissue_options(c.model, c.integrator),
                      **getattr(model_class(c.model), "point_load_options", {})}
+        if t.options.get("integrator") == "implicit":
+            # stepped implicitly from the start: no explicit step for a point-load option to keep
+            t.options.update(getattr(model_class(c.model), "implicit_point_load_options", {}))
         t.region_materials = None
         t.volume_options = {"size": tuple(float(s) for s in c.slab_size)}
         t.position = (0.0, 0.0, float(c.slab_size[2]) / 2.0)
