@@ -140,18 +140,40 @@ def check_control_rate(config, what: str) -> None:
 
 
 
+def _missing(cls, capabilities) -> list[str]:
+    """The capabilities of ``capabilities`` (plus ``implicit_contact`` for a quasi-static model) that
+    model class ``cls`` lacks."""
+    caps = getattr(cls, "capabilities", ())
+    needed = list(capabilities) + (["implicit_contact"] if "quasi_static" in caps else [])
+    return [c for c in needed if c not in caps]
+
+
+def serving_models(capabilities) -> list[str]:
+    """Registered tissue models that declare every one of ``capabilities`` (and ``implicit_contact``
+    if quasi-static): the models a task with these needs accepts."""
+    from surgsim_envs.tissue.registry import get as model_class
+    from surgsim_envs.tissue.registry import names
+
+    return [n for n in names() if not _missing(model_class(n), capabilities)]
+
+
 def require_capabilities(model: str, capabilities, task: str) -> None:
-    """Before building: CapabilityError (a ConfigError naming model, capability and task) unless
-    tissue model ``model`` declares every one of ``capabilities`` (tissue contract v2)."""
+    """Before building: CapabilityError (a ConfigError naming model, capability and task, and the
+    registered models that serve the task) unless tissue model ``model`` declares every one of
+    ``capabilities`` (tissue contract v2)."""
+    from surgsim_envs.tissue.capabilities import CapabilityError
     from surgsim_envs.tissue.registry import get as model_class
 
     cls = model_class(model)
-    for cap in capabilities:
-        cls.require(cap, task=task)
-    if "quasi_static" in getattr(cls, "capabilities", ()):
-        # a quasi-static model solves an equilibrium every step: the scene's penalty contact (forces
-        # that change with the positions) must enter that solve, or the solve chases the contact
-        cls.require("implicit_contact", task=f"{task} (a quasi-static model in a contact scene)")
+    try:
+        for cap in capabilities:
+            cls.require(cap, task=task)
+        if "quasi_static" in getattr(cls, "capabilities", ()):
+            # a quasi-static model solves an equilibrium every step: the scene's penalty contact (forces
+            # that change with the positions) must enter that solve, or the solve chases the contact
+            cls.require("implicit_contact", task=f"{task} (a quasi-static model in a contact scene)")
+    except CapabilityError as exc:
+        raise CapabilityError(f"{exc}; models that serve {task}: {serving_models(capabilities)}") from None
 
 
 def check_explicit_step(tissue, dt: float, what: str) -> None:

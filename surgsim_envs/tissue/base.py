@@ -98,6 +98,10 @@ class TissueModel(abc.ABC):
     #: constructor options the model needs where a tool presses a concentrated load into it (a probe
     #: tip about one lattice spacing wide): scenes that do so build it with these (tissue contract v2)
     point_load_options: ClassVar[Mapping[str, Any]] = {}
+    #: replace ``point_load_options`` where the scene steps the model implicitly: an option chosen only to
+    #: keep the explicit step (a capped Poisson ratio) is no constraint there, and the model gets its full
+    #: material instead
+    implicit_point_load_options: ClassVar[Mapping[str, Any]] = {}
     #: module of the model's compiled step (tissue/compiled.py), for this exact class only (a
     #: subclass that changes the physics does not inherit it); None: Python steps only
     compiled_step_module: ClassVar[str | None] = None

@@ -85,13 +85,15 @@ class CalibratedMassSpringModel(MassSpringModel):
     compiled_step_module: ClassVar[str | None] = "surgsim_envs.tissue.calibrated_mass_spring_compiled"
     summary: ClassVar[str] = ("mass-spring network (the grasping simulation paper) with spring constants and a nodal volume term "
                               "identified from linear elasticity (matches FEM at small strain), auto/symplectic/implicit")
-    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "implicit_contact", "viscoelastic"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "implicit_contact", "viscoelastic",
+                                                    "subsurface_stiffness"})
     #: "subcycled": the symplectic step split into n = ceil(dt / stable_dt()) equal steps under the same
     #: external forces (n re-evaluated with critical_dt(), as "auto" does); "auto" takes it instead of
     #: "implicit" while n <= MAX_SUBCYCLES and the contact stiffness alone is stable at dt
     integrators: ClassVar[tuple[str, ...]] = ("symplectic", "implicit", "subcycled")
     #: the calibrated volume term already keeps tets under a concentrated load from collapsing
     point_load_options: ClassVar[Mapping[str, Any]] = {}
+    implicit_point_load_options: ClassVar[Mapping[str, Any]] = {}
 
     def __init__(self, volume, material="liver", *, integrator=None, K2=None, b0=None, b1=None,
                  mass_scaling: float | None = MASS_SCALING_RATIO, **base_kwargs):

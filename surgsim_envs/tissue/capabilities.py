@@ -25,6 +25,9 @@ CAPABILITIES: dict[str, str] = {
     "static_solve": "static_solve(forces) returns equilibrium positions",
     "unstructured_mesh": "runs on any tet mesh (snapped organ lattices, user meshes), not only on regular "
                          "tensor-product grids",
+    "subsurface_stiffness": "the interior carries load: a stiffer region below the surface (an inclusion in the "
+                            "Young's modulus field) stiffens the surface above it, and the surface dents under a "
+                            "pressing tool instead of letting it sink through",
 }
 
 

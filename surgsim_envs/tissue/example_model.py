@@ -20,7 +20,7 @@ class LinearSpringsModel(TissueModel):
     name = "linear_springs"
     summary = "example: linear springs on tet edges, symplectic Euler (docs/models.md)"
     integrators = ("symplectic",)
-    capabilities = frozenset({"forces"})
+    capabilities = frozenset({"forces", "subsurface_stiffness"})
     material_fields = ("young", "density")
 
     def __init__(self, volume, material="liver", **kwargs):

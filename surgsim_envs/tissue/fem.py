@@ -75,7 +75,8 @@ class TetFEMModel(TissueModel):
     integrators = ("implicit", "symplectic")
     auto_pair = ("symplectic", "implicit")
     default_integrator = "auto"
-    capabilities = frozenset({"forces", "unstructured_mesh", "implicit_contact", "viscoelastic", "static_solve"})
+    capabilities = frozenset({"forces", "unstructured_mesh", "implicit_contact", "viscoelastic", "static_solve",
+                              "subsurface_stiffness"})
     material_fields = ("young", "poisson", "density", "damping", "relax_fraction", "relax_time")
 
     def __init__(self, volume, material="liver", *, integrator=None, corotational: bool = True,

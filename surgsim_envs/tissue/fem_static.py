@@ -90,7 +90,8 @@ class QuasiStaticFEMModel(TetFEMModel):
     integrators: ClassVar[tuple[str, ...]] = ("quasi_static",)
     auto_pair = None
     default_integrator = None
-    capabilities = frozenset({"forces", "unstructured_mesh", "implicit_contact", "quasi_static", "static_solve"})
+    capabilities = frozenset({"forces", "unstructured_mesh", "implicit_contact", "quasi_static", "static_solve",
+                              "subsurface_stiffness"})
     material_fields = ("young", "poisson", "density")
 
     def __init__(self, volume, material="liver", *, formulation: str = "anp", fixed_dofs=None,

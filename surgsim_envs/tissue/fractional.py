@@ -88,7 +88,8 @@ class FractionalTetModel(TissueModel):
     integrators = ("symplectic", "implicit")
     auto_pair = ("symplectic", "implicit")
     default_integrator = "auto"
-    capabilities: ClassVar[frozenset] = frozenset({"forces", "unstructured_mesh", "history", "viscoelastic", "static_solve"})
+    capabilities: ClassVar[frozenset] = frozenset({"forces", "unstructured_mesh", "history", "viscoelastic", "static_solve",
+                                                   "subsurface_stiffness"})
     material_fields = ("young", "poisson", "density", "damping", "relax_fraction", "relax_time")
     node_field_names = ("displacement", "stress", "order")
 

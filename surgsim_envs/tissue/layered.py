@@ -90,7 +90,7 @@ class LayeredModel(TissueModel):
                               "constrained local static integration on active nodes, force accumulation")
     integrators: ClassVar[tuple[str, ...]] = ("local_static",)
     capabilities: ClassVar[frozenset] = frozenset({"forces", "implicit_contact", "quasi_static", "static_solve",
-                                                   "unstructured_mesh"})
+                                                   "unstructured_mesh", "subsurface_stiffness"})
 
     def __init__(self, volume, material=None, *, max_compression: float = MAX_COMPRESSION, f_tol: float = F_TOL,
                  x_tol: float = X_TOL, max_updates: int = MAX_UPDATES, omega: float = OMEGA, solver: str = "local",

@@ -26,7 +26,11 @@ off the tip and the probe reads less force than beside it. ``volume_stiffness="c
 ``point_load_options``, which the palpation tasks build it with) adds a per-tet volume term: springs
 scaled and ``k_v`` set so that the small-strain modulus is E and the Poisson ratio min(nu,
 CAPPED_POISSON = 0.123), the largest whose P-wave modulus (which sets the explicit step) is the plain
-network's. See docs/models/mass_spring.md.
+network's. Where a scene steps the model implicitly anyway (a stiff inclusion on a fine lattice),
+that cap buys nothing and is too weak: a press deeper than the lattice spacing pushes the surface
+node through the layer below and inverts its tets, and a stiffer layer below then *lowers* the force.
+There the model's ``implicit_point_load_options`` (``volume_stiffness="auto"``, the material's own
+nu) apply. See docs/models/mass_spring.md.
 """
 
 from __future__ import annotations
@@ -143,12 +147,16 @@ class MassSpringModel(TissueModel):
     auto_pair: ClassVar[tuple[str, str] | None] = ("symplectic", "implicit")
     default_integrator: ClassVar[str | None] = "auto"
     capabilities: ClassVar[frozenset[str]] = frozenset(
-        {"forces", "unstructured_mesh", "implicit_contact", "viscoelastic", "static_solve"})
+        {"forces", "unstructured_mesh", "implicit_contact", "viscoelastic", "static_solve", "subsurface_stiffness"})
     material_fields: ClassVar[tuple[str, ...]] = ("young", "poisson", "density", "damping", "relax_fraction",
                                                   "relax_time", "nonlinear")
     #: a probe pressing one surface node collapses the plain network's tets (module docstring): the
     #: capped volume term keeps them, at the plain network's explicit step
     point_load_options: ClassVar[Mapping[str, Any]] = {"volume_stiffness": "capped"}
+    #: stepped implicitly (a stiff inclusion on a fine lattice), the explicit limit that capped nu no longer
+    #: binds, and the capped term is too weak there: a press deeper than the lattice spacing pushes the
+    #: surface node through the layer below, inverting its tets (docs/models/mass_spring.md)
+    implicit_point_load_options: ClassVar[Mapping[str, Any]] = {"volume_stiffness": "auto"}
 
     def __init__(self, volume, material="liver", *, integrator=None, springs="edges",
                  K1=None, K2=None, b0=None, b1=None, volume_stiffness=None, cg_tol: float = CG_TOLERANCE,

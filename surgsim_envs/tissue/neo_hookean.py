@@ -54,7 +54,8 @@ class NeoHookeanModel(TissueModel):
     summary: ClassVar[str] = ("stable Neo-Hookean tets (Smith 2018) with averaged nodal volume, quasi-static "
                               "projected-Newton solve: large-strain hyperelasticity")
     integrators: ClassVar[tuple[str, ...]] = ("quasi_static",)
-    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "quasi_static", "static_solve"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"forces", "unstructured_mesh", "quasi_static", "static_solve",
+                                                    "subsurface_stiffness"})
     #: material fields scale_material / set_field may change (the model re-derives its constants)
     material_fields: ClassVar[tuple[str, ...]] = ("young", "poisson")
 

@@ -35,7 +35,7 @@ class PalpationConfig:
     on_unstable: str = "raise"         # "terminate": a tissue divergence ends the episode (info["unstable"])
     slab_size: Sequence[float] = (0.1, 0.1, 0.02)   # m
     material: str = "liver"
-    model: str = "mass_spring"         # any registered tissue model with the "forces" capability
+    model: str = "mass_spring"         # a registered tissue model with the capabilities PalpationEnv.REQUIRES
     integrator: str = "symplectic"     # if the model has it and it is stable over the stiffness ranges, else "auto"
     tip_radius: float = 0.01           # m, probe tip
     probe_speed: float = 0.2           # m/s, rate limit of the probe target

@@ -49,7 +49,7 @@ from surgsim_envs import validate
 from surgsim_envs.envs.base import SurgSimEnv
 from surgsim_envs.envs.checks import check_explicit_step, check_range, require_capabilities, sample
 from surgsim_envs.envs.palpation.config import RIGID_CONTACT_CLEARANCE, PalpationConfig
-from surgsim_envs.envs.palpation.terms import (REWARD_TERMS, TERMINATION_TERMS, cell_of, column_contrast,
+from surgsim_envs.envs.palpation.terms import (REWARD_TERMS, TERMINATION_TERMS, cell_of,
                                               indentation_depth, is_new_site, localisation_error,
                                               localisation_potential, localisation_reward, normalised_map,
                                               stiffness_estimate, weighted_estimate)
@@ -66,7 +66,9 @@ class PalpationEnv(SurgSimEnv):
 
     config_cls = PalpationConfig
     TASK_ID = "SurgSim/Palpation-v0"
-    REQUIRES = ("forces",)      # tissue capabilities the task needs (contract v2)
+    #: tissue capabilities the task needs (contract v2): a probe must feel an inclusion below the surface,
+    #: so a surface-only model (whose interior carries nothing) is refused by name
+    REQUIRES = ("forces", "subsurface_stiffness")
     ACTION = ActionTerm("probe", 4, "[vx, vy, press, report]: target step (x, y), depth, report")
     REWARD_TERMS = REWARD_TERMS
     TERMINATION_TERMS = TERMINATION_TERMS
@@ -88,6 +90,9 @@ class PalpationEnv(SurgSimEnv):
         # from outside the package may not declare any)
         t.options = {**tissue_options(c.model, c.integrator),
                      **getattr(model_class(c.model), "point_load_options", {})}
+        if t.options.get("integrator") == "implicit":
+            # stepped implicitly from the start: no explicit step for a point-load option to keep
+            t.options.update(getattr(model_class(c.model), "implicit_point_load_options", {}))
         t.region_materials = None
         t.volume_options = {"size": tuple(float(s) for s in c.slab_size)}
         t.position = (0.0, 0.0, float(c.slab_size[2]) / 2.0)
@@ -104,7 +109,10 @@ class PalpationEnv(SurgSimEnv):
         stiffest = check_range(c.young_scale, "young_scale")[1] * check_range(c.stiffness_contrast, "contrast")[1]
         switch = integrator_for_range(self.sim.tissue(), c.dt, stiffest)   # inclusion: young_scale x contrast
         if switch is not None:
-            t.options = {**t.options, "integrator": switch}
+            # the explicit step is unstable over the stiffness range: the model steps implicitly, so the
+            # point-load options that only kept its explicit step give way to its implicit ones
+            t.options = {**t.options, "integrator": switch,
+                         **getattr(model_class(c.model), "implicit_point_load_options", {})}
             self.sim = Simulation(palpation_scene(cfg), dt=c.dt, substeps=self.substeps)
         self.centroids = self.sim.tissue().element_centroids()     # (T,3) m, rest frame: inclusion masks
         self.home = np.asarray(p.position, dtype=float)
@@ -148,13 +156,8 @@ class PalpationEnv(SurgSimEnv):
         scale = sample(rng, get("young_scale"), "young_scale", 0.1, 10.0)
         centre = np.array([x, y, self.surface_z - depth])
         tissue = self.sim.tissue()
-        if "surface_only" in getattr(tissue, "capabilities", ()):
-            # a surface-only model's elements are its surface nodes, each standing for the column of tissue
-            # under it: the inclusion reaches it as that column's series stiffness (the sphere lies below)
-            tissue.scale_material("young", scale * column_contrast(self.centroids, centre, radius, contrast, 0.0))
-        else:
-            tissue.scale_material("young", scale)             # the contract's only way to change stiffness
-            tissue.scale_material("young", scale * contrast, mask=sphere_mask(self.centroids, centre, radius))
+        tissue.scale_material("young", scale)             # the contract's only way to change stiffness
+        tissue.scale_material("young", scale * contrast, mask=sphere_mask(self.centroids, centre, radius))
         self.sim.reset(seed=int(rng.integers(2**31)))
         check_explicit_step(tissue, self.sim.dt, f"Palpation: stiffness contrast {contrast:.2f} x young_scale "
                                                  f"{scale:.2f}")

@@ -84,23 +84,6 @@ def normalised_map(k: np.ndarray) -> np.ndarray:
     return k / top if top > 0 else np.zeros_like(k)
 
 
-def column_contrast(points: np.ndarray, centre, radius: float, contrast: float, bottom: float) -> np.ndarray:
-    """(P,) stiffness factor of the vertical tissue column from height ``bottom`` (m) up to each point of
-    ``points`` (P, 3) m, with a sphere (``centre`` (3,) m, ``radius`` m) ``contrast`` times stiffer than
-    the rest: the series (Reuss) average over the column, ``h / ((h - l) + l / contrast)`` with h the
-    column's height and l the length of it inside the sphere (1 where h = 0 or the column misses it)."""
-    p = np.asarray(points, dtype=float).reshape(-1, 3)
-    c = np.asarray(centre, dtype=float)
-    half = np.sqrt(np.clip(radius ** 2 - ((p[:, :2] - c[:2]) ** 2).sum(axis=1), 0.0, None))
-    top = p[:, 2]
-    inside = np.clip(np.minimum(c[2] + half, top) - np.maximum(c[2] - half, bottom), 0.0, None)
-    h = top - bottom
-    out = np.ones(len(p))
-    ok = h > 0
-    out[ok] = h[ok] / ((h[ok] - inside[ok]) + inside[ok] / contrast)
-    return out
-
-
 def localisation_error(guess_xy: np.ndarray, true_xy: np.ndarray) -> float:
     """m, planar distance from the guess to the inclusion centre."""
     return float(np.hypot(*(np.asarray(guess_xy, dtype=float) - np.asarray(true_xy, dtype=float))))
