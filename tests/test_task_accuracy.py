@@ -120,3 +120,29 @@ def test_reference_presses_in_the_task_scene_rise_with_depth_and_feel_the_lump()
     assert set(row["nodes_by_site"]) == {"0/over", "0/mirror"}
     assert ta.monotone(f, PROBES.depths)
     assert f["0/over/6mm"] > f["0/mirror/6mm"] > 0.0
+
+
+def test_reference_scene_is_graded_about_the_press_site_with_its_contact_per_area():
+    """The reference's lattice for a site: the site on a surface node, spacing h_f around it (the fine box
+    covers the contact radius of the deepest press), the node penalty 1e8 N/m^3 x h_f^2 and samples at h_f / 2;
+    the inclusion's mask follows the new mesh."""
+    import numpy as np
+
+    fine, xy = 0.004, (-0.02, 0.0)
+    env = ta._make("SurgSim/Palpation-v0", tr.REFERENCE_MODEL, tr.COARSE_SPACING, material=tr.elastic("liver"))
+    try:
+        n = tr.graded_scene(env, xy, fine, 0.007)
+        x = env.sim.tissue().positions
+        assert n == len(x)
+        top = x[np.isclose(x[:, 2], env.surface_z)]
+        assert np.min(np.linalg.norm(top[:, :2] - xy, axis=1)) < 1e-12          # the site is a node
+        row = top[np.isclose(top[:, 1], 0.0)][:, 0]
+        near = np.sort(row[np.abs(row - xy[0]) <= tr.fine_half_widths(0.01, 0.007)[0] + 1e-9])
+        assert np.allclose(np.diff(near), fine, atol=1e-12)                        # uniform h_f across the box
+        assert tr.fine_half_widths(0.01, 0.007)[0] >= np.sqrt(2 * 0.01 * 0.007 - 0.007 ** 2)
+        contact = env.sim.scene.config.contact
+        assert contact.stiffness == pytest.approx(tr.CONTACT_STIFFNESS_PER_AREA * fine ** 2)
+        assert contact.surface_samples == tr.SURFACE_SUBDIVISIONS == 2
+        assert len(env.centroids) == len(env.sim.tissue().tets)
+    finally:
+        env.close()
