@@ -113,9 +113,9 @@ def test_extrapolate_states_last_change_order_and_convergence_per_press():
 
 
 def test_reference_presses_in_the_task_scene_rise_with_depth_and_feel_the_lump():
-    """One coarse reference row (graded lattices, 4 mm at each site): the quasi-static presses rise with
+    """One coarse reference row (the coarsest graded lattice: 5 mm at each site): the quasi-static presses rise with
     depth, and a 5x lump raises the force over it above the mirror site's; each site has its own mesh."""
-    row = tr.reference_row("SurgSim/Palpation-v0", PROBES, 0.004, "liver", ta._make)
+    row = tr.reference_row("SurgSim/Palpation-v0", PROBES, 0.005, "liver", ta._make)
     f = row["forces_N"]
     assert set(row["nodes_by_site"]) == {"0/over", "0/mirror"}
     assert ta.monotone(f, PROBES.depths)

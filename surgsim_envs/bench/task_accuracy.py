@@ -9,7 +9,7 @@ registered model the task accepts runs the same set at each candidate lattice sp
 The reference (:mod:`surgsim_envs.bench.task_reference`) is quasi-static ``fem_static`` with a
 contact stiffness per unit area that does not change with the spacing and surface samples at half
 the spacing, on one lattice per press site graded about it, refined there (fine spacing 2 mm to
-0.71 mm, by 1/sqrt 2) until the last refinement changes every press by under 1 %.
+0.71 mm, by 1/sqrt 2); converged when the last refinement changes every press by under 1 %.
 
 The material is elastic (``relax_fraction`` 0) for every model and the reference: relaxation is
 each model's material law, checked against exact solutions elsewhere (``surgsim bench
