@@ -146,3 +146,25 @@ def test_reference_scene_is_graded_about_the_press_site_with_its_contact_per_are
         assert len(env.centroids) == len(env.sim.tissue().tets)
     finally:
         env.close()
+
+
+def test_rescore_recomputes_every_model_error_from_stored_forces_against_a_new_reference(monkeypatch):
+    """--rescore: the reference is recomputed and each model row's errors come from its stored per-press
+    forces (no model is rerun); a task without a probe set is refused by name."""
+    keys = ["0/over/3mm", "0/mirror/3mm"]
+    old_ref = {"forces_N": dict.fromkeys(keys, 1.0)}
+    new_ref = {"forces_N": {"0/over/3mm": 2.0, "0/mirror/3mm": 1.0}}
+    row = {**_row({"0/over/3mm": 1.0, "0/mirror/3mm": 1.0}), "task": "SurgSim/Palpation-v0"}
+    probes = ta.ProbeSet(inclusions=PROBES.inclusions, depths=(0.003,), hold=0.5, spacings=(0.01,),
+                         reference_spacings=(0.004, 0.002))
+    monkeypatch.setitem(ta.PROBE_SETS, "SurgSim/Palpation-v0", (probes, probes))
+    monkeypatch.setattr(ta, "converged_reference", lambda task, p, progress: new_ref)
+    table = {"rows": [ta.compare(row, old_ref, probes)], "references": {"SurgSim/Palpation-v0": old_ref},
+             "quick": False, "tolerances": {}, "not_covered": []}
+    assert table["rows"][0]["error"] == 0.0
+    out = ta.rescore(table, progress=lambda s: None)
+    assert out["references"]["SurgSim/Palpation-v0"] is new_ref
+    assert out["rows"][0]["error_median"] == pytest.approx(0.25)          # errors 0.5 and 0
+    assert out["rows"][0]["forces_N"] == row["forces_N"]
+    with pytest.raises(ConfigError, match="has no probe set"):
+        ta.rescore(table, ["SurgSim/Grasp-v0"], progress=lambda s: None)
