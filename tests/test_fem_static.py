@@ -266,3 +266,31 @@ def test_divergence_from_explicit_contact_damping_names_the_cause():
     assert press(0.0).integrated_external_forces[:, 2].sum() < 0.0    # without damping: pressed, at rest
     with pytest.raises(TissueUnstableError, match="lower the contact damping"):
         press(5.0)
+
+
+def test_pardiso_solver_gives_the_superlu_step_and_refuses_by_name_when_absent(monkeypatch):
+    """solver='pardiso' (optional pypardiso, MKL's Cholesky of the SPD stiffness) steps to the same state
+    as SuperLU; 'auto' falls back to SuperLU without it; 'pardiso' without it names the package."""
+    from surgsim_envs.tissue import compliance
+
+    X = _block()[0].rest_positions
+    top = np.flatnonzero(np.isclose(X[:, 2], 0.02))
+    f = np.zeros_like(X)
+    f[top[:5]] = [0.0, 0.01, -0.05]
+    kc = np.zeros(len(X))
+    kc[top[3:9]] = 150.0
+    if compliance.pardiso_available():
+        states = []
+        for solver in ("superlu", "pardiso"):
+            model = _block(solver=solver)[0]
+            for _ in range(3):
+                model.step(1e-3, f, kc)
+            assert model.compliance().solver == solver
+            states.append(model.positions - X)
+        assert np.abs(states[1] - states[0]).max() <= 1e-9 * np.abs(states[0]).max()
+    monkeypatch.setattr(compliance, "pardiso_available", lambda: False)
+    assert _block(solver="auto")[0].compliance().solver == "superlu"
+    with pytest.raises(ConfigError, match="needs the optional package pypardiso"):
+        _block(solver="pardiso")[0].compliance()
+    with pytest.raises(ConfigError, match="solver='cholmod' is not one of"):
+        _block(solver="cholmod")

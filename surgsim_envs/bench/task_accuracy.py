@@ -7,10 +7,9 @@ from a fresh reset (same seed and options), so presses do not see each other's h
 registered model the task accepts runs the same set at each candidate lattice spacing.
 
 The reference (:mod:`surgsim_envs.bench.task_reference`) is quasi-static ``fem_static`` with a
-contact stiffness per unit area that does not change with the spacing and surface contact samples
-at most 1 mm apart, at four or more spacings, Richardson-extrapolated to zero spacing; it counts as
-converged when the extrapolation changes by under 1 % for every press when the finest spacing
-replaces the coarsest.
+contact stiffness per unit area that does not change with the spacing and surface samples at half
+the spacing, on one lattice per press site graded about it, refined there (fine spacing 2 mm to
+0.71 mm, by 1/sqrt 2); converged when the last refinement changes every press by under 1 %.
 
 The material is elastic (``relax_fraction`` 0) for every model and the reference: relaxation is
 each model's material law, checked against exact solutions elsewhere (``surgsim bench
@@ -66,7 +65,8 @@ class Inclusion:
 @dataclass(frozen=True)
 class ProbeSet:
     """A task's scripted presses: inclusions, depths (m), hold (s), the spacings (m) the models are
-    run at and the reference's spacings (m; four or more, see :mod:`task_reference`)."""
+    run at and the reference's fine spacings (m, descending: its graded lattices' spacing at the
+    press site, see :mod:`task_reference`)."""
 
     inclusions: tuple[Inclusion, ...]
     depths: tuple[float, ...]
@@ -79,14 +79,13 @@ PALPATION_FULL = ProbeSet(
     inclusions=(Inclusion("5x lump, r 7 mm, 11 mm deep", (0.02, 0.0), 0.011, 0.007, 5.0),
                 Inclusion("3x lump, r 9 mm, 9 mm deep", (-0.01, 0.01), 0.009, 0.009, 3.0)),
     depths=(0.003, 0.005, 0.007), hold=0.5, spacings=(0.01, 0.0075, 0.005),
-    reference_spacings=(0.01, 0.005, 0.01 / 3, 0.0025))
+    reference_spacings=(0.002, 0.002 / math.sqrt(2), 0.001, 0.001 / math.sqrt(2)))
 PALPATION_QUICK = ProbeSet(inclusions=PALPATION_FULL.inclusions[:1], depths=(0.004, 0.007), hold=0.5,
-                           spacings=(0.01,), reference_spacings=(0.01, 0.005, 0.01 / 3))
+                           spacings=(0.01,), reference_spacings=(0.004, 0.004 / math.sqrt(2), 0.002))
 
-#: The reference's spacings are 10 mm / n and every press site lies on a multiple of 10 mm from the slab's
-#: edge, so each site sits on a lattice node at every reference spacing: a sphere on a lattice reads a
-#: different force on a node and between nodes, and a sequence that mixes the two is not smooth enough
-#: to extrapolate (measured: observed orders 0.7-5.8 over 7.5, 5, 4, 3.33 mm with sites at (-0.015, 0.01) m).
+#: Every press site sits on a node of the reference's lattice (each is graded about its site) and of the
+#: models' lattices (each site lies on a multiple of 10 mm from the slab's edge): a sphere on a lattice reads
+#: a different force on a node and between nodes.
 
 def _declared(task_id: str, **extra) -> dict:
     """The force tolerance ``task_id`` declares in the task registry (``TaskSpec.force_tolerance``)."""
@@ -295,34 +294,70 @@ def build_table(tasks: Iterable[str], models: Iterable[str], quick: bool = False
             "tolerances": tolerances}
 
 
+def rescore(table: dict, tasks: Iterable[str] | None = None, progress: Callable[[str], None] = print) -> dict:
+    """``table`` (a task-accuracy table with each row's per-press ``forces_N``) with its references
+    recomputed and every model row's errors and contrasts recomputed against them, without rerunning
+    the models (their forces, costs and path differences are kept)."""
+    references = dict(table["references"])
+    rows = list(table["rows"])
+    for task in (list(references) if tasks is None else list(tasks)):
+        if task not in PROBE_SETS:
+            raise ConfigError(f"rescore: {task!r} has no probe set; tasks with one: {sorted(PROBE_SETS)}")
+        probes = PROBE_SETS[task][1 if table.get("quick") else 0]
+        references[task] = converged_reference(task, probes, progress)
+        rows = [compare(r, references[task], probes) if r["task"] == task else r for r in rows]
+    return {**table, "rows": rows, "references": references}
+
+
 def reference_summary(ref: dict) -> str:
-    """One paragraph on a reference: spacings, nodes, cost, observed orders and the convergence check."""
-    orders = [p for p in ref["observed_order"].values() if math.isfinite(p)]
+    """One paragraph on a reference: its lattices, cost, the change of its last refinement and the
+    Richardson check."""
+    orders = [p for p in ref["observed_order"].values() if p is not None and math.isfinite(p)]
     spacings = ", ".join(f"{h * 1e3:.3g}" for h in ref["spacings"])
     nodes = ", ".join(str(n) for n in ref["nodes"])
     cost = ", ".join(f"{t:.0f}" for t in ref["seconds"])
+    coarse = ref.get("coarse_spacing") or task_reference.COARSE_SPACING
     text = (f"Reference: `{task_reference.REFERENCE_MODEL}` (elastic, friction on, contact stiffness "
-            f"{task_reference.CONTACT_STIFFNESS_PER_AREA:.0e} N/m^3 per area, surface samples <= "
-            f"{task_reference.SAMPLE_SPACING * 1e3:g} mm apart) at spacings {spacings} mm ({nodes} nodes; "
-            f"{cost} s each). ")
+            f"{task_reference.CONTACT_STIFFNESS_PER_AREA:.0e} N/m^3 per area, surface samples at half the spacing) "
+            f"on one lattice per press site, graded from fine spacings {spacings} mm at the site to {coarse * 1e3:.3g} mm "
+            f"(at most {nodes} nodes; {cost} s each for the {len(ref['forces_N'])} presses). ")
+    last = 100 * ref["last_refinement_change"]
     if ref["reference_converged"]:
-        text += (f"Converged: Richardson-extrapolated per press from the three finest; the extrapolation moves "
-                 f"by at most {100 * ref['reference_change']:.2g} % when the coarsest of four replaces the finest")
+        text += (f"**Converged**: the last refinement ({ref['spacings'][-2] * 1e3:.3g} -> {ref['spacings'][-1] * 1e3:.3g} mm) "
+                 f"changed every press by under 1 % (at most {last:.2g} %)")
     else:
-        gaps = [g for g in ref["finest_gap"].values() if g > 0]
-        text += (f"**Not converged**: the last refinement changed the forces by up to "
-                 f"{100 * ref['last_refinement_change']:.2g} %, so the errors below are against the finest "
-                 f"solution ({ref['spacings'][-1] * 1e3:.3g} mm). Richardson extrapolation from the three finest")
+        text += (f"**Not converged**: the last refinement changed the forces by up to {last:.2g} %")
+    if ref.get("reference_extrapolated"):
+        text += (f"; the forces are Richardson-extrapolated from the three finest (observed orders "
+                 f"{min(orders):.2g}-{max(orders):.2g}), which the three coarsest confirm to "
+                 f"{100 * max(ref['extrapolation_change'].values()):.2g} %")
+    else:
+        text += f"; the errors below are against the finest solution ({ref['spacings'][-1] * 1e3:.3g} mm)"
         if orders:
-            text += (f" gives observed orders {min(orders):.2g}-{max(orders):.2g} and limits "
-                     f"{100 * min(gaps):.2g}-{100 * max(gaps):.2g} % from the finest" if gaps else "")
-        if ref.get("not_extrapolated"):
-            text += f" ({len(ref['not_extrapolated'])} presses outside the asymptotic range)"
-        check = [c for c in ref["extrapolation_change"].values() if math.isfinite(c)]
-        if check:
-            text += (f", but the extrapolation from the three coarsest differs from it by "
-                     f"{100 * min(check):.2g}-{100 * max(check):.2g} %: it is not yet reliable")
+            check = [c for c in ref["extrapolation_change"].values() if c is not None and math.isfinite(c)]
+            text += (f". Richardson extrapolation from the three finest gives observed orders "
+                     f"{min(orders):.2g}-{max(orders):.2g}")
+            if ref.get("not_extrapolated"):
+                text += f" ({len(ref['not_extrapolated'])} presses outside {task_reference.MIN_ORDER}-{task_reference.MAX_ORDER})"
+            if check:
+                text += (f", and the extrapolation from the three coarsest differs from it by "
+                         f"{100 * min(check):.2g}-{100 * max(check):.2g} %, so it is not used")
     return text + "."
+
+
+def reference_table(ref: dict) -> str:
+    """The reference's force per press at each spacing, each refinement's change (%) and the
+    Richardson limit with its observed order."""
+    head = ["press"] + [f"{h * 1e3:.3g} mm" for h in ref["spacings"]] + ["last change %", "Richardson F0 (order)"]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for key in ref["forces_by_spacing"][-1]:
+        f = [r[key] for r in ref["forces_by_spacing"]]
+        cells = [f"{f[0]:.4f}"] + [f"{b:.4f} ({100 * (b - a) / b:+.1f} %)" for a, b in zip(f, f[1:])]
+        p = ref["observed_order"].get(key)
+        rich = (f"{ref['extrapolated_N'][key]:.4f} ({p:.2f})" if p is not None and math.isfinite(p) else
+                "outside " f"{task_reference.MIN_ORDER:g}-{task_reference.MAX_ORDER:g}" if len(f) >= 3 else "-")
+        out.append(f"| {key} | " + " | ".join(cells) + f" | {100 * ref['last_change'][key]:.2f} | {rich} |")
+    return "\n".join(out)
 
 
 def markdown(table: dict) -> str:
@@ -346,6 +381,10 @@ def markdown(table: dict) -> str:
                        f"{100 * r['error_p95']:.1f} | {con} | {'yes' if r['monotone'] else 'NO'} | "
                        f"{r['max_tensile_N']:.3g} | {path} | {r['us_per_env_step']:.0f} |")
         out.append("")
+        if "last_change" in ref:
+            out.append("The reference's forces (N) per press (inclusion / site / depth) at each fine spacing, with the "
+                       "change of each refinement:\n")
+            out.append(reference_table(ref) + "\n")
     if table["not_covered"]:
         out.append("Tasks without a probe set yet: " + ", ".join(table["not_covered"]) + ".\n")
     return "\n".join(out)
@@ -373,7 +412,7 @@ def chart(table: dict, path: str | Path) -> None:
         ax.set_ylabel("force error against the reference, p95 (%)")
         ref = table["references"][task]
         state = "converged" if ref.get("reference_converged") else "not converged"
-        where = "extrapolated" if ref["reference_converged"] else f"at {ref['spacings'][-1] * 1e3:.3g} mm"
+        where = "extrapolated" if ref.get("reference_extrapolated") else f"graded, {ref['spacings'][-1] * 1e3:.3g} mm at the site"
         ax.set_title(f"{task}\nreference: {task_reference.REFERENCE_MODEL} {where} ({state})", fontsize=10)
         ax.grid(True, alpha=0.3)
     fig.tight_layout()
@@ -409,9 +448,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--models", default=None, help="comma-separated model names (default: all registered)")
     parser.add_argument("--quick", action="store_true",
                         help="one inclusion, two depths, the task's default spacing; the reference at three "
-                             "spacings (10, 5, 3.33 mm), extrapolated without a check: not converged")
+                             "fine spacings (4, 2.8, 2 mm): not converged")
     parser.add_argument("--out", default="surgsim-out/task-accuracy", help="output directory (JSON, markdown, PNG)")
     parser.add_argument("--json", action="store_true", help="also print the table as JSON")
+    parser.add_argument("--rescore", default=None, metavar="TABLE_JSON",
+                        help="recompute only the references of --tasks and score the model rows of this table "
+                             "(their stored per-press forces) against them, without rerunning the models")
 
 
 def _names(text: str, known: Iterable[str], what: str) -> list[str]:
@@ -439,7 +481,13 @@ def run(args) -> int:
         bar.set_postfix_str(text)
         bar.update(1)
 
-    table = build_table(tasks, models, quick=args.quick, progress=progress)
+    if args.rescore is not None:
+        from surgsim_envs import validate
+
+        source = json.loads(validate.path(args.rescore, "--rescore", fix="a task_accuracy.json").read_text())
+        table = rescore(source, tasks, progress=progress)
+    else:
+        table = build_table(tasks, models, quick=args.quick, progress=progress)
     bar.close()
     paths = write(table, args.out)
     print(markdown(table))

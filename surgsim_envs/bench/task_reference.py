@@ -1,21 +1,37 @@
-"""A converged force reference in a task's own scene: quasi-static FEM refined, then extrapolated.
+"""A converged force reference in a task's own scene: quasi-static FEM on graded lattices.
 
 The reference answers "what force does the continuum give for this press in this scene": the
 task's slab, bed, inclusion, probe, friction and elastic material, solved by ``fem_static``
-(linear tets with averaged nodal pressure, equilibrium at every step) at a sequence of lattice
-spacings, and Richardson-extrapolated to zero spacing.
+(linear tets with averaged nodal pressure, equilibrium at every step) on a sequence of lattices
+refined where the press is; it counts as converged when the last refinement changes every press by
+under :data:`CONVERGED_CHANGE` (1 %), and says by how much it changed otherwise.
 
 Why not a dynamic ``fem`` refined until it stops changing: with the task's contact law (a
 penalty of 200 N/m per node, whatever the spacing) the stiffness per unit surface area grows as
 1/h^2, so refining changes the contact law as well as the mesh (21 % from 7.5 to 5 mm), and the
 explicit step shrinks with h until the elements under the 10 mm tip invert (3.3 mm). The
-reference therefore changes three things, each for its cause:
+reference therefore changes, each for its cause:
 
 * **contact stiffness per unit area** held at :data:`CONTACT_STIFFNESS_PER_AREA` (the node's
-  penalty k = this x h^2, shared by surface samples at most 1 mm apart): the penalty's own error
-  does not depend on the spacing, and a rigid sphere meets the faces, not only the nodes;
+  penalty k = this x h_f^2, shared by the surface samples): the penalty's own error does not
+  depend on the spacing;
+* **surface samples that scale with the spacing** (:data:`SURFACE_SUBDIVISIONS` per edge, h_f / 2
+  apart): with nodes only a rigid sphere meets the lattice's nodes and not its faces (the force
+  then rises under refinement); with samples a fixed 1 mm apart the samples per facet change with
+  h, and the two effects mixed in one sequence (nodes only at 1 mm, samples above) moved a press by
+  4 % in one refinement. Samples at h_f / 2 make the sequence self-similar;
+* **graded lattices** (:mod:`surgsim_envs.geometry.graded_axis`, ``box_volume(grading=...)``):
+  one mesh per press site, the site on a node, spacing h_f on a box around it
+  (:func:`fine_half_widths`: the contact radius of the deepest press plus :data:`FINE_MARGIN`
+  across, :data:`FINE_DEPTH` down), growing by :data:`GROWTH` per cell to :data:`COARSE_SPACING`.
+  Uniform lattices could not get there: 2.5 mm was 15,129 nodes, and a press still moved 2.4-7.3 %
+  from 3.33 mm; halving the coarse spacing of a graded lattice (5 -> 2.5 mm, h_f 2 mm) moved the
+  presses by 0.3-0.5 %, so the error sits under the probe and only h_f is refined;
 * **quasi-static equilibrium** (``fem_static``): no step-size limit and nothing to invert; the
   press is load-stepped by the probe's own motion (0.2 mm per 1 ms step at the task's speed);
+  its stiffness is factorised by MKL PARDISO's Cholesky when the optional ``pypardiso`` is
+  installed (``solver="auto"``: 7x faster factorisation and 6x faster columns than SuperLU,
+  the same forces to round-off);
 * **elastic material** (the task's material with ``relax_fraction`` 0, friction kept): the
   reference is the elastic response of the scene; relaxation is each model's material law,
   checked against its exact solution in ``surgsim bench viscoelastic`` / ``fractional-memory``.
@@ -24,12 +40,15 @@ Friction stays on (the task's mu): a straight-down press is monotone loading, an
 reads every depth of one site in one pass (quasi-static and rate-independent: pressing to 3 mm,
 holding, then on to 5 mm is the same path as straight to 5 mm).
 
-Richardson extrapolation: for each press, F(h) = F0 + C h^p through the three finest spacings
-gives F0 and the observed order p; the coarsest spacing then checks it: the extrapolation from
-the three coarsest must agree with F0 (their difference is stated as ``extrapolation_change``;
-the reference counts as converged when it is under :data:`CONVERGED_CHANGE` for every press).
-A reference that is not converged is the finest solution computed, with the change of its last
-refinement and the extrapolations stated beside it.
+Convergence: the reference is the finest solution, converged when its last refinement (h_f by
+1/sqrt 2) changed every press by under :data:`CONVERGED_CHANGE`. The finest spacing this host
+reaches is 0.71 mm (about 52,000 nodes, 5-6 minutes per site): at 0.5 mm the contact of a 7 mm
+press loads about 1,100 nodes, so each step's condensed solve is dense in 3,300 dofs and the
+cached compliance columns need about 7 GB; a finer reference needs another contact solver (an
+active-set solve on the full sparse system, not condensation). Richardson extrapolation
+F(h) = F0 + C h^p through the three finest is stated beside it with the observed order, and is
+used instead only when the extrapolation from the three coarsest agrees with it to
+:data:`CONVERGED_CHANGE` for every press (otherwise its order is not yet the asymptotic one).
 """
 
 from __future__ import annotations
@@ -48,20 +67,30 @@ from surgsim_envs.errors import ConfigError
 #: shallowest press. Much stiffer (2e9) locks: flat facets cannot wrap the sphere, every sample
 #: holds them off it, and the force of one site jumped 23 % between 5 and 4 mm while the other did not
 CONTACT_STIFFNESS_PER_AREA = 1e8
-#: m, the largest distance between contact samples on the reference's surface: with nodes only, a
-#: rigid sphere meets the lattice's nodes and not its faces, and the force jumps with where the tip
-#: lands between nodes (measured: 5 -> 4 mm changed a 7 mm press by 21 %)
-SAMPLE_SPACING = 0.001
-#: the quasi-static reference model
+#: edge subdivisions of the surface contact samples: samples h_f / 2 apart at every refinement
+SURFACE_SUBDIVISIONS = 2
+#: m, the lattice spacing away from the press (the graded lattice grows to it)
+COARSE_SPACING = 0.005
+#: growth of the cell size per cell from the fine region outwards
+GROWTH = 1.3
+#: m, the fine region reaches this far beyond the contact radius of the deepest press
+FINE_MARGIN = 0.0025
+#: m, the fine region's depth below the rest surface
+FINE_DEPTH = 0.005
+#: the quasi-static reference model, and its options (the factorisation: PARDISO when installed;
+#: the compliance column cache sized for the contact of a 7 mm press at h_f 0.7 mm)
 REFERENCE_MODEL = "fem_static"
-#: s, hold at each depth of a reference descent, and the reading window at its end
-REFERENCE_HOLD = 0.1
+REFERENCE_OPTIONS = {"solver": "auto", "cache_mb": 4000.0}
+#: s, hold at each depth of a reference descent, and the reading window at its end (measured, h_f 1.41 mm,
+#: friction on: the reading after 0.04 s differs from the one after 0.1 s by at most 0.07 %)
+REFERENCE_HOLD = 0.04
 REFERENCE_WINDOW = 0.02
-#: the observed orders accepted by :func:`richardson` (linear tets with a curved contact: 1-2 expected);
-#: outside them the coarsest spacing is not in the asymptotic range (measured: 0.3 for a 3 mm press
-#: from 10, 5, 3.33 mm, which extrapolates to a negative force)
+#: the observed orders accepted by :func:`richardson`; outside them the coarsest spacing is not in the
+#: asymptotic range (measured on uniform lattices: 0.3 for a 3 mm press from 10, 5, 3.33 mm, which
+#: extrapolates to a negative force)
 MIN_ORDER, MAX_ORDER = 0.5, 4.0
-#: relative change of the extrapolated force when the coarsest spacing is swapped for the finest
+#: the largest change of any press in the last refinement for a converged reference (and the agreement
+#: of the two Richardson extrapolations for it to be used)
 CONVERGED_CHANGE = 0.01
 
 
@@ -71,23 +100,35 @@ def elastic(material) -> dict:
     return {**base, "relax_fraction": 0.0}
 
 
-def surface_subdivisions(spacing: float) -> int:
-    """Edge subdivisions of the surface contact samples at lattice ``spacing`` (m): samples at most
-    :data:`SAMPLE_SPACING` apart (at most 8 subdivisions)."""
-    return int(min(8, max(1, math.ceil(float(spacing) / SAMPLE_SPACING - 1e-9))))
+def fine_half_widths(tip_radius: float, deepest: float) -> tuple[float, float, float]:
+    """(x, y, z) half extents (m) of the fine region about a press site: the chord radius of a sphere
+    of ``tip_radius`` pressed ``deepest`` m in, plus :data:`FINE_MARGIN`; :data:`FINE_DEPTH` down."""
+    d = min(float(deepest), float(tip_radius))
+    r = math.sqrt(max(2.0 * tip_radius * d - d * d, 0.0)) + FINE_MARGIN
+    return (r, r, FINE_DEPTH)
 
 
-def stiff_contact(env, spacing: float) -> None:
-    """Rebuild ``env.sim`` from its own scene config with the reference's contact: stiffness per
-    area CONTACT_STIFFNESS_PER_AREA (k = that x spacing^2 per node, shared by the samples of
-    :func:`surface_subdivisions`)."""
+def graded_scene(env, xy, fine: float, deepest: float) -> int:
+    """Rebuild ``env.sim`` from its own scene config on a lattice graded about the press site
+    ``xy`` (m; spacing ``fine`` m there, :data:`COARSE_SPACING` away from it) with the reference's
+    contact (stiffness per area :data:`CONTACT_STIFFNESS_PER_AREA`, :data:`SURFACE_SUBDIVISIONS`) and
+    model options. Returns the node count."""
     from surgsim_envs.scene import Simulation, build_scene
 
     cfg = copy.deepcopy(env.sim.scene.config)
-    cfg.contact.stiffness = CONTACT_STIFFNESS_PER_AREA * float(spacing) ** 2
+    tissue = cfg.tissues[0]
+    top = float(env.surface_z) - float(tissue.position[2])          # the rest surface in the box's frame
+    tissue.spacing = COARSE_SPACING
+    tissue.volume_options = {**dict(tissue.volume_options), "grading": {
+        "fine": float(fine), "around": (float(xy[0]), float(xy[1]), top), "ratio": GROWTH,
+        "half_widths": fine_half_widths(env.config.tip_radius, deepest)}}
+    tissue.options = {**dict(tissue.options), **REFERENCE_OPTIONS}
+    cfg.contact.stiffness = CONTACT_STIFFNESS_PER_AREA * float(fine) ** 2
     cfg.contact.tangential_stiffness = None          # = the normal one
-    cfg.contact.surface_samples = surface_subdivisions(spacing)
+    cfg.contact.surface_samples = SURFACE_SUBDIVISIONS
     env.sim = Simulation(build_scene(cfg), dt=env.sim.dt, substeps=env.sim.substeps)
+    env.centroids = env.sim.tissue().element_centroids()      # the inclusion's mask follows the mesh
+    return int(len(env.sim.tissue().positions))
 
 
 def descent_forces(env, xy, depths: Sequence[float], hold: float = REFERENCE_HOLD,
@@ -121,31 +162,31 @@ def descent_forces(env, xy, depths: Sequence[float], hold: float = REFERENCE_HOL
     return out
 
 
-def reference_row(task: str, probes, spacing: float, material, make: Callable) -> dict:
-    """The reference forces of ``probes`` at one ``spacing`` (m) with the task's ``material``
-    (made elastic here): keys as :func:`surgsim_envs.bench.task_accuracy.measure`'s ``forces_N``.
-    ``make(task, model, spacing, material=...)`` builds the task env (unwrapped)."""
+def reference_row(task: str, probes, fine: float, material, make: Callable) -> dict:
+    """The reference forces of ``probes`` at fine spacing ``fine`` (m) with the task's ``material``
+    (made elastic here), one graded lattice per press site: keys as
+    :func:`surgsim_envs.bench.task_accuracy.measure`'s ``forces_N``. ``make(task, model, spacing,
+    material=...)`` builds the task env (unwrapped)."""
     from surgsim_envs.tissue import TissueUnstableError
 
     t0 = time.perf_counter()
-    env = make(task, REFERENCE_MODEL, spacing, material=elastic(material))
-    stiff_contact(env, spacing)
-    forces = {}
+    env = make(task, REFERENCE_MODEL, COARSE_SPACING, material=elastic(material))
+    forces, nodes = {}, {}
     try:
         for i, inc in enumerate(probes.inclusions):
-            env.reset(seed=0, options=inc.options())     # the inclusion's material: factorised once
             for site in ("over", "mirror"):
                 xy = inc.position if site == "over" else (-inc.position[0], -inc.position[1])
-                env.sim.reset()                          # fresh contact and rest state, same material
+                nodes[f"{i}/{site}"] = graded_scene(env, xy, fine, max(probes.depths))
+                env.reset(seed=0, options=inc.options())
                 for depth, f in zip(probes.depths, descent_forces(env, xy, probes.depths)):
                     forces[f"{i}/{site}/{depth * 1e3:g}mm"] = f
     except TissueUnstableError as exc:
-        raise ConfigError(f"{task}: the reference {REFERENCE_MODEL} at {spacing * 1e3:.3g} mm failed: "
+        raise ConfigError(f"{task}: the reference {REFERENCE_MODEL} at {fine * 1e3:.3g} mm failed: "
                           f"{str(exc).splitlines()[0]}") from None
     finally:
-        nodes = int(len(env.sim.tissue().positions))
         env.close()
-    return {"task": task, "model": REFERENCE_MODEL, "spacing": float(spacing), "nodes": nodes, "forces_N": forces,
+    return {"task": task, "model": REFERENCE_MODEL, "spacing": float(fine), "coarse_spacing": COARSE_SPACING,
+            "nodes": max(nodes.values()), "nodes_by_site": nodes, "forces_N": forces,
             "seconds": time.perf_counter() - t0}
 
 
@@ -189,36 +230,40 @@ def richardson(h: Sequence[float], f: Sequence[float]) -> tuple[float, float]:
 
 
 def extrapolate(rows: Sequence[dict]) -> dict:
-    """The reference from rows at three or more spacings (any order): per press the extrapolation F0
-    of the three finest and its observed order; with a fourth, the change against the three
-    coarsest' extrapolation (with three only the change is unknown: not converged). Also the
-    finest row's distance from F0. Returns a row (``forces_N`` = F0) with these per press."""
+    """The reference from rows at two or more spacings (any order): per press the change of the last
+    refinement (converged when every one is under :data:`CONVERGED_CHANGE`); with three or more, the
+    Richardson extrapolation F0 of the three finest and its observed order, and with four, its change
+    against the three coarsest' extrapolation. The forces are F0 when that check holds for every
+    press, else the finest row's. Returns a row with these per press."""
     rows = sorted(rows, key=lambda r: -r["spacing"])
-    if len(rows) < 3:
-        raise ConfigError(f"the reference needs forces at 3 or more spacings to extrapolate (4 to check the "
-                          f"extrapolation), got {len(rows)}")
+    if len(rows) < 2:
+        raise ConfigError(f"the reference needs forces at 2 or more spacings to state a refinement's change (3 to "
+                          f"extrapolate, 4 to check the extrapolation), got {len(rows)}")
     h = [r["spacing"] for r in rows]
-    forces, order, change, finest_gap, notes = {}, {}, {}, {}, {}
+    forces, order, change, finest_gap, notes, last = {}, {}, {}, {}, {}, {}
     for key in rows[-1]["forces_N"]:
         f = [r["forces_N"][key] for r in rows]
-        try:
-            f0, p = richardson(h[-3:], f[-3:])
-            g0 = richardson(h[-4:-1], f[-4:-1])[0] if len(rows) > 3 else math.nan
-        except ConfigError as exc:          # not in the asymptotic range: the finest force, flagged
-            f0, p, g0 = f[-1], math.nan, math.nan
-            notes[key] = str(exc)
+        last[key] = abs(f[-1] - f[-2]) / abs(f[-1])
+        f0, p, g0 = f[-1], math.nan, math.nan
+        if len(rows) >= 3:
+            try:
+                f0, p = richardson(h[-3:], f[-3:])
+                g0 = richardson(h[-4:-1], f[-4:-1])[0] if len(rows) > 3 else math.nan
+            except ConfigError as exc:      # not in the asymptotic range: the finest force, flagged
+                f0, p, g0 = f[-1], math.nan, math.nan
+                notes[key] = str(exc)
         forces[key], order[key] = f0, p
         change[key] = abs(f0 - g0) / abs(f0) if math.isfinite(g0) else math.inf
         finest_gap[key] = abs(f[-1] - f0) / abs(f0)
-    worst = max(change.values())
+    worst = max(last.values())
     converged = bool(worst < CONVERGED_CHANGE)
-    last = max(abs(a - b) / abs(b) for a, b in zip(rows[-2]["forces_N"].values(), rows[-1]["forces_N"].values()))
-    return {"task": rows[-1]["task"], "model": f"{REFERENCE_MODEL} extrapolated" if converged else REFERENCE_MODEL,
-            "spacing": 0.0 if converged else h[-1], "spacings": h, "nodes": [r["nodes"] for r in rows],
-            # not converged: the finest solution computed, labelled so, rather than an extrapolation
-            # that its own check does not support
-            "forces_N": forces if converged else dict(rows[-1]["forces_N"]), "extrapolated_N": forces,
-            "last_refinement_change": float(last),
+    extrapolated = bool(max(change.values()) < CONVERGED_CHANGE)
+    return {"task": rows[-1]["task"], "model": f"{REFERENCE_MODEL} extrapolated" if extrapolated else REFERENCE_MODEL,
+            "spacing": 0.0 if extrapolated else h[-1], "spacings": h, "nodes": [r["nodes"] for r in rows],
+            # an extrapolation its own check does not support is stated, not used
+            "forces_N": forces if extrapolated else dict(rows[-1]["forces_N"]), "extrapolated_N": forces,
+            "last_refinement_change": float(worst), "last_change": last,
             "forces_by_spacing": [r["forces_N"] for r in rows], "seconds": [r["seconds"] for r in rows],
             "observed_order": order, "extrapolation_change": change, "finest_gap": finest_gap,
-            "not_extrapolated": notes, "reference_change": float(worst), "reference_converged": converged}
+            "not_extrapolated": notes, "reference_change": float(worst), "reference_converged": converged,
+            "reference_extrapolated": extrapolated, "coarse_spacing": rows[-1].get("coarse_spacing")}

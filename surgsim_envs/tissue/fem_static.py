@@ -39,7 +39,7 @@ from numba import njit
 from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.tissue import fem_assembly as asm
-from surgsim_envs.tissue.compliance import DEFAULT_CACHE_MB, CondensedCompliance
+from surgsim_envs.tissue.compliance import DEFAULT_CACHE_MB, SOLVERS, CondensedCompliance
 from surgsim_envs.tissue.fem import TetFEMModel
 from surgsim_envs.tissue.guard import StabilityGuard
 
@@ -79,6 +79,9 @@ class QuasiStaticFEMModel(TetFEMModel):
         planes) in addition to the fixed nodes.
     cache_mb: memory (MB) for cached compliance columns (72 x N bytes per loaded node; least
         recently used evicted beyond it).
+    solver: the sparse factorisation of K: ``"superlu"`` (default), ``"pardiso"`` (MKL PARDISO's
+        Cholesky, needs the optional package pypardiso; several times faster on large meshes) or
+        ``"auto"`` (pardiso when installed), see :mod:`surgsim_envs.tissue.compliance`.
     precompute: None (columns on first contact, default), ``"surface"`` (every free surface node,
         at build) or node indices: back-substitute those columns at build so that no step pays
         for a first contact (:meth:`precompute`).
@@ -95,7 +98,7 @@ class QuasiStaticFEMModel(TetFEMModel):
     material_fields = ("young", "poisson", "density")
 
     def __init__(self, volume, material="liver", *, formulation: str = "anp", fixed_dofs=None,
-                 cache_mb: float = DEFAULT_CACHE_MB, precompute=None, integrator: str | None = None,
+                 cache_mb: float = DEFAULT_CACHE_MB, solver: str = "superlu", precompute=None, integrator: str | None = None,
                  corotational: bool = False, **base_kwargs):
         if corotational:
             raise ConfigError("fem_static is small-strain only (corotational=False): its factorised stiffness and "
@@ -103,9 +106,11 @@ class QuasiStaticFEMModel(TetFEMModel):
         for key in ("stiffness_damping", "rotation_iters", "cg_tol", "threads", "preconditioner"):
             if key in base_kwargs:
                 raise ConfigError(f"fem_static has no option {key!r} (it has no dynamic integrator); options: "
-                                  "formulation, fixed_dofs, cache_mb, fixed, gravity, region_materials")
+                                  "formulation, fixed_dofs, cache_mb, solver, fixed, gravity, region_materials")
         self.cache_mb = validate.positive(cache_mb, "fem_static: cache_mb", unit="MB",
                                           fix="the memory of cached compliance rows, e.g. 256")
+        self.solver = validate.choice(solver, "fem_static: solver", SOLVERS,
+                                      fix="'superlu', 'pardiso' (needs pypardiso) or 'auto'")
         self._comp: CondensedCompliance | None = None
         if base_kwargs.get("guard") is None:
             # a linear solve with a factorised SPD stiffness cannot diverge: an inverted element means
@@ -176,7 +181,7 @@ class QuasiStaticFEMModel(TetFEMModel):
             if free.all():
                 raise ConfigError("fem_static needs fixed nodes (a free body has rigid modes): pass fixed=... or "
                                   "call set_fixed(nodes)")
-            self._comp = CondensedCompliance(self._k_rest, free, cache_mb=self.cache_mb)
+            self._comp = CondensedCompliance(self._k_rest, free, cache_mb=self.cache_mb, solver=self.solver)
             self._u0_stale = True
         return self._comp
 
