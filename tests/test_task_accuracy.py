@@ -143,7 +143,11 @@ def test_reference_scene_is_graded_about_the_press_site_with_its_contact_per_are
         contact = env.sim.scene.config.contact
         assert contact.stiffness == pytest.approx(tr.CONTACT_STIFFNESS_PER_AREA * fine ** 2)
         assert contact.surface_samples == tr.SURFACE_SUBDIVISIONS == 2
-        assert len(env.centroids) == len(env.sim.tissue().tets)
+        env.reset(seed=0, options={"inclusion_position": xy, "stiffness_contrast": (5.0, 5.0),
+                                   "inclusion_depth": (0.011, 0.011), "inclusion_radius": (0.007, 0.007),
+                                   "young_scale": (1.0, 1.0)})
+        young = env.sim.tissue().fields["young"]
+        assert len(young) == len(env.sim.tissue().tets) and young.max() / young.min() == pytest.approx(5.0)
     finally:
         env.close()
 

@@ -39,7 +39,7 @@ from gymnasium.vector.utils import batch_space
 
 from surgsim_envs.batch.simulation import BatchSimulation
 from surgsim_envs.envs.checks import sample
-from surgsim_envs.envs.tissue_setup import sphere_mask
+from surgsim_envs.envs.tissue_setup import inclusion_young_factors
 from surgsim_envs.batch.world_view import WorldView
 from surgsim_envs.envs.palpation import (PalpationEnv, is_new_site, localisation_error,
                                          localisation_reward, map_cell, stiffness_map,
@@ -114,7 +114,7 @@ class BatchedPalpationEnv(VectorEnv):
         self.max_episode_steps = self.template.max_episode_steps
         self.surface_z = self.template.surface_z
         self.home = np.array(self.template.home, dtype=np.float64)
-        self.centroids = self.template.centroids
+        self._tissue = self.template.sim.tissue()     # the template's tissue: the mesh the inclusion is cut from
         self.n_cells = int(c.map_cells) ** 2
         self._factors = np.ones((W, self.sim.topology.n_tets))
         self._tasks = [_WorldTask(self.n_cells, seeding.np_random(None)[0]) for _ in range(W)]
@@ -167,8 +167,7 @@ class BatchedPalpationEnv(VectorEnv):
             scale = sample(rng, get("young_scale"), "young_scale", 0.1, 10.0)
             rng.integers(2**31)             # the single env's physics seed draw: keeps the streams aligned
             centre = np.array([x, y, self.surface_z - depth])
-            inside = sphere_mask(self.centroids, centre, radius)
-            self._factors[w] = np.where(inside, scale * contrast, scale)
+            self._factors[w] = inclusion_young_factors(self._tissue, centre, radius, contrast, scale)
             task.start({"centre": centre, "radius": radius, "contrast": contrast, "young_scale": scale},
                        self.home.copy())
         sim.set_young_factors(self._factors[idx], worlds=idx)

@@ -127,7 +127,6 @@ def graded_scene(env, xy, fine: float, deepest: float) -> int:
     cfg.contact.tangential_stiffness = None          # = the normal one
     cfg.contact.surface_samples = SURFACE_SUBDIVISIONS
     env.sim = Simulation(build_scene(cfg), dt=env.sim.dt, substeps=env.sim.substeps)
-    env.centroids = env.sim.tissue().element_centroids()      # the inclusion's mask follows the mesh
     return int(len(env.sim.tissue().positions))
 
 

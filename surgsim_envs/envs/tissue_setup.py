@@ -4,11 +4,13 @@ an inclusion."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from surgsim_envs.envs.checks import integrator_names_of
+from surgsim_envs.geometry.sphere_fraction import mixed_young_factors, sphere_volume_fractions
 
 
 def sphere_mask(centroids: np.ndarray, centre, radius: float) -> np.ndarray:
@@ -19,6 +21,25 @@ def sphere_mask(centroids: np.ndarray, centre, radius: float) -> np.ndarray:
     if not mask.any():
         mask[np.argmin(d)] = True
     return mask
+
+
+def inclusion_young_factors(tissue, centre, radius: float, contrast: float, scale: float = 1.0) -> np.ndarray:
+    """(T,) Young's modulus factors (for ``tissue.scale_material("young", ...)``) of a sphere
+    (``centre`` (3,) m, ``radius`` m) ``contrast`` x stiffer than the rest of ``tissue``, the whole
+    scaled by ``scale``: each element mixes the two by the fraction of its volume inside the sphere
+    (:mod:`surgsim_envs.geometry.sphere_fraction`), so the inclusion keeps its volume on any lattice.
+    A sphere too small for the sampling to see puts its whole volume into the nearest element."""
+    vertices = tissue.element_vertices()
+    frac = sphere_volume_fractions(vertices, centre, radius)
+    if not frac.any():
+        d = np.linalg.norm(vertices.mean(axis=1) - np.asarray(centre, dtype=float)[None], axis=1)
+        i = int(np.argmin(d))
+        share = 1.0
+        if vertices.shape[1] == 4:
+            e = vertices[i, 1:] - vertices[i, 0]
+            share = min(1.0, (4.0 / 3.0) * math.pi * float(radius) ** 3 / (abs(np.linalg.det(e)) / 6.0))
+        frac[i] = share
+    return mixed_young_factors(frac, contrast, scale)
 
 
 def tissue_options(model: str, integrator: str) -> dict[str, Any]:

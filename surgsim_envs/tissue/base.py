@@ -223,6 +223,13 @@ class TissueModel(abc.ABC):
             return self.rest_positions.copy()
         return self.rest_positions[self.volume.tets].mean(axis=1)
 
+    def element_vertices(self) -> np.ndarray:
+        """(T,4,3) m rest corners of the elements that carry the material fields (tets; for a
+        surface-only model (N,1,3), its nodes), to weigh a region's share of each element."""
+        if "surface_only" in self.capabilities:
+            return self.rest_positions[:, None, :].copy()
+        return self.rest_positions[self.volume.tets]
+
     def _check_field_name(self, name: str) -> None:
         if name not in self.fields:
             raise ConfigError(f"unknown material field {name!r}; fields: {sorted(self.fields)}")

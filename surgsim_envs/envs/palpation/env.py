@@ -56,7 +56,7 @@ from surgsim_envs.envs.palpation.terms import (REWARD_TERMS, TERMINATION_TERMS, 
 from surgsim_envs.envs.terms import ObsTerm
 from surgsim_envs.envs.terms.action import ActionTerm, probe_target
 from surgsim_envs.envs.terms.force import vector_norm
-from surgsim_envs.envs.tissue_setup import integrator_for_range, sphere_mask, tissue_options
+from surgsim_envs.envs.tissue_setup import inclusion_young_factors, integrator_for_range, tissue_options
 from surgsim_envs.errors import ConfigError
 
 
@@ -114,7 +114,6 @@ class PalpationEnv(SurgSimEnv):
             t.options = {**t.options, "integrator": switch,
                          **getattr(model_class(c.model), "implicit_point_load_options", {})}
             self.sim = Simulation(palpation_scene(cfg), dt=c.dt, substeps=self.substeps)
-        self.centroids = self.sim.tissue().element_centroids()     # (T,3) m, rest frame: inclusion masks
         self.home = np.asarray(p.position, dtype=float)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
         self.n_cells = int(c.map_cells) ** 2
@@ -156,8 +155,8 @@ class PalpationEnv(SurgSimEnv):
         scale = sample(rng, get("young_scale"), "young_scale", 0.1, 10.0)
         centre = np.array([x, y, self.surface_z - depth])
         tissue = self.sim.tissue()
-        tissue.scale_material("young", scale)             # the contract's only way to change stiffness
-        tissue.scale_material("young", scale * contrast, mask=sphere_mask(self.centroids, centre, radius))
+        # the contract's only way to change stiffness; cut elements mix the two by volume fraction
+        tissue.scale_material("young", inclusion_young_factors(tissue, centre, radius, contrast, scale))
         self.sim.reset(seed=int(rng.integers(2**31)))
         check_explicit_step(tissue, self.sim.dt, f"Palpation: stiffness contrast {contrast:.2f} x young_scale "
                                                  f"{scale:.2f}")
