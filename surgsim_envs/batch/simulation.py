@@ -404,6 +404,12 @@ class BatchSimulation:
         """(kinetic, static) Coulomb friction per world and tool body, (W, B) each."""
         return self.contact.mu.numpy().copy(), self.contact.mu_s.numpy().copy()
 
+    @property
+    def material_tets(self) -> int:
+        """Tets of the template's material (the columns of :meth:`set_young_factors`' factors)."""
+        sw = self._spring_weight_matrix
+        return self.topology.n_tets if isinstance(sw, str) else int(sw.shape[1])
+
     def set_young_factors(self, factors, worlds=None) -> None:
         """Per-world, per-tet Young's modulus factors ``factors`` (W, T), or (len(worlds), T) for the
         worlds listed, relative to the template's
@@ -414,9 +420,7 @@ class BatchSimulation:
         term). Needs a template whose materials differ in Young's modulus only (as the tasks build
         it); checked against the CPU model's own re-derivation in tests/test_batch_equivalence.py."""
         f = np.asarray(factors, dtype=np.float64)
-        sw = self._spring_weight_matrix
-        nt = self.topology.n_tets if isinstance(sw, str) else sw.shape[1]      # the material's tets (with or
-        #                                                                       without a volume term)
+        nt = self.material_tets         # with or without a volume term
         idx = np.arange(self.W) if worlds is None else np.asarray(worlds, dtype=np.int64).reshape(-1)
         if f.shape != (len(idx), nt) or not np.all(np.isfinite(f)) or np.any(f <= 0):
             raise ConfigError(f"factors must be positive finite ({len(idx)}, {nt}) per-tet Young's modulus factors, "

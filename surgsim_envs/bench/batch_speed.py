@@ -68,7 +68,7 @@ def measure(device: str, worlds: int, steps: int, repeats: int) -> dict:
     """The figures of one world count (module docstring)."""
     import warp as wp
 
-    from surgsim_envs.batch.env import BatchedPalpationEnv
+    from surgsim_envs.batch.palpation_env import BatchedPalpationEnv
 
     env = BatchedPalpationEnv(worlds, device=device)
     sim = env.sim
