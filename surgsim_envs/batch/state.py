@@ -145,7 +145,8 @@ class ContactState:
         z = lambda shape, dt: wp.zeros(shape, dtype=dt, device=device)  # noqa: E731
         return cls(anchor=z((W, C, G), wp.vec3d), state=z((W, C, G), wp.int32), f_ext=z((W, N), wp.vec3d),
                    point_force=z((W, C, G), wp.vec3d), point_fn=z((W, C, G), wp.float64),
-                   point_ft=z((W, C, G), wp.vec3d), point_depth=z((W, C, G), wp.float64), gpos=z((W, G), wp.vec3d), gmat=z((W, G), wp.mat33d),
+                   point_ft=z((W, C, G), wp.vec3d), point_depth=z((W, C, G), wp.float64),
+                   gpos=z((W, G), wp.vec3d), gmat=z((W, G), wp.mat33d),
                    gang=z((W, G), wp.vec3d), glin=z((W, G), wp.vec3d), tcom=z((W, B), wp.vec3d),
                    tool_force=z((W, B), wp.vec3d), tool_torque=z((W, B), wp.vec3d), tool_fn=z((W, B), wp.float64),
                    tool_ft=z((W, B), wp.float64), tool_contacts=z((W, B), wp.int32),

@@ -1,9 +1,10 @@
 """``surgsim bench batch``: speed of the batched Warp backend (surgsim_envs/batch, docs/batch.md).
 
 For each world count W: env steps/s of the batched vector env of ``--task`` (Palpation-v0 by
-default, or any task with a batched env, e.g. Grasp-v0; random actions, autoreset), physics world-steps/s of the bare :class:`BatchSimulation` (W x physics steps per
-second), the share of each phase of a physics step (rate limiter, MuJoCo Warp step1, contact,
-tissue, reaction, MuJoCo Warp step2; timed with the device synchronised after each phase, in a
+default, or any task with a batched env, e.g. Grasp-v0; random actions, autoreset), physics
+world-steps/s of the bare :class:`BatchSimulation` (W x physics steps per second), the share of
+each phase of a physics step (rate limiter, MuJoCo Warp step1, contact, tissue, reaction, MuJoCo
+Warp step2; timed with the device synchronised after each phase, in a
 separate run), and the memory of the batched state per tissue node-world (the backend's arrays,
 and with MuJoCo Warp's data). Medians over ``--repeats``; the load average is recorded.
 Warp's CPU device runs kernels on one thread: CPU figures are for checking, not for speed.
