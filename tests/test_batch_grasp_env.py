@@ -17,7 +17,7 @@ control steps), target 7 mm out, and damage_force 0.1 N so that the excess-force
 import numpy as np
 import pytest
 
-from surgsim_envs.batch.backend import available
+from surgsim_envs.batch.backend import available, cuda_available
 
 pytestmark = pytest.mark.skipif(not available(), reason="needs the [batch] extra (warp-lang, mujoco-warp)")
 
@@ -28,11 +28,11 @@ REL, PER_NODE = 1e-4, 2e-6           # of the grip; N per contact node
 RTOL, ATOL = 1e-4, 5e-5              # reward terms
 
 
-def _batched(num_envs, **kwargs):
+def _batched(num_envs, device="cpu", **kwargs):
     import gymnasium as gym
 
     return gym.make_vec("SurgSim/Grasp-v0", num_envs=num_envs, vectorization_mode="vector_entry_point",
-                        device="cpu", max_episode_steps=20, **FAST, **kwargs)
+                        device=device, max_episode_steps=20, **FAST, **kwargs)
 
 
 def _script(k, obs, close_steps=10):
@@ -42,12 +42,14 @@ def _script(k, obs, close_steps=10):
     return np.array([*np.clip(obs[3:6] / 0.001 * 0.6, -0.6, 0.6), 1.0], dtype=np.float32)
 
 
-def test_one_world_follows_the_single_env_through_a_grasp():
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
+    not cuda_available(), reason="no CUDA device on this host (Warp sees none)"))])
+def test_one_world_follows_the_single_env_through_a_grasp(device):
     import gymnasium as gym
 
     from surgsim_envs.envs.grasp import GraspEnv
 
-    venv = _batched(1)
+    venv = _batched(1, device)
     env = gym.make("SurgSim/Grasp-v0", max_episode_steps=20, **FAST)
     single = env.unwrapped
     assert venv.single_observation_space == env.observation_space
