@@ -20,3 +20,9 @@ def test_cli_reports_a_bad_device(capsys):
     pytest.importorskip("warp")
     assert main(["bench", "batch", "--device", "tpu", "--worlds", "1"]) == 2
     assert "device='tpu' must be 'cpu', 'cuda' or 'cuda:<index>'" in capsys.readouterr().err
+
+
+def test_cli_reports_a_task_without_a_batched_env(capsys):
+    pytest.importorskip("warp")
+    assert main(["bench", "batch", "--task", "SurgSim/Slippage-v0", "--worlds", "1"]) == 2
+    assert "--task 'SurgSim/Slippage-v0' has no batched env; choose one of ['SurgSim/Grasp-v0'" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""The batched Palpation-v0 vector env (surgsim_envs/batch/env.py) against the single env.
+"""The batched Palpation-v0 vector env (surgsim_envs/batch/palpation_env.py) against the single env.
 
 ``gym.make_vec(..., vectorization_mode="vector_entry_point", device="cpu")`` returns the batched
 env; with one world and the same seed it follows ``gym.make("SurgSim/Palpation-v0")`` through a
@@ -43,7 +43,7 @@ def venv():
 def test_make_vec_with_device_returns_the_batched_env(venv):
     import gymnasium as gym
 
-    from surgsim_envs.batch.env import BatchedPalpationEnv
+    from surgsim_envs.batch.palpation_env import BatchedPalpationEnv
 
     single = gym.make("SurgSim/Palpation-v0")
     assert isinstance(venv, BatchedPalpationEnv)
@@ -118,7 +118,7 @@ def test_bad_vector_arguments_raise_clear_errors(venv):
     from surgsim_envs.errors import ConfigError
 
     with pytest.raises(ConfigError, match=r"device= \(the batched Warp backend\) is available for"):
-        gym.make_vec("SurgSim/Grasp-v0", num_envs=2, vectorization_mode="vector_entry_point", device="cpu")
+        gym.make_vec("SurgSim/Slippage-v0", num_envs=2, vectorization_mode="vector_entry_point", device="cpu")
     with pytest.raises(ConfigError, match=r"actions must be finite \(2, 4\) numbers"):
         venv.step(np.zeros((3, 4)))
     with pytest.raises(ConfigError, match="unknown reset option"):

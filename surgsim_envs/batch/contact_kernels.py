@@ -10,7 +10,10 @@ capsule, box and cylinder tool geoms.
   (``f_ext``) and each geom's part of it (``point_force``, kept for the tool sums).
 * :func:`tool_sums`: one thread per (world, tool body) sums the reactions of its geoms' points in
   the CPU kernel's order (points, then geoms), so no atomics are needed; then the per-tool
-  report (normal force, contacts, penetration).
+  report (normal and tangential force, contact and slipping points, penetration).
+* :func:`geom_sums` (one thread per (world, geom)) and :func:`contact_node_mask` (per (world,
+  node)): readouts computed when asked for, from the last tissue step's per-point parts (a
+  grasper's per-jaw normal and tangential forces; the nodes in contact).
 * :func:`write_reaction`: the sums into MuJoCo Warp's ``xfrc_applied`` (float32), and
   :func:`zero_reaction` clears those rows after ``step2``.
 """
@@ -143,10 +146,11 @@ def contact_points(x: wp.array2d(dtype=wp.vec3d), v: wp.array2d(dtype=wp.vec3d),
                    kind: wp.array(dtype=wp.int32), tool: wp.array(dtype=wp.int32), size: wp.array2d(dtype=f64),
                    gpos: wp.array2d(dtype=wp.vec3d), gmat: wp.array2d(dtype=wp.mat33d),
                    gang: wp.array2d(dtype=wp.vec3d), glin: wp.array2d(dtype=wp.vec3d),
-                   mu: wp.array(dtype=f64), mu_s: wp.array(dtype=f64), k_n: f64, c_n: f64, k_t: f64,
+                   mu: wp.array2d(dtype=f64), mu_s: wp.array2d(dtype=f64), k_n: f64, c_n: f64, k_t: f64,
                    anchor: wp.array3d(dtype=wp.vec3d), state: wp.array3d(dtype=wp.int32),
                    f_ext: wp.array2d(dtype=wp.vec3d), point_force: wp.array3d(dtype=wp.vec3d),
-                   point_fn: wp.array3d(dtype=f64), point_depth: wp.array3d(dtype=f64)):
+                   point_fn: wp.array3d(dtype=f64), point_ft: wp.array3d(dtype=wp.vec3d),
+                   point_depth: wp.array3d(dtype=f64)):
     w, c = wp.tid()
     i = cand[c]
     xi = x[w, i]
@@ -155,6 +159,7 @@ def contact_points(x: wp.array2d(dtype=wp.vec3d), v: wp.array2d(dtype=wp.vec3d),
     for g in range(kind.shape[0]):
         point_force[w, c, g] = zero
         point_fn[w, c, g] = f64(0.0)
+        point_ft[w, c, g] = zero
         point_depth[w, c, g] = f64(0.0)
         s0 = size[g, 0]
         s1 = size[g, 1]
@@ -199,17 +204,17 @@ def contact_points(x: wp.array2d(dtype=wp.vec3d), v: wp.array2d(dtype=wp.vec3d),
             en = e[0] * n[0] + e[1] * n[1] + e[2] * n[2]
             tv = wp.vec3d(e[0] - en * n[0], e[1] - en * n[1], e[2] - en * n[2])
             stretch = wp.sqrt(tv[0] * tv[0] + tv[1] * tv[1] + tv[2] * tv[2])
-            cap = mu[t] * f_n
+            cap = mu[w, t] * f_n
             if st != 2:
-                if mu_s[t] > mu[t]:
-                    cap = mu_s[t] * f_n
+                if mu_s[w, t] > mu[w, t]:
+                    cap = mu_s[w, t] * f_n
             else:
                 cap = cap * f64(1.000000001)
             if k_t * stretch <= cap:
                 ft = -k_t * tv
             else:
                 slip = 1
-                cap = mu[t] * f_n
+                cap = mu[w, t] * f_n
                 sc = cap / stretch
                 ft = -sc * tv
                 keep = cap / (k_t * stretch)
@@ -220,6 +225,7 @@ def contact_points(x: wp.array2d(dtype=wp.vec3d), v: wp.array2d(dtype=wp.vec3d),
         ftot = ftot + gf
         point_force[w, c, g] = gf
         point_fn[w, c, g] = f_n
+        point_ft[w, c, g] = ft
         point_depth[w, c, g] = depth
     f_ext[w, i] = ftot
 
@@ -227,22 +233,29 @@ def contact_points(x: wp.array2d(dtype=wp.vec3d), v: wp.array2d(dtype=wp.vec3d),
 @wp.kernel
 def tool_sums(x: wp.array2d(dtype=wp.vec3d), cand: wp.array(dtype=wp.int32), tool: wp.array(dtype=wp.int32),
               point_force: wp.array3d(dtype=wp.vec3d), point_fn: wp.array3d(dtype=f64),
-              point_depth: wp.array3d(dtype=f64), tcom: wp.array2d(dtype=wp.vec3d),
+              point_ft: wp.array3d(dtype=wp.vec3d), point_depth: wp.array3d(dtype=f64),
+              state: wp.array3d(dtype=wp.int32), tcom: wp.array2d(dtype=wp.vec3d),
               tool_force: wp.array2d(dtype=wp.vec3d), tool_torque: wp.array2d(dtype=wp.vec3d),
-              tool_fn: wp.array2d(dtype=f64), tool_contacts: wp.array2d(dtype=wp.int32),
-              tool_depth: wp.array2d(dtype=f64)):
+              tool_fn: wp.array2d(dtype=f64), tool_ft: wp.array2d(dtype=f64), tool_contacts: wp.array2d(dtype=wp.int32),
+              tool_slipping: wp.array2d(dtype=wp.int32), tool_depth: wp.array2d(dtype=f64)):
     """Reaction force (N) and torque about the body's centre of mass (N m) on tool body t: minus the
     sum over its geoms' contact points of their forces, applied at the points (positions before
-    the tissue step, as the CPU loop takes them)."""
+    the tissue step, as the CPU loop takes them); and its contact report, as the CPU kernel's: the
+    sum of normal magnitudes, the magnitude of the summed friction force, the points touching the
+    body and those sliding on one of its geoms (each point counted once per body), the deepest
+    penetration."""
     w, t = wp.tid()
     F = wp.vec3d(f64(0.0), f64(0.0), f64(0.0))
     M = wp.vec3d(f64(0.0), f64(0.0), f64(0.0))
     fn = f64(0.0)
+    ftv = wp.vec3d(f64(0.0), f64(0.0), f64(0.0))
     depth = f64(0.0)
     count = int(0)
+    slipping = int(0)
     com = tcom[w, t]
     for c in range(cand.shape[0]):
         touched = int(0)
+        slid = int(0)
         for g in range(tool.shape[0]):
             if tool[g] != t:
                 continue
@@ -254,15 +267,52 @@ def tool_sums(x: wp.array2d(dtype=wp.vec3d), cand: wp.array(dtype=wp.int32), too
             r = x[w, cand[c]] - com
             M = M - wp.cross(r, gf)
             fn = fn + point_fn[w, c, g]
+            ftv = ftv + point_ft[w, c, g]
             touched = 1
+            if state[w, c, g] == 2:
+                slid = 1
             if d > depth:
                 depth = d
         count = count + touched
+        slipping = slipping + slid
     tool_force[w, t] = F
     tool_torque[w, t] = M
     tool_fn[w, t] = fn
+    tool_ft[w, t] = wp.sqrt(ftv[0] * ftv[0] + ftv[1] * ftv[1] + ftv[2] * ftv[2])
     tool_contacts[w, t] = count
+    tool_slipping[w, t] = slipping
     tool_depth[w, t] = depth
+
+
+@wp.kernel
+def geom_sums(point_fn: wp.array3d(dtype=f64), point_ft: wp.array3d(dtype=wp.vec3d),
+              point_depth: wp.array3d(dtype=f64), geom_fn: wp.array2d(dtype=f64), geom_ft: wp.array2d(dtype=f64)):
+    """Per geom (one thread per (world, geom), points summed in order, as the CPU kernel's
+    ``geom_normal_force`` / ``geom_tangential_force``): the sum of the normal force magnitudes (N)
+    and the magnitude of the summed friction force (N) of its contact points; e.g. a grasper's
+    per-jaw forces."""
+    w, g = wp.tid()
+    fn = f64(0.0)
+    ftv = wp.vec3d(f64(0.0), f64(0.0), f64(0.0))
+    for c in range(point_fn.shape[1]):
+        if point_depth[w, c, g] <= f64(0.0):
+            continue
+        fn = fn + point_fn[w, c, g]
+        ftv = ftv + point_ft[w, c, g]
+    geom_fn[w, g] = fn
+    geom_ft[w, g] = wp.sqrt(ftv[0] * ftv[0] + ftv[1] * ftv[1] + ftv[2] * ftv[2])
+
+
+@wp.kernel
+def contact_node_mask(f_ext: wp.array2d(dtype=wp.vec3d), mask: wp.array2d(dtype=wp.int32)):
+    """1 for the nodes that felt a contact force in the last tissue step (|f|^2 > 0, as
+    ``grasp.terms.contact_nodes`` on the CPU), else 0."""
+    w, i = wp.tid()
+    f = f_ext[w, i]
+    hit = int(0)
+    if f[0] * f[0] + f[1] * f[1] + f[2] * f[2] > f64(0.0):
+        hit = 1
+    mask[w, i] = hit
 
 
 @wp.kernel

@@ -1,36 +1,35 @@
-"""Palpation-v0 as a Gymnasium vector env over W batched worlds (:class:`BatchedPalpationEnv`).
+"""The base of the batched vector envs: one task's episodes in W batched worlds (:class:`BatchedTaskEnv`).
 
-``gym.make_vec("SurgSim/Palpation-v0", num_envs=W, vectorization_mode="vector_entry_point",
-device="cpu")`` returns it (``device="cuda"`` where a GPU exists). The physics of all worlds runs
-in :class:`~surgsim_envs.batch.simulation.BatchSimulation`; every world is one Palpation-v0
-episode with the single env's observation (same names and order, ``observation_names``), reward
-terms and info metrics, computed by the task's own term functions (:mod:`surgsim_envs.envs.palpation`)
-on the per-world arrays:
+A task's batched env is one small module on this base (``batch/palpation_env.py``,
+``batch/grasp_env.py``), registered through ``TaskSpec.batched``:
+``gym.make_vec(task_id, num_envs=W, vectorization_mode="vector_entry_point", device="cpu")``
+(``device="cuda"`` where a GPU exists). The base holds what every task shares:
 
-* physics readouts and the per-step terms (indentation depth, force magnitude, damage penalty,
-  stiffness estimate, quasi-static test, report hold, time cost) are numpy operations over all worlds;
-* the stiffness-sample bookkeeping (press sites, map cells, the running stiffness-weighted
-  estimate and its shaping) runs per world that took a sample this step.
+* the single env built once as the template (its config, spaces, observation names, declared
+  reward and termination terms) and the :class:`~surgsim_envs.batch.simulation.BatchSimulation` of
+  its scene;
+* seeding: world i of ``reset(seed=s)`` draws from its own generator seeded ``s + i``, as
+  Gymnasium's vector envs seed their copies, so it is ``gym.make(task_id).reset(seed=s + i)``;
+* reset options: the task's ``OPTIONS`` less those a batch cannot honour (``REFUSED``: option ->
+  why), refused with a :class:`~surgsim_envs.errors.ConfigError` naming the option and the reason;
+* the step: action checks, the task's commands for the live worlds, the physics, diverged worlds
+  (``on_unstable``), the task's evaluation, and Gymnasium's NEXT_STEP autoreset per world (the step
+  after a world's episode ended resets it: its action is ignored, reward 0, terminated/truncated
+  False, and it returns its first observation);
+* the term loop (:meth:`_term_loop`): the single env's declared reward terms run for each live
+  world on a :class:`~surgsim_envs.batch.world_view.WorldView` of it, so the batched env computes
+  the same functions, in the declared order, not a second copy of their arithmetic;
+* :meth:`device_arrays`: the physics arrays on the device (Warp arrays: ``__dlpack__``,
+  ``wp.to_torch``, ``wp.to_jax`` share them without copies). Observations and rewards come back
+  as numpy arrays.
 
-Per-world randomisation as the single env's ``reset``: inclusion position, depth, radius,
-stiffness contrast and Young's scale, drawn from each world's own generator (seeded ``seed + i``
-as Gymnasium's vector envs seed their copies), so world i of ``reset(seed=s)`` has the inclusion
-of ``gym.make("SurgSim/Palpation-v0").reset(seed=s + i)``; they enter the tissue as per-tet Young's
-factors (:meth:`BatchSimulation.set_young_factors`).
-
-Autoreset: Gymnasium's NEXT_STEP mode (the default of ``SurgSimVectorEnv`` too): the step after a
-world's episode ended resets it (its action is ignored, reward 0, terminated/truncated False) and
-returns its first observation. A world whose tissue diverges raises
-:class:`~surgsim_envs.errors.TissueUnstableError` (config ``on_unstable="raise"``, the default) or
-ends its episode with ``info["unstable"]`` ("terminate"), as the single env. Observations and rewards come back as numpy arrays;
-:meth:`device_arrays` hands out the physics arrays on the device (Warp arrays: ``__dlpack__``,
-``wp.to_torch``, ``wp.to_jax`` share them without copies).
+A task module supplies ``TEMPLATE`` (the single env's class), ``_reset_worlds``,
+``_apply_actions``, ``_evaluate``, ``_observe`` and ``_reset_info``.
 """
 
 from __future__ import annotations
 
-import math
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium.utils import seeding
@@ -38,65 +37,34 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from surgsim_envs.batch.simulation import BatchSimulation
-from surgsim_envs.envs.checks import sample
-from surgsim_envs.envs.tissue_setup import inclusion_young_factors
 from surgsim_envs.batch.world_view import WorldView
-from surgsim_envs.envs.palpation import (PalpationEnv, is_new_site, localisation_error,
-                                         localisation_reward, map_cell, stiffness_map,
-                                         stiffness_weighted_estimate)
-from surgsim_envs.envs.palpation.terms import localisation_potential
 from surgsim_envs.envs.terms.reward import RewardManager
 from surgsim_envs.errors import ConfigError
 
 
-
-class _WorldTask:
-    """One world's episode bookkeeping (the single env's per-episode attributes)."""
-
-    def __init__(self, n_cells: int, rng):
-        self.rng = rng
-        self.n_cells = n_cells
-
-    def start(self, inclusion: dict, prev_tip: np.ndarray) -> None:
-        self.inclusion = inclusion
-        self.sites: list[np.ndarray] = []
-        self.samples_xy: list[np.ndarray] = []
-        self.samples_k: list[float] = []
-        self.estimate = None
-        self.contrast_seen = 1.0
-        self.cell_k = np.zeros(self.n_cells)
-        self.phi = self.phi_before = 0.0
-        self.new_cell = self.new_site = self.finished_now = False
-        self.guess = None
-        self.error = None
-
-    def begin_step(self) -> None:
-        """Clear the step's events and keep the potential at the step's start (the single env's ``_update``)."""
-        self.new_cell = self.new_site = self.finished_now = False
-        self.phi_before = self.phi
-
-
-class BatchedPalpationEnv(VectorEnv):
-    """Palpation-v0 in ``num_envs`` batched worlds on Warp device ``device`` (module docstring).
+class BatchedTaskEnv(VectorEnv):
+    """A task's episodes in ``num_envs`` batched worlds on Warp device ``device`` (module docstring).
 
     num_envs: worlds W; device: "cpu" (Warp's CPU device, everywhere) or "cuda"; config / overrides:
-    as for ``gym.make("SurgSim/Palpation-v0", ...)`` (a :class:`PalpationConfig` and field overrides).
+    as for ``gym.make(task_id, ...)`` (the task's config dataclass and field overrides).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
-    OPTIONS = ("inclusion_position", "inclusion_xy", "inclusion_depth", "inclusion_radius", "stiffness_contrast",
-               "young_scale")
+    #: the single env's class (its config, spaces and declared terms)
+    TEMPLATE: ClassVar[type]
+    #: reset options of the single env a batch cannot honour: option -> why
+    REFUSED: ClassVar[dict[str, str]] = {}
 
     def __init__(self, num_envs: int = 1, *, device: str = "cpu", config=None, max_episode_steps: int | None = None,
                  **overrides):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ConfigError(f"num_envs={num_envs!r} must be a positive integer (batched worlds)")
-        self.template = PalpationEnv(config=config, render_mode=None, **overrides)
+        self.template = self.TEMPLATE(config=config, render_mode=None, **overrides)
         if max_episode_steps is not None and max_episode_steps != self.template.max_episode_steps:
             raise ConfigError(f"max_episode_steps={max_episode_steps!r}: the batched env ends episodes at the config's "
                               f"{self.template.max_episode_steps} control steps (episode_seconds x control_hz); "
                               "change episode_seconds instead")
-        self.config = c = self.template.config
+        self.config = self.template.config
         self.sim = BatchSimulation(self.template.sim, int(num_envs), device=device)
         self.num_envs = W = int(num_envs)
         self.device = self.sim.device
@@ -105,97 +73,73 @@ class BatchedPalpationEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, W)
         self.action_space = batch_space(self.single_action_space, W)
         self.observation_names = self.template.observation_names
-        # the reward terms the single env declares (names, order, weight fields, functions)
-        self.rewards = RewardManager(type(self.template).REWARD_TERMS, c)
+        # the reward and termination terms the single env declares (names, order, weight fields, functions)
+        self.rewards = RewardManager(type(self.template).REWARD_TERMS, self.config)
         self.reward_term_names = self.rewards.names
-        self._view = WorldView(c, self.template.control_dt)
+        self.termination_terms = tuple(type(self.template).TERMINATION_TERMS)
+        self._view = WorldView(self.config, self.template.control_dt)
         self.substeps = self.template.substeps
         self.control_dt = self.template.control_dt
         self.max_episode_steps = self.template.max_episode_steps
-        self.surface_z = self.template.surface_z
-        self.home = np.array(self.template.home, dtype=np.float64)
-        self._tissue = self.template.sim.tissue()     # the template's tissue: the mesh the inclusion is cut from
-        self.n_cells = int(c.map_cells) ** 2
-        self._factors = np.ones((W, self.sim.topology.n_tets))
-        self._tasks = [_WorldTask(self.n_cells, seeding.np_random(None)[0]) for _ in range(W)]
+        self.OPTIONS = tuple(o for o in type(self.template).OPTIONS if o not in self.REFUSED)
+        self._rngs = [seeding.np_random(None)[0] for _ in range(W)]
         self._steps = np.zeros(W, dtype=np.int64)
-        self._target = np.tile(self.home, (W, 1))
-        self._best = np.zeros((W, 3))
-        self._prev_tip = np.tile(self.home, (W, 1))
-        self._report_held = np.zeros(W, dtype=np.int64)
-        self._peak = np.zeros(W)
         self._autoreset = np.zeros(W, dtype=bool)
         self._obs = np.zeros((W,) + self.single_observation_space.shape, dtype=np.float32)
+        self._readings = None
+
+    # -- the task's part --------------------------------------------------------------------------
+    def _reset_worlds(self, idx: np.ndarray, options: dict[str, Any]) -> None:
+        """Randomise and reset worlds ``idx`` as the single env's reset does (same draws, same order)."""
+        raise NotImplementedError
+
+    def _apply_actions(self, a: np.ndarray, live: np.ndarray) -> None:
+        """Commands of the (clipped) actions ``a`` (W, A) for the worlds where ``live`` is True."""
+        raise NotImplementedError
+
+    def _evaluate(self, a: np.ndarray, live: np.ndarray):
+        """(rewards (W,), terminated (W,), truncated (W,), info) after the physics of a control step,
+        for the ``live`` worlds (zeros and False elsewhere)."""
+        raise NotImplementedError
+
+    def _observe(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def _reset_info(self, idx) -> dict:
+        return {}
 
     # -- episodes ---------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
         options = dict(options or {})
+        refused = sorted(set(options) & set(self.REFUSED))
+        if refused:
+            name = refused[0]
+            raise ConfigError(f"reset option {name!r} cannot be honoured by {type(self).__name__}: "
+                              f"{self.REFUSED[name]}")
         unknown = sorted(set(options) - set(self.OPTIONS))
         if unknown:
-            raise ConfigError(f"unknown reset option(s) {unknown} for BatchedPalpationEnv; accepted options: "
+            raise ConfigError(f"unknown reset option(s) {unknown} for {type(self).__name__}; accepted options: "
                               f"{list(self.OPTIONS)}")
         if seed is not None:
             seeds = [int(seed) + i for i in range(self.num_envs)] if not hasattr(seed, "__len__") else list(seed)
             if len(seeds) != self.num_envs:
                 raise ConfigError(f"seed must be an int or {self.num_envs} ints, got {len(seeds)}")
-            for task, s in zip(self._tasks, seeds):
-                task.rng = seeding.np_random(s)[0]
-        self._reset_worlds(np.arange(self.num_envs), options)
+            self._rngs = [seeding.np_random(s)[0] for s in seeds]
+        idx = np.arange(self.num_envs)
+        self._reset_worlds(idx, options)
         self._autoreset[:] = False
-        return self._observe(), self._reset_info(np.arange(self.num_envs))
+        return self._observe(), self._reset_info(idx)
 
-    def _reset_worlds(self, idx: np.ndarray, options: dict[str, Any]) -> None:
-        """Randomise and reset worlds ``idx`` as the single env's reset does (same draws, same order)."""
-        c = self.config
-        get = lambda k: options.get(k, getattr(c, k))  # noqa: E731
-        half = float(min(c.slab_size[:2])) / 2
-        sim = self.sim
-        sim.reset_worlds(idx)
-        for w in idx:
-            task = self._tasks[w]
-            rng = task.rng
-            x = sample(rng, get("inclusion_xy"), "inclusion_xy", -half, half)
-            y = sample(rng, get("inclusion_xy"), "inclusion_xy", -half, half)
-            if options.get("inclusion_position") is not None:
-                value = np.asarray(options["inclusion_position"], dtype=float).reshape(-1)
-                if value.shape != (2,) or not np.all(np.abs(value) <= half):
-                    raise ConfigError(f"inclusion_position must be (x, y) m inside +-{half} m, got {value.tolist()}")
-                x, y = float(value[0]), float(value[1])
-            depth = sample(rng, get("inclusion_depth"), "inclusion_depth", 0.0, float(c.slab_size[2]))
-            radius = sample(rng, get("inclusion_radius"), "inclusion_radius", 1e-4, float(max(c.slab_size)))
-            contrast = sample(rng, get("stiffness_contrast"), "stiffness_contrast", 1.0, 20.0)
-            scale = sample(rng, get("young_scale"), "young_scale", 0.1, 10.0)
-            rng.integers(2**31)             # the single env's physics seed draw: keeps the streams aligned
-            centre = np.array([x, y, self.surface_z - depth])
-            self._factors[w] = inclusion_young_factors(self._tissue, centre, radius, contrast, scale)
-            task.start({"centre": centre, "radius": radius, "contrast": contrast, "young_scale": scale},
-                       self.home.copy())
-        sim.set_young_factors(self._factors[idx], worlds=idx)
-        self._target[idx] = self.home
-        sim.set_tool_targets("probe", self._target[idx], speed=c.probe_speed, worlds=idx)
-        self._steps[idx] = 0
-        self._best[idx] = 0.0
-        self._prev_tip[idx] = sim.tool_positions("probe")[idx]
-        self._report_held[idx] = 0
-        self._peak[idx] = 0.0
-        self._readings = None
-
-    # -- stepping ---------------------------------------------------------------------------------
     def step(self, actions):
         c, W = self.config, self.num_envs
+        shape = (W,) + self.single_action_space.shape
         a = np.asarray(actions, dtype=np.float64)
-        if a.shape != (W, 4) or not np.all(np.isfinite(a)):
-            raise ConfigError(f"actions must be finite ({W}, 4) numbers in [-1, 1], got shape {a.shape}")
+        if a.shape != shape or not np.all(np.isfinite(a)):
+            raise ConfigError(f"actions must be finite {shape} numbers in [-1, 1], got shape {a.shape}")
         a = np.clip(a, -1.0, 1.0)
         live = ~self._autoreset
-        # targets as the single env's _apply_action, for the live worlds
-        xy = np.clip(self._target[:, :2] + a[:, :2] * c.max_xy_step, -c.xy_limit, c.xy_limit)
-        press = (a[:, 2] + 1.0) / 2.0
-        z = self.surface_z + c.tip_radius + c.hover - press * (c.hover + c.max_depth)
-        self._target[live, :2] = xy[live]
-        self._target[live, 2] = z[live]
         if live.any():
-            self.sim.set_tool_targets("probe", self._target[live], speed=c.probe_speed, worlds=np.flatnonzero(live))
+            self._apply_actions(a, live)
         self.sim.step(self.substeps)
         self._readings = None
         self._steps[live] += 1
@@ -216,113 +160,26 @@ class BatchedPalpationEnv(VectorEnv):
             rewards[done_before] = 0.0
             terminated[done_before] = False
             truncated[done_before] = False
+            for key, value in self._reset_info(done_before).items():    # their rows: the new episode's
+                if key in info and np.shape(info[key]) == np.shape(value):
+                    info[key] = np.array(info[key])
+                    info[key][done_before] = np.asarray(value)[done_before]
         self._autoreset = terminated | truncated
+        info["steps"] = self._steps.copy()          # control steps of each world's episode (0: just reset)
         return self._observe(), rewards, terminated, truncated, info
 
-    def _read(self):
-        if self._readings is None:
-            pos = self.sim.tool_positions("probe")
-            force = self.sim.tool_forces("probe")
-            depth = np.maximum(0.0, self.surface_z + self.config.tip_radius - pos[:, 2])   # indentation_depth
-            self._readings = (pos, force, depth)
-        return self._readings
-
-    def _evaluate(self, a: np.ndarray, live: np.ndarray):
-        c, W = self.config, self.num_envs
-        pos, force, depth = self._read()
-        fmag = np.sqrt(np.einsum("ij,ij->i", force, force))
-        self._peak = np.where(live, np.maximum(self._peak, fmag), self._peak)
-        for w in np.flatnonzero(live):
-            self._tasks[w].begin_step()
-        pressing = depth >= c.press_min_depth
-        k = np.where(pressing, force[:, 2] / np.where(pressing, depth, 1.0), 0.0)      # stiffness_estimate
-        better = live & (k > self._best[:, 2])
-        self._best[better] = np.column_stack([pos[better, 0], pos[better, 1], k[better]])
-        d = pos - self._prev_tip
-        speed = np.sqrt(np.einsum("ij,ij->i", d, d)) / self.control_dt
-        self._prev_tip = np.where(live[:, None], pos, self._prev_tip)
-        quasi_static = speed <= c.sample_max_speed
-        for w in np.flatnonzero(live & (k > 0.0) & quasi_static):
-            self._record_sample(w, pos[w, :2].copy(), float(k[w]))
-        for w in np.flatnonzero(live & pressing & quasi_static):
-            task = self._tasks[w]
-            if is_new_site(pos[w, :2], task.sites, c.site_spacing):
-                task.sites.append(pos[w, :2].copy())
-                task.new_site = len(task.sites) <= c.max_rewarded_sites
-        self._report_held = np.where(a[:, 3] > 0.0, self._report_held + 1, 0)
-        terminated = live & (self._report_held >= c.report_hold_steps) & (self._steps * self.control_dt >= c.min_report_seconds)
-        truncated = live & ~terminated & (self._steps >= self.max_episode_steps)
-        final = np.zeros(W)
-        for w in np.flatnonzero(terminated | truncated):
-            r = self._finish(w, pos[w])
-            if terminated[w]:
-                self._tasks[w].finished_now = True       # the localisation term pays the report
-            else:
-                final[w] = r                             # as the single env's "final" entry
+    def _term_loop(self, live: np.ndarray, view_of) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """(reward (W,), {term name: (W,) weighted values}) of the single env's declared reward terms,
+        summed in declared order, for the ``live`` worlds (0 elsewhere); ``view_of(w)`` points the
+        :class:`WorldView` at world w and returns it."""
+        W = self.num_envs
         terms = {name: np.zeros(W) for name in self.reward_term_names}
         reward = np.zeros(W)
-        view = self._view
-        for w in np.flatnonzero(live):       # the single env's term functions, summed in declared order
-            view.point((pos[w], force[w], float(depth[w])), self._tasks[w], self._steps[w], self._report_held[w])
-            reward[w], values = self.rewards.compute(view)
+        for w in np.flatnonzero(live):
+            reward[w], values = self.rewards.compute(view_of(w))
             for name, v in values.items():
                 terms[name][w] = v
-        reward = reward + final
-        for name in terms:
-            terms[name] = np.where(live, terms[name], 0.0)
-        info = {"reward_terms": terms, "final_reward": final, "force_N": fmag, "stiffness_estimate_N_per_m": k,
-                "peak_force_N": self._peak.copy(), "steps": self._steps.copy()}
-        ended = terminated | truncated
-        if ended.any():
-            err = np.array([t.error if t.error is not None else math.nan for t in self._tasks])
-            info["localisation_error_m"], info["_localisation_error_m"] = err, ended.copy()
-            ok = ended & (err <= c.tolerance_mm * 1e-3)
-            info["success"], info["_success"] = ok, ended.copy()
-            info["is_success"], info["_is_success"] = ok.copy(), ended.copy()
-        return np.where(live, reward, 0.0), terminated, truncated, info
-
-    def _record_sample(self, w: int, xy: np.ndarray, k: float) -> None:
-        """The single env's sample bookkeeping for world ``w`` (coverage, estimate, contrast, shaping)."""
-        c, task = self.config, self._tasks[w]
-        task.samples_xy.append(xy)
-        task.samples_k.append(k)
-        cell = map_cell(xy, int(c.map_cells), float(c.map_half_width))
-        if task.cell_k[cell] == 0.0:
-            task.new_cell = True
-        task.cell_k[cell] = max(task.cell_k[cell], k)
-        ks = np.array(task.samples_k)
-        task.estimate = stiffness_weighted_estimate(np.array(task.samples_xy), ks)
-        med = float(np.median(ks))
-        task.contrast_seen = float(ks.max()) / med if med > 0 else 1.0
-        err = localisation_error(task.estimate, task.inclusion["centre"][:2])
-        task.phi = localisation_potential(err, c.localisation_scale)
-
-    def _finish(self, w: int, pos: np.ndarray) -> float:
-        c, task = self.config, self._tasks[w]
-        task.guess = (task.estimate if task.estimate is not None else pos[:2]).copy()
-        task.error = localisation_error(task.guess, task.inclusion["centre"][:2])
-        return localisation_reward(task.error, c.localisation_scale, c.tolerance_mm * 1e-3, c.localisation_weight,
-                                   c.success_bonus)
-
-    def _observe(self) -> np.ndarray:
-        pos, force, depth = self._read()
-        obs = self._obs
-        obs[:, 0:3] = pos
-        obs[:, 3:6] = force
-        obs[:, 6] = depth
-        obs[:, 7:10] = self._best
-        obs[:, 10] = self._steps / self.max_episode_steps
-        for w, task in enumerate(self._tasks):
-            est = task.estimate if task.estimate is not None else pos[w, :2]
-            obs[w, 11:13] = est
-            obs[w, 13] = task.contrast_seen
-            obs[w, 14:] = stiffness_map(task.cell_k)
-        return obs.copy()
-
-    def _reset_info(self, idx) -> dict:
-        centres = np.array([t.inclusion["centre"] for t in self._tasks])
-        return {"inclusion_centre_m": centres, "inclusion_radius_m": np.array([t.inclusion["radius"] for t in self._tasks]),
-                "stiffness_contrast": np.array([t.inclusion["contrast"] for t in self._tasks])}
+        return reward, terms
 
     def device_arrays(self) -> dict:
         """The physics arrays on the device (:meth:`BatchSimulation.arrays`), shared without copies."""

@@ -35,11 +35,19 @@ def reset_springs(worlds: wp.array(dtype=wp.int32), s: wp.array2d(dtype=f64), dl
 
 @wp.kernel
 def reset_contacts(worlds: wp.array(dtype=wp.int32), state: wp.array3d(dtype=wp.int32),
-                   anchor: wp.array3d(dtype=wp.vec3d)):
+                   anchor: wp.array3d(dtype=wp.vec3d), point_force: wp.array3d(dtype=wp.vec3d),
+                   point_fn: wp.array3d(dtype=f64), point_ft: wp.array3d(dtype=wp.vec3d),
+                   point_depth: wp.array3d(dtype=f64)):
+    """Contact states, anchors and per-point parts of the listed worlds cleared (the readouts
+    computed from them, e.g. per-jaw forces, then read zero until the next step)."""
     k, c, g = wp.tid()
     w = worlds[k]
     state[w, c, g] = 0
     anchor[w, c, g] = wp.vec3d()
+    point_force[w, c, g] = wp.vec3d()
+    point_fn[w, c, g] = f64(0.0)
+    point_ft[w, c, g] = wp.vec3d()
+    point_depth[w, c, g] = f64(0.0)
 
 
 @wp.kernel
@@ -47,7 +55,8 @@ def reset_world_scalars(worlds: wp.array(dtype=wp.int32), fresh: wp.array(dtype=
                         diverged: wp.array(dtype=wp.int32), moving: wp.array(dtype=wp.int32),
                         ctrl64: wp.array2d(dtype=f64), goal: wp.array2d(dtype=f64),
                         tool_force: wp.array2d(dtype=wp.vec3d), tool_torque: wp.array2d(dtype=wp.vec3d),
-                        tool_fn: wp.array2d(dtype=f64), tool_contacts: wp.array2d(dtype=wp.int32),
+                        tool_fn: wp.array2d(dtype=f64), tool_ft: wp.array2d(dtype=f64),
+                        tool_contacts: wp.array2d(dtype=wp.int32), tool_slipping: wp.array2d(dtype=wp.int32),
                         tool_depth: wp.array2d(dtype=f64), sum_force: wp.array2d(dtype=wp.vec3d),
                         sum_torque: wp.array2d(dtype=wp.vec3d)):
     """Per-world flags, controls and tool sums of the listed worlds back to their reset values."""
@@ -63,7 +72,9 @@ def reset_world_scalars(worlds: wp.array(dtype=wp.int32), fresh: wp.array(dtype=
         tool_force[w, t] = wp.vec3d()
         tool_torque[w, t] = wp.vec3d()
         tool_fn[w, t] = f64(0.0)
+        tool_ft[w, t] = f64(0.0)
         tool_contacts[w, t] = 0
+        tool_slipping[w, t] = 0
         tool_depth[w, t] = f64(0.0)
         sum_force[w, t] = wp.vec3d()
         sum_torque[w, t] = wp.vec3d()

@@ -79,6 +79,14 @@ def _mass_spring_parts(tissue, dt: float, W: int, device: str):
     return topo, fields
 
 
+def _row_sum(a: np.ndarray) -> np.ndarray:
+    """(W,) sums of the columns of ``a`` (W, k) added left to right (the CPU report's order)."""
+    total = a[:, 0].copy() if a.shape[1] else np.zeros(a.shape[0])
+    for j in range(1, a.shape[1]):
+        total = total + a[:, j]
+    return total
+
+
 class BatchSimulation:
     """W worlds of the scene of ``template`` (a CPU :class:`~surgsim_envs.scene.Simulation`, at its
     reset state) on Warp device ``device`` ("cpu" runs everywhere; "cuda" where a GPU exists).
@@ -152,7 +160,8 @@ class BatchSimulation:
             mu[:len(contact.tool_friction)] = contact.tool_friction[:B]
             mu_s = np.zeros(B) + float(contact.tool_static_friction[0])
             mu_s[:len(contact.tool_static_friction)] = contact.tool_static_friction[:B]
-            self._mu, self._mu_s = _put(wp, mu, wp.float64, dev), _put(wp, mu_s, wp.float64, dev)
+            self.contact.mu.assign(_tiled(mu, W))
+            self.contact.mu_s.assign(_tiled(mu_s, W))
             k_n = float(contact.stiffness_for(self.dt))
             k_t = float(contact.params.tangential_stiffness or k_n)
             self._k_n, self._c_n, self._k_t = k_n, float(contact.params.damping), k_t
@@ -213,13 +222,14 @@ class BatchSimulation:
                 if j:
                     wp.launch(ck.advance_geoms, dim=(W, G), inputs=[c.gpos0, c.glin, wp.float64(j * self.dt), c.gpos])
                 wp.launch(ck.contact_points, dim=(W, C), inputs=[ts.x, ts.v, self._cand, self._kind, self._tool, self._size,
-                                                                c.gpos, c.gmat, c.gang, c.glin, self._mu, self._mu_s,
+                                                                c.gpos, c.gmat, c.gang, c.glin, c.mu, c.mu_s,
                                                                 wp.float64(self._k_n), wp.float64(self._c_n),
                                                                 wp.float64(self._k_t), c.anchor, c.state, c.f_ext,
-                                                                c.point_force, c.point_fn, c.point_depth])
+                                                                c.point_force, c.point_fn, c.point_ft, c.point_depth])
                 wp.launch(ck.tool_sums, dim=(W, B), inputs=[ts.x, self._cand, self._tool, c.point_force, c.point_fn,
-                                                           c.point_depth, c.tcom, c.tool_force, c.tool_torque, c.tool_fn,
-                                                           c.tool_contacts, c.tool_depth])
+                                                           c.point_ft, c.point_depth, c.state, c.tcom, c.tool_force,
+                                                           c.tool_torque, c.tool_fn, c.tool_ft, c.tool_contacts,
+                                                           c.tool_slipping, c.tool_depth])
                 wp.launch(ck.add_wrench, dim=(W, B), inputs=[c.tool_force, c.tool_torque, c.sum_force, c.sum_torque])
                 mark("contact")
                 self._tissue_step(dt)
@@ -357,12 +367,48 @@ class BatchSimulation:
             k = idx.shape[0]
             wp.launch(rsk.reset_nodes, dim=(k, topo.n_nodes), inputs=[idx, self._rest, ts.x, ts.v, c.f_ext])
             wp.launch(rsk.reset_springs, dim=(k, topo.n_springs), inputs=[idx, ts.s, ts.dl])
-            wp.launch(rsk.reset_contacts, dim=(k, c.state.shape[1], c.state.shape[2]), inputs=[idx, c.state, c.anchor])
+            wp.launch(rsk.reset_contacts, dim=(k, c.state.shape[1], c.state.shape[2]),
+                      inputs=[idx, c.state, c.anchor, c.point_force, c.point_fn, c.point_ft, c.point_depth])
             wp.launch(rsk.reset_world_scalars, dim=k, inputs=[idx, ts.fresh, ts.diverged, t.moving, t.ctrl64, t.goal,
-                                                              c.tool_force, c.tool_torque, c.tool_fn, c.tool_contacts,
-                                                              c.tool_depth, c.sum_force, c.sum_torque])
+                                                              c.tool_force, c.tool_torque, c.tool_fn, c.tool_ft,
+                                                              c.tool_contacts, c.tool_slipping, c.tool_depth,
+                                                              c.sum_force, c.sum_torque])
             mjw.reset_data(t.model, t.data, reset=wp.array(mask, dtype=bool))
             mjw.forward(t.model, t.data)
+
+    def set_tool_friction(self, mu, mu_static=None, worlds=None) -> None:
+        """Coulomb friction of every tool body in the listed worlds (all if None): ``mu`` kinetic,
+        ``mu_static`` static (None: equal to ``mu``), each one number per listed world ((k,)) or one
+        per world and tool body ((k, B)); as the CPU tasks set ``ContactModel.tool_friction`` /
+        ``tool_static_friction`` per episode. Needs 0 <= mu <= mu_static (finite)."""
+        idx = np.arange(self.W) if worlds is None else np.asarray(worlds, dtype=np.int64).reshape(-1)
+        B = len(self.bodies) or 1
+        values = []
+        for name, v in (("mu", mu), ("mu_static", mu if mu_static is None else mu_static)):
+            a = np.asarray(v, dtype=np.float64)
+            if a.shape == (len(idx),):
+                a = np.repeat(a[:, None], B, axis=1)
+            if a.shape != (len(idx), B) or not np.all(np.isfinite(a)) or np.any(a < 0):
+                raise ConfigError(f"{name} must be finite numbers >= 0, one per listed world ({len(idx)},) or per "
+                                  f"world and tool body ({len(idx)}, {B}); got shape {a.shape}")
+            values.append(a)
+        if np.any(values[1] < values[0]):
+            raise ConfigError("mu_static must be >= mu (static friction at least the kinetic); got "
+                              f"mu_static - mu down to {float((values[1] - values[0]).min()):.3g}")
+        if not len(idx):
+            return
+        self._assign_rows(self.contact.mu, idx, values[0])
+        self._assign_rows(self.contact.mu_s, idx, values[1])
+
+    def tool_friction(self) -> tuple[np.ndarray, np.ndarray]:
+        """(kinetic, static) Coulomb friction per world and tool body, (W, B) each."""
+        return self.contact.mu.numpy().copy(), self.contact.mu_s.numpy().copy()
+
+    @property
+    def material_tets(self) -> int:
+        """Tets of the template's material (the columns of :meth:`set_young_factors`' factors)."""
+        sw = self._spring_weight_matrix
+        return self.topology.n_tets if isinstance(sw, str) else int(sw.shape[1])
 
     def set_young_factors(self, factors, worlds=None) -> None:
         """Per-world, per-tet Young's modulus factors ``factors`` (W, T), or (len(worlds), T) for the
@@ -374,7 +420,7 @@ class BatchSimulation:
         term). Needs a template whose materials differ in Young's modulus only (as the tasks build
         it); checked against the CPU model's own re-derivation in tests/test_batch_equivalence.py."""
         f = np.asarray(factors, dtype=np.float64)
-        nt = self.topology.n_tets
+        nt = self.material_tets         # with or without a volume term
         idx = np.arange(self.W) if worlds is None else np.asarray(worlds, dtype=np.int64).reshape(-1)
         if f.shape != (len(idx), nt) or not np.all(np.isfinite(f)) or np.any(f <= 0):
             raise ConfigError(f"factors must be positive finite ({len(idx)}, {nt}) per-tet Young's modulus factors, "
@@ -386,7 +432,8 @@ class BatchSimulation:
         base = self._base_fields
         for key in ("K1", "K2", "kM", "kMg"):
             self._assign_rows(getattr(self.fields, key), idx, (base[key][:, None] * edge).T)
-        self._assign_rows(self.fields.kv, idx, base["kv"][None, :] * f)
+        if self.topology.n_tets:
+            self._assign_rows(self.fields.kv, idx, base["kv"][None, :] * f)
 
     def _assign_rows(self, arr, idx: np.ndarray, values: np.ndarray) -> None:
         """``arr[idx] = values`` on the device (all rows at once when idx is every world; else only
@@ -458,6 +505,76 @@ class BatchSimulation:
         f = self.contact.tool_force.numpy()
         return f[:, idx[0]] + 0.0 if len(idx) == 1 else np.zeros((self.W, 3)) + f[:, idx].sum(axis=1)
 
+    def tool_contact_report(self, name: str) -> dict[str, np.ndarray]:
+        """Per world, tool ``name``'s contact report of the last tissue step, as
+        :meth:`Simulation.tool_contact_report` (summed over its bodies in order): normal_force N
+        (sum of normal magnitudes), tangential_force N (sum over its bodies of each body's summed
+        friction force's magnitude), contacts and slipping (points; one count per body), penetration
+        m (deepest). Each entry (W,)."""
+        idx = self._tool_rows(name)
+        c = self.contact
+        fn, ft = c.tool_fn.numpy()[:, idx], c.tool_ft.numpy()[:, idx]
+        nc, ns = c.tool_contacts.numpy()[:, idx], c.tool_slipping.numpy()[:, idx]
+        pen = c.tool_depth.numpy()[:, idx]
+        return {"normal_force": 0.0 + _row_sum(fn), "tangential_force": 0.0 + _row_sum(ft),
+                "contacts": nc.sum(axis=1), "slipping": ns.sum(axis=1),
+                "penetration": np.maximum(0.0, pen.max(axis=1, initial=0.0))}
+
+    def geom_forces(self, geom_ids) -> tuple[np.ndarray, np.ndarray]:
+        """(normal (W, k) N, tangential (W, k) N) per world of the tool geoms ``geom_ids`` (MuJoCo
+        ids), as the CPU contact result's ``geom_normal_force`` / ``geom_tangential_force``: the sum
+        of the normal magnitudes of each geom's contact points and the magnitude of their summed
+        friction force, in the last tissue step (one thread per (world, geom): ``geom_sums``)."""
+        rows = []
+        for g in np.asarray(geom_ids, dtype=np.int64).reshape(-1).tolist():
+            if g not in self.geom_ids:
+                raise ConfigError(f"geom {g} is not a tool contact geom of this batch; tool geoms: {self.geom_ids}")
+            rows.append(self.geom_ids.index(g))
+        c, wp = self.contact, self._wp
+        with wp.ScopedDevice(self.device):
+            wp.launch(ck.geom_sums, dim=(self.W, len(self.geom_ids)),
+                      inputs=[c.point_fn, c.point_ft, c.point_depth, c.geom_fn, c.geom_ft])
+        return c.geom_fn.numpy()[:, rows].copy(), c.geom_ft.numpy()[:, rows].copy()
+
+    def jaw_forces(self, name: str) -> dict[str, np.ndarray]:
+        """Per world, the per-jaw contact forces of grasper ``name``, as :meth:`Simulation.jaw_forces`:
+        {"normal": (W, 3) N, "tangential": (W, 3) N} (last tissue step)."""
+        jaws = self._jaw_tool(name).jaw_geom_ids
+        fn, ft = self.geom_forces(jaws)
+        return {"normal": fn, "tangential": ft}
+
+    def jaw_openings(self, name: str) -> np.ndarray:
+        """(W,) m, per world the distance from grasper ``name``'s axis to jaw 1's inner face (as
+        :meth:`Simulation.jaw_opening`; from MuJoCo Warp's float32 ``qpos``)."""
+        tool = self._jaw_tool(name)
+        q = self.tools.data.qpos.numpy()[:, int(tool.jaw_qpos_adr[0])].astype(np.float64)
+        return float(tool.config.open_radius) - q
+
+    def contact_node_mask(self):
+        """(W, N) int32 device array: 1 for the tissue nodes that felt a contact force in the last
+        tissue step (|f|^2 > 0; the nodes a grasp's slip tracker starts from), else 0."""
+        c, wp = self.contact, self._wp
+        with wp.ScopedDevice(self.device):
+            wp.launch(ck.contact_node_mask, dim=c.f_ext.shape, inputs=[c.f_ext, c.node_mask])
+        return c.node_mask
+
+    def contact_nodes(self, world: int) -> np.ndarray:
+        """Indices of the tissue nodes of world ``world`` that felt a contact force in the last
+        tissue step (``grasp.terms.contact_nodes`` of one world)."""
+        return np.flatnonzero(self.contact_node_mask().numpy()[int(world)])
+
+    def _tool_rows(self, name: str) -> list:
+        if name not in self.tool_index:
+            raise ConfigError(f"unknown tool {name!r}; tools in this scene: {sorted(self.tool_index)}")
+        return self.tool_index[name]
+
+    def _jaw_tool(self, name: str):
+        self._tool_rows(name)
+        tool = self.template.tools[name]
+        if getattr(tool, "jaw_geom_ids", None) is None or not len(tool.jaw_geom_ids):
+            raise ConfigError(f"tool {name!r} has no jaws (a {tool.kind}); jaw readouts need a grasper")
+        return tool
+
     def tissue_positions(self) -> np.ndarray:
         """(W, N, 3) m tissue node positions."""
         return self.tissue_state.x.numpy().copy()
@@ -466,7 +583,10 @@ class BatchSimulation:
         """The device arrays by name (Warp arrays: ``__dlpack__`` / ``wp.to_torch`` share them)."""
         return {"tissue_positions": self.tissue_state.x, "tissue_velocities": self.tissue_state.v,
                 "contact_forces": self.contact.f_ext, "tool_force": self.contact.tool_force,
-                "tool_torque": self.contact.tool_torque, "xpos": self.tools.data.xpos, "qpos": self.tools.data.qpos}
+                "tool_torque": self.contact.tool_torque, "tool_normal_force": self.contact.tool_fn,
+                "tool_tangential_force": self.contact.tool_ft, "tool_contacts": self.contact.tool_contacts,
+                "tool_slipping": self.contact.tool_slipping, "tool_friction": self.contact.mu,
+                "xpos": self.tools.data.xpos, "qpos": self.tools.data.qpos}
 
     def memory_bytes(self) -> dict:
         """Bytes of the batched state on the device: tissue state, material fields, contact state,

@@ -11,7 +11,8 @@ bodies); every float array is float64 except MuJoCo Warp's own (float32):
   in :class:`MassSpringTopology`: springs, tets, rest lengths/volumes, masses, damping, fixed nodes,
   branch decay, and the CSR incidence lists the node kernel gathers through.
 * :class:`ContactState` - stick anchors and states per (world, point, geom), the contact force on
-  every node (W, N), each geom's part per point, and the per-tool reaction sums and report.
+  every node (W, N), each geom's part per point, the per-tool reaction sums and report, and the
+  Coulomb friction per world and tool body (W, B: drawn per episode).
 * :class:`ToolState` - MuJoCo Warp's model and data (``put_model`` / ``put_data(nworld=W)``) plus
   the rate limiter's float64 controls, goals, rates and ``moving`` flags per world.
 
@@ -115,6 +116,7 @@ class ContactState:
     f_ext: object          # (W, N) vec3d, N: contact force on each node
     point_force: object    # (W, C, G) vec3d, N
     point_fn: object       # (W, C, G) float64, N: normal force magnitude
+    point_ft: object       # (W, C, G) vec3d, N: friction force
     point_depth: object    # (W, C, G) float64, m
     gpos: object           # (W, G) vec3d, m
     gmat: object           # (W, G) mat33d
@@ -124,8 +126,15 @@ class ContactState:
     tool_force: object     # (W, B) vec3d, N: force ON each tool body
     tool_torque: object    # (W, B) vec3d, N m
     tool_fn: object        # (W, B) float64, N: sum of normal force magnitudes
+    tool_ft: object        # (W, B) float64, N: magnitude of the summed friction force
     tool_contacts: object  # (W, B) int32: points in contact
+    tool_slipping: object  # (W, B) int32: points sliding on one of the body's geoms
     tool_depth: object     # (W, B) float64, m: deepest penetration
+    geom_fn: object        # (W, G) float64, N: per geom, sum of normal force magnitudes (computed when read)
+    geom_ft: object        # (W, G) float64, N: per geom, magnitude of the summed friction force (when read)
+    node_mask: object      # (W, N) int32: 1 = the node felt a contact force in the last tissue step (when read)
+    mu: object             # (W, B) float64: kinetic Coulomb friction per world and tool body
+    mu_s: object           # (W, B) float64: static friction (>= mu)
     sum_force: object      # (W, B) vec3d, N: reaction summed over the tissue sub-steps of a MuJoCo step
     sum_torque: object     # (W, B) vec3d, N m
     gpos0: object          # (W, G) vec3d, m: geom positions at the MuJoCo step's start (sub-cycling)
@@ -136,10 +145,14 @@ class ContactState:
         z = lambda shape, dt: wp.zeros(shape, dtype=dt, device=device)  # noqa: E731
         return cls(anchor=z((W, C, G), wp.vec3d), state=z((W, C, G), wp.int32), f_ext=z((W, N), wp.vec3d),
                    point_force=z((W, C, G), wp.vec3d), point_fn=z((W, C, G), wp.float64),
-                   point_depth=z((W, C, G), wp.float64), gpos=z((W, G), wp.vec3d), gmat=z((W, G), wp.mat33d),
+                   point_ft=z((W, C, G), wp.vec3d), point_depth=z((W, C, G), wp.float64),
+                   gpos=z((W, G), wp.vec3d), gmat=z((W, G), wp.mat33d),
                    gang=z((W, G), wp.vec3d), glin=z((W, G), wp.vec3d), tcom=z((W, B), wp.vec3d),
                    tool_force=z((W, B), wp.vec3d), tool_torque=z((W, B), wp.vec3d), tool_fn=z((W, B), wp.float64),
-                   tool_contacts=z((W, B), wp.int32), tool_depth=z((W, B), wp.float64),
+                   tool_ft=z((W, B), wp.float64), tool_contacts=z((W, B), wp.int32),
+                   tool_slipping=z((W, B), wp.int32), tool_depth=z((W, B), wp.float64),
+                   geom_fn=z((W, G), wp.float64), geom_ft=z((W, G), wp.float64), node_mask=z((W, N), wp.int32),
+                   mu=z((W, B), wp.float64), mu_s=z((W, B), wp.float64),
                    sum_force=z((W, B), wp.vec3d), sum_torque=z((W, B), wp.vec3d), gpos0=z((W, G), wp.vec3d))
 
     def nbytes(self) -> int:

@@ -1,9 +1,10 @@
 """``surgsim bench batch``: speed of the batched Warp backend (surgsim_envs/batch, docs/batch.md).
 
-For each world count W: Palpation-v0 env steps/s of the batched vector env (random actions,
-autoreset), physics world-steps/s of the bare :class:`BatchSimulation` (W x physics steps per
-second), the share of each phase of a physics step (rate limiter, MuJoCo Warp step1, contact,
-tissue, reaction, MuJoCo Warp step2; timed with the device synchronised after each phase, in a
+For each world count W: env steps/s of the batched vector env of ``--task`` (Palpation-v0 by
+default, or any task with a batched env, e.g. Grasp-v0; random actions, autoreset), physics
+world-steps/s of the bare :class:`BatchSimulation` (W x physics steps per second), the share of
+each phase of a physics step (rate limiter, MuJoCo Warp step1, contact, tissue, reaction, MuJoCo
+Warp step2; timed with the device synchronised after each phase, in a
 separate run), and the memory of the batched state per tissue node-world (the backend's arrays,
 and with MuJoCo Warp's data). Medians over ``--repeats``; the load average is recorded.
 Warp's CPU device runs kernels on one thread: CPU figures are for checking, not for speed.
@@ -29,6 +30,8 @@ MAX_WORLDS = 1 << 20
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", default="cpu", help="Warp device: cpu (default) or cuda")
+    parser.add_argument("--task", default="SurgSim/Palpation-v0",
+                        help="a task with a batched env (default SurgSim/Palpation-v0; also SurgSim/Grasp-v0)")
     parser.add_argument("--worlds", default="1,256,4096", help="comma-separated world counts (default 1,256,4096)")
     parser.add_argument("--steps", type=int, default=3, help="env steps per timed run (default 3)")
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per figure; medians reported (default 3)")
@@ -64,20 +67,30 @@ def _data_bytes(data) -> int:
     return total
 
 
-def measure(device: str, worlds: int, steps: int, repeats: int) -> dict:
+def batched_task(task: str) -> str:
+    """``task`` checked against the tasks with a batched env ("module:Class" of that env; ConfigError
+    naming them otherwise)."""
+    from surgsim_envs.envs import BATCHED
+
+    if task not in BATCHED:
+        raise ConfigError(f"--task {task!r} has no batched env; choose one of {sorted(BATCHED)}")
+    return BATCHED[task]
+
+
+def measure(device: str, worlds: int, steps: int, repeats: int, task: str = "SurgSim/Palpation-v0") -> dict:
     """The figures of one world count (module docstring)."""
     import warp as wp
+    from gymnasium.envs.registration import load_env_creator
 
-    from surgsim_envs.batch.env import BatchedPalpationEnv
-
-    env = BatchedPalpationEnv(worlds, device=device)
+    env = load_env_creator(batched_task(task))(worlds, device=device)
     sim = env.sim
     rng = np.random.default_rng(0)
+    shape = (worlds,) + env.single_action_space.shape
     env.reset(seed=0)
-    env.step(rng.uniform(-1, 1, (worlds, 4)).astype(np.float32))      # compile / warm
+    env.step(rng.uniform(-1, 1, shape).astype(np.float32))      # compile / warm
     env_rates, phys_rates = [], []
     for _ in range(repeats):
-        acts = [rng.uniform(-1, 1, (worlds, 4)).astype(np.float32) for _ in range(steps)]
+        acts = [rng.uniform(-1, 1, shape).astype(np.float32) for _ in range(steps)]
         wp.synchronize_device(sim.device)
         t0 = time.perf_counter()
         for a in acts:
@@ -98,7 +111,7 @@ def measure(device: str, worlds: int, steps: int, repeats: int) -> dict:
     node_worlds = worlds * sim.topology.n_nodes
     backend = sum(mem.values())
     with_mjw = backend + _data_bytes(sim.tools.data)
-    out = {"worlds": worlds, "nodes": sim.topology.n_nodes, "springs": sim.topology.n_springs,
+    out = {"task": task, "worlds": worlds, "nodes": sim.topology.n_nodes, "springs": sim.topology.n_springs,
            "tets": sim.topology.n_tets, "substeps": env.substeps,
            "env_steps_per_s": statistics.median(env_rates), "physics_world_steps_per_s": statistics.median(phys_rates),
            "physics_node_steps_per_s": statistics.median(phys_rates) * sim.topology.n_nodes,
@@ -121,7 +134,7 @@ def _table(rows: list[dict], device: str) -> str:
     return "\n".join(lines)
 
 
-def _chart(rows: list[dict], path: str, device: str) -> None:
+def _chart(rows: list[dict], path: str, device: str, task: str = "SurgSim/Palpation-v0") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -129,7 +142,7 @@ def _chart(rows: list[dict], path: str, device: str) -> None:
 
     w = [r["worlds"] for r in rows]
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
-    a1.loglog(w, [r["env_steps_per_s"] for r in rows], "o-", label="Palpation-v0 env steps/s")
+    a1.loglog(w, [r["env_steps_per_s"] for r in rows], "o-", label=f"{task.split('/')[-1]} env steps/s")
     a1.loglog(w, [r["physics_world_steps_per_s"] for r in rows], "s-", label="physics world-steps/s")
     a1.set_xlabel("worlds")
     a1.set_ylabel("per second")
@@ -156,21 +169,22 @@ def run(args: argparse.Namespace) -> int:
     validate.integer(args.steps, "--steps", lo=1, hi=100_000, fix="env steps per timed run, e.g. 3")
     validate.integer(args.repeats, "--repeats", lo=1, hi=1000, fix="e.g. 3")
     device = device_name(args.device)
+    batched_task(args.task)
     rows = []
     for w in worlds:
-        print(f"bench batch: {w} worlds on {device} ...", file=sys.stderr)
-        rows.append(measure(device, w, args.steps, args.repeats))
+        print(f"bench batch: {args.task}, {w} worlds on {device} ...", file=sys.stderr)
+        rows.append(measure(device, w, args.steps, args.repeats, args.task))
     load = os.getloadavg()
-    result = {"device": device, "load_average": load, "steps": args.steps, "repeats": args.repeats, "rows": rows,
+    result = {"task": args.task, "device": device, "load_average": load, "steps": args.steps, "repeats": args.repeats, "rows": rows,
               "note": "Warp's CPU device runs each kernel on one thread" if device == "cpu" else ""}
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "batch_speed.json"), "w") as fh:
         json.dump(result, fh, indent=1)
     table = _table(rows, device)
     with open(os.path.join(args.out, "batch_speed.md"), "w") as fh:
-        fh.write(f"Device {device}, load average {load[0]:.2f}; medians over {args.repeats} runs of {args.steps} env steps\n\n"
+        fh.write(f"{args.task}: device {device}, load average {load[0]:.2f}; medians over {args.repeats} runs of {args.steps} env steps\n\n"
                  + table + "\n")
-    _chart(rows, os.path.join(args.out, "batch_speed.png"), device)
+    _chart(rows, os.path.join(args.out, "batch_speed.png"), device, args.task)
     if args.json:
         print(json.dumps(result, indent=1))
     else:

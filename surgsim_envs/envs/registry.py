@@ -138,14 +138,14 @@ TASKS: dict[str, TaskSpec] = {spec.id: spec for spec in (
              force_tolerance=ForceTolerance(0.1, why=_PALPATION_WHY), max_episode_steps=600,
              policy="palpation_v0.npz", quick={"spacing": 0.02},
              expert="surgsim_envs.envs.palpation:palpation_expert",
-             batched="surgsim_envs.batch.env:BatchedPalpationEnv"),
+             batched="surgsim_envs.batch.palpation_env:BatchedPalpationEnv"),
     TaskSpec("SurgSim/Grasp-v0", "surgsim_envs.envs.grasp:GraspEnv", "surgsim_envs.envs.grasp:GraspConfig",
              scene="grasp", tool="grasper", model="mass_spring",
              force_tolerance=ForceTolerance(0.1, why=(
                  "the reward switches on the jaw normal force: 'holds' above 0.03 N, damage above 1 N per jaw; "
                  "10 % keeps both onsets within a tenth of where they are set")),
              max_episode_steps=150, policy="grasp_v0.npz", quick={"resolution": 0.015},
-             expert="surgsim_envs.envs.grasp:grasp_expert"),
+             expert="surgsim_envs.envs.grasp:grasp_expert", batched="surgsim_envs.batch.grasp_env:BatchedGraspEnv"),
     TaskSpec("SurgSim/Slippage-v0", "surgsim_envs.envs.slippage:SlippageEnv",
              "surgsim_envs.envs.slippage:SlippageConfig", scene="grasp", tool="grasper", model="mass_spring",
              force_tolerance=ForceTolerance(0.1, why=(
