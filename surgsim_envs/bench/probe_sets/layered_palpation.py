@@ -138,9 +138,10 @@ def measure(task: str, model: str, spacing: float, probes: ProbeSet) -> dict:
     return row
 
 
-def reference_row(task: str, probes: ProbeSet, fine: float) -> dict:
+def reference_row(task: str, probes: ProbeSet, fine: float, sites: tuple[str, ...] = ("over", "mirror")) -> dict:
     """The reference of ``probes`` at fine spacing ``fine`` (m): :func:`layered_reference.reference_row`
-    on the task's wall (its patch size, layers, materials, nodule and probe)."""
+    on the task's wall (its patch size, layers, materials, nodule and probe); ``sites``: the press sites
+    to solve ("over", "mirror"; one per process keeps a fine level's memory and time per run down)."""
     from surgsim_envs.bench import layered_reference
     from surgsim_envs.envs.layered_palpation import LayeredPalpationConfig
     from surgsim_envs.geometry.anatomy import ABDOMINAL_WALL_THICKNESS, ANATOMY_MATERIALS
@@ -150,7 +151,11 @@ def reference_row(task: str, probes: ProbeSet, fine: float) -> dict:
     if len(probes.inclusions) != 1:
         raise ConfigError(f"{TASK}: the task hides one nodule; the probe set has {len(probes.inclusions)}")
     inc = probes.inclusions[0]
-    sites = {"over": tuple(inc.position), "mirror": mirror(inc.position)}
+    every = {"over": tuple(inc.position), "mirror": mirror(inc.position)}
+    unknown = sorted(set(sites) - set(every))
+    if unknown or not sites:
+        raise ConfigError(f"{TASK}: reference sites {list(sites)!r}: choose from {list(every)}")
+    sites = {name: every[name] for name in sites}
     return layered_reference.reference_row(
         task, sites, probes.depths, fine, size=tuple(cfg.size), thickness=ABDOMINAL_WALL_THICKNESS,
         materials={**PRESETS, **ANATOMY_MATERIALS}, nodule_xy=inc.position, nodule_radius=inc.radius,
