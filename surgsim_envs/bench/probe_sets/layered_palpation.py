@@ -37,8 +37,8 @@ from surgsim_envs.errors import ConfigError
 TASK = "SurgSim/LayeredPalpation-v0"
 #: the models the task accepts (its env builds no other)
 MODELS = ("layered",)
-REFUSAL = ("SurgSim/LayeredPalpation-v0 builds its wall with the layered model only (the paper's model; its "
-           "unilateral probe solves each press with the model's static_solve) and takes no model option")
+REFUSAL = ("the task builds its wall with the layered model only and takes no model option (the paper's model; "
+           "its unilateral probe solves each press with the model's static_solve)")
 #: m, the nodule's centre (x, y): a node of every lattice the probe set uses
 NODULE_XY = (0.02, 0.01)
 #: how the reference is described in the task-accuracy table
