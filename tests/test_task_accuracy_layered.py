@@ -67,9 +67,9 @@ def test_reference_lattice_conforms_to_the_layers_and_labels_the_nodule_by_the_t
     assert np.min(np.linalg.norm(top[:, :2] - (0.02, 0.01), axis=1)) < 1e-12    # the site is a node
 
 
-def test_reference_feels_the_nodule_and_never_pulls():
+def test_reference_feels_the_nodule_and_pushes_the_probe_at_both_sites():
     """The coarsest reference (5 mm lattices): the 30x nodule raises the force over it above its mirror
-    site's, and both presses push the probe (unilateral contact)."""
+    site's, and both presses push the probe up."""
     row = lp.reference_row(TASK, ONE_DEPTH, 0.005)
     f = row["forces_N"]
     assert set(row["nodes_by_site"]) == {"over", "mirror"}
