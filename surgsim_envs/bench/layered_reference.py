@@ -45,6 +45,9 @@ FINE_HALF_WIDTH = 0.015
 FINE_FAT_DEPTH = 0.005
 #: the skin's cells are at most this fraction of the fine (x, y) spacing tall
 SKIN_CELL_FRACTION = 0.5
+#: MB of cached compliance columns: a press at h_f 1 mm (48,300 nodes) ran within 800 MB (230 columns);
+#: task_reference's 4,000 MB let one process reach 9.5 GB at that level, more than a shared host had free
+CACHE_MB = 1000.0
 #: s and m/s: the quasi-static load stepping of a reference press (the probe moves 0.2 mm per step)
 DT = 1e-3
 PROBE_SPEED = 0.2
@@ -138,7 +141,8 @@ def press_scene(volume, materials: dict, site, tip_radius: float, fine: float, t
     lo, hi = volume.bounds()
     tissue = TissueConfig(name="wall", organ=volume, model=task_reference.REFERENCE_MODEL, material=materials[0],
                           spacing=None, anchors=("bottom",), position=tuple((lo + hi) / 2.0),
-                          region_materials=dict(materials), options=dict(task_reference.REFERENCE_OPTIONS))
+                          region_materials=dict(materials),
+                          options={**task_reference.REFERENCE_OPTIONS, "cache_mb": CACHE_MB})
     probe = ProbeConfig(name="probe", tip_radius=float(tip_radius), friction=0.0,
                         position=(float(site[0]), float(site[1]), top + tip_radius + 2 * HOVER))
     contact = ContactConfig(stiffness=task_reference.CONTACT_STIFFNESS_PER_AREA * float(fine) ** 2,
