@@ -4,7 +4,9 @@ For a task, a fixed scripted probe set drives the task's own scene (built by ``g
 the task's friction, time step and probe, and its material made elastic): presses straight down
 at several depths over an inclusion and at its mirror site, for two inclusions. Each press starts
 from a fresh reset (same seed and options), so presses do not see each other's history. Every
-registered model the task accepts runs the same set at each candidate lattice spacing.
+registered model the task accepts runs the same set at each candidate lattice spacing. A task whose
+scene is driven otherwise (LayeredPalpation-v0: one quasi-static solve per press) has its probe
+set, presser and reference in its own module, registered in :mod:`surgsim_envs.bench.probe_sets`.
 
 The reference (:mod:`surgsim_envs.bench.task_reference`) is quasi-static ``fem_static`` with a
 contact stiffness per unit area that does not change with the spacing and surface samples at half
