@@ -154,3 +154,15 @@ def test_any_action_is_a_finite_step_or_a_config_error(env, action):
     assert env.observation_space.contains(obs) and math.isfinite(r)
     if term or trunc:
         env.reset(seed=0)
+
+
+def test_the_nodule_position_option_places_the_nodule_inside_the_patch(env):
+    _, info = env.reset(seed=3, options={"nodule_position": (0.01, -0.005)})
+    assert info["nodule_centre"][:2] == pytest.approx((0.01, -0.005)) and info["nodule_tets"] > 0
+    _, again = env.reset(seed=3)
+    assert again["nodule_centre"][:2] != pytest.approx((0.01, -0.005))   # without it: drawn from the seed
+    half = 0.5 * env.config.size[0] - env.config.nodule_radius
+    with pytest.raises(ConfigError, match=r"nodule_position\[0\].*" + f"{half:g}".replace(".", r"\.")):
+        env.reset(options={"nodule_position": (1.0, 0.0)})
+    with pytest.raises(ConfigError, match="nodule_position.*pair"):
+        env.reset(options={"nodule_position": 0.01})

@@ -4,7 +4,9 @@ For a task, a fixed scripted probe set drives the task's own scene (built by ``g
 the task's friction, time step and probe, and its material made elastic): presses straight down
 at several depths over an inclusion and at its mirror site, for two inclusions. Each press starts
 from a fresh reset (same seed and options), so presses do not see each other's history. Every
-registered model the task accepts runs the same set at each candidate lattice spacing.
+registered model the task accepts runs the same set at each candidate lattice spacing. A task whose
+scene is driven otherwise (LayeredPalpation-v0: one quasi-static solve per press) has its probe
+set, presser and reference in its own module, registered in :mod:`surgsim_envs.bench.probe_sets`.
 
 The reference (:mod:`surgsim_envs.bench.task_reference`) is quasi-static ``fem_static`` with a
 contact stiffness per unit area that does not change with the spacing and surface samples at half
@@ -38,41 +40,14 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable
 
 import numpy as np
 
-from surgsim_envs.bench import task_reference
+from surgsim_envs.bench import probe_sets, task_reference
+from surgsim_envs.bench.probe_set import Inclusion, ProbeSet, mirror as _mirror
 from surgsim_envs.errors import ConfigError
-
-
-@dataclass(frozen=True)
-class Inclusion:
-    name: str
-    position: tuple[float, float]   # m, centre (x, y)
-    depth: float                    # m, centre below the top surface
-    radius: float                   # m
-    contrast: float                 # E_inclusion / E_tissue
-
-    def options(self) -> dict:
-        return {"inclusion_position": self.position, "inclusion_depth": (self.depth, self.depth),
-                "inclusion_radius": (self.radius, self.radius), "stiffness_contrast": (self.contrast, self.contrast),
-                "young_scale": (1.0, 1.0)}
-
-
-@dataclass(frozen=True)
-class ProbeSet:
-    """A task's scripted presses: inclusions, depths (m), hold (s), the spacings (m) the models are
-    run at and the reference's fine spacings (m, descending: its graded lattices' spacing at the
-    press site, see :mod:`task_reference`)."""
-
-    inclusions: tuple[Inclusion, ...]
-    depths: tuple[float, ...]
-    hold: float
-    spacings: tuple[float, ...]
-    reference_spacings: tuple[float, ...]
 
 
 PALPATION_FULL = ProbeSet(
@@ -107,6 +82,9 @@ FORCE_TOLERANCES: dict[str, dict] = {
 PROBE_SETS: dict[str, tuple[ProbeSet, ProbeSet]] = {
     "SurgSim/Palpation-v0": (PALPATION_FULL, PALPATION_QUICK),
 }
+# the tasks whose probe sets are driven by their own module (:mod:`surgsim_envs.bench.probe_sets`)
+PROBE_SETS.update({task: (d.FULL, d.QUICK) for task, d in probe_sets.DRIVERS.items()})
+FORCE_TOLERANCES.update({task: _declared(task) for task in probe_sets.DRIVERS})
 
 
 def _make(task: str, model: str, spacing: float, material=None, dt: float | None = None):
@@ -170,10 +148,6 @@ class _Presser:
         return force
 
 
-def _mirror(xy) -> tuple[float, float]:
-    return (-float(xy[0]), -float(xy[1]))
-
-
 def task_material(task: str):
     """The material a task builds its tissue from by default (its config's ``material``)."""
     import importlib
@@ -192,6 +166,8 @@ def measure(task: str, model: str, spacing: float, probes: ProbeSet, dt: float |
     or one that goes unstable, gives a row saying so instead of numbers."""
     from surgsim_envs.tissue import TissueUnstableError
 
+    if task in probe_sets.DRIVERS:
+        return probe_sets.DRIVERS[task].measure(task, model, spacing, probes)
     head = {"task": task, "model": model, "spacing": float(spacing)}
     material = task_reference.elastic(task_material(task))
     try:
@@ -266,12 +242,17 @@ def compare(row: dict, reference: dict, probes: ProbeSet) -> dict:
 def converged_reference(task: str, probes: ProbeSet, progress: Callable[[str], None] = print) -> dict:
     """The reference of ``probes`` in ``task``: ``fem_static`` at ``probes.reference_spacings``,
     extrapolated (:func:`task_reference.extrapolate`)."""
-    material = task_material(task)
+    driver = probe_sets.DRIVERS.get(task)
+    material = task_material(task) if driver is None else None
     rows = []
     for spacing in probes.reference_spacings:
         progress(f"reference {task_reference.REFERENCE_MODEL} at {spacing * 1e3:.3g} mm")
-        rows.append(task_reference.reference_row(task, probes, spacing, material, _make))
-    return task_reference.extrapolate(rows)
+        rows.append(task_reference.reference_row(task, probes, spacing, material, _make) if driver is None
+                    else driver.reference_row(task, probes, spacing))
+    out = task_reference.extrapolate(rows)
+    if driver is not None:
+        out["description"] = driver.REFERENCE_DESCRIPTION
+    return out
 
 
 def build_table(tasks: Iterable[str], models: Iterable[str], quick: bool = False,
@@ -289,6 +270,8 @@ def build_table(tasks: Iterable[str], models: Iterable[str], quick: bool = False
             for spacing in probes.spacings:
                 progress(f"{task}: {model} at {spacing * 1e3:.3g} mm")
                 rows.append(compare(measure(task, model, spacing, probes), reference, probes))
+                if "refused" in rows[-1] and task in probe_sets.DRIVERS:
+                    break                   # a model the task does not build: said once, not per spacing
     tolerances = {t: v for t, v in FORCE_TOLERANCES.items() if v.get("scene_of", t) in references}
     return {"rows": rows, "references": references, "not_covered": not_covered, "quick": bool(quick),
             "tolerances": tolerances}
@@ -317,8 +300,10 @@ def reference_summary(ref: dict) -> str:
     nodes = ", ".join(str(n) for n in ref["nodes"])
     cost = ", ".join(f"{t:.0f}" for t in ref["seconds"])
     coarse = ref.get("coarse_spacing") or task_reference.COARSE_SPACING
-    text = (f"Reference: `{task_reference.REFERENCE_MODEL}` (elastic, friction on, contact stiffness "
-            f"{task_reference.CONTACT_STIFFNESS_PER_AREA:.0e} N/m^3 per area, surface samples at half the spacing) "
+    what = ref.get("description") or (
+        f"`{task_reference.REFERENCE_MODEL}` (elastic, friction on, contact stiffness "
+        f"{task_reference.CONTACT_STIFFNESS_PER_AREA:.0e} N/m^3 per area, surface samples at half the spacing)")
+    text = (f"Reference: {what} "
             f"on one lattice per press site, graded from fine spacings {spacings} mm at the site to {coarse * 1e3:.3g} mm "
             f"(at most {nodes} nodes; {cost} s each for the {len(ref['forces_N'])} presses). ")
     last = 100 * ref["last_refinement_change"]

@@ -162,8 +162,11 @@ TASKS: dict[str, TaskSpec] = {spec.id: spec for spec in (
              "surgsim_envs.envs.layered_palpation:LayeredPalpationConfig", scene=None, tool="probe",
              model="layered",
              force_tolerance=ForceTolerance(0.2, why=(
-                 "the nodule is 30 x stiffer than the fat around it; the committed site is judged by position, "
-                 "and a 20 % force error cannot hide a contrast that large")),
+                 "the task is to find the nodule by the force it adds: over the 30x nodule (radius 8 mm, mid-fat) "
+                 "the layered FEM reference reads C = 4.2-4.8 x the force at the mirror site (2.5-4.5 mm presses; "
+                 "4.2 on its 2 mm lattices, 4.8 on its 1 mm ones). A model reading the nodule e low and the mirror "
+                 "site e high shrinks C by (1 - e) / (1 + e); keeping at least half of the excess, (C + 1) / 2, "
+                 "needs e <= (C - 1) / (3 C + 1) = 23-25 %, so 20 % (docs/task_accuracy.md)")),
              max_episode_steps=30, policy="layered_palpation_v0.npz", quasi_static=True,
              quick={"spacing": 0.01, "size": (0.04, 0.04), "max_presses": 5}),
 )}

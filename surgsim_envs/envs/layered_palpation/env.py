@@ -3,7 +3,9 @@
 Tissue: the ``layered`` model (Lin et al. 2008) of an abdominal wall patch (skin, fat, fascia, muscle,
 peritoneum; :mod:`surgsim_envs.geometry.anatomy`), bottom bonded. Each episode hides a stiff
 nodule in the fat: the tets within ``nodule_radius`` of a random centre get ``nodule_factor`` x
-their Young's modulus, through the tissue contract (``scale_material``), never by model name.
+their Young's modulus, through the tissue contract (``scale_material``), never by model name. The
+reset option ``nodule_position`` (x, y) m places the centre instead (scripted probes and benchmarks
+such as ``surgsim bench task-accuracy``); its height is the median height of the fat's tets either way.
 
 Each step presses a position-controlled sphere (:class:`UnilateralProbe`: frictionless,
 push-only contact) at a point of the patch to a depth and solves the equilibrium (quasi-static:
@@ -49,7 +51,9 @@ class LayeredPalpationEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 1}
     config_cls = LayeredPalpationConfig
-    OPTIONS: tuple = ()
+    #: reset options: ``nodule_position`` (x, y) m places the nodule's centre (scripted probes, benchmarks);
+    #: without it the nodule is drawn from the seed
+    OPTIONS: tuple = ("nodule_position",)
     ACTION = ActionTerm("probe", 4, "[x, y, depth, commit]: press site over the patch, depth, commit")
     REWARD_TERMS = REWARD_TERMS
     #: the shape/dtype/NaN checks of every other task
@@ -134,15 +138,19 @@ class LayeredPalpationEnv(gym.Env):
             raise ConfigError(f"reset options must be a dict or None, got {type(options).__name__}")
         unknown = sorted(set(options or {}) - set(self.OPTIONS))
         if unknown:
-            raise ConfigError(f"unknown reset option(s) {unknown} for LayeredPalpationEnv; it accepts none "
-                              "(the nodule is placed from the seed)")
+            raise ConfigError(f"unknown reset option(s) {unknown} for LayeredPalpationEnv; it accepts "
+                              f"{list(self.OPTIONS)} (without them the nodule is placed from the seed)")
         super().reset(seed=None if seed is None else validate.seed(seed, "reset seed"))
         cfg = self.config
         self.probe.move_to((1e3, 1e3, 1e3))    # lifted: every node free
         self.tissue.reset()
         hx, hy = 0.5 * cfg.size[0] - cfg.nodule_radius, 0.5 * cfg.size[1] - cfg.nodule_radius
         z = float(np.clip(np.median(self._fat_z), self._fat_z.min() + cfg.nodule_radius / 2, self._fat_z.max()))
-        self.nodule = np.array([self.np_random.uniform(-hx, hx), self.np_random.uniform(-hy, hy), z])
+        placed = (options or {}).get("nodule_position")
+        if placed is None:
+            self.nodule = np.array([self.np_random.uniform(-hx, hx), self.np_random.uniform(-hy, hy), z])
+        else:
+            self.nodule = np.array([*self._nodule_xy(placed, hx, hy), z])
         mask = np.linalg.norm(self.centroids - self.nodule, axis=1) < cfg.nodule_radius
         self.tissue.scale_material("young", 1.0)
         self.tissue.scale_material("young", cfg.nodule_factor, mask=mask)
@@ -153,6 +161,18 @@ class LayeredPalpationEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return np.zeros(4, dtype=np.float32), {"nodule_tets": int(mask.sum()), "nodule_centre": self.nodule.copy()}
+
+    @staticmethod
+    def _nodule_xy(value, hx: float, hy: float) -> tuple[float, float]:
+        """The ``nodule_position`` reset option as (x, y) m, inside the patch by the nodule's radius."""
+        if not validate.has_length(value, 2):
+            raise ConfigError(f"reset option nodule_position={validate.short_repr(value)} must be a pair (x, y) "
+                              "in m, e.g. (0.02, 0.01)")
+        out = []
+        for k, (v, h) in enumerate(zip(value, (hx, hy))):
+            out.append(validate.real(v, f"reset option nodule_position[{k}]", lo=-h, hi=h, unit="m",
+                                     fix="a centre at least nodule_radius inside the patch edge"))
+        return out[0], out[1]
 
     def step(self, action):
         if not self._reset_done:

@@ -1,0 +1,199 @@
+"""A converged force reference for LayeredPalpation-v0's presses: quasi-static FEM on the wall's layers.
+
+The task presses a rigid sphere into an abdominal wall patch (:func:`surgsim_envs.geometry.anatomy.
+abdominal_wall_layers`: skin 2 mm, fat 15 mm, muscle 10 mm, peritoneum 2 mm, flat, the whole
+bottom bonded, the sides free) with a 30x stiffer nodule in the fat. The reference solves the
+same presses as a continuum: ``fem_static`` (linear tets, averaged nodal pressure) with each
+tet's Young's modulus and Poisson ratio from the layer its centroid lies in, the nodule's tets
+(centroid within the nodule's radius of its centre, the task's own rule) at ``nodule_factor`` x
+theirs, and the contact of :mod:`surgsim_envs.bench.task_reference` (stiffness per unit area,
+surface samples at half the spacing), frictionless as the task's probe is.
+
+The lattice (:func:`wall_volume`) is a box of Kuhn cells on three node axes:
+
+* x and y graded about the press site (:func:`surgsim_envs.geometry.graded_axis.graded_axis`):
+  spacing ``fine`` within :data:`FINE_HALF_WIDTH` of it, growing by :data:`task_reference.GROWTH`
+  per cell to :data:`task_reference.COARSE_SPACING`;
+* z conforming to the layers: a node on every interface (27, 12 and 2 mm above the bed), the
+  skin cut into cells of at most ``fine / 2`` (a 100 kPa skin on a 1 kPa fat bends as a plate:
+  one linear tet through it locks), the fat graded from that size at the skin down to the coarse
+  spacing, the muscle and peritoneum at the coarse spacing.
+
+The fascia of the layered model is an interface material (springs between the nodes snapped onto
+the fat/muscle interface, no thickness and no tets), so the continuum has none, as in the layered
+accuracy bench (docs/models/layered.md). Only ``fine`` is refined (by 1/sqrt 2); the coarse
+lattice and the growth stay. Units: m, Pa, N.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from types import SimpleNamespace
+from typing import Sequence
+
+import numpy as np
+
+from surgsim_envs.bench import task_reference
+from surgsim_envs.errors import ConfigError
+
+#: m, half extent (x and y) of the fine region about a press site: the nodule's radius (8 mm) plus
+#: the contact radius of a 5 mm press of the 5 mm probe would need 13 mm; the skin carries the load
+#: farther out as a plate, so the fine region reaches 15 mm
+FINE_HALF_WIDTH = 0.015
+#: m, depth below the skin/fat interface to which the fat keeps the skin's cell size (then it grows)
+FINE_FAT_DEPTH = 0.005
+#: the skin's cells are at most this fraction of the fine (x, y) spacing tall
+SKIN_CELL_FRACTION = 0.5
+#: MB of cached compliance columns: a press at h_f 1 mm (48,300 nodes) ran within 800 MB (230 columns);
+#: task_reference's 4,000 MB let one process reach 9.5 GB at that level, more than a shared host had free
+CACHE_MB = 1000.0
+#: s and m/s: the quasi-static load stepping of a reference press (the probe moves 0.2 mm per step)
+DT = 1e-3
+PROBE_SPEED = 0.2
+HOVER = 0.002
+
+
+def layer_planes(thickness: dict) -> list[tuple[str, float, float]]:
+    """(layer, z_bottom, z_top) m from the bed up, for the wall's layer thicknesses (outside in)."""
+    out, z = [], 0.0
+    for name in reversed(list(thickness)):
+        out.append((name, z, z + float(thickness[name])))
+        z += float(thickness[name])
+    return out
+
+
+def wall_z_axis(planes, fine: float, coarse: float, ratio: float) -> np.ndarray:
+    """Node z (m, ascending) with a node on every layer plane; the top layer (skin) in cells of at
+    most ``fine * SKIN_CELL_FRACTION``, the layer under it graded from that size to ``coarse``, the
+    others in cells of at most ``coarse``."""
+    from surgsim_envs.geometry.graded_axis import graded_axis
+
+    top_cell = fine * SKIN_CELL_FRACTION
+    parts = []
+    for k, (_, lo, hi) in enumerate(planes):
+        if k == len(planes) - 1:
+            n = max(1, math.ceil((hi - lo) / top_cell - 1e-9))
+            parts.append(np.linspace(lo, hi, n + 1))
+        elif k == len(planes) - 2:
+            parts.append(graded_axis(lo, hi, hi, min(FINE_FAT_DEPTH, hi - lo), top_cell, coarse, ratio,
+                                     what="wall z axis"))
+        else:
+            n = max(1, math.ceil((hi - lo) / coarse - 1e-9))
+            parts.append(np.linspace(lo, hi, n + 1))
+    z = np.concatenate([p if i == 0 else p[1:] for i, p in enumerate(parts)])
+    z[-1] = planes[-1][2]
+    return z
+
+
+def wall_volume(size, planes, site, fine: float, nodule_centre, nodule_radius: float,
+                coarse: float = task_reference.COARSE_SPACING, ratio: float = task_reference.GROWTH):
+    """The reference lattice of a press at ``site`` (x, y) m on a wall patch of ``size`` (x, y) m
+    centred on the origin, bed at z = 0: a :class:`~surgsim_envs.geometry.Volume` whose tet labels
+    are the layer index (``planes`` order) for plain tets and ``len(planes)`` + the layer index for
+    the nodule's tets (centroid within ``nodule_radius`` of ``nodule_centre``)."""
+    from surgsim_envs.geometry.box import lattice_tets
+    from surgsim_envs.geometry.graded_axis import graded_axis
+    from surgsim_envs.geometry.volume import Volume, tet_signed_volumes
+
+    sx, sy = (float(v) for v in size)
+    x = graded_axis(-sx / 2, sx / 2, float(site[0]), FINE_HALF_WIDTH, fine, coarse, ratio, what="wall x axis")
+    y = graded_axis(-sy / 2, sy / 2, float(site[1]), FINE_HALF_WIDTH, fine, coarse, ratio, what="wall y axis")
+    z = wall_z_axis(planes, fine, coarse, ratio)
+    grid = np.stack(np.meshgrid(x, y, z, indexing="ij"), axis=-1).reshape(-1, 3)
+    tets = lattice_tets((len(x), len(y), len(z)))
+    neg = tet_signed_volumes(grid, tets) < 0
+    tets[neg] = tets[neg][:, [0, 2, 1, 3]]
+    centroids = grid[tets].mean(axis=1)
+    bottoms = np.array([lo for _, lo, _ in planes])
+    layer = np.clip(np.searchsorted(bottoms, centroids[:, 2], side="right") - 1, 0, len(planes) - 1)
+    inside = np.linalg.norm(centroids - np.asarray(nodule_centre, dtype=float), axis=1) < float(nodule_radius)
+    labels = (layer + len(planes) * inside).astype(np.int32)
+    return Volume(grid, tets, labels=labels, name="abdominal_wall_reference")
+
+
+def region_materials(planes, materials: dict, nodule_factor: float) -> dict:
+    """{label: Material} of :func:`wall_volume`'s labels: each layer's material elastic and frictionless
+    (the task's probe has no friction), the nodule's at ``nodule_factor`` x the layer's modulus."""
+    out = {}
+    for k, (name, _, _) in enumerate(planes):
+        m = materials[name].replace(relax_fraction=0.0, friction=0.0)
+        out[k] = m
+        out[len(planes) + k] = m.replace(young=m.young * float(nodule_factor), name=f"{name} nodule")
+    return out
+
+
+def nodule_centre_z(planes, layer: str, radius: float) -> float:
+    """The task's nodule height (m above the bed) in the continuum: the middle of ``layer`` (the
+    median of its tets' centroid heights), at least ``radius / 2`` above its bottom."""
+    lo, hi = next((a, b) for n, a, b in planes if n == layer)
+    return float(np.clip(0.5 * (lo + hi), lo + radius / 2, hi))
+
+
+def press_scene(volume, materials: dict, site, tip_radius: float, fine: float, top: float):
+    """A Simulation of ``volume`` (``fem_static``, bed bonded, ``materials`` per label) and a
+    position-driven frictionless probe of ``tip_radius`` hovering over ``site``, with the reference
+    contact (:data:`task_reference.CONTACT_STIFFNESS_PER_AREA` x ``fine``^2 per node, samples at
+    ``fine`` / 2)."""
+    from surgsim_envs.scene import Simulation, build_scene
+    from surgsim_envs.scene.config import ContactConfig, ProbeConfig, SceneConfig, TissueConfig
+
+    lo, hi = volume.bounds()
+    tissue = TissueConfig(name="wall", organ=volume, model=task_reference.REFERENCE_MODEL, material=materials[0],
+                          spacing=None, anchors=("bottom",), position=tuple((lo + hi) / 2.0),
+                          region_materials=dict(materials),
+                          options={**task_reference.REFERENCE_OPTIONS, "cache_mb": CACHE_MB})
+    probe = ProbeConfig(name="probe", tip_radius=float(tip_radius), friction=0.0,
+                        position=(float(site[0]), float(site[1]), top + tip_radius + 2 * HOVER))
+    contact = ContactConfig(stiffness=task_reference.CONTACT_STIFFNESS_PER_AREA * float(fine) ** 2,
+                            tangential_stiffness=None, surface_samples=task_reference.SURFACE_SUBDIVISIONS)
+    cfg = SceneConfig(name="layered_press_reference", tissues=[tissue], tools=[probe], contact=contact, dt=DT,
+                      gravity=(0.0, 0.0, 0.0))
+    return Simulation(build_scene(cfg), dt=DT)
+
+
+def site_forces(volume, materials: dict, site, depths: Sequence[float], tip_radius: float, fine: float,
+                top: float) -> list[float]:
+    """The reference force (N) of a straight-down press at ``site`` at each of ``depths`` (m below the
+    rest surface ``top``, rising), read in one quasi-static descent
+    (:func:`task_reference.descent_forces`)."""
+    sim = press_scene(volume, materials, site, tip_radius, fine, top)
+    env = SimpleNamespace(sim=sim, surface_z=float(top),
+                          config=SimpleNamespace(tip_radius=float(tip_radius), hover=HOVER, probe_speed=PROBE_SPEED))
+    return task_reference.descent_forces(env, site, depths)
+
+
+def reference_row(task: str, sites: dict, depths: Sequence[float], fine: float, *, size, thickness: dict,
+                  materials: dict, nodule_xy, nodule_radius: float, nodule_factor: float, nodule_layer: str,
+                  tip_radius: float, coarse: float = task_reference.COARSE_SPACING) -> dict:
+    """The reference forces at fine spacing ``fine`` (m) of straight-down presses at each of
+    ``sites`` ({name: (x, y) m}) to each of ``depths`` (m), one graded lattice per site; keys
+    ``"0/<site>/<depth>mm"`` as :func:`surgsim_envs.bench.task_accuracy.measure`'s; ``coarse``: the
+    spacing (m) away from the press site."""
+    from surgsim_envs.tissue import TissueUnstableError
+
+    if not all(a < b for a, b in zip(depths, depths[1:])):
+        raise ConfigError(f"reference depths must rise, got {list(depths)} m")
+    planes = layer_planes(thickness)
+    top = planes[-1][2]
+    centre = (float(nodule_xy[0]), float(nodule_xy[1]), nodule_centre_z(planes, nodule_layer, nodule_radius))
+    mats = region_materials(planes, materials, nodule_factor)
+    t0 = time.perf_counter()
+    forces, nodes = {}, {}
+    for name, xy in sites.items():
+        vol = wall_volume(size, planes, xy, fine, centre, nodule_radius, coarse=coarse)
+        nodes[name] = int(len(vol.nodes))
+        try:
+            values = site_forces(vol, mats, xy, depths, tip_radius, fine, top)
+        except TissueUnstableError as exc:
+            raise ConfigError(f"{task}: the reference {task_reference.REFERENCE_MODEL} at {fine * 1e3:.3g} mm failed: "
+                              f"{str(exc).splitlines()[0]}") from None
+        for depth, f in zip(depths, values):
+            forces[f"0/{name}/{depth * 1e3:g}mm"] = f
+    return {"task": task, "model": task_reference.REFERENCE_MODEL, "spacing": float(fine),
+            "coarse_spacing": float(coarse), "nodes": max(nodes.values()), "nodes_by_site": nodes,
+            "forces_N": forces, "seconds": time.perf_counter() - t0, "nodule_centre": list(centre)}
+
+
+__all__ = ["layer_planes", "wall_z_axis", "wall_volume", "region_materials", "nodule_centre_z", "press_scene",
+           "site_forces", "reference_row"]
