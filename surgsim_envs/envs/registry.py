@@ -127,7 +127,7 @@ def _snake_name(task_id: str) -> str:
 
 
 _PALPATION_WHY = ("the task is to find a lump by the force it adds: over the 5x lump of radius 7 mm, 11 mm "
-                  "deep, the graded FEM reference reads 34 % more than at the mirror site (7 mm press; the 3x "
+                  "deep, the graded FEM reference reads 35 % more than at the mirror site (7 mm press; the 3x "
                   "lumps the task also draws add less), so a model must keep its force error under about half of "
                   "that; 10 % also keeps the 1.5 N damage threshold within 0.15 N (docs/task_accuracy.md)")
 
