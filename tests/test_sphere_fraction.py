@@ -65,3 +65,25 @@ def test_bad_input_is_refused_by_name(bad, match):
     args = {"vertices": UNIT_TET, "centre": [0, 0, 0], "radius": 0.5, **bad}
     with pytest.raises(ConfigError, match=match):
         sphere_volume_fractions(**args)
+
+
+def test_a_sphere_too_small_to_sample_puts_its_volume_into_the_nearest_tet():
+    """A 0.1 mm lump in a 10 mm lattice misses every sample point; the task still gets it, as its
+    volume share of the nearest tet (and a larger lump gets no such patch)."""
+    from surgsim_envs.envs.tissue_setup import inclusion_young_factors
+
+    vol = box_volume((0.05, 0.05, 0.02), 0.01)
+
+    class Wall:
+        def element_vertices(self):
+            return vol.nodes[vol.tets]
+
+    v = vol.nodes[vol.tets]
+    centre, r = v[7].mean(axis=0), 1e-4
+    f = inclusion_young_factors(Wall(), centre, r, contrast=5.0, scale=0.5)
+    share = (4.0 / 3.0 * math.pi * r ** 3) / _tet_volumes(v[7:8])[0]
+    assert np.flatnonzero(f != 0.5).tolist() == [7]
+    assert f[7] == pytest.approx(0.5 * (1 + 4.0 * share))
+    big = inclusion_young_factors(Wall(), centre, 0.012, contrast=5.0, scale=0.5)
+    phi = sphere_volume_fractions(v, centre, 0.012)
+    assert np.allclose(big, 0.5 * (1 + 4.0 * phi))
