@@ -391,6 +391,12 @@ def chart(table: dict, path: str | Path) -> None:
             ax.scatter(r["us_per_env_step"], 100 * r["error"], s=30)
             ax.annotate(f"{r['model']} {r['spacing'] * 1e3:.3g} mm", (r["us_per_env_step"], 100 * r["error"]),
                         fontsize=7, xytext=(3, 3), textcoords="offset points")
+        tolerance = table.get("tolerances", {}).get(task, {}).get("tolerance")
+        if tolerance is not None:                     # the task's declared need: rows below it qualify
+            ax.axhline(100 * tolerance, color="k", ls="--", lw=1)
+            ax.annotate(f"task tolerance {100 * tolerance:g} %", (0.01, 100 * tolerance), xycoords=("axes fraction", "data"),
+                        fontsize=8, xytext=(0, 3), textcoords="offset points")
+            ax.set_ylim(bottom=0)
         ax.set_xscale("log")
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel("wall time per env step (us)")
