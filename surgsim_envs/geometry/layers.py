@@ -18,7 +18,8 @@ Algorithm (:func:`layered_volume`):
    boundary), again within ``dd / 2``, without adding nodes (Fig. 2.6).
 4. Snaps that would flatten a lattice tet below ``min_quality`` are halved, then undone (the NBB
    order of every node along every axis is kept).
-5. Flags: every node gets its material; a node snapped onto an interface gets that interface's
+5. Flags: every node gets its material; a node snapped onto an interface (also one that lay on the
+   crossing already, a snap of length zero; not one whose snap was undone) gets that interface's
    own material (``interface_material``, e.g. fascia), forming the interface's spring layer.
    Springs join the six direct lattice neighbours (the NBB, Fig. 2.11); a homogeneous spring gets
    the material of its ends, a heterogeneous spring (one end on an interface) the material of
@@ -290,12 +291,22 @@ def _sheet_mesh(iface: Interface, lo: np.ndarray, hi: np.ndarray, step: float):
 
 
 # ----------------------------------------------------------------------------------------------
-def _region_of(ls: LayerSet, meshes: list, points: np.ndarray) -> np.ndarray:
-    """(P,) region index of points: 0 = base, k = interface k-1 (the last containing region wins)."""
+#: m, how far above a height sheet a point still counts as on it: far above the round-off of
+#: lattice and sheet heights (~1e-17 m at the lattice's scale), far below any layer's thickness
+ON_SHEET = 1e-12
+
+
+def _region_of(ls: LayerSet, meshes: list, points: np.ndarray, on_sheet_below: bool = False) -> np.ndarray:
+    """(P,) region index of points: 0 = base, k = interface k-1 (the last containing region wins).
+
+    on_sheet_below: a point on a height sheet (to :data:`ON_SHEET`) lies below it, as the points
+    snapped onto the sheet do (for lattice nodes); else only points strictly below it (cell centres)."""
     region = np.zeros(len(points), dtype=np.int64)
+    tol = ON_SHEET if on_sheet_below else 0.0
     for k, (iface, mesh) in enumerate(zip(ls.interfaces, meshes)):
         if iface.is_sheet:
-            inside = points[:, 2] < _sheet_heights(iface, points[:, 0], points[:, 1])
+            heights = _sheet_heights(iface, points[:, 0], points[:, 1])
+            inside = points[:, 2] <= heights + tol if on_sheet_below else points[:, 2] < heights
         else:
             inside = mesh.contains(points) if len(points) else np.zeros(0, bool)
         region[inside] = k + 1
@@ -397,15 +408,18 @@ def layered_volume(layer_set: LayerSet, spacing: float, *, min_quality: float = 
                            tag, movable_b if tag == -2 else ~movable_b)
     # a ray along the boundary's own face (the lattice's outermost line, shifted outward by the jitter)
     # misses it: keep those nodes inside the boundary's bounding box (else a box's edge rows stick out)
+    moved = np.linalg.norm(disp, axis=1) > 0
     disp = np.clip(rest + disp, lo, hi) - rest
     disp, _ = guard_snaps(rest, disp, tets, min_quality=min_quality)
-    intact = np.linalg.norm(disp, axis=1) > 0
-    on_iface[~intact] = -1
+    # a node whose snap was undone is off its interface; a node that already lay on the crossing
+    # (a zero-length snap) is on it, so its flag must not depend on the round-off of that length
+    undone = moved & ~(np.linalg.norm(disp, axis=1) > 0)
+    on_iface[undone] = -1
     nodes = rest + disp
 
     # flags: region of each node (at its lattice point, or just inside for boundary nodes)
     centre_pull = 1e-3 * h
-    region = _region_of(ls, meshes, nodes + 0.0)
+    region = _region_of(ls, meshes, nodes + 0.0, on_sheet_below=True)
     outside = ~boundary.contains(nodes - centre_pull * np.sign(nodes - (lo + hi) / 2.0))
     if outside.any():  # boundary nodes: take the region of their nearest cell centre
         probe = _nearest_cell_centre(index[outside], occ, origin, h)
