@@ -147,3 +147,27 @@ def test_slippage_pieces_refuse_bad_input_with_the_fix(scene):
         batch.tool_displacements("grasper", np.zeros((2, 3)), [0.0, 0.0, 2.0])
     with pytest.raises(ConfigError, match=r"origins must be finite \(2, 3\)"):
         batch.tool_displacements("grasper", np.zeros(3), [0.0, 0.0, 1.0])
+
+
+def test_held_worlds_get_their_state_back(scene):
+    """``held``: the steps inside move every world; on leaving, the held world's tissue, contact,
+    controls and MuJoCo state are what they were (bit for bit), the other world keeps its steps."""
+    from surgsim_envs.errors import ConfigError
+
+    batch, acts = scene["batch"], scene["acts"]
+    d = batch.tools.data
+    before = (batch.tissue_positions(), d.qpos.numpy().copy(), d.time.numpy().copy(), batch.controls(acts),
+              batch.contact.f_ext.numpy().copy(), batch.tool_positions("grasper"))
+    v = np.zeros((20, 2, 2))
+    v[:, :, 0] = before[3][:, 0] + 1e-3          # the jaws close 1 mm further in both worlds
+    with batch.held([0]):
+        batch.step_with_controls(acts, v)
+        assert not np.array_equal(batch.tissue_positions()[0], before[0][0]), "world 0 steps inside"
+    after = (batch.tissue_positions(), d.qpos.numpy(), d.time.numpy(), batch.controls(acts), batch.contact.f_ext.numpy(),
+             batch.tool_positions("grasper"))     # the pose: forward recomputed from the restored state
+    for b, a in zip(before, after):
+        np.testing.assert_array_equal(a[0], b[0])
+    assert after[2][1] > before[2][1] and not np.array_equal(after[0][1], before[0][1]), "world 1 kept its steps"
+    with pytest.raises(ConfigError, match=r"worlds must be indices in \[0, 2\)"):
+        with batch.held([5]):
+            pass

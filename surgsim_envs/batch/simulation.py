@@ -24,6 +24,7 @@ Anything else raises :class:`~surgsim_envs.batch.backend.BatchUnavailableError` 
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 
 import mujoco
 import numpy as np
@@ -434,6 +435,48 @@ class BatchSimulation:
         moving[idx] = 0
         t.ctrl64.assign(c64)
         t.moving.assign(moving)
+
+    @contextmanager
+    def held(self, worlds):
+        """Inside, the physics steps every world as usual; on leaving, worlds ``worlds`` get back
+        the state they had on entering: tissue and contact state, controls, goals and rate-limiter
+        flags, MuJoCo's integration state and the kinematics the readouts read between steps (body
+        and geom poses, actuator forces; MuJoCo Warp recomputes the rest at the next ``step1``), so
+        they read and step on bit for bit as if nothing had run. So a few worlds
+        can run a reset's settle while the others stand still (a per-world settle, e.g. Slippage-v0's
+        grasp, when only some worlds autoreset). Costs a host copy of every per-world array and the
+        steps inside for all worlds: for resets, not for every step."""
+        W = self.W
+        idx = np.asarray(worlds, dtype=np.int64).reshape(-1)
+        if len(idx) and (idx.min() < 0 or idx.max() >= W):
+            raise ConfigError(f"worlds must be indices in [0, {W}), got {idx.tolist()}")
+        arrays = self._per_world_arrays()
+        saved = [a.numpy().copy() for a in arrays] if len(idx) else []
+        yield
+        if not len(idx):
+            return
+        for a, before in zip(arrays, saved):
+            now = a.numpy()
+            now[idx] = before[idx]
+            a.assign(now)
+
+    def _per_world_arrays(self) -> list:
+        """Every device array whose rows are worlds and that carries state from one step to the next."""
+        wp, W = self._wp, self.W
+        out = []
+        for record in (self.tissue_state, self.contact):
+            for name in record.__dataclass_fields__:
+                a = getattr(record, name)
+                if isinstance(a, wp.array) and a.shape[0] == W:
+                    out.append(a)
+        t = self.tools
+        out += [t.ctrl64, t.goal, t.rate, t.moving]
+        fields = [f for _, f in self._STATE_FIELDS if f is not None] + list(self._READOUT_FIELDS)
+        out += [getattr(t.data, f) for f in fields if getattr(t.data, f).size]
+        return out
+
+    #: MuJoCo Warp ``Data`` fields computed by a step that the readouts read between steps
+    _READOUT_FIELDS = ("xpos", "xquat", "xmat", "xipos", "ximat", "geom_xpos", "geom_xmat", "actuator_force")
 
     def reset_worlds(self, worlds=None) -> None:
         """Back to the template's reset state in the listed worlds (all if None): tissue at rest,
