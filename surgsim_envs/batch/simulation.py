@@ -481,7 +481,9 @@ class BatchSimulation:
     def reset_worlds(self, worlds=None) -> None:
         """Back to the template's reset state in the listed worlds (all if None): tissue at rest,
         branches and contacts cleared, MuJoCo data reset (``reset_data`` + ``forward``), controls
-        and goals zero."""
+        and goals zero. ``forward`` runs in every world; the other worlds' poses and actuator forces
+        (what the readouts read between steps) are put back, so their observations do not move
+        (their next ``step1`` recomputes the rest)."""
         wp, mjw = self._wp, self._mjw
         mask = np.ones(self.W, dtype=bool)
         if worlds is not None:
@@ -503,7 +505,14 @@ class BatchSimulation:
                                                               c.tool_contacts, c.tool_slipping, c.tool_depth,
                                                               c.sum_force, c.sum_torque])
             mjw.reset_data(t.model, t.data, reset=wp.array(mask, dtype=bool))
+            keep = np.flatnonzero(~mask)
+            saved = [(f, getattr(t.data, f).numpy().copy()) for f in self._READOUT_FIELDS] if len(keep) else []
             mjw.forward(t.model, t.data)
+            for f, before in saved:         # forward runs in every world: the others' readouts stay as they were
+                arr = getattr(t.data, f)
+                now = arr.numpy()
+                now[keep] = before[keep]
+                arr.assign(now)
 
     def set_tool_friction(self, mu, mu_static=None, worlds=None) -> None:
         """Coulomb friction of every tool body in the listed worlds (all if None): ``mu`` kinetic,
