@@ -18,7 +18,7 @@ the three jaws' force bound, ``hold`` and ``drop`` equal.
 import numpy as np
 import pytest
 
-from surgsim_envs.batch.backend import available
+from surgsim_envs.batch.backend import available, cuda_available
 
 pytestmark = pytest.mark.skipif(not available(), reason="needs the [batch] extra (warp-lang, mujoco-warp)")
 
@@ -27,11 +27,11 @@ REL, PER_NODE = 1e-4, 2e-6            # of the grip; N per contact node
 STEPS = 4                             # control steps compared (before the chaos window)
 
 
-def _batched(num_envs):
+def _batched(num_envs, device="cpu"):
     import gymnasium as gym
 
     return gym.make_vec("SurgSim/Slippage-v0", num_envs=num_envs, vectorization_mode="vector_entry_point",
-                        device="cpu")
+                        device=device)
 
 
 def _assert_obs_close(o1, ob, where):
@@ -45,12 +45,14 @@ def _assert_obs_close(o1, ob, where):
     return bound
 
 
-def test_one_world_follows_the_single_env_through_the_settle_and_the_first_pull_steps():
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
+    not cuda_available(), reason="no CUDA device on this host (Warp sees none)"))])
+def test_one_world_follows_the_single_env_through_the_settle_and_the_first_pull_steps(device):
     import gymnasium as gym
 
     from surgsim_envs.envs.slippage import SlippageEnv
 
-    venv = _batched(1)
+    venv = _batched(1, device)
     single = gym.make("SurgSim/Slippage-v0").unwrapped
     assert venv.single_observation_space == single.observation_space
     assert venv.observation_names == single.observation_names
