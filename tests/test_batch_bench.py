@@ -24,5 +24,5 @@ def test_cli_reports_a_bad_device(capsys):
 
 def test_cli_reports_a_task_without_a_batched_env(capsys):
     pytest.importorskip("warp")
-    assert main(["bench", "batch", "--task", "SurgSim/Slippage-v0", "--worlds", "1"]) == 2
-    assert "--task 'SurgSim/Slippage-v0' has no batched env; choose one of ['SurgSim/Grasp-v0'" in capsys.readouterr().err
+    assert main(["bench", "batch", "--task", "SurgSim/PalpationPress-v0", "--worlds", "1"]) == 2
+    assert "--task 'SurgSim/PalpationPress-v0' has no batched env; choose one of ['SurgSim/Grasp-v0'" in capsys.readouterr().err

@@ -118,7 +118,7 @@ def test_bad_vector_arguments_raise_clear_errors(venv):
     from surgsim_envs.errors import ConfigError
 
     with pytest.raises(ConfigError, match=r"device= \(the batched Warp backend\) is available for"):
-        gym.make_vec("SurgSim/Slippage-v0", num_envs=2, vectorization_mode="vector_entry_point", device="cpu")
+        gym.make_vec("SurgSim/PalpationPress-v0", num_envs=2, vectorization_mode="vector_entry_point", device="cpu")
     with pytest.raises(ConfigError, match=r"actions must be finite \(2, 4\) numbers"):
         venv.step(np.zeros((3, 4)))
     with pytest.raises(ConfigError, match="unknown reset option"):

@@ -24,7 +24,8 @@ A task's batched env is one small module on this base (``batch/palpation_env.py`
   as numpy arrays.
 
 A task module supplies ``TEMPLATE`` (the single env's class), ``_reset_worlds``,
-``_apply_actions``, ``_evaluate``, ``_observe`` and ``_reset_info``.
+``_apply_actions``, ``_evaluate``, ``_observe`` and ``_reset_info`` (and ``_physics`` where its
+actuators follow a control schedule rather than the rate limiter).
 """
 
 from __future__ import annotations
@@ -108,6 +109,11 @@ class BatchedTaskEnv(VectorEnv):
     def _reset_info(self, idx) -> dict:
         return {}
 
+    def _physics(self) -> None:
+        """The physics of one control step in every world (the rate limiter moves the controls the
+        task set); a task that drives its actuators by a control schedule replaces it."""
+        self.sim.step(self.substeps)
+
     # -- episodes ---------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
         options = dict(options or {})
@@ -140,7 +146,7 @@ class BatchedTaskEnv(VectorEnv):
         live = ~self._autoreset
         if live.any():
             self._apply_actions(a, live)
-        self.sim.step(self.substeps)
+        self._physics()
         self._readings = None
         self._steps[live] += 1
         unstable = np.zeros(W, dtype=bool)

@@ -1,6 +1,7 @@
 """Warp kernels of the tools' command side over W worlds: the rate limiter of
 ``scene/simulation.py`` (each actuator target moves towards its goal by at most ``rate * dt``
-per step) on a float64 copy of the controls, written to MuJoCo Warp's float32 ``ctrl``."""
+per step) on a float64 copy of the controls, written to MuJoCo Warp's float32 ``ctrl``, and the
+write of a per-world control schedule computed ahead (a force motor's pull, a jaw closure)."""
 
 from __future__ import annotations
 
@@ -31,3 +32,16 @@ def rate_limit(ctrl64: wp.array2d(dtype=f64), goal: wp.array2d(dtype=f64), rate:
         if wp.abs(goal[w, a] - c) > f64(1e-12):
             still = 1
     moving[w] = still
+
+
+@wp.kernel
+def set_controls(k: int, actuators: wp.array(dtype=wp.int32), values: wp.array3d(dtype=f64),
+                 ctrl64: wp.array2d(dtype=f64), ctrl: wp.array2d(dtype=wp.float32)):
+    """World x listed actuator: the k-th MuJoCo step's control of a per-world schedule
+    (``values`` (K, W, A)), written to the float64 controls and MuJoCo Warp's float32 ``ctrl``
+    before the rate limiter runs (as ``Simulation.step_with_controls``)."""
+    w, j = wp.tid()
+    a = actuators[j]
+    c = values[k, w, j]
+    ctrl64[w, a] = c
+    ctrl[w, a] = wp.float32(c)

@@ -24,6 +24,7 @@ Anything else raises :class:`~surgsim_envs.batch.backend.BatchUnavailableError` 
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 
 import mujoco
 import numpy as np
@@ -196,6 +197,34 @@ class BatchSimulation:
         for _ in range(int(n) // self.subcycles):
             self._one_step()
 
+    def step_with_controls(self, actuators, values) -> None:
+        """``K`` MuJoCo steps (each ``subcycles`` physics steps) with a per-world control schedule
+        computed ahead: before the k-th, ``ctrl[w, actuators] = values[k, w]`` in every world w (then
+        the rate limiter, where a world's targets still move), as :meth:`Simulation.step_with_controls`
+        does for one scene. ``actuators`` (A,) ids; ``values`` (K, W, A) in the actuators' units (a
+        force motor's newtons, a jaw's closing travel in m); one host-to-device copy per call."""
+        ids = np.asarray(actuators, dtype=np.int64).reshape(-1)
+        nu = self._mjm.nu
+        if len(ids) == 0 or ids.min() < 0 or ids.max() >= nu:
+            raise ConfigError(f"actuators must be ids in [0, {nu}), got {ids.tolist()}")
+        vals = np.asarray(values, dtype=np.float64)
+        if vals.ndim != 3 or vals.shape[1:] != (self.W, len(ids)):
+            raise ConfigError(f"values must have shape (steps, {self.W}, {len(ids)}) (MuJoCo steps, worlds, "
+                              f"actuators), got {vals.shape}")
+        if not np.all(np.isfinite(vals)):
+            raise ConfigError("control values contain NaN/inf; give finite numbers")
+        if not len(vals):
+            return
+        wp = self._wp
+        t = self.tools
+        with wp.ScopedDevice(self.device):
+            ids_d = wp.array(ids.astype(np.int32), dtype=wp.int32)
+            vals_d = wp.array(np.ascontiguousarray(vals), dtype=wp.float64)
+        for k in range(len(vals)):
+            with wp.ScopedDevice(self.device):
+                wp.launch(rk.set_controls, dim=(self.W, len(ids)), inputs=[k, ids_d, vals_d, t.ctrl64, t.data.ctrl])
+            self._one_step()
+
     def _one_step(self) -> None:
         """One MuJoCo step of n dt (n = ``subcycles``) with n tissue + contact sub-steps of dt, as
         ``Simulation._subcycled_steps`` (n = 1: its generic loop): inside the MuJoCo step the geoms
@@ -349,10 +378,112 @@ class BatchSimulation:
             rate[np.ix_(idx, ids)] = float(speed)
             t.rate.assign(rate)
 
+    #: MuJoCo state components (mjtState bits, in the state vector's order) and the MuJoCo Warp
+    #: ``Data`` field each restores into (None: must be empty in a batched scene)
+    _STATE_FIELDS = ((mujoco.mjtState.mjSTATE_TIME, "time"), (mujoco.mjtState.mjSTATE_QPOS, "qpos"),
+                     (mujoco.mjtState.mjSTATE_QVEL, "qvel"), (mujoco.mjtState.mjSTATE_ACT, "act"),
+                     (mujoco.mjtState.mjSTATE_HISTORY, None), (mujoco.mjtState.mjSTATE_WARMSTART, "qacc_warmstart"),
+                     (mujoco.mjtState.mjSTATE_CTRL, "ctrl"), (mujoco.mjtState.mjSTATE_QFRC_APPLIED, "qfrc_applied"),
+                     (mujoco.mjtState.mjSTATE_XFRC_APPLIED, "xfrc_applied"),
+                     (mujoco.mjtState.mjSTATE_EQ_ACTIVE, "eq_active"), (mujoco.mjtState.mjSTATE_MOCAP_POS, "mocap_pos"),
+                     (mujoco.mjtState.mjSTATE_MOCAP_QUAT, "mocap_quat"), (mujoco.mjtState.mjSTATE_USERDATA, "userdata"),
+                     (mujoco.mjtState.mjSTATE_PLUGIN, None), (mujoco.mjtState.mjSTATE_PLASTIC, None))
+
+    def set_rigid_states(self, state, worlds=None) -> None:
+        """Restore the tools' MuJoCo state ``state`` (a ``mjSTATE_INTEGRATION`` vector of the
+        template's model, from ``mujoco.mj_getState``: time, qpos, qvel, act, warm start, controls,
+        applied forces, equality flags) into the listed worlds (all if None), in MuJoCo Warp's
+        float32 ``Data``; the float64 controls take the state's controls and the rate limiter stops
+        in those worlds (as after ``mj_setState`` on a just-reset CPU scene). Tissue and contact
+        state are untouched: restore a contact-free state (an approach snapshot,
+        :mod:`surgsim_envs.scene.approach_snapshot`) on worlds just reset with :meth:`reset_worlds`.
+        The kinematics follow at the next step's ``step1`` (readouts of poses are stale until then).
+        One host round trip per field (a reset, not a step)."""
+        m = self._mjm
+        spec = int(mujoco.mjtState.mjSTATE_INTEGRATION)
+        vec = np.asarray(state, dtype=np.float64).reshape(-1)
+        size = mujoco.mj_stateSize(m, spec)
+        if vec.shape != (size,) or not np.all(np.isfinite(vec)):
+            raise ConfigError(f"state must be a finite mjSTATE_INTEGRATION vector of {size} numbers of this scene's "
+                              f"MuJoCo model (mujoco.mj_getState(model, data, state, mjSTATE_INTEGRATION)), got "
+                              f"shape {vec.shape}")
+        idx = np.arange(self.W) if worlds is None else np.asarray(worlds, dtype=np.int64).reshape(-1)
+        if len(idx) and (idx.min() < 0 or idx.max() >= self.W):
+            raise ConfigError(f"worlds must be indices in [0, {self.W}), got {idx.tolist()}")
+        if not len(idx):
+            return
+        d, t, at = self.tools.data, self.tools, 0
+        ctrl = np.zeros(m.nu)
+        for bit, field in self._STATE_FIELDS:
+            n = mujoco.mj_stateSize(m, int(bit))
+            part, at = vec[at:at + n], at + n
+            if field is None:
+                if n:
+                    raise BatchUnavailableError(f"restoring MuJoCo state component {bit.name} ({n} numbers) is not "
+                                                "batched yet")
+                continue
+            if not n:
+                continue
+            if field == "ctrl":
+                ctrl = part
+            arr = getattr(d, field)
+            host = arr.numpy()
+            host[idx] = part.reshape(host.shape[1:]).astype(host.dtype)
+            arr.assign(host)
+        c64, moving = t.ctrl64.numpy(), t.moving.numpy()
+        c64[idx] = ctrl
+        moving[idx] = 0
+        t.ctrl64.assign(c64)
+        t.moving.assign(moving)
+
+    @contextmanager
+    def held(self, worlds):
+        """Inside, the physics steps every world as usual; on leaving, worlds ``worlds`` get back
+        the state they had on entering: tissue and contact state, controls, goals and rate-limiter
+        flags, MuJoCo's integration state and the kinematics the readouts read between steps (body
+        and geom poses, actuator forces; MuJoCo Warp recomputes the rest at the next ``step1``), so
+        they read and step on bit for bit as if nothing had run. So a few worlds
+        can run a reset's settle while the others stand still (a per-world settle, e.g. Slippage-v0's
+        grasp, when only some worlds autoreset). Costs a host copy of every per-world array and the
+        steps inside for all worlds: for resets, not for every step."""
+        W = self.W
+        idx = np.asarray(worlds, dtype=np.int64).reshape(-1)
+        if len(idx) and (idx.min() < 0 or idx.max() >= W):
+            raise ConfigError(f"worlds must be indices in [0, {W}), got {idx.tolist()}")
+        arrays = self._per_world_arrays()
+        saved = [a.numpy().copy() for a in arrays] if len(idx) else []
+        yield
+        if not len(idx):
+            return
+        for a, before in zip(arrays, saved):
+            now = a.numpy()
+            now[idx] = before[idx]
+            a.assign(now)
+
+    def _per_world_arrays(self) -> list:
+        """Every device array whose rows are worlds and that carries state from one step to the next."""
+        wp, W = self._wp, self.W
+        out = []
+        for record in (self.tissue_state, self.contact):
+            for name in record.__dataclass_fields__:
+                a = getattr(record, name)
+                if isinstance(a, wp.array) and a.shape[0] == W:
+                    out.append(a)
+        t = self.tools
+        out += [t.ctrl64, t.goal, t.rate, t.moving]
+        fields = [f for _, f in self._STATE_FIELDS if f is not None] + list(self._READOUT_FIELDS)
+        out += [getattr(t.data, f) for f in fields if getattr(t.data, f).size]
+        return out
+
+    #: MuJoCo Warp ``Data`` fields computed by a step that the readouts read between steps
+    _READOUT_FIELDS = ("xpos", "xquat", "xmat", "xipos", "ximat", "geom_xpos", "geom_xmat", "actuator_force")
+
     def reset_worlds(self, worlds=None) -> None:
         """Back to the template's reset state in the listed worlds (all if None): tissue at rest,
         branches and contacts cleared, MuJoCo data reset (``reset_data`` + ``forward``), controls
-        and goals zero."""
+        and goals zero. ``forward`` runs in every world; the other worlds' poses and actuator forces
+        (what the readouts read between steps) are put back, so their observations do not move
+        (their next ``step1`` recomputes the rest)."""
         wp, mjw = self._wp, self._mjw
         mask = np.ones(self.W, dtype=bool)
         if worlds is not None:
@@ -374,7 +505,14 @@ class BatchSimulation:
                                                               c.tool_contacts, c.tool_slipping, c.tool_depth,
                                                               c.sum_force, c.sum_torque])
             mjw.reset_data(t.model, t.data, reset=wp.array(mask, dtype=bool))
+            keep = np.flatnonzero(~mask)
+            saved = [(f, getattr(t.data, f).numpy().copy()) for f in self._READOUT_FIELDS] if len(keep) else []
             mjw.forward(t.model, t.data)
+            for f, before in saved:         # forward runs in every world: the others' readouts stay as they were
+                arr = getattr(t.data, f)
+                now = arr.numpy()
+                now[keep] = before[keep]
+                arr.assign(now)
 
     def set_tool_friction(self, mu, mu_static=None, worlds=None) -> None:
         """Coulomb friction of every tool body in the listed worlds (all if None): ``mu`` kinetic,
@@ -542,6 +680,38 @@ class BatchSimulation:
         jaws = self._jaw_tool(name).jaw_geom_ids
         fn, ft = self.geom_forces(jaws)
         return {"normal": fn, "tangential": ft}
+
+    def tool_displacements(self, name: str, origins, direction) -> np.ndarray:
+        """(W,) m, per world tool ``name``'s displacement from ``origins`` ((W, 3) m) along the unit
+        vector ``direction`` (3,) (e.g. a pulled wrist's travel since the grasp, as Slippage-v0's
+        ``(pos - pos0) @ pull_dir``); from MuJoCo Warp's float32 ``xpos``."""
+        o = np.asarray(origins, dtype=np.float64)
+        u = np.asarray(direction, dtype=np.float64).reshape(-1)
+        if o.shape != (self.W, 3) or not np.all(np.isfinite(o)):
+            raise ConfigError(f"origins must be finite ({self.W}, 3) m, got shape {o.shape}")
+        if u.shape != (3,) or not np.all(np.isfinite(u)) or abs(float(np.linalg.norm(u)) - 1.0) > 1e-9:
+            raise ConfigError(f"direction must be a unit 3-vector, got {u.tolist()}; divide it by its norm")
+        return (self.tool_positions(name) - o) @ u
+
+    def controls(self, actuators) -> np.ndarray:
+        """(W, A) the float64 controls of actuators ``actuators`` (A,) ids in every world: the
+        schedule's or rate limiter's last value (a jaw's closing travel m, a force motor's N)."""
+        ids = self._actuator_ids(actuators)
+        return self.tools.ctrl64.numpy()[:, ids].copy()
+
+    def actuator_forces(self, actuators) -> np.ndarray:
+        """(W, A) N (or N m) the force each of actuators ``actuators`` applied in the last MuJoCo
+        step (MuJoCo Warp's float32 ``actuator_force``; for a force motor of gain 1, its control
+        clamped to its range: a pull's force), as ``MjData.actuator_force``."""
+        ids = self._actuator_ids(actuators)
+        return self.tools.data.actuator_force.numpy()[:, ids].astype(np.float64)
+
+    def _actuator_ids(self, actuators) -> np.ndarray:
+        ids = np.asarray(actuators, dtype=np.int64).reshape(-1)
+        nu = self._mjm.nu
+        if len(ids) == 0 or ids.min() < 0 or ids.max() >= nu:
+            raise ConfigError(f"actuators must be ids in [0, {nu}), got {ids.tolist()}")
+        return ids
 
     def jaw_openings(self, name: str) -> np.ndarray:
         """(W,) m, per world the distance from grasper ``name``'s axis to jaw 1's inner face (as

@@ -152,7 +152,8 @@ TASKS: dict[str, TaskSpec] = {spec.id: spec for spec in (
                  "the grasp slips when the pull exceeds mu x the normal force; a 10 % normal-force error moves "
                  "the slip onset by 10 % of the pull, small against the 0.3-1.0 friction randomisation")),
              max_episode_steps=150, policy="slippage_v0.npz", quick={"resolution": 0.015},
-             expert="surgsim_envs.envs.slippage:slippage_expert"),
+             expert="surgsim_envs.envs.slippage:slippage_expert",
+             batched="surgsim_envs.batch.slippage_env:BatchedSlippageEnv"),
     TaskSpec("SurgSim/PalpationPress-v0", "surgsim_envs.envs.palpation_press:PalpationPressEnv",
              "surgsim_envs.envs.palpation_press:PalpationPressConfig", scene="palpation", tool="probe",
              model="mass_spring", force_tolerance=ForceTolerance(0.1, why=_PALPATION_WHY),

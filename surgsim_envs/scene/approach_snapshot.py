@@ -76,6 +76,13 @@ class ApproachSnapshot:
         snap = self._kept.get(sim, {}).get(key)
         return None if snap is None else snap.steps
 
+    def state(self, sim, key: Hashable) -> np.ndarray | None:
+        """A copy of the MuJoCo integration state (``mjSTATE_INTEGRATION``) the snapshot of
+        ``(sim, key)`` restores; None before it is recorded or where nothing was kept (e.g. for a
+        batched backend that restores it into its own worlds)."""
+        snap = self._kept.get(sim, {}).get(key)
+        return None if snap is None or snap.state is None else snap.state.copy()
+
     def skip(self, sim, key: Hashable, run: Callable[[int], None], steps: int) -> int:
         """On ``sim`` just reset: restore the snapshot of the approach ``run`` (``run(n)`` advances
         the caller's schedule by n physics steps, continuing from the current controls) and return
