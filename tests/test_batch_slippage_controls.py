@@ -51,7 +51,7 @@ def scene():
 
     def schedule(steps, jaw, t, goal, pull=None, t0=0.0):
         """(steps MuJoCo steps, 2) jaw and pull controls of the task's schedule (Slippage-v0's _run)."""
-        v = np.empty((steps, 2))
+        v = np.zeros((steps, 2))          # no pull: column 1 stays 0 (control_schedule leaves it unwritten)
         args = (True, *pull, t0, float(c.max_pull)) if pull else (False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         control_schedule(v, jaw, goal, c.closing_speed * dt, t, dt, *args)
         return v
