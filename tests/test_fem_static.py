@@ -91,9 +91,11 @@ def test_rollers_dirichlet_targets_and_eviction_stay_exact():
     assert model.compliance().columns_computed == 8         # 3 + 3 (two of the first evicted, LRU) + those two again
 
 
-def test_material_changes_refactor_and_relaxed_moduli():
-    """Young's modulus x2 halves the displacement; a viscoelastic material gives its long-term
-    (relaxed) equilibrium, moduli x (1 - relax_fraction)."""
+def test_material_changes_refactor_and_the_viscoelastic_treatments():
+    """Young's modulus x2 halves the displacement; a viscoelastic material with
+    viscoelastic="relaxed" gives its long-term equilibrium, moduli x (1 - relax_fraction); with the
+    hereditary law (the default for one relax fraction and time) a force applied over one step h
+    meets the stiffness c K0, c = 1 - g + g tau/h (1 - exp(-h/tau)), exactly."""
     model, _ = _block()
     X = model.rest_positions
     f = np.zeros_like(X)
@@ -107,9 +109,16 @@ def test_material_changes_refactor_and_relaxed_moduli():
     # above that and far below any modelling difference
     tol = 1e-9 * np.abs(u1).max()
     assert np.allclose(model.positions - X, 0.5 * u1, rtol=0, atol=tol)
-    visco, _ = _block(material={**ELASTIC, "relax_fraction": 0.4, "relax_time": 0.5})
+    visco_material = {**ELASTIC, "relax_fraction": 0.4, "relax_time": 0.5}
+    relaxed, _ = _block(material=visco_material, viscoelastic="relaxed")
+    relaxed.step(1e-3, f)
+    assert relaxed.hereditary is None
+    assert np.allclose(relaxed.positions - X, u1 / 0.6, rtol=0, atol=tol / 0.6)
+    visco, _ = _block(material=visco_material)
+    assert visco.hereditary == (0.4, 0.5)
     visco.step(1e-3, f)
-    assert np.allclose(visco.positions - X, u1 / 0.6, rtol=0, atol=tol / 0.6)
+    c = 1.0 - 0.4 + 0.4 * 0.5 / 1e-3 * -np.expm1(-1e-3 / 0.5)
+    assert np.allclose(visco.positions - X, u1 / c, rtol=0, atol=tol / c)
     with pytest.raises(CapabilityError, match="relax_fraction"):
         visco.scale_material("relax_fraction", 0.5)
 

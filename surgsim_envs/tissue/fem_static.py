@@ -21,11 +21,27 @@ and gravity (a full solve, only when they change) and g_A the external force act
 with the linearised penalty exactly: the condensation loses nothing (tests compare it with a full
 sparse solve). Cost per step: a 3|A| x 3|A| dense solve and one 3N x 3|A| product.
 
+Viscoelasticity (``viscoelastic="auto"``, the default). A material with a relax fraction g and
+time tau relaxes by the ``fem`` model's standard linear solid (:mod:`fem_viscous`: the stress
+``(1 - g) sigma0 + g h``, ``h`` the hereditary integral of ``sigma0`` with kernel exp(-t/tau)). When
+every element shares g and tau (a lump that only scales E keeps them), the stiffness factors as
+``K(t) = K0 (1 - g + g exp(-t/tau))``: the hereditary integral lives in displacement space, one
+vector H (3N,) m, and a step of h s with the exact piecewise-linear update of ``fem_viscous``
+(decay = exp(-h/tau), gamma = tau/h (1 - decay), c = 1 - g + g gamma) is
+
+    K0 (c u + s) = f,   s = g (decay H_n - gamma u_n),   H_{n+1} = decay H_n + gamma (u - u_n)   (4)
+
+So ``w = c u + s`` is the elastic solution of (1) for the same loads (with Dirichlet targets
+``c u_D + s_D``), and (2)-(3) hold for w with W_AA / c and u0 -> (u0 - s) / c: the same
+factorisation and cached columns, plus O(N) vector work per step. Held still, the force relaxes
+to (1 - g) of its instantaneous value with time constant tau; under a held force the body creeps
+to 1 / (1 - g) of its instantaneous displacement. When g or tau differ between elements the
+stiffness does not factor, and the model gives the long-term (relaxed) equilibrium, moduli
+x (1 - g), as ``fem.static_solve`` does (``viscoelastic="relaxed"`` asks for that always).
+
 Choices: small strain (no corotation: a rotating element would change K and void the cached
-columns; the indentation depths of the benchmark are <= 0.3 R); viscoelastic materials give their
-long-term (relaxed) equilibrium, moduli x (1 - relax_fraction), as ``fem.static_solve`` does; the
-symmetry planes of a quarter model may be held per dof with ``fixed_dofs``. See
-docs/models/fem_static.md.
+columns; the indentation depths of the benchmark are <= 0.3 R); the symmetry planes of a quarter
+model may be held per dof with ``fixed_dofs``. See docs/models/fem_static.md.
 """
 
 from __future__ import annotations
@@ -39,9 +55,14 @@ from numba import njit
 from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.tissue import fem_assembly as asm
+from surgsim_envs.tissue import fem_viscous as visc
 from surgsim_envs.tissue.compliance import DEFAULT_CACHE_MB, SOLVERS, CondensedCompliance
 from surgsim_envs.tissue.fem import TetFEMModel
 from surgsim_envs.tissue.guard import StabilityGuard
+
+
+#: fem_static's treatments of a viscoelastic material (see the module docstring)
+VISCOELASTIC_MODES = ("auto", "hereditary", "relaxed")
 
 
 @njit(cache=True, nogil=True)
@@ -85,6 +106,10 @@ class QuasiStaticFEMModel(TetFEMModel):
     precompute: None (columns on first contact, default), ``"surface"`` (every free surface node,
         at build) or node indices: back-substitute those columns at build so that no step pays
         for a first contact (:meth:`precompute`).
+    viscoelastic: ``"auto"`` (default: the hereditary standard linear solid of equation (4) when
+        every element shares the relax fraction and time, else the relaxed equilibrium),
+        ``"hereditary"`` (ConfigError when they differ) or ``"relaxed"`` (the long-term
+        equilibrium, moduli x (1 - relax_fraction)).
     """
 
     name: ClassVar[str] = "fem_static"
@@ -94,19 +119,23 @@ class QuasiStaticFEMModel(TetFEMModel):
     auto_pair = None
     default_integrator = None
     capabilities = frozenset({"forces", "unstructured_mesh", "implicit_contact", "quasi_static", "static_solve",
-                              "subsurface_stiffness"})
+                              "subsurface_stiffness", "viscoelastic"})
     material_fields = ("young", "poisson", "density")
 
     def __init__(self, volume, material="liver", *, formulation: str = "anp", fixed_dofs=None,
                  cache_mb: float = DEFAULT_CACHE_MB, solver: str = "superlu", precompute=None, integrator: str | None = None,
-                 corotational: bool = False, **base_kwargs):
+                 corotational: bool = False, viscoelastic: str = "auto", **base_kwargs):
         if corotational:
             raise ConfigError("fem_static is small-strain only (corotational=False): its factorised stiffness and "
                               "cached compliance are valid for one K; use model 'fem' for large rotations")
         for key in ("stiffness_damping", "rotation_iters", "cg_tol", "threads", "preconditioner"):
             if key in base_kwargs:
                 raise ConfigError(f"fem_static has no option {key!r} (it has no dynamic integrator); options: "
-                                  "formulation, fixed_dofs, cache_mb, solver, fixed, gravity, region_materials")
+                                  "formulation, fixed_dofs, cache_mb, solver, viscoelastic, fixed, gravity, "
+                                  "region_materials")
+        self.viscoelastic = validate.choice(viscoelastic, "fem_static: viscoelastic", VISCOELASTIC_MODES,
+                                            fix="'auto', 'hereditary' or 'relaxed'")
+        self.hereditary = None            # (g, tau) of equation (4) when the model steps it, else None
         self.cache_mb = validate.positive(cache_mb, "fem_static: cache_mb", unit="MB",
                                           fix="the memory of cached compliance rows, e.g. 256")
         self.solver = validate.choice(solver, "fem_static: solver", SOLVERS,
@@ -131,6 +160,9 @@ class QuasiStaticFEMModel(TetFEMModel):
         self.fixed_dofs.setflags(write=False)      # set at build: the factorisation depends on it
         self._u0 = np.zeros(3 * n)             # response to Dirichlet targets and gravity (m)
         self._u0_stale = True
+        self._hist = np.zeros(3 * n)           # H of equation (4), m
+        self._u_step = np.zeros(3 * n)         # u at the end of the last step (equation (4)'s u_n), m
+        self._wd_key = None                    # Dirichlet targets of the cached elastic response (equation (4))
         self.last_loaded = 0
         self._loaded_buf = np.zeros(n, dtype=np.int64)
         self._zero_kc = np.zeros(n)
@@ -145,16 +177,30 @@ class QuasiStaticFEMModel(TetFEMModel):
     # Material: the long-term (relaxed) elastic body; factorisation dropped on change
     def _setup_material(self) -> None:
         super()._setup_material()
-        if self._visco:                      # quasi-static: relaxed moduli, E (1 - relax_fraction)
-            r = 1.0 - self.relax_g
-            self.mu, self.lam, self._kappa_el = self.mu * r, self.lam * r, self._kappa_el * r
-            self._ke = self._ke * r[:, None, None]
-            self.kappa_node = asm.nodal_average(self.tets, self.tet_volume, self._kappa_el, self.n_nodes)
-            self._k_rest = self._assemble_stiffness(None)
+        self.hereditary = None
+        if self._visco:
+            g, tau = self.relax_g, self.relax_tau
+            uniform = bool(np.all(g == g[0]) and np.all(tau == tau[0]))
+            mode = getattr(self, "viscoelastic", "auto")
+            if mode == "hereditary" and not uniform:
+                raise ConfigError(
+                    "fem_static: viscoelastic='hereditary' needs one relax_fraction and relax_time for every element "
+                    f"(here relax_fraction {float(g.min()):g}..{float(g.max()):g}, relax_time {float(tau.min()):g}.."
+                    f"{float(tau.max()):g} s): the stiffness then factors as K0 (1 - g + g exp(-t/tau)); use "
+                    "viscoelastic='relaxed' (the long-term equilibrium) or the dynamic model 'fem'")
+            if uniform and mode != "relaxed":
+                self.hereditary = (float(g[0]), float(tau[0]))   # K0 stays the instantaneous stiffness
+            else:                            # quasi-static: relaxed moduli, E (1 - relax_fraction)
+                r = 1.0 - self.relax_g
+                self.mu, self.lam, self._kappa_el = self.mu * r, self.lam * r, self._kappa_el * r
+                self._ke = self._ke * r[:, None, None]
+                self.kappa_node = asm.nodal_average(self.tets, self.tet_volume, self._kappa_el, self.n_nodes)
+                self._k_rest = self._assemble_stiffness(None)
             self._visco = False
         self._comp = None
         self._comp_version = -1
         self._u0_stale = True
+        self._wd_key = None
 
     def _on_fixed_changed(self) -> None:
         self._u0_stale = True                 # the factorisation is rebuilt if the fixed dofs changed
@@ -198,17 +244,32 @@ class QuasiStaticFEMModel(TetFEMModel):
 
     def _base_displacement(self) -> np.ndarray:
         """u0 (3N,) m: equilibrium under the Dirichlet targets and gravity, without external forces."""
-        comp = self.compliance()
         if self._u0_stale:
-            n = self.n_nodes
-            uc = np.zeros(3 * n)
+            uc = np.zeros(3 * self.n_nodes)
             fx = self.fixed
             uc.reshape(-1, 3)[fx] = (self.fixed_targets[fx] - self.rest_positions[fx])
-            load = (self.masses[:, None] * self.gravity[None, :]).ravel() - self._k_rest @ uc
-            u = comp.solve(np.where(comp.free, load, 0.0)) if (np.any(uc) or np.any(self.gravity)) else np.zeros(3 * n)
-            self._u0 = u + uc
+            self._u0 = self._elastic_response(uc)
             self._u0_stale = False
         return self._u0
+
+    def _elastic_response(self, uc: np.ndarray) -> np.ndarray:
+        """(3N,) m: K0's equilibrium under gravity with the held dofs at ``uc`` (zero elsewhere)."""
+        comp = self.compliance()
+        load = (self.masses[:, None] * self.gravity[None, :]).ravel() - self._k_rest @ uc
+        u = comp.solve(np.where(comp.free, load, 0.0)) if (np.any(uc) or np.any(self.gravity)) else np.zeros(uc.shape)
+        return u + uc
+
+    def _hereditary_base(self, c: float, s: np.ndarray) -> np.ndarray:
+        """w0 (3N,) of equation (4): K0's equilibrium under gravity with the Dirichlet dofs at
+        ``c u_D + s_D`` (cached while those stay the same, e.g. nodes held at rest)."""
+        self.compliance()
+        u_d = self._base_displacement()
+        wd = np.where(self._comp.free, 0.0, c * u_d + s)
+        key = (c, wd.tobytes())
+        if self._wd_key != key:
+            self._w0 = self._elastic_response(wd)
+            self._wd_key = key
+        return self._w0
 
     # ------------------------------------------------------------------------------------------
     # Step: equations (2)-(3) of the module docstring
@@ -216,6 +277,16 @@ class QuasiStaticFEMModel(TetFEMModel):
         n = self.n_nodes
         comp = self.compliance()
         u0 = self._base_displacement()
+        c, s, decay, gamma = 1.0, None, 1.0, 1.0
+        if self.hereditary is not None:               # equation (4): w = c u + s solves (1)
+            g, tau = self.hereditary
+            decay_a, gamma_a = visc.branch_coefficients(dt, np.array([tau]))
+            decay, gamma = float(decay_a[0]), float(gamma_a[0])
+            c = 1.0 - g + g * gamma
+            # u_n is the last step's own result: Dirichlet targets moved since (set_fixed) enter the
+            # hereditary integral over this step, as a ramp, like every other displacement
+            s = g * (decay * self._hist - gamma * self._u_step)
+            u0 = (self._hereditary_base(c, s) - s) / c
         held = self.fixed
         if stiffness is not None:
             kc = np.asarray(stiffness, dtype=np.float64)
@@ -230,6 +301,8 @@ class QuasiStaticFEMModel(TetFEMModel):
         if len(loaded):
             slots = comp.slots(loaded)
             w = comp.block(loaded, slots)
+            if c != 1.0:
+                w = w / c
             f_a = forces[loaded].reshape(-1)
             un_a = (x_prev[loaded] - self.rest_positions[loaded]).reshape(-1)
             dofs = (3 * loaded[:, None] + np.arange(3)).reshape(-1)
@@ -237,11 +310,15 @@ class QuasiStaticFEMModel(TetFEMModel):
                 k_a = np.repeat(kc[loaded], 3)
                 rhs = u0[dofs] + w @ (f_a + k_a * un_a)
                 u_a = np.linalg.solve(np.eye(len(dofs)) + w * k_a[None, :], rhs)
-                g = f_a - k_a * (u_a - un_a)
+                g_a = f_a - k_a * (u_a - un_a)
             else:
-                g = f_a
-            comp.response(slots, g.reshape(-1, 3), u)
-            self.integrated_external_forces[loaded] = g.reshape(-1, 3)
+                g_a = f_a
+            comp.response(slots, (g_a / c if c != 1.0 else g_a).reshape(-1, 3), u)
+            self.integrated_external_forces[loaded] = g_a.reshape(-1, 3)
+        if s is not None:
+            self._hist *= decay
+            self._hist += gamma * (u - self._u_step)
+            self._u_step[:] = u
         commit_positions(u, self.rest_positions, self.positions, self.velocities, dt)
         self.external_forces = forces
 
@@ -259,14 +336,20 @@ class QuasiStaticFEMModel(TetFEMModel):
                 "it for quasi-static models with ContactConfig.implicit_damping='auto')")) from None
 
     def internal_forces(self) -> np.ndarray:
-        """(N,3) N elastic nodal forces -K u (no inertia, no viscous term: quasi-static)."""
-        return self.elastic_forces()
+        """(N,3) N elastic nodal forces (no inertia, no viscous term: quasi-static): -K u, or with the
+        hereditary law -K0 ((1 - g) u + g H)."""
+        if self.hereditary is None:
+            return self.elastic_forces()
+        g = self.hereditary[0]
+        u = (self.positions - self.rest_positions).reshape(-1)
+        return -(self._k_rest @ ((1.0 - g) * u + g * self._hist)).reshape(-1, 3)
 
     # ------------------------------------------------------------------------------------------
     def static_solve(self, forces=None, stiffness=None, **kwargs) -> np.ndarray:
         """Equilibrium positions (N,3) m under ``forces`` (N,3) N (default: the last ones) and the
-        Dirichlet targets: one full back-substitution (no condensation). Updates ``positions``
-        (velocities zeroed) and returns a copy. ``stiffness`` is not accepted (no contact state)."""
+        Dirichlet targets: one full back-substitution (no condensation); with the hereditary law the
+        long-term one (fully relaxed, H = 0). Updates ``positions`` (velocities zeroed) and returns a
+        copy. ``stiffness`` is not accepted (no contact state)."""
         if stiffness is not None:
             raise ConfigError("fem_static.static_solve takes no contact stiffness; use step(dt, forces, stiffness)")
         if kwargs:
@@ -276,6 +359,13 @@ class QuasiStaticFEMModel(TetFEMModel):
             raise ConfigError(f"forces must be a finite array of shape {self.positions.shape}, got {f.shape}")
         comp = self.compliance()
         u = self._base_displacement() + comp.solve(np.where(comp.free, f.reshape(-1), 0.0))
+        if self.hereditary is not None:    # relaxed stiffness (1 - g) K0: the loads' response / (1 - g)
+            uc = np.where(comp.free, 0.0, u)
+            load = (self.masses[:, None] * self.gravity[None, :]).ravel() + f.reshape(-1)
+            u = (uc + comp.solve(np.where(comp.free, load, 0.0)) / (1.0 - self.hereditary[0])
+                 + (comp.solve(np.where(comp.free, -(self._k_rest @ uc), 0.0)) if np.any(uc) else 0.0))
+            self._hist[:] = 0.0
+            self._u_step[:] = u
         self.positions = self.rest_positions + u.reshape(-1, 3)
         self.velocities = np.zeros_like(self.positions)
         return self.positions.copy()
@@ -283,6 +373,9 @@ class QuasiStaticFEMModel(TetFEMModel):
     def _reset_state(self) -> None:
         super()._reset_state()
         self.last_loaded = 0
+        if hasattr(self, "_hist"):
+            self._hist[:] = 0.0
+            self._u_step[:] = 0.0
 
     def describe(self) -> dict:
         out = super().describe()
