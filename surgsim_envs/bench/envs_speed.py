@@ -41,6 +41,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per figure; median reported (default 3)")
     parser.add_argument("--workers", type=int, default=2, help="async vector env size (0 to skip; default 2)")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    parser.add_argument("--env-options", default=None,
+                        help="a JSON object of gym.make keyword arguments for the single-env figures, e.g. "
+                             "'{\"model\": \"fem_static\", \"spacing\": 0.0033333}' (a task's non-default model "
+                             "and resolution: random actions with their resets, the cost an RL loop meets)")
     parser.add_argument("--compiled-vs-generic", action="store_true",
                         help="also time, alternately in this process, env steps and physics substeps with the "
                              "compiled substeps (scene/step/compiled.py) and with the generic per-substep loop")
@@ -81,11 +85,27 @@ def add_arguments(parser) -> None:
                              "network, stepped alternately in this process (bench/default_model_cost.py)")
 
 
-def single_rate(env_id: str, steps: int, repeats: int, compiled_vs: bool = False) -> dict:
-    """Median env steps/s of one env in this process, plus its timing settings."""
+def parse_env_options(text) -> dict:
+    """``--env-options``: a JSON object of gym.make keyword arguments ({} for None)."""
+    if text is None:
+        return {}
+    try:
+        opts = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ConfigError(f"--env-options {text!r} is not JSON ({exc}); pass an object such as "
+                          '\'{"model": "fem_static", "spacing": 0.005}\'') from None
+    if not isinstance(opts, dict):
+        raise ConfigError(f"--env-options {text!r} must be a JSON object of gym.make keyword arguments, "
+                          '{"model": "fem_static"}')
+    return opts
+
+
+def single_rate(env_id: str, steps: int, repeats: int, compiled_vs: bool = False, env_options=None) -> dict:
+    """Median env steps/s of one env in this process, plus its timing settings; ``env_options``:
+    gym.make keyword arguments (default: the task's defaults)."""
     import gymnasium as gym
 
-    env = gym.make(env_id)
+    env = gym.make(env_id, **(env_options or {}))
     u = env.unwrapped
     rng = np.random.default_rng(0)
     pal = "Palpation" in env_id
@@ -122,7 +142,7 @@ def single_rate(env_id: str, steps: int, repeats: int, compiled_vs: bool = False
            "mj_step1_us": step1_us, "mj_step1_with_visual_flex_us": step1_flex_us,
            "reference_kernel_us": statistics.median(refs),
            "env_step_in_reference_kernels": 1e6 / statistics.median(rates) / statistics.median(refs),
-           "load_avg_1min": os.getloadavg()[0]}
+           "load_avg_1min": os.getloadavg()[0], "tissue_model": u.sim.tissue().name}
     out["compiled_substeps"] = u.sim.compiled_runner() is not None
     if compiled_vs:
         out.update(compiled_vs_generic(env, repeats, rng, pal, steps))
@@ -154,7 +174,11 @@ def overhead(env, steps: int, repeats: int, rng, palpation: bool) -> tuple[float
         sub.append((time.perf_counter() - t0) / k * 1e6)
         sim = u.sim
         name = next(iter(sim.contacts))
-        tissue = copy.deepcopy(sim.tissues[name])
+        try:
+            tissue = copy.deepcopy(sim.tissues[name])
+        except TypeError:        # a model holding a factorisation (fem_static's SuperLU) cannot be copied
+            own.append(float("nan"))
+            continue
         res = sim.contacts[name].result
         forces = np.array(res.forces)
         stiffness = None if res.stiffness is None else np.array(res.stiffness)
@@ -162,7 +186,8 @@ def overhead(env, steps: int, repeats: int, rng, palpation: bool) -> tuple[float
         for _ in range(k):
             tissue.step(sim.dt, forces, stiffness)
         own.append((time.perf_counter() - t0) / k * 1e6)
-    return statistics.median(sub), statistics.median(own)
+    own = [t for t in own if t == t]
+    return statistics.median(sub), (statistics.median(own) if own else float("nan"))
 
 
 def compiled_vs_generic(env, repeats: int, rng, palpation: bool, steps: int, n: int = 300) -> dict:
@@ -523,6 +548,10 @@ def run(args) -> int:
         raise ConfigError(f"unknown task(s) {unknown}; known: {list(TASKS)}")
     if getattr(args, "vector_accounting", False):
         return _run_accounting(tasks, args)
+    if parse_env_options(getattr(args, "env_options", None)) and (
+            args.workers or getattr(args, "vector", False) or not getattr(args, "no_model_ratio", False)):
+        raise ConfigError("--env-options times the single env only; add --workers 0 --no-model-ratio (the vector "
+                          "and model-ratio figures build the task's defaults)")
     rows = []
     vector = getattr(args, "vector", False)
     for t in tasks:
@@ -530,7 +559,10 @@ def run(args) -> int:
             row = vector_row(t, args)
             rows.append(row)
             continue
-        row = single_rate(t, args.steps, args.repeats, getattr(args, "compiled_vs_generic", False))
+        env_options = parse_env_options(getattr(args, "env_options", None))
+        row = single_rate(t, args.steps, args.repeats, getattr(args, "compiled_vs_generic", False), env_options)
+        if env_options:
+            row["env_options"] = env_options
         if not getattr(args, "no_model_ratio", False):
             row.update(_model_ratio(t, args.steps, args.repeats))
         if vector:
