@@ -34,7 +34,8 @@ def test_unknown_names_are_refused_before_anything_is_written(tmp_path):
     parser = argparse.ArgumentParser()
     ta.add_arguments(parser)
     out = tmp_path / "out"
-    for argv, word in ((["--models", "bogus"], "bogus"), (["--tasks", "SurgSim/Nope-v0"], "Nope")):
+    for argv, word in ((["--models", "bogus"], "bogus"), (["--tasks", "SurgSim/Nope-v0"], "Nope"),
+                       (["--spacings", "0.0005"], "outside 1-20 mm"), (["--spacings", "2.5mm"], "not a number")):
         with pytest.raises(ConfigError, match=word):
             ta.run(parser.parse_args(argv + ["--out", str(out)]))
     assert not out.exists()

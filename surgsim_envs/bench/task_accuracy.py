@@ -53,7 +53,7 @@ from surgsim_envs.errors import ConfigError
 PALPATION_FULL = ProbeSet(
     inclusions=(Inclusion("5x lump, r 7 mm, 11 mm deep", (0.02, 0.0), 0.011, 0.007, 5.0),
                 Inclusion("3x lump, r 9 mm, 9 mm deep", (-0.01, 0.01), 0.009, 0.009, 3.0)),
-    depths=(0.003, 0.005, 0.007), hold=0.5, spacings=(0.01, 0.0075, 0.005),
+    depths=(0.003, 0.005, 0.007), hold=0.5, spacings=(0.01, 0.0075, 0.005, 0.01 / 3),
     reference_spacings=(0.002, 0.002 / math.sqrt(2), 0.001, 0.001 / math.sqrt(2)))
 PALPATION_QUICK = ProbeSet(inclusions=PALPATION_FULL.inclusions[:1], depths=(0.004, 0.007), hold=0.5,
                            spacings=(0.01,), reference_spacings=(0.004, 0.004 / math.sqrt(2), 0.002))
@@ -256,8 +256,9 @@ def converged_reference(task: str, probes: ProbeSet, progress: Callable[[str], N
 
 
 def build_table(tasks: Iterable[str], models: Iterable[str], quick: bool = False,
-        progress: Callable[[str], None] = print) -> dict:
-    """The table: ``{"rows": [...], "references": {task: row}, "not_covered": [...]}``."""
+        progress: Callable[[str], None] = print, spacings: Iterable[float] | None = None) -> dict:
+    """The table: ``{"rows": [...], "references": {task: row}, "not_covered": [...]}``; ``spacings``
+    (m) replaces the probe sets' model spacings (a refinement row of one model)."""
     rows, references, not_covered = [], {}, []
     for task in tasks:
         if task not in PROBE_SETS:
@@ -267,7 +268,7 @@ def build_table(tasks: Iterable[str], models: Iterable[str], quick: bool = False
         reference = converged_reference(task, probes, progress)
         references[task] = reference
         for model in models:
-            for spacing in probes.spacings:
+            for spacing in (probes.spacings if spacings is None else tuple(spacings)):
                 progress(f"{task}: {model} at {spacing * 1e3:.3g} mm")
                 rows.append(compare(measure(task, model, spacing, probes), reference, probes))
                 if "refused" in rows[-1] and task in probe_sets.DRIVERS:
@@ -440,6 +441,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--quick", action="store_true",
                         help="one inclusion, two depths, the task's default spacing; the reference at three "
                              "fine spacings (4, 2.8, 2 mm): not converged")
+    parser.add_argument("--spacings", default=None,
+                        help="comma-separated model lattice spacings in m, instead of the probe set's (e.g. "
+                             "0.0025 with --models fem_static for a refinement row); 10 mm / k puts every press "
+                             "site on a node")
     parser.add_argument("--out", default="surgsim-out/task-accuracy", help="output directory (JSON, markdown, PNG)")
     parser.add_argument("--json", action="store_true", help="also print the table as JSON")
     parser.add_argument("--rescore", default=None, metavar="TABLE_JSON",
@@ -453,6 +458,22 @@ def _names(text: str, known: Iterable[str], what: str) -> list[str]:
     if not names or unknown:
         raise ConfigError(f"--{what} {text!r}: unknown {unknown or 'empty list'}; choose from {sorted(known)}")
     return names
+
+
+def _spacings(text) -> tuple[float, ...] | None:
+    """``--spacings``: model lattice spacings in m (1-20 mm), or None."""
+    if text is None:
+        return None
+    out = []
+    for part in str(text).split(","):
+        try:
+            h = float(part)
+        except ValueError:
+            raise ConfigError(f"--spacings {text!r}: {part.strip()!r} is not a number; give metres, e.g. 0.0025") from None
+        if not (math.isfinite(h) and 1e-3 <= h <= 0.02):
+            raise ConfigError(f"--spacings {text!r}: {h!r} m is outside 1-20 mm; give metres, e.g. 0.0025")
+        out.append(h)
+    return tuple(out)
 
 
 def run(args) -> int:
@@ -478,7 +499,8 @@ def run(args) -> int:
         source = json.loads(validate.path(args.rescore, "--rescore", fix="a task_accuracy.json").read_text())
         table = rescore(source, tasks, progress=progress)
     else:
-        table = build_table(tasks, models, quick=args.quick, progress=progress)
+        table = build_table(tasks, models, quick=args.quick, progress=progress,
+                            spacings=_spacings(getattr(args, "spacings", None)))
     bar.close()
     paths = write(table, args.out)
     print(markdown(table))
