@@ -23,20 +23,23 @@ class TissueUnstableError(SurgSimError, RuntimeError):
     ``reason`` (what the guard saw).
     """
 
-    def __init__(self, model: str, dt: float, critical_dt: float, reason: str):
+    #: the advice of a divergence of an explicit step
+    EXPLICIT_ADVICE = ("Reduce dt below the critical estimate, use an implicit integrator "
+                       "(integrator='implicit'), or soften the material.")
+
+    def __init__(self, model: str, dt: float, critical_dt: float, reason: str, advice: str | None = None):
         self.model = model
         self.dt = float(dt)
         self.critical_dt = float(critical_dt)
         self.reason = reason
+        self.advice = self.EXPLICIT_ADVICE if advice is None else advice
         super().__init__(
             f"tissue model '{model}' became unstable at dt={dt:.3g} s "
-            f"(estimated critical dt {critical_dt:.3g} s): {reason}. "
-            "Reduce dt below the critical estimate, use an implicit integrator "
-            "(integrator='implicit'), or soften the material."
+            f"(estimated critical dt {critical_dt:.3g} s): {reason}. {self.advice}"
         )
 
     def __reduce__(self):  # picklable across processes (e.g. gymnasium async vector envs)
-        return (type(self), (self.model, self.dt, self.critical_dt, self.reason))
+        return (type(self), (self.model, self.dt, self.critical_dt, self.reason, self.advice))
 
 
 class RenderingUnavailableError(SurgSimError, RuntimeError):

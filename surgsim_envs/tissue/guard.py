@@ -102,6 +102,19 @@ class GuardedModel(Protocol):
     def elastic_energy(self) -> float: ...
 
 
+def implicit_step_advice(model, reason: str) -> str | None:
+    """The advice for a failure of an implicit step (None: the explicit-step advice): a smaller dt
+    cannot cure elements inverted by the load itself."""
+    pair = getattr(model, "auto_pair", None)
+    active = getattr(model, "active_integrator", None)
+    if pair is None or active != pair[1]:
+        return None
+    if "inverted" in reason:
+        return ("The step was implicit already: the load inverts elements, a deformation too large for this "
+                "lattice; press less deep, use a coarser lattice, or a model for large strain")
+    return ("The step was implicit already; lower the loads or their rate, or soften the material")
+
+
 class StabilityGuard:
     """max_speed: m/s above which a node is taken as diverging (tissue never moves at 20 m/s).
     energy_factor: blow-up when kinetic energy exceeds this multiple of the largest
@@ -195,7 +208,7 @@ class StabilityGuard:
             reason += f" (critical dt evaluated on the last good state, t={self._good_time:.4g} s)"
         else:
             reason += " (critical dt evaluated on the rest state)"
-        raise TissueUnstableError(model.name, dt, crit, reason)
+        raise TissueUnstableError(model.name, dt, crit, reason, advice=implicit_step_advice(model, reason))
 
     def check(self, model: GuardedModel, dt: float) -> None:
         vmax2 = max_speed_squared(model.positions, model.velocities)
