@@ -227,7 +227,11 @@ def contrast(forces: dict, n_inclusions: int, depth: float) -> list[float]:
 
 
 def compare(row: dict, reference: dict, probes: ProbeSet) -> dict:
-    """``row`` with its errors and contrasts against ``reference`` (same presses)."""
+    """``row`` with its errors and contrasts against ``reference`` (same presses); a probe-set module
+    with its own readings (closures, pulls) scores them with its ``compare``."""
+    own = getattr(probe_sets.DRIVERS.get(row["task"]), "compare", None)
+    if own is not None:
+        return own(row, reference, probes)
     if "forces_N" not in row:
         return row
     f, ref = row["forces_N"], reference["forces_N"]

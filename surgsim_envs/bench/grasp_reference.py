@@ -1,0 +1,64 @@
+"""A force reference for the grasp tasks' closures and pulls: quasi-static FEM in the task's own scene.
+
+The grasp tasks (Grasp-v0, Slippage-v0) close a three-jaw grasper on the tip of an organ held by
+its ligaments (:func:`surgsim_envs.scene.grasp_config`; spleen by default, lattice 11 mm). The
+reference solves the same closures and pulls as a continuum: the task's scene config (organ,
+anchors, grasper and its placement, time step, tissue sub-cycles, friction) with
+
+* ``fem_static`` (linear tets, averaged nodal pressure, equilibrium at every physics step) on the
+  organ's lattice at a finer spacing, the material elastic (``relax_fraction`` 0, the task's
+  friction kept: :func:`surgsim_envs.bench.task_reference.elastic`);
+* a contact stiffness per unit surface area (:data:`CONTACT_STIFFNESS_PER_AREA`, the node's penalty
+  ``k = that x h^2``, normal and tangential): the task's contact is a fixed 200 N/m per node, so
+  its stiffness per area grows as 1/h^2 under refinement and would change the contact law with the
+  mesh. The jaws are flat boxes wider than the lattice, so nodes alone sample them (no surface
+  samples: they help a sphere meet the faces between nodes, not a flat jaw).
+
+The organ's lattice is uniform (the grasp scene fills the organ's mesh), so the reference refines
+the whole lattice; the jaws are driven by the task's own commands (:func:`jaw_opening` targets at
+the task's closing speed for Grasp-v0; the jaw and pull-motor schedule of Slippage-v0,
+:func:`surgsim_envs.envs.slippage.terms.control_schedule`) and read by the same functions the tasks'
+rewards read (``Simulation.jaw_forces``, :class:`surgsim_envs.envs.grasp.terms.SlipTracker`).
+Units: m, N, s.
+"""
+
+from __future__ import annotations
+
+import copy
+
+
+#: N/m^3, normal and tangential contact stiffness per unit surface area of the reference, the value
+#: task_reference uses for the palpation presses. The grasp readings depend on it (measured at 7.8 mm,
+#: mu 0.8: the jaws' summed normal at the open-most closure read 0.93, 0.54, 1.10 and 1.04 N at 1e7,
+#: 3e7, 1e8 and 3e8; frictionless 0.44, 0.40 and 0.34 N at 3e7, 1e8 and 3e8; 1e9 diverged), so it is
+#: part of the reference's definition, stated with its results
+CONTACT_STIFFNESS_PER_AREA = 1e8
+REFERENCE_MODEL = "fem_static"
+REFERENCE_OPTIONS = {"solver": "auto", "cache_mb": 1000.0}
+
+
+def reference_simulation(env, spacing: float):
+    """A Simulation of ``env``'s grasp scene (its organ, anchors, grasper, dt, sub-cycles; built by
+    the task with ``fem_static`` and the elastic material) with the reference's contact at lattice
+    ``spacing`` (m): stiffness :data:`CONTACT_STIFFNESS_PER_AREA` x spacing^2 per node, nodes only."""
+    from surgsim_envs.scene import Simulation, build_scene
+
+    sim = env.sim
+    cfg = copy.deepcopy(sim.scene.config)
+    tissue = cfg.tissues[0]
+    tissue.options = {**dict(tissue.options), **REFERENCE_OPTIONS}
+    cfg.contact.stiffness = CONTACT_STIFFNESS_PER_AREA * float(spacing) ** 2
+    cfg.contact.tangential_stiffness = None          # = the normal one
+    cfg.contact.surface_samples = None
+    return Simulation(build_scene(cfg), dt=sim.dt, substeps=sim.substeps, tissue_subcycles=sim.tissue_subcycles)
+
+
+def set_friction(sim, mu: float, static_ratio: float) -> None:
+    """Every tool's Coulomb coefficient ``mu`` (static ``static_ratio * mu``), as the tasks set it per episode."""
+    for contact in sim.contacts.values():
+        contact.tool_friction[:] = mu
+        contact.tool_static_friction[:] = static_ratio * mu
+
+
+__all__ = ["CONTACT_STIFFNESS_PER_AREA", "REFERENCE_MODEL", "REFERENCE_OPTIONS", "reference_simulation",
+           "set_friction"]
