@@ -98,7 +98,6 @@ def test_the_reference_contact_is_a_stiffness_per_area_and_its_closures_rise():
     assert row["max_tensile_N"] == 0.0 and f["+0.2/sum"] > f["+0/sum"] > 0.03
 
 
-@pytest.mark.slow
 def test_the_reference_pull_slides_and_holds_a_positive_pull():
     row = sp.reference_row(sp.TASK, sp.QUICK, COARSE)
     f = row["forces_N"]

@@ -1,23 +1,23 @@
 """Slippage-v0's probe set: the task's closure held, then a slow pull until the grasp slides.
 
 The task's scene is its own (``gym.make("SurgSim/Slippage-v0", model=..., resolution=...)``): the
-spleen held by its ligaments, the three-jaw grasper closed on its tip by the reset's settle (the
-task's ``initial_closure`` 0.7 at its closing speed), then pulled out along the tool axis by the
+spleen held by its ligaments, the three-jaw grasper closed on its tip by the reset's settle (at the
+task's closing speed, to :data:`CLOSURE`, set as the task's ``initial_closure``), then pulled out along the tool axis by the
 task's force motor (with its joint damping). The material is the task's made elastic
 (``relax_fraction`` 0, friction kept; the option ``material``), and the settle is lengthened to
 :data:`HOLD` s (the option ``settle_time``) so the closure is held before the pull starts.
 
 Each pull starts from a fresh reset (seed 0, Young's modulus scale 1, friction mu for both
 coefficients, a steady ramp of :data:`PULL_RATE` N/s with no oscillation) and keeps the jaws at
-``initial_closure``. Readings, all from the task's own readouts (the ones its reward terms use):
+that closure. Readings, all from the task's own readouts (the ones its reward terms use):
 
 * ``"mu<mu>/normal"``: the jaws' summed normal force (N) at the end of the hold (the reset's
   observation, before any pull);
 * ``"mu<mu>/held"``: the largest pull (N, ``info["pull_force_N"]``) over the control steps before
   the task's slip distance (``env.slip_distance``: the grasped nodes' centroid relative to the
   wrist, the slip reward's input) first exceeds :data:`SLIP_ONSET`. Below it the grasp deforms and
-  slips partially at the edges of each jaw's contact (0.3-1.5 mm in the default scene); past it the
-  tissue runs away from the jaws within one or two control steps.
+  slips partially at the edges of each jaw's contact (0.3-1.5 mm with mass_spring at 11 mm, closure
+  0.7, mu 0.6); past it the tissue ran away from the jaws within two control steps (1.5 -> 10 mm).
 
 Per mu the row also gives held / (mu x summed normal at the hold) and at the onset
 (``held_ratio``, ``held_ratio_at_onset``), the largest tensile jaw normal force seen (N) and the
@@ -51,21 +51,27 @@ HOLD = 1.0
 PULL_RATE = 0.2
 #: m, the slip distance at which the grasp counts as sliding (module docstring)
 SLIP_ONSET = 0.002
+#: the jaw closure held (action value): the task's own settle closure (0.7) squeezes the spleen tip to
+#: about 8 N in the reference, where its small-strain equilibrium is lost at 5.5 mm (a node jumped
+#: 11 mm in one step, t = 0.49 s of the closing); 0.3 (about 3 N) is within what the agent commands
+CLOSURE = 0.3
 
 
 @dataclass(frozen=True)
 class PullSet:
-    """Slippage pulls: the friction coefficients (one pull each), the lattice spacings (m) the models
-    run at and the reference's (descending)."""
+    """Slippage pulls: the jaw closure held (the task's action value, set as its ``initial_closure``),
+    the friction coefficients (one pull each), the lattice spacings (m) the models run at and the
+    reference's (descending)."""
 
+    closure: float
     mus: tuple[float, ...]
     spacings: tuple[float, ...]
     reference_spacings: tuple[float, ...]
 
 
-FULL = PullSet(mus=(0.3, 0.6), spacings=(0.015, 0.011, 0.008),
+FULL = PullSet(closure=CLOSURE, mus=(0.3, 0.6), spacings=(0.015, 0.011, 0.008),
                reference_spacings=(0.011, 0.011 / math.sqrt(2), 0.0055, 0.0055 / math.sqrt(2), 0.00275))
-QUICK = PullSet(mus=(0.6,), spacings=(0.015,), reference_spacings=(0.015, 0.011))
+QUICK = PullSet(closure=CLOSURE, mus=(0.6,), spacings=(0.015,), reference_spacings=(0.015, 0.011))
 
 
 def task_material():
@@ -76,15 +82,15 @@ def task_material():
     return elastic(SlippageConfig().material)
 
 
-def make_env(model: str, spacing: float):
-    """Slippage-v0 (unwrapped) with ``model`` at lattice ``spacing`` (m), the elastic material and the
-    hold :data:`HOLD`."""
+def make_env(model: str, spacing: float, closure: float = CLOSURE):
+    """Slippage-v0 (unwrapped) with ``model`` at lattice ``spacing`` (m), the elastic material, the
+    hold :data:`HOLD` and the settle closing the jaws to ``closure`` (action value)."""
     import gymnasium as gym
 
     import surgsim_envs.envs  # noqa: F401  (registers the tasks)
 
     return gym.make(TASK, model=model, resolution=float(spacing), material=task_material(), settle_time=HOLD,
-                    disable_env_checker=True).unwrapped
+                    initial_closure=float(closure), disable_env_checker=True).unwrapped
 
 
 def options(mu: float) -> dict:
@@ -132,7 +138,7 @@ def measure(task: str, model: str, spacing: float, probes: PullSet) -> dict:
 
     head = {"task": task, "model": model, "spacing": float(spacing)}
     try:
-        env = make_env(model, spacing)
+        env = make_env(model, spacing, probes.closure)
     except ConfigError as exc:
         return {**head, "refused": str(exc).split("\n")[0]}
     forces, ratios, step_us, low, never = {}, {}, [], math.inf, []
@@ -188,7 +194,7 @@ def reference_row(task: str, probes: PullSet, fine: float) -> dict:
     from surgsim_envs.tissue import TissueUnstableError
 
     t0 = time.perf_counter()
-    env = make_env(ref.REFERENCE_MODEL, fine)
+    env = make_env(ref.REFERENCE_MODEL, fine, probes.closure)
     c, g, name = env.config, env.gcfg, env.tool_name
     sim = ref.reference_simulation(env, fine)
     jaw_act, pull_act = motorise(sim, sim.tool(name), float(c.max_pull), float(c.pull_damping))
