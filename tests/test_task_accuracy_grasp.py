@@ -86,13 +86,22 @@ def test_a_pull_in_the_slippage_scene_slides_before_the_motor_limit():
     assert missing["missing_readings"] == ["mu0.6/held"] and math.isinf(missing["error"])
 
 
-def test_the_reference_contact_is_a_stiffness_per_area_and_its_closures_rise():
-    env = gc.make_env(gr.REFERENCE_MODEL, COARSE)
+def test_the_reference_refines_the_organ_under_the_task_grasper_with_a_contact_stiffness_per_area():
+    env = gc.make_env(gr.REFERENCE_MODEL, None)                  # the task's default lattice places the grasper
     sim = gr.reference_simulation(env, COARSE)
     params = next(iter(sim.contacts.values())).params
     assert params.stiffness == pytest.approx(gr.CONTACT_STIFFNESS_PER_AREA * COARSE ** 2)
     assert params.tangential_stiffness is None
+    coarse = gc.make_env("mass_spring", COARSE)                  # the task at 15 mm: its own lattice and placement
+    assert len(sim.tissue().positions) == len(coarse.sim.tissue().positions) != len(env.sim.tissue().positions)
+    sim.reset(seed=0)
+    assert np.array_equal(sim.tool_position(env.tool_name), env.home)     # one grasper for every refinement
+    assert not np.allclose(coarse.home, env.home, atol=1e-3)
     env.close()
+    coarse.close()
+
+
+def test_the_reference_closures_rise_and_never_pull():
     row = gc.reference_row(gc.TASK, gc.QUICK, COARSE)
     f = row["forces_N"]
     assert row["max_tensile_N"] == 0.0 and f["+0.2/sum"] > f["+0/sum"] > 0.03

@@ -38,14 +38,22 @@ REFERENCE_OPTIONS = {"solver": "auto", "cache_mb": 1000.0}
 
 
 def reference_simulation(env, spacing: float):
-    """A Simulation of ``env``'s grasp scene (its organ, anchors, grasper, dt, sub-cycles; built by
-    the task with ``fem_static`` and the elastic material) with the reference's contact at lattice
-    ``spacing`` (m): stiffness :data:`CONTACT_STIFFNESS_PER_AREA` x spacing^2 per node, nodes only."""
+    """A Simulation of ``env``'s grasp scene (its organ, anchors, grasper and the grasper's placement,
+    dt, sub-cycles; ``env`` built by the task at its default lattice with ``fem_static`` and the
+    elastic material) with the organ's lattice at ``spacing`` (m) and the reference's contact:
+    stiffness :data:`CONTACT_STIFFNESS_PER_AREA` x spacing^2 per node, nodes only.
+
+    The grasper keeps the placement the task gave it on its default lattice: the task places it
+    around the lattice's tip nodes (:func:`surgsim_envs.scene.builder.place_grasper_around_tip`), so
+    its open radius (34.2-36.2 mm), its axis's height (24.8-25.8 mm) and its sideways offset
+    (4.2-6.3 mm) change with the lattice from 15 to 2.75 mm, and with them the jaw opening of a
+    closure action; the reference refines the organ only, under one grasper."""
     from surgsim_envs.scene import Simulation, build_scene
 
     sim = env.sim
     cfg = copy.deepcopy(sim.scene.config)
     tissue = cfg.tissues[0]
+    tissue.spacing = tissue.resolution = float(spacing)
     tissue.options = {**dict(tissue.options), **REFERENCE_OPTIONS}
     cfg.contact.stiffness = CONTACT_STIFFNESS_PER_AREA * float(spacing) ** 2
     cfg.contact.tangential_stiffness = None          # = the normal one

@@ -71,13 +71,14 @@ def task_material():
     return elastic(GraspConfig().material)
 
 
-def make_env(model: str, spacing: float):
-    """Grasp-v0 (unwrapped) with ``model`` at lattice ``spacing`` (m) and the elastic material."""
+def make_env(model: str, spacing: float | None):
+    """Grasp-v0 (unwrapped) with ``model`` at lattice ``spacing`` (m; None: the task's default) and the
+    elastic material."""
     import gymnasium as gym
 
     import surgsim_envs.envs  # noqa: F401  (registers the tasks)
 
-    return gym.make(TASK, model=model, resolution=float(spacing), material=task_material(),
+    return gym.make(TASK, model=model, resolution=None if spacing is None else float(spacing), material=task_material(),
                     disable_env_checker=True).unwrapped
 
 
@@ -152,7 +153,7 @@ def reference_row(task: str, probes: ClosureSet, fine: float) -> dict:
     from surgsim_envs.tissue import TissueUnstableError
 
     t0 = time.perf_counter()
-    env = make_env(ref.REFERENCE_MODEL, fine)
+    env = make_env(ref.REFERENCE_MODEL, None)
     sim = ref.reference_simulation(env, fine)
     name, home, g = env.tool_name, env.home.copy(), env.gcfg
     steps = int(round(probes.hold / env.control_dt))

@@ -82,14 +82,14 @@ def task_material():
     return elastic(SlippageConfig().material)
 
 
-def make_env(model: str, spacing: float, closure: float = CLOSURE):
-    """Slippage-v0 (unwrapped) with ``model`` at lattice ``spacing`` (m), the elastic material, the
+def make_env(model: str, spacing: float | None, closure: float = CLOSURE):
+    """Slippage-v0 (unwrapped) with ``model`` at lattice ``spacing`` (m; None: the task's default), the elastic material, the
     hold :data:`HOLD` and the settle closing the jaws to ``closure`` (action value)."""
     import gymnasium as gym
 
     import surgsim_envs.envs  # noqa: F401  (registers the tasks)
 
-    return gym.make(TASK, model=model, resolution=float(spacing), material=task_material(), settle_time=HOLD,
+    return gym.make(TASK, model=model, resolution=None if spacing is None else float(spacing), material=task_material(), settle_time=HOLD,
                     initial_closure=float(closure), disable_env_checker=True).unwrapped
 
 
@@ -194,7 +194,7 @@ def reference_row(task: str, probes: PullSet, fine: float) -> dict:
     from surgsim_envs.tissue import TissueUnstableError
 
     t0 = time.perf_counter()
-    env = make_env(ref.REFERENCE_MODEL, fine, probes.closure)
+    env = make_env(ref.REFERENCE_MODEL, None, probes.closure)
     c, g, name = env.config, env.gcfg, env.tool_name
     sim = ref.reference_simulation(env, fine)
     jaw_act, pull_act = motorise(sim, sim.tool(name), float(c.max_pull), float(c.pull_damping))
