@@ -60,30 +60,35 @@ def test_grasp_errors_are_scored_on_the_holding_threshold_below_it():
 
 
 def test_the_onset_is_the_largest_pull_before_the_slip_passes_its_distance():
-    pull = sp.Pull(normal_at_hold=2.0)
-    steps = [(0.10, 0.0001, 2.0), (0.30, 0.0010, 2.1), (0.25, 0.0015, 2.2), (0.35, sp.SLIP_ONSET * 1.5, 0.5)]
+    pull = sp.Pull(normal_at_hold=2.0, mu=0.5)
+    steps = [(0.10, 0.0001, 2.0, 0.08), (0.30, 0.0010, 2.1, 0.20), (0.25, 0.0015, 2.2, 0.22),
+             (0.35, sp.SLIP_ONSET * 1.5, 0.5, 0.30)]
     slid = [pull.add(*s) for s in steps]
     assert slid == [False, False, False, True]
     forces, ratios = {}, {}
-    pull.store(forces, ratios, mu=0.5)
-    assert forces == {"mu0.5/normal": 2.0, "mu0.5/held": 0.30}
-    assert ratios["mu0.5"] == pytest.approx({"held_ratio": 0.30 / (0.5 * 2.0), "held_ratio_at_onset": 0.30 / (0.5 * 2.2)})
-    never, forces = sp.Pull(1.0), {}
-    never.add(0.2, 0.0, 1.0)
-    never.store(forces, {}, mu=0.5)
+    pull.store(forces, ratios)
+    assert forces == {"mu0.5/normal": 2.0, "mu0.5/held": 0.30, "mu0.5/held_contact": 0.22}
+    assert ratios["mu0.5"] == pytest.approx({"held_ratio": 0.30 / (0.5 * 2.0), "held_ratio_at_onset": 0.30 / (0.5 * 2.2),
+                                             "contact_ratio": 0.22 / (0.5 * 2.0), "coulomb_ratio": 0.22 / (0.5 * 2.2)})
+    never, forces = sp.Pull(1.0, mu=0.5), {}
+    never.add(0.2, 0.0, 1.0, 0.1)
+    never.store(forces, {})
     assert forces == {"mu0.5/normal": 1.0}                   # no onset: no held reading
 
 
 def test_a_pull_in_the_slippage_scene_slides_before_the_motor_limit():
     row = ta.measure(sp.TASK, "mass_spring", COARSE, sp.QUICK)
     f = row["forces_N"]
-    assert row["never_slid_mu"] == [] and set(f) == {"mu0.6/normal", "mu0.6/held"}
+    assert row["never_slid_mu"] == [] and set(f) == {"mu0.6/normal", "mu0.6/held", "mu0.6/held_contact"}
     assert row["max_tensile_N"] == 0.0
-    assert f["mu0.6/normal"] > 0.03 and 0.0 < f["mu0.6/held"] < 3.0
-    ratio = row["held_ratio"]["mu0.6"]["held_ratio"]
-    assert ratio == pytest.approx(f["mu0.6/held"] / (0.6 * f["mu0.6/normal"]), rel=1e-12)
+    assert f["mu0.6/normal"] > 0.03 and 0.0 < f["mu0.6/held_contact"] <= f["mu0.6/held"] < 3.0
+    ratios = row["held_ratio"]["mu0.6"]
+    assert ratios["held_ratio"] == pytest.approx(f["mu0.6/held"] / (0.6 * f["mu0.6/normal"]), rel=1e-12)
+    # Coulomb: the tissue's pull on the jaws never exceeds mu x their normal force (the jaws' normals lie
+    # across the pull), up to the penalty contact's stick-spring lag of one step
+    assert 0.5 < ratios["coulomb_ratio"] <= 1.02
     missing = ta.compare({**row, "forces_N": {"mu0.6/normal": f["mu0.6/normal"]}}, {"forces_N": f}, sp.QUICK)
-    assert missing["missing_readings"] == ["mu0.6/held"] and math.isinf(missing["error"])
+    assert missing["missing_readings"] == ["mu0.6/held", "mu0.6/held_contact"] and math.isinf(missing["error"])
 
 
 def test_the_reference_refines_the_organ_under_the_task_grasper_with_a_contact_stiffness_per_area():
@@ -111,3 +116,4 @@ def test_the_reference_pull_slides_and_holds_a_positive_pull():
     row = sp.reference_row(sp.TASK, sp.QUICK, COARSE)
     f = row["forces_N"]
     assert 0.0 < f["mu0.6/held"] < 3.0 and f["mu0.6/normal"] > 0.03
+    assert row["held_ratio"]["mu0.6"]["coulomb_ratio"] <= 1.02

@@ -17,12 +17,18 @@ that closure. Readings, all from the task's own readouts (the ones its reward te
   the task's slip distance (``env.slip_distance``: the grasped nodes' centroid relative to the
   wrist, the slip reward's input) first exceeds :data:`SLIP_ONSET`. Below it the grasp deforms and
   slips partially at the edges of each jaw's contact (0.3-1.5 mm with mass_spring at 11 mm, closure
-  0.7, mu 0.6); past it the tissue ran away from the jaws within two control steps (1.5 -> 10 mm).
+  0.7, mu 0.6); past it the tissue ran away from the jaws within two control steps (1.5 -> 10 mm);
+* ``"mu<mu>/held_contact"``: the largest contact force of the tissue on the grasper against the pull
+  (N, ``Simulation.tool_force`` along the pull) over the same steps. The motor's pull exceeds it by
+  what the wrist's joint damping (2 N s/m) and inertia take while the grasp creeps.
 
 Per mu the row also gives held / (mu x summed normal at the hold) and at the onset
-(``held_ratio``, ``held_ratio_at_onset``), the largest tensile jaw normal force seen (N) and the
-median wall time of one env step. Errors: ``|F - F_ref| / F_ref`` over the normal and held
-readings. A pull that never slides (up to the motor's ``max_pull``) gives no held reading and the
+(``held_ratio``, ``held_ratio_at_onset``), the held contact force / (mu x summed normal at the hold)
+(``contact_ratio``) and the largest contact force / (mu x summed normal) of any one step before the
+onset (``coulomb_ratio``: Coulomb friction bounds it by 1 where the jaws' normals are across the
+pull), the largest tensile jaw normal force seen (N) and the
+median wall time of one env step. Errors: ``|F - F_ref| / F_ref`` over the normal, held and
+held-contact readings. A pull that never slides (up to the motor's ``max_pull``) gives no held reading and the
 row says so.
 
 Reference: :mod:`surgsim_envs.bench.grasp_reference` (``fem_static``, elastic, friction on, contact
@@ -69,8 +75,11 @@ class PullSet:
     reference_spacings: tuple[float, ...]
 
 
+#: the reference stops at 3.9 mm: a pull to the onset runs up to about 15,000 quasi-static steps per mu
+#: (1 s of hold and up to 5 s of ramp at 0.4 ms), against 5,000 per closure of Grasp-v0's probe set,
+#: whose 2.75 mm level (8,500 nodes) took 238 s
 FULL = PullSet(closure=CLOSURE, mus=(0.3, 0.6), spacings=(0.015, 0.011, 0.008),
-               reference_spacings=(0.011, 0.011 / math.sqrt(2), 0.0055, 0.0055 / math.sqrt(2), 0.00275))
+               reference_spacings=(0.011, 0.011 / math.sqrt(2), 0.0055, 0.0055 / math.sqrt(2)))
 QUICK = PullSet(closure=CLOSURE, mus=(0.6,), spacings=(0.015,), reference_spacings=(0.015, 0.011))
 
 
@@ -100,31 +109,38 @@ def options(mu: float) -> dict:
 
 
 class Pull:
-    """One pull's readings: the normal at the hold, then per control step the pull, the slip distance
-    and the jaws' summed normal, until the slip passes :data:`SLIP_ONSET`."""
+    """One pull's readings: the normal at the hold, then per control step the pull, the slip distance,
+    the jaws' summed normal and the contact force on the grasper along the pull, until the slip
+    passes :data:`SLIP_ONSET`."""
 
-    def __init__(self, normal_at_hold: float):
-        self.normal = float(normal_at_hold)
-        self.held = None
-        self.normal_at_onset = None
-        self.last_pull, self.last_normal = 0.0, self.normal
+    def __init__(self, normal_at_hold: float, mu: float):
+        self.normal, self.mu = float(normal_at_hold), float(mu)
+        self.held = self.held_contact = self.normal_at_onset = None
+        self.last_pull, self.last_contact, self.last_normal = 0.0, 0.0, self.normal
+        self.coulomb = 0.0          # the largest contact / (mu x summed normal) of one step
 
-    def add(self, pull: float, slip: float, normal: float) -> bool:
-        """Record one control step; True once the grasp has slid (the held force is then set)."""
+    def add(self, pull: float, slip: float, normal: float, contact: float) -> bool:
+        """Record one control step (``contact``: N, the tissue's force on the grasper against the pull);
+        True once the grasp has slid (the held forces are then set)."""
         if slip > SLIP_ONSET:
-            self.held, self.normal_at_onset = self.last_pull, self.last_normal
+            self.held, self.held_contact, self.normal_at_onset = self.last_pull, self.last_contact, self.last_normal
             return True
         self.last_pull = max(self.last_pull, float(pull))
+        self.last_contact = max(self.last_contact, float(contact))
         self.last_normal = float(normal)
+        if normal > 0.0:
+            self.coulomb = max(self.coulomb, float(contact) / (self.mu * float(normal)))
         return False
 
-    def store(self, forces: dict, ratios: dict, mu: float) -> None:
-        key = f"mu{mu:g}"
+    def store(self, forces: dict, ratios: dict) -> None:
+        key = f"mu{self.mu:g}"
         forces[f"{key}/normal"] = self.normal
         if self.held is not None:
             forces[f"{key}/held"] = self.held
-            ratios[key] = {"held_ratio": self.held / (mu * self.normal),
-                           "held_ratio_at_onset": self.held / (mu * self.normal_at_onset)}
+            forces[f"{key}/held_contact"] = self.held_contact
+            mu_n = self.mu * self.normal
+            ratios[key] = {"held_ratio": self.held / mu_n, "held_ratio_at_onset": self.held / (self.mu * self.normal_at_onset),
+                           "contact_ratio": self.held_contact / mu_n, "coulomb_ratio": self.coulomb}
 
 
 def max_steps(max_pull: float, control_dt: float) -> int:
@@ -141,30 +157,36 @@ def measure(task: str, model: str, spacing: float, probes: PullSet) -> dict:
         env = make_env(model, spacing, probes.closure)
     except ConfigError as exc:
         return {**head, "refused": str(exc).split("\n")[0]}
-    forces, ratios, step_us, low, never = {}, {}, [], math.inf, []
+    forces, ratios, step_us, low, never, released = {}, {}, [], math.inf, [], []
     action = np.array([env.config.initial_closure], dtype=np.float32)
     try:
         for mu in probes.mus:
             env.reset(seed=0, options=options(mu))
             fn = env.readings()[1]
             low = min(low, float(np.min(fn)))
-            pull = Pull(float(np.sum(fn)))
+            pull = Pull(float(np.sum(fn)), mu)
             for _ in range(max_steps(env.config.max_pull, env.control_dt)):
                 t0 = time.perf_counter()
-                _, _, terminated, _, info = env.step(action)
+                try:
+                    _, _, terminated, _, info = env.step(action)
+                except TissueUnstableError:     # released (a quasi-static model springs back): the slide
+                    released.append(mu)
+                    pull.add(math.nan, math.inf, math.nan, math.nan)
+                    break
                 step_us.append((time.perf_counter() - t0) * 1e6)
                 fn = env.readings()[1]
                 low = min(low, float(np.min(fn)))
-                if pull.add(info["pull_force_N"], env.slip_distance, info["normal_force_N"]) or terminated:
+                contact = -float(env.sim.tool_force(env.tool_name) @ env.pull_dir)
+                if pull.add(info["pull_force_N"], env.slip_distance, info["normal_force_N"], contact) or terminated:
                     break
             if pull.held is None:
                 never.append(mu)
-            pull.store(forces, ratios, mu)
+            pull.store(forces, ratios)
     except (TissueUnstableError, ConfigError) as exc:
         env.close()
         return {**head, "refused": "fails in the task's scene: " + str(exc).split("\n")[0]}
     row = {**head, "nodes": int(len(env.sim.tissue().positions)), "forces_N": forces, "held_ratio": ratios,
-           "never_slid_mu": never, "max_tensile_N": max(0.0, -low), "us_per_env_step": float(np.median(step_us)),
+           "never_slid_mu": never, "released_mu": released, "max_tensile_N": max(0.0, -low), "us_per_env_step": float(np.median(step_us)),
            "control_dt": float(env.control_dt), "dt": float(env.sim.dt)}
     env.close()
     row["us_per_ms"] = row["us_per_env_step"] / (row["control_dt"] * 1e3)
@@ -224,22 +246,23 @@ def reference_row(task: str, probes: PullSet, fine: float) -> dict:
             if len(nodes) == 0:
                 raise ConfigError(f"{task}: the reference's jaws closed on nothing at {fine * 1e3:.3g} mm")
             tracker.start(sim.tool_position(name), sim.tissue().positions, nodes)
-            pull, start = Pull(float(np.sum(fn))), float(sim.time)
+            pull, start = Pull(float(np.sum(fn)), mu), float(sim.time)
             for _ in range(max_steps(c.max_pull, env.control_dt)):
                 try:
                     force = run(per_step, True, PULL_RATE, start)
                 except TissueUnstableError:     # released: the organ springs back within the step
                     released.append(mu)
-                    pull.add(math.nan, math.inf, math.nan)
+                    pull.add(math.nan, math.inf, math.nan, math.nan)
                     break
                 fn = sim.jaw_forces(name)["normal"]
                 low = min(low, float(np.min(fn)))
                 slip = tracker.distance(sim.tool_position(name), sim.tissue().positions)
-                if pull.add(force, slip, float(np.sum(fn))):
+                contact = -float(sim.tool_force(name) @ env.pull_dir)
+                if pull.add(force, slip, float(np.sum(fn)), contact):
                     break
             if pull.held is None:
                 never.append(mu)
-            pull.store(forces, ratios, mu)
+            pull.store(forces, ratios)
     except TissueUnstableError as exc:
         raise ConfigError(f"{task}: the reference {ref.REFERENCE_MODEL} at {fine * 1e3:.3g} mm failed: "
                           f"{str(exc).splitlines()[0]}") from None
