@@ -137,7 +137,7 @@ def measure(task: str, model: str, spacing: float, probes: ClosureSet) -> dict:
             low = min(low, store(forces, settle, close, readings, env.config.hold_force))
     except TissueUnstableError as exc:
         env.close()
-        return {**head, "refused": "unstable in the task's scene: " + str(exc).split("\n")[0]}
+        return {**head, "refused": "unstable in the task's scene: " + str(exc).split("\n")[0], "spacing_specific": True}
     row = {**head, "nodes": int(len(env.sim.tissue().positions)), "forces_N": forces, "settle_change": settle,
            "max_tensile_N": max(0.0, -low), "us_per_env_step": float(np.median(step_us)),
            "control_dt": float(env.control_dt), "dt": float(env.sim.dt), "hold_force_N": float(env.config.hold_force)}

@@ -184,7 +184,7 @@ def measure(task: str, model: str, spacing: float, probes: PullSet) -> dict:
             pull.store(forces, ratios)
     except (TissueUnstableError, ConfigError) as exc:
         env.close()
-        return {**head, "refused": "fails in the task's scene: " + str(exc).split("\n")[0]}
+        return {**head, "refused": "fails in the task's scene: " + str(exc).split("\n")[0], "spacing_specific": True}
     row = {**head, "nodes": int(len(env.sim.tissue().positions)), "forces_N": forces, "held_ratio": ratios,
            "never_slid_mu": never, "released_mu": released, "max_tensile_N": max(0.0, -low), "us_per_env_step": float(np.median(step_us)),
            "control_dt": float(env.control_dt), "dt": float(env.sim.dt)}
