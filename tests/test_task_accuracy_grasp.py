@@ -117,3 +117,29 @@ def test_the_reference_pull_slides_and_holds_a_positive_pull():
     f = row["forces_N"]
     assert 0.0 < f["mu0.6/held"] < 3.0 and f["mu0.6/normal"] > 0.03
     assert row["held_ratio"]["mu0.6"]["coulomb_ratio"] <= 1.02
+
+
+def test_an_instability_at_one_spacing_does_not_skip_the_model_s_other_spacings(monkeypatch):
+    from types import SimpleNamespace
+
+    from surgsim_envs.bench import probe_sets
+
+    probes = gc.ClosureSet(closures=(0.0,), hold=1.0, spacings=(0.015, 0.011), reference_spacings=(0.011, 0.008))
+
+    def measure(task, model, spacing, _):
+        if model == "not_built":                       # the task does not build it: said once
+            return {"task": task, "model": model, "spacing": spacing, "refused": "not built"}
+        if spacing == 0.015:                           # unstable at this lattice only
+            return {"task": task, "model": model, "spacing": spacing, "refused": "unstable", "spacing_specific": True}
+        return {"task": task, "model": model, "spacing": spacing, "forces_N": {"+0/sum": 1.0}}
+
+    def reference_row(task, _, fine):
+        return {"task": task, "spacing": fine, "nodes": 1, "seconds": 0.0, "forces_N": {"+0/sum": 1.0}}
+
+    fake = SimpleNamespace(TASK=gc.TASK, REFERENCE_DESCRIPTION="fake", measure=measure, reference_row=reference_row,
+                           compare=lambda row, ref, _: row)
+    monkeypatch.setitem(probe_sets.DRIVERS, gc.TASK, fake)
+    monkeypatch.setitem(ta.PROBE_SETS, gc.TASK, (probes, probes))
+    table = ta.build_table([gc.TASK], ["unstable_coarse", "not_built"], progress=lambda s: None)
+    got = [(r["model"], r["spacing"], "refused" in r) for r in table["rows"]]
+    assert got == [("unstable_coarse", 0.015, True), ("unstable_coarse", 0.011, False), ("not_built", 0.015, True)]
