@@ -21,8 +21,9 @@ the task's closing speed for Grasp-v0; the jaw and pull-motor schedule of Slippa
 rewards read (``Simulation.jaw_forces``, :class:`surgsim_envs.envs.grasp.terms.SlipTracker`).
 
 Not converged to 1 % (measured on a 2-core host, friction on): Grasp-v0's closures (mu 0.8) from
-11 to 2.75 mm changed the jaws' summed normal by 1-80 % per refinement and by 2.4-3.1 % in the last
-(3.9 -> 2.75 mm, 8,500 nodes, 220 s), single jaws by up to 30 % there (a jaw reading 0.08 N);
+11 to 1.94 mm changed the jaws' summed normal by 1-80 % per refinement, by 2.4-3.1 % from 3.9 to
+2.75 mm and by 6.1-10.1 % from 2.75 to 1.94 mm (22,700 nodes, 11 minutes at load 3.5, 3.9 GB),
+single jaws by up to 20 % there: the sequence alternates and shows no sign of settling;
 Slippage-v0's pulls from 11 to 3.9 mm changed by 2.2-7.4 % in the last refinement. The readings
 also move with the contact stiffness per area (:data:`CONTACT_STIFFNESS_PER_AREA`): the organ tip
 is stiff in confined compression and each jaw meets a few nodes, so the penalty's penetration is

@@ -55,7 +55,8 @@ class ClosureSet:
 
 
 FULL = ClosureSet(closures=(0.0, 0.1, 0.2), hold=2.0, spacings=(0.015, 0.011, 0.008),
-                  reference_spacings=(0.011, 0.011 / math.sqrt(2), 0.0055, 0.0055 / math.sqrt(2), 0.00275))
+                  reference_spacings=(0.011, 0.011 / math.sqrt(2), 0.0055, 0.0055 / math.sqrt(2), 0.00275,
+                                      0.00275 / math.sqrt(2)))
 QUICK = ClosureSet(closures=(0.0, 0.2), hold=2.0, spacings=(0.015,), reference_spacings=(0.015, 0.011))
 
 
