@@ -172,4 +172,4 @@ def test_rescore_recomputes_every_model_error_from_stored_forces_against_a_new_r
     assert out["rows"][0]["error_median"] == pytest.approx(0.25)          # errors 0.5 and 0
     assert out["rows"][0]["forces_N"] == row["forces_N"]
     with pytest.raises(ConfigError, match="has no probe set"):
-        ta.rescore(table, ["SurgSim/Grasp-v0"], progress=lambda s: None)
+        ta.rescore(table, ["SurgSim/PalpationPress-v0"], progress=lambda s: None)

@@ -227,7 +227,11 @@ def contrast(forces: dict, n_inclusions: int, depth: float) -> list[float]:
 
 
 def compare(row: dict, reference: dict, probes: ProbeSet) -> dict:
-    """``row`` with its errors and contrasts against ``reference`` (same presses)."""
+    """``row`` with its errors and contrasts against ``reference`` (same presses); a probe-set module
+    with its own readings (closures, pulls) scores them with its ``compare``."""
+    own = getattr(probe_sets.DRIVERS.get(row["task"]), "compare", None)
+    if own is not None:
+        return own(row, reference, probes)
     if "forces_N" not in row:
         return row
     f, ref = row["forces_N"], reference["forces_N"]
@@ -271,7 +275,7 @@ def build_table(tasks: Iterable[str], models: Iterable[str], quick: bool = False
             for spacing in (probes.spacings if spacings is None else tuple(spacings)):
                 progress(f"{task}: {model} at {spacing * 1e3:.3g} mm")
                 rows.append(compare(measure(task, model, spacing, probes), reference, probes))
-                if "refused" in rows[-1] and task in probe_sets.DRIVERS:
+                if "refused" in rows[-1] and task in probe_sets.DRIVERS and not rows[-1].get("spacing_specific"):
                     break                   # a model the task does not build: said once, not per spacing
     tolerances = {t: v for t, v in FORCE_TOLERANCES.items() if v.get("scene_of", t) in references}
     return {"rows": rows, "references": references, "not_covered": not_covered, "quick": bool(quick),

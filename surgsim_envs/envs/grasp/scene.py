@@ -23,6 +23,7 @@ from surgsim_envs.envs.checks import (check_control_rate, check_explicit_step, c
 from surgsim_envs.envs.grasp.simulation import build_grasp_simulation, check_grasp_organ, organ_key
 from surgsim_envs.envs.grasp.terms import SlipTracker
 from surgsim_envs.errors import ConfigError
+from surgsim_envs.materials import get_material
 
 
 @dataclass
@@ -35,6 +36,7 @@ class GraspSceneConfig:
     #                                    "auto": resolved_subcycles)
     episode_seconds: float = 3.0
     organ: Any = "spleen"              # "spleen", "liver_lobe", a closed mesh file (STL/OBJ/PLY/VTK) or a Volume
+    material: Any = "spleen"           # the organ's material: a preset name, a Material or a dict ({"preset": ..., field: value})
     model: str = "mass_spring"         # any registered tissue model with the "forces" capability
     integrator: str = "symplectic"     # if the model has it and it is stable over young_scale, else "auto"
     resolution: float | str | None = None   # None: the organ's task lattice; a spacing in m; "auto"
@@ -70,6 +72,10 @@ class GraspSceneConfig:
                               f"above {MAX_SUBCYCLED_RIGID_DT:g} s where the grasper's jaw servo goes unstable; use "
                               f"at most {max(1, int(MAX_SUBCYCLED_RIGID_DT / self.dt * (1 + 1e-9)))} or 'auto'")
         check_grasp_organ(self.organ, f"{what}.organ")
+        try:
+            get_material(self.material)
+        except (ConfigError, TypeError, ValueError) as exc:
+            raise ConfigError(f"{what}.material={validate.short_repr(self.material)}: {exc}") from None
         check_range(self.mu, "mu", 0.0, 2.0)
         from surgsim_envs.scene.contact_options import static_friction_ratio
 
@@ -115,7 +121,7 @@ class GraspSceneEnv(SurgSimEnv):
             require_capabilities(c.model, self.REQUIRES, self.TASK_ID)
             self._sims[key] = build_grasp_simulation(organ, c.dt, self.substeps, c.closing_speed, c.resolution,
                                                        c.error_tolerance, c.step_budget_us, model=c.model,
-                                                       integrator=c.integrator,
+                                                       integrator=c.integrator, material=c.material,
                                                        max_young_scale=check_range(c.young_scale, "young_scale")[1],
                                                        tissue_subcycles=resolved_subcycles(c))
             self.sim = self._sims[key]

@@ -47,7 +47,8 @@ def organ_key(organ):
 
 def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: float, resolution=None,
                            error_tolerance: float = 0.1, step_budget_us: float = 5_000.0, model: str = "mass_spring",
-                           integrator: str = "symplectic", max_young_scale: float = 1.0, tissue_subcycles: int = 1):
+                           integrator: str = "symplectic", max_young_scale: float = 1.0, tissue_subcycles: int = 1,
+                           material="spleen"):
     """A Simulation of the grasp scene for ``organ``: "spleen" or "liver_lobe", a closed mesh file
     (lattice spacing :data:`MESH_SPACING`) or a Volume (:func:`check_grasp_organ`).
 
@@ -58,6 +59,7 @@ def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: 
     the whole stiffness randomisation (Young's modulus up to ``max_young_scale``) is replaced by
     the model's "auto" (:func:`surgsim_envs.envs.tissue_setup.integrator_for_range`).
     tissue_subcycles: tissue + contact steps of ``dt`` per MuJoCo step (see :class:`Simulation`).
+    material: the organ's material (a preset name, a Material or a dict, :func:`surgsim_envs.materials.get_material`).
     """
     from surgsim_envs.envs.tissue_setup import integrator_for_range, tissue_options
     from surgsim_envs.scene import Simulation, grasp_config, grasp_scene
@@ -65,6 +67,7 @@ def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: 
     check_grasp_organ(organ)
     cfg = grasp_config(organ=organ, model=model)
     t = cfg.tissues[0]
+    t.material = material
     t.spacing = ORGAN_SPACING.get(organ, MESH_SPACING) if isinstance(organ, str) else MESH_SPACING
     t.resolution, t.error_tolerance, t.step_budget_us = resolution, error_tolerance, step_budget_us
     t.options = tissue_options(model, integrator)
