@@ -408,7 +408,9 @@ def chart(table: dict, path: str | Path) -> None:
         ax.set_ylabel("force error against the reference, p95 (%)")
         ref = table["references"][task]
         state = "converged" if ref.get("reference_converged") else "not converged"
-        where = "extrapolated" if ref.get("reference_extrapolated") else f"graded, {ref['spacings'][-1] * 1e3:.3g} mm at the site"
+        lattice = "graded" if ref.get("coarse_spacing") else "uniform"    # graded lattices keep a coarse spacing
+        at = " at the site" if ref.get("coarse_spacing") else ""
+        where = "extrapolated" if ref.get("reference_extrapolated") else f"{lattice}, {ref['spacings'][-1] * 1e3:.3g} mm{at}"
         ax.set_title(f"{task}\nreference: {task_reference.REFERENCE_MODEL} {where} ({state})", fontsize=10)
         ax.grid(True, alpha=0.3)
     fig.tight_layout()
