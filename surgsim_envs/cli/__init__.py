@@ -17,6 +17,7 @@ import sys
 #: command -> (module, help). "bench X" are sub-commands of "bench".
 COMMANDS: dict[str, tuple[str, str]] = {
     "models": ("surgsim_envs.cli.models", "list registered tissue models"),
+    "choose": ("surgsim_envs.cli.choose", "the cheapest model and spacing within a task's force tolerance (task-accuracy table)"),
     "demo": ("surgsim_envs.scene.demo", "palpate and grasp on built-in defaults; writes ./surgsim-out/"),
     "warmup": ("surgsim_envs.warmup", "compile the physics kernels ahead (numba caches) for the demo and every task"),
     "material": ("surgsim_envs.cli.material", "virtual material tests (indent, relax, slip)"),
