@@ -97,3 +97,23 @@ def test_a_model_the_task_does_not_build_is_refused_by_name():
 def test_the_node_limit_counts_the_continuum_lattice():
     with pytest.raises(ConfigError, match="lattice nodes"):
         _env(size=(0.3, 0.3), spacing=0.002)
+
+
+@pytest.mark.slow
+def test_the_continuum_wall_at_2_mm_meets_the_tasks_20_percent_against_the_shipped_reference():
+    """The probe set's presses on the full patch at 2 mm against the shipped reference (fem_static
+    on graded lattices, 1 mm at each site, penalty contact per area: an independent discretisation
+    and contact); the task declares 20 %. 30 s on an idle 2-core host (2 min loaded), 3.7 GB."""
+    import json
+
+    from surgsim_envs.bench.probe_sets import layered_palpation as lp
+    from surgsim_envs.tissue.task_table import TASK_TABLE_PATH
+
+    with open(TASK_TABLE_PATH) as fh:
+        ref = json.load(fh)["references"][lp.TASK]["forces_N"]
+    row = lp.measure(lp.TASK, "fem_static", 0.002, lp.FULL)
+    err = {k: row["forces_N"][k] / ref[k] - 1 for k in ref}
+    assert max(abs(e) for e in err.values()) <= 0.20, err
+    over = [row["forces_N"][f"0/over/{d}mm"] / row["forces_N"][f"0/mirror/{d}mm"] for d in ("2.5", "3.5", "4.5")]
+    assert min(over) > 4.0          # the reference reads 4.77-4.84 x over the nodule what it reads beside it
+    assert row["path_difference"] < 1e-9 and row["max_tensile_N"] == 0.0

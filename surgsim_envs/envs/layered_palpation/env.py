@@ -9,8 +9,8 @@ their Young's modulus, through the tissue contract (``scale_material``), never b
 reset option ``nodule_position`` (x, y) m places the centre instead (scripted probes and benchmarks
 such as ``surgsim bench task-accuracy``); its height is the median height of the fat's tets either way.
 
-Each step presses a position-controlled sphere (:class:`UnilateralProbe`: frictionless,
-push-only contact) at a point of the patch to a depth and solves the equilibrium (quasi-static:
+Each step presses a position-controlled sphere (frictionless, push-only contact: :mod:`.wall` names
+the probe of each model) at a point of the patch to a depth and solves the equilibrium (quasi-static:
 one press per step); the force depends on the pose only, not on the presses before.
 Action (4,) in [-1, 1]: x, y over the patch, depth over [0, max_depth], commit (> 0 ends the
 episode with the guess "the nodule is under this press"). Observation (4,): x (m), y (m),
