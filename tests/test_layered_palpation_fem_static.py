@@ -89,6 +89,24 @@ def test_a_stiff_nodule_raises_the_force_above_it():
     assert over > 1.5 * away
 
 
+@pytest.mark.parametrize("model", ["layered", "fem_static"])
+def test_a_reset_with_the_same_nodule_keeps_it(model):
+    """The env rescales the material only when the nodule's tets change: a reset to the same nodule,
+    and back to it after another, presses as the first episode did."""
+    env = _env(model=model)
+    site, other = (0.01, 0.005), (-0.01, -0.005)
+    env.reset(seed=0, options={"nodule_position": site})
+    first = _press(env, site, 0.004)
+    env.reset(seed=0, options={"nodule_position": site})
+    again = _press(env, site, 0.004)
+    env.reset(seed=0, options={"nodule_position": other})
+    away = _press(env, site, 0.004)
+    env.reset(seed=0, options={"nodule_position": site})
+    back = _press(env, site, 0.004)
+    assert again == pytest.approx(first, rel=1e-12) and back == pytest.approx(first, rel=1e-9)
+    assert first > 1.05 * away
+
+
 def test_a_model_the_task_does_not_build_is_refused_by_name():
     with pytest.raises(ConfigError, match=r"model='mass_spring'.*\['layered', 'fem_static'\]"):
         _env(model="mass_spring")
