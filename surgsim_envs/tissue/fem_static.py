@@ -280,10 +280,18 @@ class QuasiStaticFEMModel(TetFEMModel):
         self.velocities = np.zeros_like(self.positions)
         return self.positions.copy()
 
+    def _require_elastic(self, what: str) -> None:
+        """The condensed equilibrium is elastic: a body with a relaxation state has none."""
+        if getattr(self, "hereditary", None) is not None:
+            raise ConfigError(f"fem_static.{what}: this body relaxes (hereditary viscoelasticity), so a force has no "
+                              "single equilibrium; build it with an elastic material (relax_fraction 0) or "
+                              "viscoelastic='relaxed'")
+
     def compliance_block(self, nodes) -> tuple[np.ndarray, np.ndarray]:
         """(W, u0) of free ``nodes`` (m,): W (3m, 3m) m/N the displacement of their dofs per unit force
         on them (cached compliance columns), u0 (3m,) m their displacement under the Dirichlet
         targets and gravity alone. A contact solved on them needs no solve of the whole body."""
+        self._require_elastic("compliance_block")
         idx = self._as_indices(nodes, "compliance_block nodes")
         if np.any(self.fixed[idx]):
             raise ConfigError(f"fem_static.compliance_block: nodes {idx[self.fixed[idx]][:5].tolist()} are fixed; "
@@ -298,6 +306,7 @@ class QuasiStaticFEMModel(TetFEMModel):
         targets and gravity, from the cached compliance columns (no full solve): ``positions``
         updated, velocities zeroed, ``integrated_external_forces`` the applied forces. Returns the
         positions (N,3) m (a copy)."""
+        self._require_elastic("apply_nodal_forces")
         idx = self._as_indices(nodes, "apply_nodal_forces nodes")
         f = np.asarray(forces, dtype=np.float64)
         if f.shape != (len(idx), 3) or not np.all(np.isfinite(f)):
