@@ -12,8 +12,8 @@ surface samples at half the spacing), frictionless as the task's probe is.
 The lattice (:func:`wall_volume`) is a box of Kuhn cells on three node axes:
 
 * x and y graded about the press site (:func:`surgsim_envs.geometry.graded_axis.graded_axis`):
-  spacing ``fine`` within :data:`FINE_HALF_WIDTH` of it, growing by :data:`task_reference.GROWTH`
-  per cell to :data:`task_reference.COARSE_SPACING`;
+  spacing ``fine`` within 15 mm of it (:data:`surgsim_envs.geometry.wall_lattice.FINE_HALF_WIDTH`),
+  growing by :data:`task_reference.GROWTH` per cell to :data:`task_reference.COARSE_SPACING`;
 * z conforming to the layers: a node on every interface (27, 12 and 2 mm above the bed), the
   skin cut into cells of at most ``fine / 2`` (a 100 kPa skin on a 1 kPa fat bends as a plate:
   one linear tet through it locks), the fat graded from that size at the skin down to the coarse
@@ -27,7 +27,6 @@ lattice and the growth stay. Units: m, Pa, N.
 
 from __future__ import annotations
 
-import math
 import time
 from types import SimpleNamespace
 from typing import Sequence
@@ -36,15 +35,9 @@ import numpy as np
 
 from surgsim_envs.bench import task_reference
 from surgsim_envs.errors import ConfigError
+from surgsim_envs.geometry.wall_lattice import (SKIN_CELL_FRACTION, graded_wall_volume,  # noqa: F401
+                                               layer_planes, wall_z_axis)
 
-#: m, half extent (x and y) of the fine region about a press site: the nodule's radius (8 mm) plus
-#: the contact radius of a 5 mm press of the 5 mm probe would need 13 mm; the skin carries the load
-#: farther out as a plate, so the fine region reaches 15 mm
-FINE_HALF_WIDTH = 0.015
-#: m, depth below the skin/fat interface to which the fat keeps the skin's cell size (then it grows)
-FINE_FAT_DEPTH = 0.005
-#: the skin's cells are at most this fraction of the fine (x, y) spacing tall
-SKIN_CELL_FRACTION = 0.5
 #: MB of cached compliance columns: a press at h_f 1 mm (48,300 nodes) ran within 800 MB (230 columns);
 #: task_reference's 4,000 MB let one process reach 9.5 GB at that level, more than a shared host had free
 CACHE_MB = 1000.0
@@ -54,62 +47,13 @@ PROBE_SPEED = 0.2
 HOVER = 0.002
 
 
-def layer_planes(thickness: dict) -> list[tuple[str, float, float]]:
-    """(layer, z_bottom, z_top) m from the bed up, for the wall's layer thicknesses (outside in)."""
-    out, z = [], 0.0
-    for name in reversed(list(thickness)):
-        out.append((name, z, z + float(thickness[name])))
-        z += float(thickness[name])
-    return out
-
-
-def wall_z_axis(planes, fine: float, coarse: float, ratio: float) -> np.ndarray:
-    """Node z (m, ascending) with a node on every layer plane; the top layer (skin) in cells of at
-    most ``fine * SKIN_CELL_FRACTION``, the layer under it graded from that size to ``coarse``, the
-    others in cells of at most ``coarse``."""
-    from surgsim_envs.geometry.graded_axis import graded_axis
-
-    top_cell = fine * SKIN_CELL_FRACTION
-    parts = []
-    for k, (_, lo, hi) in enumerate(planes):
-        if k == len(planes) - 1:
-            n = max(1, math.ceil((hi - lo) / top_cell - 1e-9))
-            parts.append(np.linspace(lo, hi, n + 1))
-        elif k == len(planes) - 2:
-            parts.append(graded_axis(lo, hi, hi, min(FINE_FAT_DEPTH, hi - lo), top_cell, coarse, ratio,
-                                     what="wall z axis"))
-        else:
-            n = max(1, math.ceil((hi - lo) / coarse - 1e-9))
-            parts.append(np.linspace(lo, hi, n + 1))
-    z = np.concatenate([p if i == 0 else p[1:] for i, p in enumerate(parts)])
-    z[-1] = planes[-1][2]
-    return z
-
-
 def wall_volume(size, planes, site, fine: float, nodule_centre, nodule_radius: float,
                 coarse: float = task_reference.COARSE_SPACING, ratio: float = task_reference.GROWTH):
     """The reference lattice of a press at ``site`` (x, y) m on a wall patch of ``size`` (x, y) m
-    centred on the origin, bed at z = 0: a :class:`~surgsim_envs.geometry.Volume` whose tet labels
-    are the layer index (``planes`` order) for plain tets and ``len(planes)`` + the layer index for
-    the nodule's tets (centroid within ``nodule_radius`` of ``nodule_centre``)."""
-    from surgsim_envs.geometry.box import lattice_tets
-    from surgsim_envs.geometry.graded_axis import graded_axis
-    from surgsim_envs.geometry.volume import Volume, tet_signed_volumes
-
-    sx, sy = (float(v) for v in size)
-    x = graded_axis(-sx / 2, sx / 2, float(site[0]), FINE_HALF_WIDTH, fine, coarse, ratio, what="wall x axis")
-    y = graded_axis(-sy / 2, sy / 2, float(site[1]), FINE_HALF_WIDTH, fine, coarse, ratio, what="wall y axis")
-    z = wall_z_axis(planes, fine, coarse, ratio)
-    grid = np.stack(np.meshgrid(x, y, z, indexing="ij"), axis=-1).reshape(-1, 3)
-    tets = lattice_tets((len(x), len(y), len(z)))
-    neg = tet_signed_volumes(grid, tets) < 0
-    tets[neg] = tets[neg][:, [0, 2, 1, 3]]
-    centroids = grid[tets].mean(axis=1)
-    bottoms = np.array([lo for _, lo, _ in planes])
-    layer = np.clip(np.searchsorted(bottoms, centroids[:, 2], side="right") - 1, 0, len(planes) - 1)
-    inside = np.linalg.norm(centroids - np.asarray(nodule_centre, dtype=float), axis=1) < float(nodule_radius)
-    labels = (layer + len(planes) * inside).astype(np.int32)
-    return Volume(grid, tets, labels=labels, name="abdominal_wall_reference")
+    centred on the origin, bed at z = 0 (:func:`surgsim_envs.geometry.wall_lattice.graded_wall_volume`):
+    tet labels are the layer index (``planes`` order) for plain tets and ``len(planes)`` + the layer
+    index for the nodule's tets (centroid within ``nodule_radius`` of ``nodule_centre``)."""
+    return graded_wall_volume(size, planes, site, fine, nodule_centre, nodule_radius, coarse, ratio)
 
 
 def region_materials(planes, materials: dict, nodule_factor: float) -> dict:

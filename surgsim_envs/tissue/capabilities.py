@@ -23,6 +23,9 @@ CAPABILITIES: dict[str, str] = {
     "history": "internal state depends on the strain history (memory buffer); reset() clears it",
     "viscoelastic": "honours the material's relax_fraction / relax_time",
     "static_solve": "static_solve(forces) returns equilibrium positions",
+    "condensed_compliance": "linear and static: compliance_block(nodes) gives the compliance (3m,3m) m/N of free "
+                            "nodes and their unloaded displacement (3m,) m; apply_nodal_forces(nodes, forces) sets "
+                            "the equilibrium under forces (m,3) N on those nodes alone",
     "unstructured_mesh": "runs on any tet mesh (snapped organ lattices, user meshes), not only on regular "
                          "tensor-product grids",
     "subsurface_stiffness": "the interior carries load: a stiffer region below the surface (an inclusion in the "

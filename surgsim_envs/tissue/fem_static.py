@@ -119,7 +119,7 @@ class QuasiStaticFEMModel(TetFEMModel):
     auto_pair = None
     default_integrator = None
     capabilities = frozenset({"forces", "unstructured_mesh", "implicit_contact", "quasi_static", "static_solve",
-                              "subsurface_stiffness", "viscoelastic"})
+                              "subsurface_stiffness", "viscoelastic", "condensed_compliance"})
     material_fields = ("young", "poisson", "density")
 
     def __init__(self, volume, material="liver", *, formulation: str = "anp", fixed_dofs=None,
@@ -368,6 +368,52 @@ class QuasiStaticFEMModel(TetFEMModel):
             self._u_step[:] = u
         self.positions = self.rest_positions + u.reshape(-1, 3)
         self.velocities = np.zeros_like(self.positions)
+        return self.positions.copy()
+
+    def _require_elastic(self, what: str) -> None:
+        """The condensed equilibrium is elastic: a body with a relaxation state has none."""
+        if getattr(self, "hereditary", None) is not None:
+            raise ConfigError(f"fem_static.{what}: this body relaxes (hereditary viscoelasticity), so a force has no "
+                              "single equilibrium; build it with an elastic material (relax_fraction 0) or "
+                              "viscoelastic='relaxed'")
+
+    def compliance_block(self, nodes) -> tuple[np.ndarray, np.ndarray]:
+        """(W, u0) of free ``nodes`` (m,): W (3m, 3m) m/N the displacement of their dofs per unit force
+        on them (cached compliance columns), u0 (3m,) m their displacement under the Dirichlet
+        targets and gravity alone. A contact solved on them needs no solve of the whole body."""
+        self._require_elastic("compliance_block")
+        idx = self._as_indices(nodes, "compliance_block nodes")
+        if np.any(self.fixed[idx]):
+            raise ConfigError(f"fem_static.compliance_block: nodes {idx[self.fixed[idx]][:5].tolist()} are fixed; "
+                              "pass free nodes only")
+        comp = self.compliance()
+        u0 = self._base_displacement()
+        dofs = (3 * idx[:, None] + np.arange(3)).reshape(-1)
+        return comp.block(idx, comp.slots(idx)), u0[dofs].copy()
+
+    def apply_nodal_forces(self, nodes, forces) -> np.ndarray:
+        """Set the equilibrium under ``forces`` (m,3) N on free ``nodes`` (m,) alone, plus the Dirichlet
+        targets and gravity, from the cached compliance columns (no full solve): ``positions``
+        updated, velocities zeroed, ``integrated_external_forces`` the applied forces. Returns the
+        positions (N,3) m (a copy)."""
+        self._require_elastic("apply_nodal_forces")
+        idx = self._as_indices(nodes, "apply_nodal_forces nodes")
+        f = np.asarray(forces, dtype=np.float64)
+        if f.shape != (len(idx), 3) or not np.all(np.isfinite(f)):
+            raise ConfigError(f"fem_static.apply_nodal_forces: forces must be a finite ({len(idx)}, 3) array (N), "
+                              f"got shape {f.shape}")
+        if np.any(self.fixed[idx]):
+            raise ConfigError("fem_static.apply_nodal_forces: a fixed node takes no force; pass free nodes only")
+        comp = self.compliance()
+        u = self._base_displacement().copy()
+        if len(idx):
+            comp.response(comp.slots(idx), f, u)
+        self.positions = self.rest_positions + u.reshape(-1, 3)
+        self.velocities = np.zeros_like(self.positions)
+        self.integrated_external_forces[:] = 0.0
+        self.integrated_external_forces[idx] = f
+        self.external_forces = np.zeros_like(self.positions)
+        self.external_forces[idx] = f
         return self.positions.copy()
 
     def _reset_state(self) -> None:

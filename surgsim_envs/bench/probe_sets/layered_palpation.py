@@ -13,10 +13,11 @@ and away from the depths at which a lattice node at the footprint's edge joins t
 spacing h, a node at distance rho joins at depth r - sqrt(r^2 - rho^2): 2.76 mm for rho = 4.47 mm
 at h = 2 mm, 5 mm for rho = r), so no reading sits on that edge.
 
-Models: the task builds its wall as ``layered`` (``make("layered", ...)`` in its env: the paper's
-model is the task's premise, and its unilateral probe solves each press with the model's
-all-node ``static_solve``); it takes no model option, so every other model is reported as refused,
-with that reason. Its rows are ``layered`` at the task's spacings 10, 5, 2.5 and 2 mm.
+Models: the task builds its wall as ``layered`` (the paper's model, the task's premise: its
+unilateral probe solves each press with the model's all-node ``static_solve``) or, with its
+``model="fem_static"`` option, as a continuum on a layer-conforming lattice (the same contact law
+solved on the prefactored stiffness's compliance); every other model is reported as refused, with
+that reason. Rows at the task's spacings 10, 5, 2.5 and 2 mm.
 
 Path independence: the force at the nodule site at the middle depth after a press 6 mm away in
 the same episode, against the same press from a fresh reset (the probe claims the force depends
@@ -36,9 +37,9 @@ from surgsim_envs.errors import ConfigError
 
 TASK = "SurgSim/LayeredPalpation-v0"
 #: the models the task accepts (its env builds no other)
-MODELS = ("layered",)
-REFUSAL = ("the task builds its wall with the layered model only and takes no model option (the paper's model; "
-           "its unilateral probe solves each press with the model's static_solve)")
+MODELS = ("layered", "fem_static")
+REFUSAL = ("the task builds its wall with the layered model (the paper's springs) or fem_static (the continuum on a "
+           "layer-conforming lattice) only: its option model= takes no other")
 #: m, the nodule's centre (x, y): a node of every lattice the probe set uses
 NODULE_XY = (0.02, 0.01)
 #: how the reference is described in the task-accuracy table
@@ -116,7 +117,7 @@ def measure(task: str, model: str, spacing: float, probes: ProbeSet) -> dict:
     head = {"task": task, "model": model, "spacing": float(spacing)}
     if model not in MODELS:
         return {**head, "refused": REFUSAL}
-    env = gym.make(task, spacing=float(spacing), disable_env_checker=True).unwrapped
+    env = gym.make(task, model=model, spacing=float(spacing), disable_env_checker=True).unwrapped
     presser = Presser(env)
     forces = {}
     for i, inc in enumerate(probes.inclusions):

@@ -35,11 +35,13 @@ def _integer(value, what: str, lo: int, hi: int, hint: str) -> int:
 
 @dataclass
 class LayeredPalpationConfig:
-    """size (x, y) m of the wall patch; spacing m of its lattice; max_depth m; nodule radius m and
+    """model: the tissue model of the wall (``"layered"``, the paper's springs, or ``"fem_static"``, the
+    continuum; :mod:`.wall`); size (x, y) m of the wall patch; spacing m of its lattice; max_depth m; nodule radius m and
     Young's modulus factor; press_cost per press; size_scale m of the commit reward; max_presses;
     probe_radius m; control_hz presses per second of the nominal clock (render fps, dm_control
     timestep); render_width/height px and camera ("overview", "top", "side") of rgb_array frames."""
 
+    model: str = "layered"
     size: tuple = (0.08, 0.06)
     spacing: float = 0.005
     max_depth: float = 0.008
@@ -61,6 +63,12 @@ class LayeredPalpationConfig:
 
     def validate(self) -> None:
         """ConfigError naming the field, its bound and the fix."""
+        from surgsim_envs.envs.layered_palpation.wall import WALL_MODELS, wall_nodes
+
+        if not isinstance(self.model, str) or self.model not in WALL_MODELS:
+            raise ConfigError(f"LayeredPalpationConfig.model={validate.short_repr(self.model)}; choose one of "
+                              f"{list(WALL_MODELS)}: the task builds its layered wall with these only (the "
+                              "paper's springs, or the continuum on a layer-conforming lattice)")
         size = self.size
         if not validate.has_length(size, 2):
             raise ConfigError(f"LayeredPalpationConfig.size={size!r} must be a pair (x, y) of lengths in m, "
@@ -85,7 +93,7 @@ class LayeredPalpationConfig:
         _integer(self.render_height, "render_height", 16, 4096, "pixels, e.g. 480")
         if self.camera not in CAMERAS:
             raise ConfigError(f"LayeredPalpationConfig.camera={self.camera!r}; choose one of {list(CAMERAS)}")
-        nodes = (size[0] / spacing + 1) * (size[1] / spacing + 1) * (0.029 / spacing + 1)
+        nodes = wall_nodes(self.model, size, spacing)
         if nodes > MAX_NODES:
             raise ConfigError(f"LayeredPalpationConfig: size {tuple(size)!r} m at spacing {spacing:g} m gives about "
                               f"{nodes:,.0f} lattice nodes (limit {MAX_NODES:,}): each press solves them all; "

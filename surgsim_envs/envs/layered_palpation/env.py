@@ -1,14 +1,16 @@
 """``SurgSim/LayeredPalpation-v0``: find a stiff nodule under the skin of an abdominal wall by pressing.
 
-Tissue: the ``layered`` model (Lin et al. 2008) of an abdominal wall patch (skin, fat, fascia, muscle,
-peritoneum; :mod:`surgsim_envs.geometry.anatomy`), bottom bonded. Each episode hides a stiff
+Tissue: an abdominal wall patch (skin, fat, fascia, muscle, peritoneum;
+:mod:`surgsim_envs.geometry.anatomy`), bottom bonded, as the ``layered`` model (Lin et al. 2008;
+the default) or, with ``model="fem_static"``, as a continuum on a layer-conforming lattice
+(:mod:`.wall`). Each episode hides a stiff
 nodule in the fat: the tets within ``nodule_radius`` of a random centre get ``nodule_factor`` x
 their Young's modulus, through the tissue contract (``scale_material``), never by model name. The
 reset option ``nodule_position`` (x, y) m places the centre instead (scripted probes and benchmarks
 such as ``surgsim bench task-accuracy``); its height is the median height of the fat's tets either way.
 
-Each step presses a position-controlled sphere (:class:`UnilateralProbe`: frictionless,
-push-only contact) at a point of the patch to a depth and solves the equilibrium (quasi-static:
+Each step presses a position-controlled sphere (frictionless, push-only contact: :mod:`.wall` names
+the probe of each model) at a point of the patch to a depth and solves the equilibrium (quasi-static:
 one press per step); the force depends on the pose only, not on the presses before.
 Action (4,) in [-1, 1]: x, y over the patch, depth over [0, max_depth], commit (> 0 ends the
 episode with the guess "the nodule is under this press"). Observation (4,): x (m), y (m),
@@ -42,8 +44,6 @@ from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 
 
-_VOLUMES: dict = {}
-
 
 class LayeredPalpationEnv(gym.Env):
     """See the module docstring. config: a :class:`LayeredPalpationConfig` (None = defaults);
@@ -60,9 +60,7 @@ class LayeredPalpationEnv(gym.Env):
     check_action = SurgSimEnv.check_action
 
     def __init__(self, config: LayeredPalpationConfig | None = None, render_mode: str | None = None, **overrides):
-        from surgsim_envs.contact.unilateral_probe import UnilateralProbe
-        from surgsim_envs.geometry.anatomy import abdominal_wall_volume
-        from surgsim_envs.tissue import make
+        from surgsim_envs.envs.layered_palpation.wall import BUILDERS
 
         if config is None:
             config = LayeredPalpationConfig()
@@ -73,18 +71,11 @@ class LayeredPalpationEnv(gym.Env):
         check_render_mode(render_mode, self.metadata["render_modes"], "SurgSim/LayeredPalpation-v0")
         self.render_mode = render_mode
         self.metadata = dict(self.metadata, render_fps=max(1, int(round(cfg.control_hz))))
-        key = (tuple(float(v) for v in cfg.size), float(cfg.spacing))
-        if key not in _VOLUMES:
-            _VOLUMES[key] = abdominal_wall_volume(cfg.spacing, size=key[0])
-        vol = _VOLUMES[key]
-        bottom = vol.face_nodes(4)  # no node below: the whole bottom face
-        self.tissue = make("layered", vol, fixed=bottom)
-        self.top = np.flatnonzero(vol.neighbours[:, 5] < 0)
-        self.z_top = float(vol.nodes[self.top, 2].max())
-        self.probe = UnilateralProbe(self.tissue, self.top, cfg.probe_radius)
-        self.centroids = self.tissue.element_centroids()
-        fat = vol.layer_names.index("fat")
-        self._fat_z = self.centroids[vol.labels == fat, 2]
+        self.wall = wall = BUILDERS[cfg.model](cfg)
+        self.tissue, self.top, self.z_top, self.probe = wall.tissue, wall.top, wall.z_top, wall.probe
+        self.centroids = wall.centroids
+        self._fat_z = wall.fat_z
+        self._mask = None
         hx, hy = 0.5 * float(cfg.size[0]), 0.5 * float(cfg.size[1])
         self.action_space = gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
         self.observation_terms = [ObsTerm("press_x", "m", 1, -hx, hx), ObsTerm("press_y", "m", 1, -hy, hy),
@@ -124,7 +115,7 @@ class LayeredPalpationEnv(gym.Env):
 
             cfg = self.config
             self._scene = PressScene(self.tissue, cfg.spacing, cfg.size, cfg.probe_radius, cfg.render_width,
-                                     cfg.render_height)
+                                     cfg.render_height, model=cfg.model, organ=self.wall.organ)
             self._show()
         return self._scene.sim
 
@@ -142,7 +133,7 @@ class LayeredPalpationEnv(gym.Env):
                               f"{list(self.OPTIONS)} (without them the nodule is placed from the seed)")
         super().reset(seed=None if seed is None else validate.seed(seed, "reset seed"))
         cfg = self.config
-        self.probe.move_to((1e3, 1e3, 1e3))    # lifted: every node free
+        self.wall.lift()    # every node free
         self.tissue.reset()
         hx, hy = 0.5 * cfg.size[0] - cfg.nodule_radius, 0.5 * cfg.size[1] - cfg.nodule_radius
         z = float(np.clip(np.median(self._fat_z), self._fat_z.min() + cfg.nodule_radius / 2, self._fat_z.max()))
@@ -152,8 +143,11 @@ class LayeredPalpationEnv(gym.Env):
         else:
             self.nodule = np.array([*self._nodule_xy(placed, hx, hy), z])
         mask = np.linalg.norm(self.centroids - self.nodule, axis=1) < cfg.nodule_radius
-        self.tissue.scale_material("young", 1.0)
-        self.tissue.scale_material("young", cfg.nodule_factor, mask=mask)
+        if self._mask is None or not np.array_equal(mask, self._mask):   # unchanged: keep a factorised stiffness
+            self.tissue.scale_material("young", 1.0)
+            self.tissue.scale_material("young", cfg.nodule_factor, mask=mask)
+            self._mask = mask
+        self.wall.ready()
         self.presses = self.steps = 0
         self._centre = np.array([0.0, 0.0, self.z_top + 0.03])
         self._reset_done = True
@@ -182,10 +176,10 @@ class LayeredPalpationEnv(gym.Env):
         x, y = a[0] * 0.5 * cfg.size[0], a[1] * 0.5 * cfg.size[1]
         depth = (a[2] + 1.0) / 2.0 * cfg.max_depth
         self._centre = np.array([x, y, self.z_top + cfg.probe_radius - depth])
-        self.probe.press(self._centre, self.tissue.static_solve)
+        self.wall.press(self._centre)
         force = float(self.probe.force()[2])
         if not math.isfinite(force):
-            raise TissueUnstableError("layered", 0.0, math.inf, f"the static solve gave a non-finite probe force "
+            raise TissueUnstableError(cfg.model, 0.0, math.inf, f"the static solve gave a non-finite probe force "
                                       f"{force!r} at press ({x:.4g}, {y:.4g}) m, depth {depth:.4g} m")
         force = max(force, 0.0)   # reactions are compressive; a round-off below 0 reads 0
         self.presses += 1

@@ -17,10 +17,12 @@ from surgsim_envs.errors import ConfigError
 
 
 class PressScene:
-    """A render/dm_control scene mirroring ``tissue`` (a task's layered wall built with
-    ``spacing`` m and ``size`` (x, y) m), probe tip ``radius`` m; ``sim`` is the Simulation."""
+    """A render/dm_control scene mirroring ``tissue`` (a task's wall of tissue ``model``, built on
+    ``organ``, a Volume, or when None on the registered abdominal wall at ``spacing`` m and ``size``
+    (x, y) m), probe tip ``radius`` m; ``sim`` is the Simulation."""
 
-    def __init__(self, tissue, spacing: float, size, radius: float, render_width: int, render_height: int):
+    def __init__(self, tissue, spacing: float, size, radius: float, render_width: int, render_height: int,
+                 model: str = "layered", organ=None):
         from surgsim_envs.scene.builder import build_scene
         from surgsim_envs.scene.config import ProbeConfig, SceneConfig, TissueConfig
         from surgsim_envs.scene.simulation import Simulation
@@ -28,8 +30,12 @@ class PressScene:
         rest = tissue.rest_positions
         z_mid = 0.5 * float(rest[:, 2].min() + rest[:, 2].max())
         self.home = np.array([0.0, 0.0, float(rest[:, 2].max()) + 0.03])
-        tc = TissueConfig(name="wall", organ="abdominal_wall", model="layered", material=None, spacing=spacing,
-                          volume_options={"size": tuple(size)}, position=(0.0, 0.0, z_mid), anchors=("bottom",))
+        if organ is None:
+            tc = TissueConfig(name="wall", organ="abdominal_wall", model=model, material=None, spacing=spacing,
+                              volume_options={"size": tuple(size)}, position=(0.0, 0.0, z_mid), anchors=("bottom",))
+        else:
+            tc = TissueConfig(name="wall", organ=organ, model=model, material=tissue.material, spacing=None,
+                              position=(0.0, 0.0, z_mid), anchors=("bottom",))
         cfg = SceneConfig(tissues=[tc], tools=[ProbeConfig(position=tuple(self.home), drive="free",
                                                             tip_radius=radius)],
                           dt=1e-3, render_width=int(render_width), render_height=int(render_height))
