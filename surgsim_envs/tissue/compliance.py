@@ -131,11 +131,14 @@ class CondensedCompliance:
                                   "nodes to hold the body (a fixed base)")
         else:
             self._superlu(kff)
-        self.capacity = max(1, int(cache_mb * 1e6 // (72.0 * self.n_nodes)))
-        self.cols = np.zeros((0, n3, 3))
+        self.capacity = max(1, min(self.n_nodes, int(cache_mb * 1e6 // (72.0 * self.n_nodes))))
+        # the whole budget at once: np.zeros maps zero pages lazily, so memory is touched only as columns
+        # are written, and no growth copies the cached columns (a re-factorisation per episode, as a
+        # task's per-episode lump makes, paid that copy again every episode)
+        self.cols = np.zeros((self.capacity, n3, 3))
         self.slot_of = -np.ones(self.n_nodes, dtype=np.int64)
-        self.node_in = np.zeros(0, dtype=np.int64)
-        self.last_used = np.zeros(0, dtype=np.int64)
+        self.node_in = -np.ones(self.capacity, dtype=np.int64)
+        self.last_used = np.zeros(self.capacity, dtype=np.int64)
         self.tick = 0
         self.columns_computed = 0
 
@@ -157,15 +160,6 @@ class CondensedCompliance:
         out[self.free_index] = sol
         return out
 
-    def _grow(self, need: int) -> None:
-        size = min(self.capacity, max(need, 2 * len(self.node_in), 16))
-        extra = size - len(self.node_in)
-        if extra <= 0:
-            return
-        self.cols = np.concatenate([self.cols, np.zeros((extra, 3 * self.n_nodes, 3))])
-        self.node_in = np.concatenate([self.node_in, -np.ones(extra, dtype=np.int64)])
-        self.last_used = np.concatenate([self.last_used, np.zeros(extra, dtype=np.int64)])
-
     def slots(self, nodes: np.ndarray) -> np.ndarray:
         """Cache slots of ``nodes`` ((m,) int), computing missing columns in one multi-rhs solve."""
         nodes = np.asarray(nodes, dtype=np.int64)
@@ -175,8 +169,6 @@ class CondensedCompliance:
                               f"({self.capacity} nodes); raise cache_mb")
         missing = nodes[self.slot_of[nodes] < 0]
         if len(missing):
-            if len(self.node_in) < self.capacity:
-                self._grow(int(np.count_nonzero(self.node_in >= 0)) + len(missing))
             empty = np.flatnonzero(self.node_in < 0)
             if len(empty) < len(missing):        # evict the least recently used, never one of ``nodes``
                 busy = self.slot_of[nodes]
