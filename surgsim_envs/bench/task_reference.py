@@ -123,7 +123,8 @@ def graded_scene(env, xy, fine: float, deepest: float) -> int:
         "fine": float(fine), "around": (float(xy[0]), float(xy[1]), top), "ratio": GROWTH,
         "half_widths": fine_half_widths(env.config.tip_radius, deepest)}}
     tissue.options = {**dict(tissue.options), **REFERENCE_OPTIONS}
-    cfg.contact.stiffness = CONTACT_STIFFNESS_PER_AREA * float(fine) ** 2
+    cfg.contact.stiffness = CONTACT_STIFFNESS_PER_AREA * float(fine) ** 2   # per area of the fine cells
+    cfg.contact.stiffness_per_area = None            # (the graded lattice's median edge is not h_f)
     cfg.contact.tangential_stiffness = None          # = the normal one
     cfg.contact.surface_samples = SURFACE_SUBDIVISIONS
     env.sim = Simulation(build_scene(cfg), dt=env.sim.dt, substeps=env.sim.substeps)

@@ -195,6 +195,10 @@ class ContactConfig:
     tissue's median surface edge (subdivisions ceil(edge / tip_radius), at most 8), an int n =
     edge subdivisions (1 = nodes only), None = nodes only. Each contact point then carries
     1/n^2 of the per-node stiffness and damping (same stiffness per surface area).
+    stiffness_per_area: None (default: ``stiffness`` per node), a stiffness per unit surface area
+        in N/m^3 (each node gets it x h^2, h the tissue's median surface edge) or "auto" (1e8 N/m^3
+        for quasi-static tissue models, whose equilibrium solve takes any stiffness; ``stiffness``
+        for the others); :mod:`surgsim_envs.scene.contact_options`.
     static_friction_ratio: mu_s / mu >= 1, the static friction coefficient of every tool as a
         multiple of its (kinetic) friction (1 = one coefficient; surgsim_envs.contact.friction).
         Tasks that draw mu per episode keep the ratio.
@@ -208,6 +212,7 @@ class ContactConfig:
     damping: float = 0.02
     tangential_stiffness: float | None = None
     surface_samples: Any = "auto"
+    stiffness_per_area: Any = None
     static_friction_ratio: float = 1.0
     implicit_damping: Any = "auto"
 

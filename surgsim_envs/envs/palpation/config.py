@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -38,6 +38,10 @@ class PalpationConfig:
     model: str = "mass_spring"         # a registered tissue model with the capabilities PalpationEnv.REQUIRES
     integrator: str = "symplectic"     # if the model has it and it is stable over the stiffness ranges, else "auto"
     tip_radius: float = 0.01           # m, probe tip
+    # N/m^3, probe-tissue contact stiffness per unit surface area: "auto" = 1e8 for quasi-static tissue
+    # models (their equilibrium solve takes it at any spacing), the scene's 200 N/m per node for the
+    # others (what an explicit step keeps stable); None = always per node (ContactConfig.stiffness_per_area)
+    contact_stiffness_per_area: Any = "auto"
     probe_speed: float = 0.2           # m/s, rate limit of the probe target
     # action scaling
     max_xy_step: float = 0.003         # m per control step
@@ -98,6 +102,9 @@ class PalpationConfig:
                          fix="a count of press sites, e.g. 25")
         check_task_resolution(self, "PalpationConfig")
         check_on_unstable(self.on_unstable, "PalpationConfig")
+        if self.contact_stiffness_per_area is not None and self.contact_stiffness_per_area != "auto":
+            validate.positive(self.contact_stiffness_per_area, "PalpationConfig.contact_stiffness_per_area",
+                              unit="N/m^3", hi=1e13, fix="'auto', None (200 N/m per node) or e.g. 1e8")
         if not (isinstance(self.map_cells, (int, np.integer)) and 1 <= self.map_cells <= 20):
             raise ConfigError(f"PalpationConfig.map_cells={self.map_cells!r} must be an integer in [1, 20]")
         validate.integer(self.report_hold_steps, "PalpationConfig.report_hold_steps", lo=1,
