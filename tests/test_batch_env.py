@@ -1,7 +1,8 @@
 """The batched Palpation-v0 vector env (surgsim_envs/batch/palpation_env.py) against the single env.
 
 ``gym.make_vec(..., vectorization_mode="vector_entry_point", device="cpu")`` returns the batched
-env; with one world and the same seed it follows ``gym.make("SurgSim/Palpation-v0")`` through a
+env; with one world and the same seed it follows ``gym.make("SurgSim/Palpation-v0",
+model="mass_spring", spacing=0.01)`` (the model and lattice the batched kernels step) through a
 scripted episode (a stationary press, then a held report). Its physics agrees
 to the bounds of tests/test_batch_equivalence.py (tool 1e-6 m, force 1e-4 relative); the
 observations and rewards inherit them: positions to 1e-6 m, forces and stiffness samples to 1e-4
@@ -13,6 +14,9 @@ import numpy as np
 import pytest
 
 from surgsim_envs.batch.backend import available
+
+#: the single env the batched worlds are (the model and lattice the batched kernels step)
+BATCHED = {"model": "mass_spring", "spacing": 0.01}
 
 pytestmark = pytest.mark.skipif(not available(), reason="needs the [batch] extra (warp-lang, mujoco-warp)")
 
@@ -45,7 +49,7 @@ def test_make_vec_with_device_returns_the_batched_env(venv):
 
     from surgsim_envs.batch.palpation_env import BatchedPalpationEnv
 
-    single = gym.make("SurgSim/Palpation-v0")
+    single = gym.make("SurgSim/Palpation-v0", **BATCHED)
     assert isinstance(venv, BatchedPalpationEnv)
     assert venv.single_observation_space == single.observation_space
     assert venv.single_action_space == single.action_space
@@ -57,7 +61,7 @@ def test_one_world_follows_the_single_env_through_an_episode():
     import gymnasium as gym
 
     venv = _batched(1)
-    env = gym.make("SurgSim/Palpation-v0", max_episode_steps=50, **SHORT)
+    env = gym.make("SurgSim/Palpation-v0", max_episode_steps=50, **SHORT, **BATCHED)
     ob, info = venv.reset(seed=3)
     o1, i1 = env.reset(seed=3)
     np.testing.assert_array_equal(info["inclusion_centre_m"][0], i1["inclusion_centre_m"])

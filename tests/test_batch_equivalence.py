@@ -16,6 +16,9 @@ import pytest
 
 from surgsim_envs.batch.backend import available, cuda_available
 
+#: the single env the batched worlds are (the model and lattice the batched kernels step)
+BATCHED = {"model": "mass_spring", "spacing": 0.01}
+
 pytestmark = pytest.mark.skipif(not available(), reason="needs the [batch] extra (warp-lang, mujoco-warp)")
 
 POSITION_BOUND = 1e-6      # m
@@ -26,7 +29,7 @@ FORCE_FLOOR = 1e-3         # N: below this the probe is (nearly) out of contact;
 def _palpation_sim(seed=0, **options):
     import gymnasium as gym
 
-    env = gym.make("SurgSim/Palpation-v0").unwrapped
+    env = gym.make("SurgSim/Palpation-v0", **BATCHED).unwrapped
     env.reset(seed=seed, options=options)
     env.sim.reset()
     return env

@@ -20,6 +20,9 @@ import pytest
 
 from surgsim_envs.batch.backend import available
 
+#: the single env the batched worlds are (the model and lattice the batched kernels step)
+BATCHED = {"model": "mass_spring", "spacing": 0.01}
+
 pytestmark = pytest.mark.skipif(not available(), reason="needs the [batch] extra (warp-lang, mujoco-warp)")
 
 STEPS = 1100
@@ -91,7 +94,7 @@ def test_bad_friction_and_readout_requests_raise_clear_errors():
     from surgsim_envs.batch.simulation import BatchSimulation
     from surgsim_envs.errors import ConfigError
 
-    env = gym.make("SurgSim/Palpation-v0").unwrapped
+    env = gym.make("SurgSim/Palpation-v0", **BATCHED).unwrapped
     env.reset(seed=0)
     batch = BatchSimulation(env.sim, 2, device="cpu")
     with pytest.raises(ConfigError, match=r"mu must be finite numbers >= 0, one per listed world \(2,\)"):

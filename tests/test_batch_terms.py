@@ -13,6 +13,9 @@ import pytest
 
 from surgsim_envs.batch.backend import available
 
+#: the single env the batched worlds are (the model and lattice the batched kernels step)
+BATCHED = {"model": "mass_spring", "spacing": 0.01}
+
 pytestmark = pytest.mark.skipif(not available(), reason="needs the [batch] extra (warp-lang, mujoco-warp)")
 
 # 50 control steps, report allowed at once; the default tissue pushes back only 0.2-0.45 N at the deepest
@@ -65,7 +68,7 @@ def test_reward_terms_equal_the_single_envs_over_a_press(num_envs):
 
     seed = 5
     venv = _batched(num_envs)
-    singles = [gym.make("SurgSim/Palpation-v0", max_episode_steps=50, **SHORT) for _ in range(num_envs)]
+    singles = [gym.make("SurgSim/Palpation-v0", max_episode_steps=50, **SHORT, **BATCHED) for _ in range(num_envs)]
     venv.reset(seed=seed)
     for i, env in enumerate(singles):
         env.reset(seed=seed + i)

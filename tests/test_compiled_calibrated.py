@@ -21,7 +21,8 @@ from surgsim_envs.tissue.base import DT_SAFETY
 
 def _pair(**config):
     """Two Palpation-v0 envs on the calibrated tissue in the same state: compiled, then generic."""
-    envs = [gym.make("SurgSim/Palpation-v0", model="mass_spring_calibrated", **config) for _ in range(2)]
+    envs = [gym.make("SurgSim/Palpation-v0", model="mass_spring_calibrated", **{"spacing": 0.01, **config})
+            for _ in range(2)]
     for e in envs:
         e.reset(seed=3)
     envs[1].unwrapped.sim.compiled_substeps = False
@@ -165,7 +166,7 @@ def test_calibrated_table_is_keyed_and_follows_replaced_arrays():
     the freed old one."""
     from surgsim_envs.scene.step.loop import POSITIONS_ROW
 
-    env = gym.make("SurgSim/Palpation-v0", model="mass_spring_calibrated")
+    env = gym.make("SurgSim/Palpation-v0", model="mass_spring_calibrated", spacing=0.01)
     try:
         env.reset(seed=0)
         sim = env.unwrapped.sim

@@ -14,9 +14,11 @@ def test_plain_network_drops_the_point_load_options_and_restores_them():
     assert MassSpringModel.point_load_options == before
 
 
-def test_palpation_default_is_the_capped_network_and_both_are_timed():
+def test_palpation_default_against_the_plain_network_both_timed():
+    from surgsim_envs.envs.palpation import PalpationConfig
+
     row = default_vs_plain("SurgSim/Palpation-v0", steps=3, repeats=1)
-    assert row["default_model"] == "mass_spring" and row["default_volume_stiffness"] == "capped"
+    assert row["default_model"] == PalpationConfig.model
     assert row["plain_volume_stiffness"] is None
     assert row["default_step_us"] > 0 and row["plain_step_us"] > 0
     assert math.isclose(row["default_over_plain"], row["default_step_us"] / row["plain_step_us"])

@@ -390,7 +390,7 @@ def test_task_resolution_auto(tmp_path, monkeypatch):
     monkeypatch.setattr(res, "TABLE_PATH", str(path))
 
     def nodes(**kw):
-        env = gym.make("SurgSim/Palpation-v0", resolution="auto", **kw)
+        env = gym.make("SurgSim/Palpation-v0", model="mass_spring", resolution="auto", **kw)
         try:
             return env.unwrapped.sim.scene.config.tissues[0].spacing, len(env.unwrapped.sim.tissue().positions)
         finally:
@@ -400,7 +400,8 @@ def test_task_resolution_auto(tmp_path, monkeypatch):
     fine = nodes(error_tolerance=0.4, step_budget_us=1000.0)
     assert coarse[0] == 0.02 and fine[0] == 0.01 and fine[1] > 3 * coarse[1]
     with pytest.raises(ConfigError, match="closest: mass_spring/symplectic at spacing 10 mm"):
-        gym.make("SurgSim/Palpation-v0", resolution="auto", error_tolerance=0.1, step_budget_us=1000.0)
+        gym.make("SurgSim/Palpation-v0", model="mass_spring", resolution="auto", error_tolerance=0.1,
+                 step_budget_us=1000.0)
     with pytest.raises(ConfigError, match="resolution"):
         gym.make("SurgSim/Grasp-v0", resolution="coarse")
     env = gym.make("SurgSim/Grasp-v0", resolution=0.015)

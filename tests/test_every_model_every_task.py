@@ -66,7 +66,7 @@ def test_stiffness_randomisation_goes_through_scale_material(monkeypatch):
         return orig(self, name, factor, mask)
 
     monkeypatch.setattr(cls, "scale_material", spy)
-    env = gym.make("SurgSim/Palpation-v0", spacing=0.02)
+    env = gym.make("SurgSim/Palpation-v0", model="mass_spring", spacing=0.02)
     env.reset(seed=0, options={"young_scale": 0.9, "stiffness_contrast": 3.0})
     name, factor, mask = calls[-1]                 # one call: per-tet factors, mixed by volume share
     young = env.unwrapped.sim.tissue().fields["young"]

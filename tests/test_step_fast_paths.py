@@ -17,6 +17,11 @@ from surgsim_envs.scene.simulation import _report_rows
 from surgsim_envs.scene.step.loop import POSITIONS_ROW
 from surgsim_envs.tissue.guard import all_finite, first_non_finite, max_speed_squared, speed_within
 
+#: Palpation-v0 on the explicit mass-spring network (its default model is the quasi-static FEM, which has no
+#: compiled substep loop)
+MASS_SPRING = {"model": "mass_spring", "spacing": 0.01}
+
+
 
 def _numpy_report(r, idx):
     """Simulation.tool_contact_report's general (numpy) path for one tissue."""
@@ -94,7 +99,7 @@ def _env(task="SurgSim/Palpation-v0"):
 
     import surgsim_envs  # noqa: F401
 
-    env = gym.make(task)
+    env = gym.make(task, **(MASS_SPRING if "Palpation" in task else {}))
     env.reset(seed=0)
     return env
 

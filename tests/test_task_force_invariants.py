@@ -68,7 +68,11 @@ def _accepted_models() -> list:
 
 
 def _env(model: str, material=None, resolution=None):
+    """The task with ``model``: at its default lattice for the default model, on the 10 mm lattice for
+    the others (where the mass-spring family steps explicitly; the slow matrix stays affordable)."""
     kw = {"model": model}
+    if resolution is None and model != DEFAULT_MODEL:
+        resolution = 0.01
     if material is not None:
         kw["material"] = material
     if resolution is not None:
@@ -230,13 +234,26 @@ def test_default_model_force_rises_with_depth_over_the_inclusion():
     check_depth_monotone(DEFAULT_MODEL, depths=(0.003, 0.0055, 0.008))
 
 
+def reference_contrast(depth_mm: int = 7) -> float:
+    """The converged reference's force over the 5x lump / at its mirror site (the same press on
+    homogeneous tissue) at ``depth_mm``: the shipped task-accuracy table (docs/task_accuracy.md)."""
+    import json
+    from importlib import resources
+
+    table = json.loads(resources.files("surgsim_envs.tissue.data").joinpath("task_accuracy_table.json").read_text())
+    ref = table["references"][TASK]["forces_N"]
+    return ref[f"0/over/{depth_mm}mm"] / ref[f"0/mirror/{depth_mm}mm"]
+
+
 def test_default_model_stiffer_inclusion_raises_the_force_above_it():
-    """The reported case (5x inclusion, r 7 mm, 11 mm deep, 8 mm press over it): the reference ``fem``
-    reads about twice the contrast-1 force there (the slow test measures it); the plain spring network
-    (``volume_stiffness=None``) reads 0.66x: its surface node over the stiff column snaps sideways off
-    the probe (docs/models/mass_spring.md)."""
-    ratio = contrast_ratio(DEFAULT_MODEL)
-    assert ratio > 1.5, f"{DEFAULT_MODEL}: 5x inclusion reads {ratio:.3f}x the homogeneous force above it"
+    """The reported case (5x inclusion, r 7 mm, 11 mm deep, 8 mm press over it) against the same press
+    with contrast 1: the converged reference reads 1.35x at 7 mm (its lump against its mirror site).
+    The default must feel at least half of that rise and not over-read it by more than the task's
+    tolerance (the plain spring network read 0.66x: its surface node over the stiff column snapped
+    sideways off the probe, docs/models/mass_spring.md)."""
+    ratio, ref = contrast_ratio(DEFAULT_MODEL), reference_contrast()
+    assert 1.0 + 0.5 * (ref - 1.0) <= ratio <= ref * 1.1, (
+        f"{DEFAULT_MODEL}: 5x inclusion reads {ratio:.3f}x the homogeneous force above it; the reference {ref:.3f}x")
 
 
 def test_default_model_frictionless_force_does_not_depend_on_the_path():
@@ -347,7 +364,9 @@ def test_palpation_press_shares_the_scene_and_its_inclusion_raises_the_press_for
     """PalpationPress-v0 builds Palpation-v0's scene: its own press (6 mm, held, averaged) over the
     reported inclusion reads more than the same press with contrast 1."""
     stiff, plain = press_task_samples(DEFAULT_MODEL)
-    assert stiff > 1.5 * plain, f"PalpationPress-v0 stiffness samples {stiff:.2f}, {plain:.2f} N/m (contrast 5, 1)"
+    ref = reference_contrast()
+    assert stiff > (1.0 + 0.5 * (ref - 1.0)) * plain, (
+        f"PalpationPress-v0 stiffness samples {stiff:.2f}, {plain:.2f} N/m (contrast 5, 1; the reference {ref:.3f}x)")
 
 
 @pytest.mark.slow
@@ -443,9 +462,10 @@ def test_mass_spring_at_5_mm_stiffer_inclusion_raises_the_force_and_inverts_no_t
 
 
 def test_palpation_gives_mass_spring_the_full_volume_term_whenever_it_steps_implicitly():
-    """The capped volume term only keeps the explicit step: the default 10 mm task (explicit) keeps it;
+    """The capped volume term only keeps the explicit step: the 10 mm task (explicit) keeps it;
     an implicit step asked for, or the switch the task makes on the 5 mm lattice, gets the material's nu."""
-    cases = [({}, "symplectic", "capped"), ({"integrator": "implicit"}, "implicit", "auto"),
+    cases = [({"spacing": 0.01}, "symplectic", "capped"),
+             ({"integrator": "implicit", "spacing": 0.01}, "implicit", "auto"),
              ({"resolution": 0.005}, "auto", "auto")]
     for kw, integrator, term in cases:
         env = gym.make(TASK, model="mass_spring", **kw)

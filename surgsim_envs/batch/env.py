@@ -55,11 +55,16 @@ class BatchedTaskEnv(VectorEnv):
     TEMPLATE: ClassVar[type]
     #: reset options of the single env a batch cannot honour: option -> why
     REFUSED: ClassVar[dict[str, str]] = {}
+    #: config fields the batched worlds take when neither ``config`` nor an override sets them: the
+    #: model (and lattice) the batched kernels step, where the single env defaults to another
+    BATCHED_DEFAULTS: ClassVar[dict[str, Any]] = {}
 
     def __init__(self, num_envs: int = 1, *, device: str = "cpu", config=None, max_episode_steps: int | None = None,
                  **overrides):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ConfigError(f"num_envs={num_envs!r} must be a positive integer (batched worlds)")
+        if config is None:
+            overrides = {**self.BATCHED_DEFAULTS, **overrides}
         self.template = self.TEMPLATE(config=config, render_mode=None, **overrides)
         if max_episode_steps is not None and max_episode_steps != self.template.max_episode_steps:
             raise ConfigError(f"max_episode_steps={max_episode_steps!r}: the batched env ends episodes at the config's "

@@ -70,6 +70,10 @@ class BatchedPalpationEnv(BatchedTaskEnv):
     """
 
     TEMPLATE = PalpationEnv
+    #: the batched kernels step the explicit mass-spring network; the single env's default is the
+    #: quasi-static FEM at 5 mm (a factorised stiffness per world is not batched yet), so a batch
+    #: builds the task on the 10 mm mass_spring lattice unless told otherwise (docs/batch.md)
+    BATCHED_DEFAULTS = {"model": "mass_spring", "spacing": 0.01}
 
     def __init__(self, num_envs: int = 1, *, device: str = "cpu", config=None, max_episode_steps: int | None = None,
                  **overrides):

@@ -18,6 +18,9 @@ import numpy as np
 
 #: the model the default is compared with
 PLAIN_MODEL = "mass_spring"
+#: the lattice the plain network is built on where the task's default lattice is another: 10 mm for the
+#: palpation slab, where it steps explicitly (on a finer lattice the task's stiffest lump makes it implicit)
+PLAIN_LATTICE = {"SurgSim/Palpation-v0": {"spacing": 0.01}, "SurgSim/PalpationPress-v0": {"spacing": 0.01}}
 
 
 @contextlib.contextmanager
@@ -47,14 +50,15 @@ def _timed_run(env, actions, seed: int) -> float:
 def default_vs_plain(env_id: str, steps: int, repeats: int) -> dict:
     """``{"default_model", "default_options", "default_step_us", "plain_step_us", "default_over_plain"}``
     for task ``env_id``: median env step (us) of the task as ``gym.make(env_id)`` builds it and of the
-    same task on the plain network, stepped alternately in this process."""
+    same task on the plain network (on :data:`PLAIN_LATTICE` where given), stepped alternately in this
+    process."""
     import gymnasium as gym
 
     from surgsim_envs.bench.random_actions import random_actions as _actions
 
     default = gym.make(env_id)
     with plain_network():
-        plain = gym.make(env_id, model=PLAIN_MODEL)
+        plain = gym.make(env_id, model=PLAIN_MODEL, **PLAIN_LATTICE.get(env_id, {}))
     tissue = default.unwrapped.sim.tissue()
     pal = "Palpation" in env_id
     rng = np.random.default_rng(0)

@@ -134,7 +134,7 @@ _PALPATION_WHY = ("the task is to find a lump by the force it adds: over the 5x 
 #: THE task registry: id -> spec (in registration order)
 TASKS: dict[str, TaskSpec] = {spec.id: spec for spec in (
     TaskSpec("SurgSim/Palpation-v0", "surgsim_envs.envs.palpation:PalpationEnv",
-             "surgsim_envs.envs.palpation:PalpationConfig", scene="palpation", tool="probe", model="mass_spring",
+             "surgsim_envs.envs.palpation:PalpationConfig", scene="palpation", tool="probe", model="fem_static",
              force_tolerance=ForceTolerance(0.1, why=_PALPATION_WHY), max_episode_steps=600,
              policy="palpation_v0.npz", quick={"spacing": 0.02},
              expert="surgsim_envs.envs.palpation:palpation_expert",
@@ -156,7 +156,7 @@ TASKS: dict[str, TaskSpec] = {spec.id: spec for spec in (
              batched="surgsim_envs.batch.slippage_env:BatchedSlippageEnv"),
     TaskSpec("SurgSim/PalpationPress-v0", "surgsim_envs.envs.palpation_press:PalpationPressEnv",
              "surgsim_envs.envs.palpation_press:PalpationPressConfig", scene="palpation", tool="probe",
-             model="mass_spring", force_tolerance=ForceTolerance(0.1, why=_PALPATION_WHY),
+             model="fem_static", force_tolerance=ForceTolerance(0.1, why=_PALPATION_WHY),
              max_episode_steps=25, policy="palpation_press_v0.npz", quick={"spacing": 0.02},
              expert="surgsim_envs.envs.palpation_press:press_expert"),
     TaskSpec("SurgSim/LayeredPalpation-v0", "surgsim_envs.envs.layered_palpation:LayeredPalpationEnv",
