@@ -83,11 +83,11 @@ def test_quasi_static_fem_at_5mm_reads_the_reference_within_the_task_tolerance_w
     ref = _reference_forces()
     probes = ta.PROBE_SETS[TASK][0]
     inc = probes.inclusions[0]
-    env = ta._make(TASK, "fem_static", 0.005, material=tr.elastic(ta.task_material(TASK)))
+    env = ta.make_task_env(TASK, "fem_static", 0.005, material=tr.elastic(ta.task_material(TASK)))
     try:
-        presser = ta._Presser(env, probes.hold)
+        presser = ta.Presser(env, probes.hold)
         over = presser.press(inc, inc.position, 0.005)
-        mirror = presser.press(inc, ta._mirror(inc.position), 0.005)
+        mirror = presser.press(inc, ta.mirror(inc.position), 0.005)
     finally:
         env.close()
     assert over == pytest.approx(ref["0/over/5mm"], rel=tol)

@@ -116,7 +116,7 @@ def test_extrapolate_states_last_change_order_and_convergence_per_press():
 def test_reference_presses_in_the_task_scene_rise_with_depth_and_feel_the_lump():
     """One coarse reference row (the coarsest graded lattice: 5 mm at each site): the quasi-static presses rise with
     depth, and a 5x lump raises the force over it above the mirror site's; each site has its own mesh."""
-    row = tr.reference_row("SurgSim/Palpation-v0", PROBES, 0.005, "liver", ta._make)
+    row = tr.reference_row("SurgSim/Palpation-v0", PROBES, 0.005, "liver", ta.make_task_env)
     f = row["forces_N"]
     assert set(row["nodes_by_site"]) == {"0/over", "0/mirror"}
     assert ta.monotone(f, PROBES.depths)
@@ -130,7 +130,7 @@ def test_reference_scene_is_graded_about_the_press_site_with_its_contact_per_are
     import numpy as np
 
     fine, xy = 0.004, (-0.02, 0.0)
-    env = ta._make("SurgSim/Palpation-v0", tr.REFERENCE_MODEL, tr.COARSE_SPACING, material=tr.elastic("liver"))
+    env = ta.make_task_env("SurgSim/Palpation-v0", tr.REFERENCE_MODEL, tr.COARSE_SPACING, material=tr.elastic("liver"))
     try:
         n = tr.graded_scene(env, xy, fine, 0.007)
         x = env.sim.tissue().positions

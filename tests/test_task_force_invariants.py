@@ -386,7 +386,7 @@ def graded_press_forces(fines, depths, material, xy=(-0.02, 0.0)) -> list:
     from surgsim_envs.bench import task_reference as tr
 
     inc = ta.PALPATION_FULL.inclusions[0]
-    env = ta._make(TASK, tr.REFERENCE_MODEL, tr.COARSE_SPACING, material=material)
+    env = ta.make_task_env(TASK, tr.REFERENCE_MODEL, tr.COARSE_SPACING, material=material)
     out = []
     try:
         for fine in fines:

@@ -46,7 +46,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from surgsim_envs.bench import probe_sets, task_reference
-from surgsim_envs.bench.probe_set import Inclusion, ProbeSet, mirror as _mirror
+from surgsim_envs.bench.probe_set import Inclusion, ProbeSet, mirror
 from surgsim_envs.errors import ConfigError
 
 
@@ -87,7 +87,9 @@ PROBE_SETS.update({task: (d.FULL, d.QUICK) for task, d in probe_sets.DRIVERS.ite
 FORCE_TOLERANCES.update({task: _declared(task) for task in probe_sets.DRIVERS})
 
 
-def _make(task: str, model: str, spacing: float, material=None, dt: float | None = None):
+def make_task_env(task: str, model: str, spacing: float, material=None, dt: float | None = None):
+    """``task`` (unwrapped) built with ``model`` at lattice ``spacing`` (m), optionally its ``material`` and
+    physics step ``dt`` (s)."""
     import gymnasium as gym
 
     import surgsim_envs.envs  # noqa: F401  (registers the tasks)
@@ -100,7 +102,7 @@ def _make(task: str, model: str, spacing: float, material=None, dt: float | None
     return gym.make(task, disable_env_checker=True, **kwargs).unwrapped
 
 
-class _Presser:
+class Presser:
     """Drives the probe of a palpation env's scene: each press from a fresh reset."""
 
     def __init__(self, env, hold: float):
@@ -171,15 +173,15 @@ def measure(task: str, model: str, spacing: float, probes: ProbeSet, dt: float |
     head = {"task": task, "model": model, "spacing": float(spacing)}
     material = task_reference.elastic(task_material(task))
     try:
-        env = _make(task, model, spacing, material=material, dt=dt)
+        env = make_task_env(task, model, spacing, material=material, dt=dt)
     except ConfigError as exc:
         return {**head, "refused": str(exc).split("\n")[0]}
-    presser = _Presser(env, probes.hold)
+    presser = Presser(env, probes.hold)
     forces = {}
     try:
         for i, inc in enumerate(probes.inclusions):
             for site in ("over", "mirror"):
-                xy = inc.position if site == "over" else _mirror(inc.position)
+                xy = inc.position if site == "over" else mirror(inc.position)
                 for depth in probes.depths:
                     forces[f"{i}/{site}/{depth * 1e3:g}mm"] = presser.press(inc, xy, depth)
     except TissueUnstableError as exc:
@@ -192,8 +194,8 @@ def measure(task: str, model: str, spacing: float, probes: ProbeSet, dt: float |
     env.close()
     # frictionless, elastic path independence at the middle depth over the first inclusion
     try:
-        flat = _make(task, model, spacing, material=_frictionless(material), dt=dt)
-        p = _Presser(flat, probes.hold)
+        flat = make_task_env(task, model, spacing, material=_frictionless(material), dt=dt)
+        p = Presser(flat, probes.hold)
         inc, depth = probes.inclusions[0], probes.depths[len(probes.depths) // 2]
         straight = p.press(inc, inc.position, depth)
         slid = p.press(inc, inc.position, depth, approach=(inc.position[0] - 0.006, inc.position[1]))
