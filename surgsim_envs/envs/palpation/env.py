@@ -1,6 +1,7 @@
 """SurgSim/Palpation-v0: find a hidden stiff inclusion in a tissue slab with a probe.
 
-A liver slab (default 10 x 10 x 2 cm, bed fixed, mass-spring, 10 mm lattice: 363 nodes; or
+A liver slab (default 10 x 10 x 2 cm, bed fixed, quasi-static FEM ``fem_static`` on a 5 mm lattice:
+2,205 nodes, the cheapest setting within the task's 10 % force tolerance, docs/task_accuracy.md; or
 ``resolution`` = a spacing in m / "auto", see :class:`PalpationConfig`) hides a
 spherical inclusion of random position, radius and stiffness contrast. The agent moves a
 spherical-tip probe and presses; every control step with the tip deeper than ``press_min_depth``
@@ -85,7 +86,7 @@ class PalpationEnv(SurgSimEnv):
         t.resolution, t.error_tolerance, t.step_budget_us = c.resolution, c.error_tolerance, c.step_budget_us
         t.material = c.material
         t.model = c.model
-        # the probe tip (10 mm) presses about one lattice spacing of surface: a concentrated load, so the
+        # the probe tip (10 mm) presses a few lattice spacings of surface at most: a concentrated load, so the
         # model is built with the options it declares for one (``TissueModel.point_load_options``; a model
         # from outside the package may not declare any)
         t.options = {**tissue_options(c.model, c.integrator),
