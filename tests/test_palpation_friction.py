@@ -35,3 +35,18 @@ def test_friction_raises_the_press_force_as_much_as_in_the_reference(presses):
         ours = presses[0.5][press] / presses[0.0][press]
         assert ref_rise > 1.1                                   # the effect is real in the reference
         assert ours == pytest.approx(ref_rise, rel=tol), f"{press}: x{ours:.3f} with friction, reference x{ref_rise:.3f}"
+
+
+def test_a_pressed_slide_lowers_the_force_as_much_as_in_the_reference():
+    """Straight down to 5 mm over the lump, then the same pose reached by pressing 8 mm beside it and
+    sliding in: the reference reads about 31 % less after the slide (the surface under the tip keeps
+    the tractions the slide dragged in); the default must show the same drop within the task's
+    tolerance of the force."""
+    tol = task_spec(pf.TASK).force_tolerance.value
+    ref = pf.reference()
+    level = ref["slide"][ref["finest"]]
+    straight, slid = pf.model_slide_forces(PalpationConfig.model, None)
+    ref_ratio = level["slid"] / level["straight"]
+    assert ref_ratio < 0.8                                      # the history effect is real in the reference
+    assert slid / straight == pytest.approx(ref_ratio, rel=tol), (
+        f"slid / straight {slid / straight:.3f}, reference {ref_ratio:.3f}")

@@ -12,7 +12,13 @@ The slab is 2 cm thick, bonded to its bed, and nearly incompressible (nu 0.45); 
 the 10 mm tip has a contact radius near the thickness. Friction holds the surface under the tip
 from sliding outwards, and a thin bonded near-incompressible layer that cannot spread sideways is
 much stiffer: the reference reads 13-50 % more force with mu 0.5 than frictionless (the friction
-effect on a half-space is under 1 %, docs/contact.md). Units: m, N.
+effect on a half-space is under 1 %, docs/contact.md).
+
+The history of a press (:func:`slide_forces`): the same 5 mm press over the lump reached straight
+down and by pressing :data:`SLIDE` m beside it (-x) and sliding in at depth. With friction the
+surface under the tip is dragged along and keeps tangential tractions, so the reference reads
+about 30 % less after the slide (its fine region widened to cover the slide); frictionless, the
+two agree. Units: m, N.
 """
 
 from __future__ import annotations
@@ -25,6 +31,9 @@ TASK = "SurgSim/Palpation-v0"
 DATA_FILE = "palpation_friction_reference.json"
 #: the fine spacings of the reference's frictionless runs (m): two of the table's levels
 FINE = (0.002 / 2 ** 0.5, 0.001)
+#: m, the pressed slide of :func:`slide_forces`, and its press depth
+SLIDE = 0.008
+SLIDE_DEPTH = 0.005
 
 
 def probe_set():
@@ -68,6 +77,51 @@ def press_forces(model: str, spacing: float | None, friction: float) -> dict[str
     return out
 
 
+def slide_forces(env) -> tuple[float, float]:
+    """(straight, slid) F_z (N) of the 5 mm press over the first lump in ``env`` (Palpation-v0,
+    unwrapped, already built): straight down, then pressed :data:`SLIDE` m to the -x side and slid in."""
+    from surgsim_envs.bench import task_accuracy as ta
+
+    probes = probe_set()
+    inc = probes.inclusions[0]
+    presser = ta.Presser(env, probes.hold)
+    straight = presser.press(inc, inc.position, SLIDE_DEPTH)
+    slid = presser.press(inc, inc.position, SLIDE_DEPTH, approach=(inc.position[0] - SLIDE, inc.position[1]))
+    return straight, slid
+
+
+def model_slide_forces(model: str, spacing: float | None, friction: float = 0.5) -> tuple[float, float]:
+    """:func:`slide_forces` in Palpation-v0 built with ``model`` at ``spacing`` (m; None: the task's),
+    the liver elastic with tool friction ``friction``."""
+    import gymnasium as gym
+
+    import surgsim_envs.envs  # noqa: F401
+
+    kwargs = {"model": model, "material": {"preset": "liver", "friction": float(friction), "relax_fraction": 0.0}}
+    if spacing is not None:
+        kwargs["resolution"] = float(spacing)
+    env = gym.make(TASK, disable_env_checker=True, **kwargs).unwrapped
+    try:
+        return slide_forces(env)
+    finally:
+        env.close()
+
+
+def reference_slide_forces(fine: float, friction: float = 0.5) -> tuple[float, float]:
+    """:func:`slide_forces` on the reference's lattice graded about the lump's site at ``fine`` m, its
+    fine region widened by :data:`SLIDE` in x."""
+    from surgsim_envs.bench import task_accuracy as ta
+    from surgsim_envs.bench import task_reference as tr
+
+    env = ta.make_task_env(TASK, tr.REFERENCE_MODEL, tr.COARSE_SPACING,
+                           material={"preset": "liver", "friction": float(friction), "relax_fraction": 0.0})
+    try:
+        tr.graded_scene(env, probe_set().inclusions[0].position, fine, SLIDE_DEPTH, widen=(SLIDE, 0.0))
+        return slide_forces(env)
+    finally:
+        env.close()
+
+
 def main(argv=None) -> int:
     from surgsim_envs.bench import task_accuracy as ta
     from surgsim_envs.bench import task_reference as tr
@@ -86,6 +140,11 @@ def main(argv=None) -> int:
         out["friction"][repr(fine)] = {k: ref["forces_by_spacing"][level][k] for k in row["forces_N"]}
         out["seconds"][repr(fine)] = row["seconds"]
         print(f"{fine * 1e3:.3g} mm: {row['seconds']:.0f} s", flush=True)
+    out["slide"] = {}
+    for fine in (0.002,) + FINE:
+        straight, slid = reference_slide_forces(fine)
+        out["slide"][repr(fine)] = {"straight": straight, "slid": slid}
+        print(f"slide at {fine * 1e3:.3g} mm: {straight:.4f} -> {slid:.4f} N", flush=True)
     out["finest"] = repr(FINE[-1])
     with open(args.out, "w") as fh:
         json.dump(out, fh, indent=1)

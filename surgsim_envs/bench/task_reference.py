@@ -108,11 +108,17 @@ def fine_half_widths(tip_radius: float, deepest: float) -> tuple[float, float, f
     return (r, r, FINE_DEPTH)
 
 
-def graded_scene(env, xy, fine: float, deepest: float) -> int:
+def _widened(half_widths, widen) -> tuple[float, float, float]:
+    x, y, z = half_widths
+    return (x + float(widen[0]), y + float(widen[1]), z)
+
+
+def graded_scene(env, xy, fine: float, deepest: float, widen: tuple[float, float] = (0.0, 0.0)) -> int:
     """Rebuild ``env.sim`` from its own scene config on a lattice graded about the press site
     ``xy`` (m; spacing ``fine`` m there, :data:`COARSE_SPACING` away from it) with the reference's
     contact (stiffness per area :data:`CONTACT_STIFFNESS_PER_AREA`, :data:`SURFACE_SUBDIVISIONS`) and
-    model options. Returns the node count."""
+    model options; ``widen`` (m, x and y) widens the fine region on both sides of the site (a press
+    that slides in from that far). Returns the node count."""
     from surgsim_envs.scene import Simulation, build_scene
 
     cfg = copy.deepcopy(env.sim.scene.config)
@@ -121,7 +127,7 @@ def graded_scene(env, xy, fine: float, deepest: float) -> int:
     tissue.spacing = COARSE_SPACING
     tissue.volume_options = {**dict(tissue.volume_options), "grading": {
         "fine": float(fine), "around": (float(xy[0]), float(xy[1]), top), "ratio": GROWTH,
-        "half_widths": fine_half_widths(env.config.tip_radius, deepest)}}
+        "half_widths": _widened(fine_half_widths(env.config.tip_radius, deepest), widen)}}
     tissue.options = {**dict(tissue.options), **REFERENCE_OPTIONS}
     cfg.contact.stiffness = CONTACT_STIFFNESS_PER_AREA * float(fine) ** 2   # per area of the fine cells
     cfg.contact.stiffness_per_area = None            # (the graded lattice's median edge is not h_f)
