@@ -173,3 +173,16 @@ def test_rescore_recomputes_every_model_error_from_stored_forces_against_a_new_r
     assert out["rows"][0]["forces_N"] == row["forces_N"]
     with pytest.raises(ConfigError, match="has no probe set"):
         ta.rescore(table, ["SurgSim/PalpationPress-v0"], progress=lambda s: None)
+
+
+def test_converged_reference_runs_the_reference_at_each_spacing_and_states_its_change():
+    """The CLI's reference path end to end on two coarse levels: every press gets a force at each
+    level, and the last change is stated (not asserted small: two coarse levels)."""
+    probes = ta.ProbeSet(inclusions=PROBES.inclusions, depths=(0.004,), hold=0.3, spacings=(),
+                         reference_spacings=(0.005, 0.004))
+    ref = ta.converged_reference("SurgSim/Palpation-v0", probes, progress=lambda text: None)
+    keys = {"0/over/4mm", "0/mirror/4mm"}
+    assert set(ref["forces_N"]) == keys
+    assert [len(f) for f in ref["forces_by_spacing"]] == [2, 2]
+    assert ref["forces_N"]["0/over/4mm"] > ref["forces_N"]["0/mirror/4mm"] > 0.0   # the lump is felt
+    assert 0.0 <= ref["last_refinement_change"] < 1.0

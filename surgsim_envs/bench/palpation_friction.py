@@ -64,17 +64,10 @@ def press_forces(model: str, spacing: float | None, friction: float) -> dict[str
     if spacing is not None:
         kwargs["resolution"] = float(spacing)
     env = gym.make(TASK, disable_env_checker=True, **kwargs).unwrapped
-    presser = ta.Presser(env, probes.hold)
-    out = {}
     try:
-        inc = probes.inclusions[0]
-        for site in ("over", "mirror"):
-            xy = inc.position if site == "over" else ta.mirror(inc.position)
-            for depth in probes.depths:
-                out[f"0/{site}/{depth * 1e3:g}mm"] = presser.press(inc, xy, depth)
+        return ta.Presser(env, probes.hold).press_all(probes)
     finally:
         env.close()
-    return out
 
 
 def slide_forces(env) -> tuple[float, float]:

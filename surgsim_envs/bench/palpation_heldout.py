@@ -53,17 +53,10 @@ def press_forces(model: str, spacing: float | None = None, **options) -> dict[st
     if spacing is not None:
         kwargs["resolution"] = float(spacing)
     env = gym.make(TASK, disable_env_checker=True, **kwargs).unwrapped
-    presser = ta.Presser(env, HELDOUT.hold)
-    out = {}
     try:
-        for i, inc in enumerate(HELDOUT.inclusions):
-            for site in ("over", "mirror"):
-                xy = inc.position if site == "over" else ta.mirror(inc.position)
-                for depth in HELDOUT.depths:
-                    out[f"{i}/{site}/{depth * 1e3:g}mm"] = presser.press(inc, xy, depth)
+        return ta.Presser(env, HELDOUT.hold).press_all(HELDOUT)
     finally:
         env.close()
-    return out
 
 
 def main(argv=None) -> int:

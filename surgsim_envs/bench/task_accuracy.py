@@ -149,6 +149,22 @@ class Presser:
         self._go([xy[0], xy[1], self.hover])              # retract: a tensile pull would show here
         return force
 
+    def press_all(self, probes: ProbeSet) -> dict[str, float]:
+        """Every press of ``probes``: over each inclusion and at its mirror site, at each depth, each
+        from a fresh reset; ``{press_key: N}``."""
+        forces = {}
+        for i, inc in enumerate(probes.inclusions):
+            for site in ("over", "mirror"):
+                xy = inc.position if site == "over" else mirror(inc.position)
+                for depth in probes.depths:
+                    forces[press_key(i, site, depth)] = self.press(inc, xy, depth)
+        return forces
+
+
+def press_key(inclusion_index: int, site: str, depth: float) -> str:
+    """The name of a press in a row's ``forces_N``: "0/over/5mm"."""
+    return f"{inclusion_index}/{site}/{depth * 1e3:g}mm"
+
 
 def task_material(task: str):
     """The material a task builds its tissue from by default (its config's ``material``)."""
@@ -177,13 +193,8 @@ def measure(task: str, model: str, spacing: float, probes: ProbeSet, dt: float |
     except ConfigError as exc:
         return {**head, "refused": str(exc).split("\n")[0]}
     presser = Presser(env, probes.hold)
-    forces = {}
     try:
-        for i, inc in enumerate(probes.inclusions):
-            for site in ("over", "mirror"):
-                xy = inc.position if site == "over" else mirror(inc.position)
-                for depth in probes.depths:
-                    forces[f"{i}/{site}/{depth * 1e3:g}mm"] = presser.press(inc, xy, depth)
+        forces = presser.press_all(probes)
     except TissueUnstableError as exc:
         env.close()
         return {**head, "refused": "unstable in the task's scene: " + str(exc).split("\n")[0]}
@@ -253,7 +264,7 @@ def converged_reference(task: str, probes: ProbeSet, progress: Callable[[str], N
     rows = []
     for spacing in probes.reference_spacings:
         progress(f"reference {task_reference.REFERENCE_MODEL} at {spacing * 1e3:.3g} mm")
-        rows.append(task_reference.reference_row(task, probes, spacing, material, _make) if driver is None
+        rows.append(task_reference.reference_row(task, probes, spacing, material, make_task_env) if driver is None
                     else driver.reference_row(task, probes, spacing))
     out = task_reference.extrapolate(rows)
     if driver is not None:
