@@ -80,6 +80,31 @@ def find_loaded(forces, kc, held, out):
 
 
 @njit(cache=True, nogil=True)
+def hereditary_shift(g, decay, gamma, hist, u_step, out):
+    """``out`` (3N,) = s of equation (4): g (decay H - gamma u_n), in place (the numpy expression's
+    operation order, so the result is the same to the bit)."""
+    for i in range(out.shape[0]):
+        out[i] = g * (decay * hist[i] - gamma * u_step[i])
+
+
+@njit(cache=True, nogil=True)
+def hereditary_base_displacement(w0, s, c, out):
+    """``out`` (3N,) = (w0 - s) / c: u0 of the hereditary step (equation (4)), in place."""
+    for i in range(out.shape[0]):
+        out[i] = (w0[i] - s[i]) / c
+
+
+@njit(cache=True, nogil=True)
+def hereditary_advance(u, decay, gamma, hist, u_step):
+    """After a step: H <- decay H + gamma (u - u_n), then u_n <- u (equation (4)), in place, in the
+    numpy expression's operation order."""
+    for i in range(u.shape[0]):
+        h = hist[i] * decay
+        hist[i] = h + gamma * (u[i] - u_step[i])
+        u_step[i] = u[i]
+
+
+@njit(cache=True, nogil=True)
 def commit_positions(u, rest, positions, velocities, dt):
     """positions = rest + u (u (3N,) m), velocities = finite difference over ``dt`` s, in place."""
     for i in range(rest.shape[0]):
@@ -162,6 +187,9 @@ class QuasiStaticFEMModel(TetFEMModel):
         self._u0_stale = True
         self._hist = np.zeros(3 * n)           # H of equation (4), m
         self._u_step = np.zeros(3 * n)         # u at the end of the last step (equation (4)'s u_n), m
+        self._shift_buf = np.zeros(3 * n)      # s of equation (4), m (rewritten every step)
+        self._u0_buf = np.zeros(3 * n)         # u0 of the hereditary step, m (rewritten every step)
+        self._branch_key, self._branch_value = None, (1.0, 1.0)
         self._wd_key = None                    # Dirichlet targets of the cached elastic response (equation (4))
         self.last_loaded = 0
         self._loaded_buf = np.zeros(n, dtype=np.int64)
@@ -259,6 +287,13 @@ class QuasiStaticFEMModel(TetFEMModel):
         u = comp.solve(np.where(comp.free, load, 0.0)) if (np.any(uc) or np.any(self.gravity)) else np.zeros(uc.shape)
         return u + uc
 
+    def _branch(self, dt: float, tau: float) -> tuple[float, float]:
+        """(decay, gamma) of equation (4) for a step of ``dt`` s, kept while dt and tau stay the same."""
+        if self._branch_key != (dt, tau):
+            decay_a, gamma_a = visc.branch_coefficients(dt, np.array([tau]))
+            self._branch_key, self._branch_value = (dt, tau), (float(decay_a[0]), float(gamma_a[0]))
+        return self._branch_value
+
     def _hereditary_base(self, c: float, s: np.ndarray) -> np.ndarray:
         """w0 (3N,) of equation (4): K0's equilibrium under gravity with the Dirichlet dofs at
         ``c u_D + s_D`` (cached while those stay the same, e.g. nodes held at rest)."""
@@ -280,13 +315,14 @@ class QuasiStaticFEMModel(TetFEMModel):
         c, s, decay, gamma = 1.0, None, 1.0, 1.0
         if self.hereditary is not None:               # equation (4): w = c u + s solves (1)
             g, tau = self.hereditary
-            decay_a, gamma_a = visc.branch_coefficients(dt, np.array([tau]))
-            decay, gamma = float(decay_a[0]), float(gamma_a[0])
+            decay, gamma = self._branch(dt, tau)
             c = 1.0 - g + g * gamma
             # u_n is the last step's own result: Dirichlet targets moved since (set_fixed) enter the
             # hereditary integral over this step, as a ramp, like every other displacement
-            s = g * (decay * self._hist - gamma * self._u_step)
-            u0 = (self._hereditary_base(c, s) - s) / c
+            s = self._shift_buf
+            hereditary_shift(g, decay, gamma, self._hist, self._u_step, s)
+            u0 = self._u0_buf
+            hereditary_base_displacement(self._hereditary_base(c, s), s, c, u0)
         held = self.fixed
         if stiffness is not None:
             kc = np.asarray(stiffness, dtype=np.float64)
@@ -316,9 +352,7 @@ class QuasiStaticFEMModel(TetFEMModel):
             comp.response(slots, (g_a / c if c != 1.0 else g_a).reshape(-1, 3), u)
             self.integrated_external_forces[loaded] = g_a.reshape(-1, 3)
         if s is not None:
-            self._hist *= decay
-            self._hist += gamma * (u - self._u_step)
-            self._u_step[:] = u
+            hereditary_advance(u, decay, gamma, self._hist, self._u_step)
         commit_positions(u, self.rest_positions, self.positions, self.velocities, dt)
         self.external_forces = forces
 
