@@ -187,6 +187,14 @@ def check_explicit_step(tissue, dt: float, what: str) -> None:
                           "lower the stiffness ranges or dt, or use integrator 'auto'")
 
 
+def check_contact_stiffness_per_area(value, what: str) -> None:
+    """ConfigError unless ``value`` is None (the scene's stiffness per node), "auto" or a stiffness per
+    unit surface area in N/m^3 (:func:`surgsim_envs.scene.contact_options.stiffness_per_area_for`)."""
+    if value is None or (isinstance(value, str) and value == "auto"):
+        return
+    validate.positive(value, what, unit="N/m^3", hi=1e13, fix="'auto', None (200 N/m per node) or e.g. 1e8")
+
+
 def check_on_unstable(value, what: str) -> None:
     """``on_unstable`` must be "raise" (default) or "terminate" (see the module docstring)."""
     if value not in ("raise", "terminate"):

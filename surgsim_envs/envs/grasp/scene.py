@@ -17,9 +17,9 @@ import numpy as np
 
 from surgsim_envs.envs.base import SurgSimEnv
 from surgsim_envs import validate
-from surgsim_envs.envs.checks import (check_control_rate, check_explicit_step, check_integrator, check_on_unstable,
-                                     check_positive, check_range, check_render_size, check_task_resolution,
-                                     require_capabilities, sample)
+from surgsim_envs.envs.checks import (check_contact_stiffness_per_area, check_control_rate, check_explicit_step,
+                                     check_integrator, check_on_unstable, check_positive, check_range,
+                                     check_render_size, check_task_resolution, require_capabilities, sample)
 from surgsim_envs.envs.grasp.simulation import build_grasp_simulation, check_grasp_organ, organ_key
 from surgsim_envs.envs.grasp.terms import SlipTracker
 from surgsim_envs.errors import ConfigError
@@ -44,6 +44,10 @@ class GraspSceneConfig:
     step_budget_us: float = 5_000.0    # resolution="auto": compute limit, us per simulated ms
     on_unstable: str = "raise"         # "terminate": a tissue divergence ends the episode (info["unstable"])
     closing_speed: float = 0.03        # m/s, jaw rate limit
+    # N/m^3, jaw-tissue contact stiffness per unit surface area: "auto" = 1e8 for quasi-static tissue
+    # models (their equilibrium solve takes it at any spacing), the scene's 200 N/m per node for the
+    # others (what an explicit step keeps stable); None = always per node (ContactConfig.stiffness_per_area)
+    contact_stiffness_per_area: Any = "auto"
     mu: Sequence[float] = (0.6, 1.0)                 # tool-tissue Coulomb friction (kinetic)
     static_friction_ratio: float = 1.0  # static friction mu_s = ratio * mu (>= 1; 1 = one coefficient)
     young_scale: Sequence[float] = (0.8, 1.2)        # organ Young's modulus scale
@@ -60,6 +64,7 @@ class GraspSceneConfig:
         check_control_rate(self, what)
         check_task_resolution(self, what)
         check_on_unstable(self.on_unstable, what)
+        check_contact_stiffness_per_area(self.contact_stiffness_per_area, f"{what}.contact_stiffness_per_area")
         check_integrator(self, what)
         check_render_size(self, what)
         n = self.tissue_subcycles
@@ -123,7 +128,8 @@ class GraspSceneEnv(SurgSimEnv):
                                                        c.error_tolerance, c.step_budget_us, model=c.model,
                                                        integrator=c.integrator, material=c.material,
                                                        max_young_scale=check_range(c.young_scale, "young_scale")[1],
-                                                       tissue_subcycles=resolved_subcycles(c))
+                                                       tissue_subcycles=resolved_subcycles(c),
+                                                       contact_stiffness_per_area=c.contact_stiffness_per_area)
             self.sim = self._sims[key]
             self._select_tool()
             self._on_new_simulation(self.sim)

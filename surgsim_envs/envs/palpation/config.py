@@ -8,7 +8,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from surgsim_envs import validate
-from surgsim_envs.envs.checks import (check_control_rate, check_integrator, check_on_unstable, check_positive,
+from surgsim_envs.envs.checks import (check_contact_stiffness_per_area, check_control_rate, check_integrator,
+                                     check_on_unstable, check_positive,
                                      check_range, check_render_size, check_task_length, check_task_resolution,
                                      check_weights)
 from surgsim_envs.errors import ConfigError
@@ -104,9 +105,7 @@ class PalpationConfig:
                          fix="a count of press sites, e.g. 25")
         check_task_resolution(self, "PalpationConfig")
         check_on_unstable(self.on_unstable, "PalpationConfig")
-        if self.contact_stiffness_per_area is not None and self.contact_stiffness_per_area != "auto":
-            validate.positive(self.contact_stiffness_per_area, "PalpationConfig.contact_stiffness_per_area",
-                              unit="N/m^3", hi=1e13, fix="'auto', None (200 N/m per node) or e.g. 1e8")
+        check_contact_stiffness_per_area(self.contact_stiffness_per_area, "PalpationConfig.contact_stiffness_per_area")
         if not (isinstance(self.map_cells, (int, np.integer)) and 1 <= self.map_cells <= 20):
             raise ConfigError(f"PalpationConfig.map_cells={self.map_cells!r} must be an integer in [1, 20]")
         validate.integer(self.report_hold_steps, "PalpationConfig.report_hold_steps", lo=1,
