@@ -26,3 +26,12 @@ def test_cli_reports_a_task_without_a_batched_env(capsys):
     pytest.importorskip("warp")
     assert main(["bench", "batch", "--task", "SurgSim/PalpationPress-v0", "--worlds", "1"]) == 2
     assert "--task 'SurgSim/PalpationPress-v0' has no batched env; choose one of ['SurgSim/Grasp-v0'" in capsys.readouterr().err
+
+
+def test_cli_reports_bad_outputs(capsys):
+    pytest.importorskip("warp")
+    assert main(["bench", "batch", "--outputs", "host,gpu", "--worlds", "1"]) == 2
+    assert "--outputs: 'gpu' is not one of ['host', 'device']; give e.g. host,device" in capsys.readouterr().err
+    assert main(["bench", "batch", "--task", "SurgSim/Grasp-v0", "--outputs", "device", "--worlds", "1"]) == 2
+    assert "--outputs device: SurgSim/Grasp-v0's batched env computes its observations and rewards on the host" \
+        in capsys.readouterr().err

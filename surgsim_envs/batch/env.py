@@ -21,7 +21,9 @@ A task's batched env is one small module on this base (``batch/palpation_env.py`
   the same functions, in the declared order, not a second copy of their arithmetic;
 * :meth:`device_arrays`: the physics arrays on the device (Warp arrays: ``__dlpack__``,
   ``wp.to_torch``, ``wp.to_jax`` share them without copies). Observations and rewards come back
-  as numpy arrays.
+  as numpy arrays, unless the task computes them on the device (``DEVICE_OUTPUTS``) and the env
+  is built with ``device_outputs=True``: then ``step`` and ``reset`` return Warp arrays on the
+  device (the task's ``_device_step``; Palpation-v0 only, docs/batch.md).
 
 A task module supplies ``TEMPLATE`` (the single env's class), ``_reset_worlds``,
 ``_apply_actions``, ``_evaluate``, ``_observe`` and ``_reset_info`` (and ``_physics`` where its
@@ -58,11 +60,21 @@ class BatchedTaskEnv(VectorEnv):
     #: config fields the batched worlds take when neither ``config`` nor an override sets them: the
     #: model (and lattice) the batched kernels step, where the single env defaults to another
     BATCHED_DEFAULTS: ClassVar[dict[str, Any]] = {}
+    #: the task computes its observations, rewards and terms on the device (``device_outputs=True``)
+    DEVICE_OUTPUTS: ClassVar[bool] = False
 
     def __init__(self, num_envs: int = 1, *, device: str = "cpu", config=None, max_episode_steps: int | None = None,
-                 **overrides):
+                 device_outputs: bool = False, **overrides):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ConfigError(f"num_envs={num_envs!r} must be a positive integer (batched worlds)")
+        if not isinstance(device_outputs, (bool, np.bool_)):
+            raise ConfigError(f"device_outputs={device_outputs!r} must be True (observations, rewards and terms as "
+                              "Warp arrays on the device) or False (numpy arrays, the default)")
+        if device_outputs and not self.DEVICE_OUTPUTS:
+            raise ConfigError(f"device_outputs=True: {type(self).__name__} computes its observations and rewards on "
+                              "the host (numpy); only BatchedPalpationEnv (SurgSim/Palpation-v0) computes them on "
+                              "the device. Leave device_outputs out for this task")
+        self.device_outputs = bool(device_outputs)
         if config is None:
             overrides = {**self.BATCHED_DEFAULTS, **overrides}
         self.template = self.TEMPLATE(config=config, render_mode=None, **overrides)
@@ -141,7 +153,37 @@ class BatchedTaskEnv(VectorEnv):
         self._autoreset[:] = False
         return self._observe(), self._reset_info(idx)
 
+    def _device_step(self, a: np.ndarray, live: np.ndarray, unstable: np.ndarray):
+        """The rest of :meth:`step` (evaluation, autoreset, observation) on the device, for a task
+        with ``DEVICE_OUTPUTS``: ``(obs, rewards, terminated, truncated, info)`` as device arrays."""
+        raise NotImplementedError
+
     def step(self, actions):
+        a, live, unstable = self._advance(actions)
+        if self.device_outputs:
+            return self._device_step(a, live, unstable)
+        rewards, terminated, truncated, info = self._evaluate(a, live & ~unstable)
+        if unstable.any():
+            terminated |= unstable
+            info["unstable"], info["_unstable"] = unstable.copy(), unstable.copy()
+        done_before = np.flatnonzero(self._autoreset)
+        if len(done_before):
+            self._reset_worlds(done_before, {})
+            rewards[done_before] = 0.0
+            terminated[done_before] = False
+            truncated[done_before] = False
+            for key, value in self._reset_info(done_before).items():    # their rows: the new episode's
+                if key in info and np.shape(info[key]) == np.shape(value):
+                    info[key] = np.array(info[key])
+                    info[key][done_before] = np.asarray(value)[done_before]
+        self._autoreset = terminated | truncated
+        info["steps"] = self._steps.copy()          # control steps of each world's episode (0: just reset)
+        return self._observe(), rewards, terminated, truncated, info
+
+    def _advance(self, actions):
+        """The step up to the task's evaluation: checked, clipped actions (W, A) float64, the task's
+        commands for the live worlds, the physics, the step counts, the diverged worlds reset;
+        returns ``(actions, live, unstable)`` (W,) masks."""
         c, W = self.config, self.num_envs
         shape = (W,) + self.single_action_space.shape
         a = np.asarray(actions, dtype=np.float64)
@@ -161,23 +203,7 @@ class BatchedTaskEnv(VectorEnv):
                 self.sim.check_stable()
             unstable[bad] = True          # as the single env: the episode ends, the world restarts from rest
             self._reset_worlds(bad, {})
-        rewards, terminated, truncated, info = self._evaluate(a, live & ~unstable)
-        if unstable.any():
-            terminated |= unstable
-            info["unstable"], info["_unstable"] = unstable.copy(), unstable.copy()
-        done_before = np.flatnonzero(self._autoreset)
-        if len(done_before):
-            self._reset_worlds(done_before, {})
-            rewards[done_before] = 0.0
-            terminated[done_before] = False
-            truncated[done_before] = False
-            for key, value in self._reset_info(done_before).items():    # their rows: the new episode's
-                if key in info and np.shape(info[key]) == np.shape(value):
-                    info[key] = np.array(info[key])
-                    info[key][done_before] = np.asarray(value)[done_before]
-        self._autoreset = terminated | truncated
-        info["steps"] = self._steps.copy()          # control steps of each world's episode (0: just reset)
-        return self._observe(), rewards, terminated, truncated, info
+        return a, live, unstable
 
     def _term_loop(self, live: np.ndarray, view_of) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """(reward (W,), {term name: (W,) weighted values}) of the single env's declared reward terms,

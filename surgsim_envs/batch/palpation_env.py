@@ -18,6 +18,19 @@ stiffness contrast and Young's scale, drawn from each world's own generator (the
 world i of ``reset(seed=s)`` has the inclusion of ``gym.make("SurgSim/Palpation-v0").reset(seed=s + i)``);
 they enter the tissue as per-tet Young's factors (:meth:`BatchSimulation.set_young_factors`).
 Autoreset, diverged worlds and the device arrays: the base's.
+
+``device_outputs=True`` (``gym.make_vec(..., device="cpu", device_outputs=True)``) moves the
+per-step bookkeeping, observation and reward terms onto the Warp device: the kernels of
+:mod:`surgsim_envs.batch.palpation_kernels` on the state of
+:class:`~surgsim_envs.batch.palpation_device_terms.PalpationDeviceTerms`, one thread per world,
+the same arithmetic as the numpy path. ``step`` and ``reset`` then return observations (W, D)
+float32, rewards (W,) float64, terminated and truncated (W,) bool as fresh Warp arrays on the
+device (``__dlpack__``: ``torch.from_dlpack``, ``jax.dlpack.from_dlpack``, ``np.from_dlpack`` share
+them), and ``info``'s ``reward_terms``, ``final_reward``, ``force_N``,
+``stiffness_estimate_N_per_m``, ``peak_force_N``, ``steps``, ``localisation_error_m``,
+``success`` / ``is_success`` (with their ``_`` masks, the worlds whose episode ended this step;
+present every step) as device arrays too. The reset info (the inclusions drawn on the host) and
+``info["unstable"]`` (a diverged world, found on the host) stay numpy.
 """
 
 from __future__ import annotations
@@ -28,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from surgsim_envs.batch.env import BatchedTaskEnv
+from surgsim_envs.batch.palpation_device_terms import PalpationDeviceTerms
 from surgsim_envs.envs.checks import sample
 from surgsim_envs.envs.palpation import (PalpationEnv, is_new_site, localisation_error,
                                          localisation_reward, map_cell, stiffness_map,
@@ -74,10 +88,12 @@ class BatchedPalpationEnv(BatchedTaskEnv):
     #: quasi-static FEM at 5 mm (a factorised stiffness per world is not batched yet), so a batch
     #: builds the task on the 10 mm mass_spring lattice unless told otherwise (docs/batch.md)
     BATCHED_DEFAULTS = {"model": "mass_spring", "spacing": 0.01}
+    DEVICE_OUTPUTS = True
 
     def __init__(self, num_envs: int = 1, *, device: str = "cpu", config=None, max_episode_steps: int | None = None,
-                 **overrides):
-        super().__init__(num_envs, device=device, config=config, max_episode_steps=max_episode_steps, **overrides)
+                 device_outputs: bool = False, **overrides):
+        super().__init__(num_envs, device=device, config=config, max_episode_steps=max_episode_steps,
+                         device_outputs=device_outputs, **overrides)
         W, c = self.num_envs, self.config
         self.surface_z = self.template.surface_z
         self.home = np.array(self.template.home, dtype=np.float64)
@@ -90,6 +106,8 @@ class BatchedPalpationEnv(BatchedTaskEnv):
         self._prev_tip = np.tile(self.home, (W, 1))
         self._report_held = np.zeros(W, dtype=np.int64)
         self._peak = np.zeros(W)
+        self._device_terms = (PalpationDeviceTerms(self.sim, c, self.rewards.terms, self.surface_z, self.control_dt,
+                                                   self.max_episode_steps) if self.device_outputs else None)
 
     def _reset_worlds(self, idx: np.ndarray, options: dict[str, Any]) -> None:
         """Randomise and reset worlds ``idx`` as the single env's reset does (same draws, same order)."""
@@ -126,6 +144,8 @@ class BatchedPalpationEnv(BatchedTaskEnv):
         self._report_held[idx] = 0
         self._peak[idx] = 0.0
         self._readings = None
+        if self._device_terms is not None:
+            self._device_terms.reset(idx, np.array([self._tasks[w].inclusion["centre"][:2] for w in idx]))
 
     # -- stepping ---------------------------------------------------------------------------------
     def _apply_actions(self, a: np.ndarray, live: np.ndarray) -> None:
@@ -224,7 +244,27 @@ class BatchedPalpationEnv(BatchedTaskEnv):
         return localisation_reward(task.error, c.localisation_scale, c.tolerance_mm * 1e-3, c.localisation_weight,
                                    c.success_bonus)
 
-    def _observe(self) -> np.ndarray:
+    def _device_step(self, a: np.ndarray, live: np.ndarray, unstable: np.ndarray):
+        terms = self._device_terms
+        out, done = terms.evaluate(a, live & ~unstable, unstable & live)    # as the base: an autoreset world is not terminated
+        done_before = np.flatnonzero(self._autoreset)
+        if len(done_before):                  # not live this step: reward 0, not terminated nor truncated
+            self._reset_worlds(done_before, {})
+        self._autoreset = done
+        obs, steps = terms.observe()
+        ended = out["ended"]
+        info = {"reward_terms": {name: out["terms"][j] for j, name in enumerate(self.reward_term_names)},
+                "final_reward": out["final"], "force_N": out["force_N"],
+                "stiffness_estimate_N_per_m": out["stiffness"], "peak_force_N": out["peak"], "steps": steps,
+                "localisation_error_m": out["error"], "_localisation_error_m": ended,
+                "success": out["success"], "_success": ended, "is_success": out["success"], "_is_success": ended}
+        if unstable.any():
+            info["unstable"], info["_unstable"] = unstable.copy(), unstable.copy()
+        return obs, out["reward"], out["terminated"], out["truncated"], info
+
+    def _observe(self):
+        if self._device_terms is not None:
+            return self._device_terms.observe()[0]
         pos, force, depth = self._read()
         obs = self._obs
         obs[:, 0:3] = pos

@@ -8,6 +8,9 @@ Warp step2; timed with the device synchronised after each phase, in a
 separate run), and the memory of the batched state per tissue node-world (the backend's arrays,
 and with MuJoCo Warp's data). Medians over ``--repeats``; the load average is recorded.
 Warp's CPU device runs kernels on one thread: CPU figures are for checking, not for speed.
+``--outputs host,device`` measures each world count twice in the same process: the task's
+bookkeeping, observations and rewards on the host in numpy (``host``, the default) and on the
+device (``device``: the env built with ``device_outputs=True``; Palpation-v0 only).
 Writes batch_speed.json, batch_speed.md (the table) and batch_speed.png (the chart) to ``--out``.
 """
 
@@ -26,6 +29,7 @@ from surgsim_envs.errors import ConfigError
 
 PHASES = ("rate_limit", "mujoco_warp.step1", "contact", "tissue", "reaction", "mujoco_warp.step2")
 MAX_WORLDS = 1 << 20
+OUTPUTS = ("host", "device")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,6 +39,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--worlds", default="1,256,4096", help="comma-separated world counts (default 1,256,4096)")
     parser.add_argument("--steps", type=int, default=3, help="env steps per timed run (default 3)")
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per figure; medians reported (default 3)")
+    parser.add_argument("--outputs", default="host",
+                        help="where the task's observations and rewards are computed: host (numpy, default), "
+                             "device (device_outputs=True; Palpation-v0), or host,device for both")
     parser.add_argument("--json", action="store_true", help="print the results as JSON instead of the table")
     parser.add_argument("--out", default="surgsim-out/bench_batch", help="output directory")
 
@@ -50,6 +57,17 @@ def parse_worlds(text: str) -> list[int]:
         if not 1 <= w <= MAX_WORLDS:
             raise ConfigError(f"--worlds: {w} must lie in [1, {MAX_WORLDS}]")
         out.append(w)
+    return out
+
+
+def parse_outputs(text: str) -> list[str]:
+    """Output modes from "host,device" (ConfigError naming the bad entry)."""
+    out = []
+    for part in str(text).split(","):
+        if part not in OUTPUTS:
+            raise ConfigError(f"--outputs: {part!r} is not one of {list(OUTPUTS)}; give e.g. host,device")
+        if part not in out:
+            out.append(part)
     return out
 
 
@@ -77,12 +95,14 @@ def batched_task(task: str) -> str:
     return BATCHED[task]
 
 
-def measure(device: str, worlds: int, steps: int, repeats: int, task: str = "SurgSim/Palpation-v0") -> dict:
-    """The figures of one world count (module docstring)."""
+def measure(device: str, worlds: int, steps: int, repeats: int, task: str = "SurgSim/Palpation-v0",
+            outputs: str = "host") -> dict:
+    """The figures of one world count (module docstring); ``outputs``: "host" or "device"
+    (the env's ``device_outputs``)."""
     import warp as wp
     from gymnasium.envs.registration import load_env_creator
 
-    env = load_env_creator(batched_task(task))(worlds, device=device)
+    env = load_env_creator(batched_task(task))(worlds, device=device, device_outputs=outputs == "device")
     sim = env.sim
     rng = np.random.default_rng(0)
     shape = (worlds,) + env.single_action_space.shape
@@ -111,7 +131,7 @@ def measure(device: str, worlds: int, steps: int, repeats: int, task: str = "Sur
     node_worlds = worlds * sim.topology.n_nodes
     backend = sum(mem.values())
     with_mjw = backend + _data_bytes(sim.tools.data)
-    out = {"task": task, "worlds": worlds, "nodes": sim.topology.n_nodes, "springs": sim.topology.n_springs,
+    out = {"task": task, "worlds": worlds, "outputs": outputs, "nodes": sim.topology.n_nodes, "springs": sim.topology.n_springs,
            "tets": sim.topology.n_tets, "substeps": env.substeps,
            "env_steps_per_s": statistics.median(env_rates), "physics_world_steps_per_s": statistics.median(phys_rates),
            "physics_node_steps_per_s": statistics.median(phys_rates) * sim.topology.n_nodes,
@@ -123,12 +143,13 @@ def measure(device: str, worlds: int, steps: int, repeats: int, task: str = "Sur
 
 
 def _table(rows: list[dict], device: str) -> str:
-    head = ("| worlds | env steps/s | physics world-steps/s | node-steps/s | B per node-world (with MJW) | "
+    head = ("| worlds | outputs | env steps/s | physics world-steps/s | node-steps/s | B per node-world (with MJW) | "
             + " | ".join(PHASES) + " |")
-    lines = [head, "|" + "---|" * (5 + len(PHASES))]
+    lines = [head, "|" + "---|" * (6 + len(PHASES))]
     for r in rows:
         shares = " | ".join(f"{100 * r['phase_share'][p]:.0f} %" for p in PHASES)
-        lines.append(f"| {r['worlds']} | {r['env_steps_per_s']:,.0f} | {r['physics_world_steps_per_s']:,.0f} | "
+        lines.append(f"| {r['worlds']} | {r.get('outputs', 'host')} | {r['env_steps_per_s']:,.0f} | "
+                     f"{r['physics_world_steps_per_s']:,.0f} | "
                      f"{r['physics_node_steps_per_s']:.3g} | {r['bytes_per_node_world']:.0f} "
                      f"({r['bytes_per_node_world_with_mujoco_warp']:.0f}) | {shares} |")
     return "\n".join(lines)
@@ -140,9 +161,14 @@ def _chart(rows: list[dict], path: str, device: str, task: str = "SurgSim/Palpat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    w = [r["worlds"] for r in rows]
+    modes = list(dict.fromkeys(r.get("outputs", "host") for r in rows))
+    by_mode = {m: [r for r in rows if r.get("outputs", "host") == m] for m in modes}
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
-    a1.loglog(w, [r["env_steps_per_s"] for r in rows], "o-", label=f"{task.split('/')[-1]} env steps/s")
+    for mode, mine in by_mode.items():
+        a1.loglog([r["worlds"] for r in mine], [r["env_steps_per_s"] for r in mine], "o-",
+                  label=f"{task.split('/')[-1]} env steps/s ({mode} outputs)")
+    rows = by_mode[modes[0]]            # the physics and its phases: the same in every mode, shown once
+    w = [r["worlds"] for r in rows]
     a1.loglog(w, [r["physics_world_steps_per_s"] for r in rows], "s-", label="physics world-steps/s")
     a1.set_xlabel("worlds")
     a1.set_ylabel("per second")
@@ -168,27 +194,39 @@ def run(args: argparse.Namespace) -> int:
     worlds = parse_worlds(args.worlds)
     validate.integer(args.steps, "--steps", lo=1, hi=100_000, fix="env steps per timed run, e.g. 3")
     validate.integer(args.repeats, "--repeats", lo=1, hi=1000, fix="e.g. 3")
+    outputs = parse_outputs(args.outputs)
     device = device_name(args.device)
-    batched_task(args.task)
+    env_class = batched_task(args.task)
+    if "device" in outputs:
+        from gymnasium.envs.registration import load_env_creator
+
+        if not getattr(load_env_creator(env_class), "DEVICE_OUTPUTS", False):
+            raise ConfigError(f"--outputs device: {args.task}'s batched env computes its observations and rewards on "
+                              "the host; only SurgSim/Palpation-v0 has device outputs. Use --outputs host")
+    load_before = os.getloadavg()
     rows = []
     for w in worlds:
-        print(f"bench batch: {args.task}, {w} worlds on {device} ...", file=sys.stderr)
-        rows.append(measure(device, w, args.steps, args.repeats, args.task))
+        for mode in outputs:
+            print(f"bench batch: {args.task}, {w} worlds on {device}, {mode} outputs ...", file=sys.stderr)
+            rows.append(measure(device, w, args.steps, args.repeats, args.task, mode))
     load = os.getloadavg()
-    result = {"task": args.task, "device": device, "load_average": load, "steps": args.steps, "repeats": args.repeats, "rows": rows,
+    result = {"task": args.task, "device": device, "load_average": load, "load_average_before": load_before,
+              "steps": args.steps, "repeats": args.repeats, "rows": rows,
               "note": "Warp's CPU device runs each kernel on one thread" if device == "cpu" else ""}
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "batch_speed.json"), "w") as fh:
         json.dump(result, fh, indent=1)
     table = _table(rows, device)
     with open(os.path.join(args.out, "batch_speed.md"), "w") as fh:
-        fh.write(f"{args.task}: device {device}, load average {load[0]:.2f}; medians over {args.repeats} runs of {args.steps} env steps\n\n"
+        fh.write(f"{args.task}: device {device}, load average {load_before[0]:.2f} before, {load[0]:.2f} after; "
+                 f"medians over {args.repeats} runs of {args.steps} env steps\n\n"
                  + table + "\n")
     _chart(rows, os.path.join(args.out, "batch_speed.png"), device, args.task)
     if args.json:
         print(json.dumps(result, indent=1))
     else:
         print(table)
-        print(f"device {device} (Warp CPU kernels are single-threaded), load average {load[0]:.2f}; "
+        print(f"device {device} (Warp CPU kernels are single-threaded), load average {load_before[0]:.2f} before, "
+              f"{load[0]:.2f} after; "
               f"wrote {args.out}/batch_speed.{{json,md,png}}")
     return 0
