@@ -303,3 +303,11 @@ def test_pardiso_solver_gives_the_superlu_step_and_refuses_by_name_when_absent(m
         _block(solver="pardiso")[0].compliance()
     with pytest.raises(ConfigError, match="solver='cholmod' is not one of"):
         _block(solver="cholmod")
+
+
+def test_the_guard_takes_a_jump_up_to_max_jump_in_one_step_and_no_more():
+    from surgsim_envs.tissue.guard import StabilityGuard
+
+    assert StabilityGuard().speed_limit(1e-3) == 20.0
+    guard = StabilityGuard(max_jump=0.1)
+    assert guard.speed_limit(1e-3) == pytest.approx(100.0) and guard.speed_limit(1.0) == 20.0

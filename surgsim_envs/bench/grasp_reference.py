@@ -64,6 +64,7 @@ def reference_simulation(env, spacing: float):
     tissue.spacing = tissue.resolution = float(spacing)
     tissue.options = {**dict(tissue.options), **REFERENCE_OPTIONS}
     cfg.contact.stiffness = CONTACT_STIFFNESS_PER_AREA * float(spacing) ** 2
+    cfg.contact.stiffness_per_area = None            # the task's "auto" would scale by the median edge instead
     cfg.contact.tangential_stiffness = None          # = the normal one
     cfg.contact.surface_samples = None
     return Simulation(build_scene(cfg), dt=sim.dt, substeps=sim.substeps, tissue_subcycles=sim.tissue_subcycles)

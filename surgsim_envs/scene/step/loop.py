@@ -332,7 +332,7 @@ class SubstepsRunner:
         clock, counts, e = self._clock, self._counts, self._energy
         clock[0] = tissue.time
         counts[0], counts[1], counts[2] = tissue.steps, sim.steps, 0
-        max_speed2 = float(guard.max_speed) ** 2
+        max_speed2 = guard.speed_limit(dt) ** 2
         check_every = guard.check_every
         n = sim.tissue_subcycles
         auto_on = tissue.integrator == "auto"
