@@ -32,6 +32,8 @@ def test_cli_reports_bad_outputs(capsys):
     pytest.importorskip("warp")
     assert main(["bench", "batch", "--outputs", "host,gpu", "--worlds", "1"]) == 2
     assert "--outputs: 'gpu' is not one of ['host', 'device']; give e.g. host,device" in capsys.readouterr().err
-    assert main(["bench", "batch", "--task", "SurgSim/Grasp-v0", "--outputs", "device", "--worlds", "1"]) == 2
-    assert "--outputs device: SurgSim/Grasp-v0's batched env computes its observations and rewards on the host" \
-        in capsys.readouterr().err
+    assert main(["bench", "batch", "--task", "SurgSim/Slippage-v0", "--outputs", "device", "--worlds", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "--outputs device: SurgSim/Slippage-v0's batched env computes its observations and rewards on the host" \
+        in err
+    assert "only SurgSim/Palpation-v0 and SurgSim/Grasp-v0 have device outputs. Use --outputs host" in err

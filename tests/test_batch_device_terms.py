@@ -161,9 +161,9 @@ def test_device_outputs_refused_where_not_computed_on_the_device():
 
     from surgsim_envs.errors import ConfigError
 
-    with pytest.raises(ConfigError, match=r"device_outputs=True: BatchedGraspEnv computes its observations and "
+    with pytest.raises(ConfigError, match=r"device_outputs=True: BatchedSlippageEnv computes its observations and "
                                           r"rewards on the host .* Leave device_outputs out"):
-        gym.make_vec("SurgSim/Grasp-v0", num_envs=2, vectorization_mode="vector_entry_point", device="cpu",
+        gym.make_vec("SurgSim/Slippage-v0", num_envs=2, vectorization_mode="vector_entry_point", device="cpu",
                      device_outputs=True)
     with pytest.raises(ConfigError, match=r"device_outputs='yes' must be True .* or False"):
         gym.make_vec("SurgSim/Palpation-v0", num_envs=2, vectorization_mode="vector_entry_point", device="cpu",

@@ -20,6 +20,17 @@ Per-world randomisation as the single env's ``reset``: friction coefficient (kin
 (:meth:`BatchSimulation.set_young_factors`) and the target offsets, drawn in the single env's order
 from each world's generator. The ``organ`` option changes the mesh, and a batch holds one mesh, so it
 is refused at reset; choose the organ in the config (``organ=...`` at construction).
+
+``device_outputs=True`` (``gym.make_vec(..., device="cpu", device_outputs=True)``) moves the
+per-step bookkeeping (grasp, slip tracker, progress record, success, drop), observation and reward
+terms onto the Warp device: the kernels of :mod:`surgsim_envs.batch.grasp_kernels` on the state
+of :class:`~surgsim_envs.batch.grasp_device_terms.GraspDeviceTerms`, one thread per world, the same
+arithmetic as the numpy path. ``step`` and ``reset`` then return observations (W, 15) float32,
+rewards (W,) float64, terminated and truncated (W,) bool as fresh Warp arrays on the device, and
+the info entries (``reward_terms``, ``steps``, ``grasped``, ``distance_to_target_m``,
+``success`` / ``is_success``, ``dropped``, ``mu``, ``mu_static``, ``young_scale``,
+``slip_distance_m``, ``peak_force_N``) as device arrays too; ``info["unstable"]`` (a diverged
+world, found on the host) stays numpy.
 """
 
 from __future__ import annotations
@@ -29,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from surgsim_envs.batch.env import BatchedTaskEnv
+from surgsim_envs.batch.grasp_device_terms import GraspDeviceTerms
 from surgsim_envs.envs.checks import sample
 from surgsim_envs.envs.grasp import GraspEnv
 from surgsim_envs.envs.grasp.terms import SlipTracker, is_grasped, record_progress, total_normal_force
@@ -64,12 +76,14 @@ class BatchedGraspEnv(BatchedTaskEnv):
     """
 
     TEMPLATE = GraspEnv
+    DEVICE_OUTPUTS = True
     REFUSED = {"organ": "it changes the tissue mesh and a batch holds one mesh for all worlds; build the batched "
                         "env with the organ in its config (gym.make_vec(..., organ=...)) instead"}
 
     def __init__(self, num_envs: int = 1, *, device: str = "cpu", config=None, max_episode_steps: int | None = None,
-                 **overrides):
-        super().__init__(num_envs, device=device, config=config, max_episode_steps=max_episode_steps, **overrides)
+                 device_outputs: bool = False, **overrides):
+        super().__init__(num_envs, device=device, config=config, max_episode_steps=max_episode_steps,
+                         device_outputs=device_outputs, **overrides)
         t = self.template
         self.tool_name = t.tool_name
         self.home = np.array(t.home, dtype=np.float64)
@@ -81,6 +95,9 @@ class BatchedGraspEnv(BatchedTaskEnv):
         self._worlds = [_GraspWorld() for _ in range(W)]
         self._target = np.tile(self.home, (W, 1))
         self._mask = None
+        self._device_terms = (GraspDeviceTerms(self.sim, self.config, self.rewards.terms, t.tool, self.tool_name,
+                                               self.max_episode_steps) if self.device_outputs else None)
+        self._device_metrics = None
 
     # -- episodes ---------------------------------------------------------------------------------
     def _reset_worlds(self, idx: np.ndarray, options: dict[str, Any]) -> None:
@@ -105,8 +122,14 @@ class BatchedGraspEnv(BatchedTaskEnv):
         self._target[idx] = self.home
         self._steps[idx] = 0
         self._readings = None
+        if self._device_terms is not None:
+            ws = [self._worlds[w] for w in idx]
+            self._device_terms.reset(idx, np.array([wd.goal for wd in ws]), np.array([wd.goal_dist0 for wd in ws]),
+                                     mu, scale)
 
     def _reset_info(self, idx) -> dict:
+        if self._device_terms is not None:
+            return {k: v for k, v in self._device_metrics.items() if k != "steps"}
         return self._metrics()
 
     # -- stepping ---------------------------------------------------------------------------------
@@ -209,7 +232,28 @@ class BatchedGraspEnv(BatchedTaskEnv):
                 "slip_distance_m": np.array([wd.slip_distance for wd in ws]),
                 "peak_force_N": np.array([wd.peak_force for wd in ws])}
 
-    def _observe(self) -> np.ndarray:
+    def _device_step(self, a: np.ndarray, live: np.ndarray, unstable: np.ndarray):
+        terms = self._device_terms
+        out, done = terms.evaluate(live & ~unstable, unstable & live)    # as the base: an autoreset world is not terminated
+        done_before = np.flatnonzero(self._autoreset)
+        if len(done_before):                  # not live this step: reward 0, not terminated nor truncated
+            self._reset_worlds(done_before, {})
+        self._autoreset = done
+        obs = self._observe()                 # after the resets: their metrics rows are the new episode's
+        info = {k: v for k, v in self._device_metrics.items() if k != "steps"}
+        info.update({"reward_terms": {name: out["terms"][j] for j, name in enumerate(self.reward_term_names)},
+                     "steps": self._device_metrics["steps"], "grasped": out["grasped"],
+                     "distance_to_target_m": out["distance"], "success": out["success"],
+                     "is_success": out["success"], "dropped": out["dropped"]})
+        if unstable.any():
+            info["unstable"], info["_unstable"] = unstable.copy(), unstable.copy()
+        return obs, out["reward"], out["terminated"], out["truncated"], info
+
+    def _observe(self):
+        if self._device_terms is not None:
+            obs, metrics = self._device_terms.observe()
+            self._device_metrics = metrics
+            return obs
         pos, fn, ft, rep, opening = self._read()
         obs = self._obs
         obs[:, 0:3] = pos

@@ -15,10 +15,9 @@ computes on the host in numpy (its default), with the same arithmetic in the sam
 Reproducing numpy's results bit for bit (the module compiles without floating-point contraction,
 ``fuse_fp=False``): ``np.hypot`` is glibc's (:func:`glibc_hypot`); ``w.sum()`` of a 1-D array is
 numpy's pairwise summation (:func:`pairwise_sum`, blocks of 128 with 8 accumulators);
-``(w[:, None] * xy).sum(axis=0)`` sums in order; ``np.einsum("ij,ij->i", f, f)`` of a row of 3
-is ``(f0 f0 + f2 f2) + f1 f1`` (its SIMD lanes, x86-64) and ``v.dot(v)`` (BLAS) is
-``(f0 f0 + f1 f1) + f2 f2``; ``np.median`` is the middle of a per-world sorted buffer (the mean
-of the two middle values for an even count). The one operation not reproduced: ``x ** 3.0`` of
+``(w[:, None] * xy).sum(axis=0)`` sums in order; the force norms take ``np.einsum``'s and BLAS's
+orders (:mod:`surgsim_envs.batch.device_reductions`); ``np.median`` is the middle of a per-world
+sorted buffer (the mean of the two middle values for an even count). The one operation not reproduced: ``x ** 3.0`` of
 an array, which numpy computes with its own SIMD ``pow`` on AVX-512 hosts (up to 1 ulp from the C
 library's ``pow``, which the kernels call); the estimate built from those weights, and what
 follows from it (potential, shaping, localisation error and reward), can differ in the last bits.
@@ -27,6 +26,8 @@ follows from it (potential, shaping, localisation error and reward), can differ 
 from __future__ import annotations
 
 import warp as wp
+
+from surgsim_envs.batch.device_reductions import dot_norm, einsum_norm
 
 wp.set_module_options({"fuse_fp": False})
 
@@ -77,18 +78,6 @@ def glibc_hypot(x: wp.float64, y: wp.float64) -> wp.float64:
     if ay <= ax * eps:
         return ax + ay
     return _hypot_kernel(ax, ay)
-
-
-@wp.func
-def einsum_norm(v: wp.vec3d) -> wp.float64:
-    """sqrt of ``np.einsum("ij,ij->i", f, f)`` of one row of 3 (x86-64 SIMD order)."""
-    return wp.sqrt((v[0] * v[0] + v[2] * v[2]) + v[1] * v[1])
-
-
-@wp.func
-def dot_norm(v: wp.vec3d) -> wp.float64:
-    """``vector_norm``: sqrt of ``v.dot(v)`` (BLAS, in order)."""
-    return wp.sqrt((v[0] * v[0] + v[1] * v[1]) + v[2] * v[2])
 
 
 @wp.func

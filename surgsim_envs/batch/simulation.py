@@ -663,16 +663,29 @@ class BatchSimulation:
         ids), as the CPU contact result's ``geom_normal_force`` / ``geom_tangential_force``: the sum
         of the normal magnitudes of each geom's contact points and the magnitude of their summed
         friction force, in the last tissue step (one thread per (world, geom): ``geom_sums``)."""
+        rows = self.geom_columns(geom_ids)
+        geom_fn, geom_ft = self.geom_sum_arrays()
+        return geom_fn.numpy()[:, rows].copy(), geom_ft.numpy()[:, rows].copy()
+
+    def geom_columns(self, geom_ids) -> list[int]:
+        """The columns of the tool geoms ``geom_ids`` (MuJoCo ids) in the per-geom arrays of
+        :meth:`geom_sum_arrays` (ConfigError for a geom that is not a tool contact geom)."""
         rows = []
         for g in np.asarray(geom_ids, dtype=np.int64).reshape(-1).tolist():
             if g not in self.geom_ids:
                 raise ConfigError(f"geom {g} is not a tool contact geom of this batch; tool geoms: {self.geom_ids}")
             rows.append(self.geom_ids.index(g))
+        return rows
+
+    def geom_sum_arrays(self):
+        """(normal (W, G), tangential (W, G)) float64 device arrays, N: every tool geom's sums of the
+        last tissue step (``geom_sums``, computed now; columns :meth:`geom_columns`). The arrays are
+        the batch's own, rewritten by the next call: copy what must be kept."""
         c, wp = self.contact, self._wp
         with wp.ScopedDevice(self.device):
             wp.launch(ck.geom_sums, dim=(self.W, len(self.geom_ids)),
                       inputs=[c.point_fn, c.point_ft, c.point_depth, c.geom_fn, c.geom_ft])
-        return c.geom_fn.numpy()[:, rows].copy(), c.geom_ft.numpy()[:, rows].copy()
+        return c.geom_fn, c.geom_ft
 
     def jaw_forces(self, name: str) -> dict[str, np.ndarray]:
         """Per world, the per-jaw contact forces of grasper ``name``, as :meth:`Simulation.jaw_forces`:
