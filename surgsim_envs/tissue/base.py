@@ -184,6 +184,11 @@ class TissueModel(abc.ABC):
         if fixed is not None:
             self.set_fixed(fixed)
         self.guard = guard or StabilityGuard()
+        if "quasi_static" in self.capabilities and self.guard.max_jump is None:
+            # no inertia: released (a grasp that lets go), the body springs back to its new equilibrium
+            # within one step, whatever dt; a jump beyond the body's own size is a divergence
+            span = self.rest_positions.max(axis=0) - self.rest_positions.min(axis=0)
+            self.guard.max_jump = float(np.linalg.norm(span))
         self.positions = self.rest_positions.copy()
         self.velocities = np.zeros_like(self.positions)
         self.external_forces = np.zeros_like(self.positions)

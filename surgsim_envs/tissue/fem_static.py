@@ -170,18 +170,11 @@ class QuasiStaticFEMModel(TetFEMModel):
             # a linear solve with a factorised SPD stiffness cannot diverge: an inverted element means
             # the load is beyond small strain (an accuracy limit, see inverted_elements()), not an
             # instability, so the guard checks only non-finite states and speeds
-            # (and its energy check, which evaluates the elastic energy, runs every 100 steps); a node may
-            # jump up to the body's size in one step: released (a grasp that lets go), the body springs
-            # back to its new equilibrium within one step, which no inertia spreads over time
+            # (and its energy check, which evaluates the elastic energy, runs every 100 steps); as for every
+            # quasi-static model, a node may jump up to the body's size in one step (TissueModel)
             base_kwargs["guard"] = StabilityGuard(check_inversion=False, check_every=100)
-            own_guard = True
-        else:
-            own_guard = False
         super().__init__(volume, material, integrator=integrator, corotational=False, formulation=formulation,
                          **base_kwargs)
-        if own_guard:
-            rest = self.rest_positions
-            self.guard.max_jump = float(np.linalg.norm(rest.max(axis=0) - rest.min(axis=0)))
         n = self.n_nodes
         self.fixed_dofs = np.zeros((n, 3), dtype=bool)
         if fixed_dofs is not None:
