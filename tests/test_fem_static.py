@@ -311,3 +311,49 @@ def test_the_guard_takes_a_jump_up_to_max_jump_in_one_step_and_no_more():
     assert StabilityGuard().speed_limit(1e-3) == 20.0
     guard = StabilityGuard(max_jump=0.1)
     assert guard.speed_limit(1e-3) == pytest.approx(100.0) and guard.speed_limit(1.0) == 20.0
+
+
+def test_single_axis_compliance_matches_the_full_block_at_a_third_of_the_columns():
+    model, bottom = _block()
+    top = np.flatnonzero(np.isclose(model.rest_positions[:, 2], 0.02))[:6]
+    w, u0 = model.compliance_block(top, axis=2)
+    assert model.compliance().columns_computed == len(top)            # one column per node, not three
+    w3, u03 = _block()[0].compliance_block(top)
+    np.testing.assert_allclose(w, w3[2::3, 2::3], rtol=1e-10, atol=1e-12 * np.abs(w3).max())
+    np.testing.assert_allclose(u0, u03[2::3], rtol=0, atol=1e-15)
+    f = -np.linspace(0.1, 0.6, len(top))                              # N, pressing down
+    axial = model.apply_axial_forces(top, f, 2)
+    other = _block()[0]
+    full = np.zeros((len(top), 3))
+    full[:, 2] = f
+    nodal = other.apply_nodal_forces(top, full)
+    np.testing.assert_allclose(axial, nodal, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(model.integrated_external_forces[top], full)
+    # and the reference: a sparse solve of the whole body under the same forces
+    rhs = np.zeros_like(model.rest_positions)
+    rhs[top, 2] = f
+    held = np.repeat(bottom[:, None], 3, axis=1)
+    u = _full_solve(model, held, rhs, np.zeros(model.n_nodes))
+    np.testing.assert_allclose(axial - model.rest_positions, u, rtol=0, atol=1e-9 * np.abs(u).max())
+    with pytest.raises(ConfigError, match="axis"):
+        model.compliance_block(top, axis=3)
+    with pytest.raises(ConfigError, match=r"finite \(6,\) array"):
+        model.apply_axial_forces(top, np.zeros((6, 3)), 2)
+
+
+def test_single_axis_columns_are_evicted_least_recently_used_and_stay_exact():
+    vol = box_volume((0.04, 0.04, 0.02), 0.005, center=(0.0, 0.0, 0.01))
+    X = vol.nodes
+    bottom = np.isclose(X[:, 2], 0.0)
+    small = 72.0 * len(X) * 2 / 1e6                       # 2 nodes' 3-columns: 6 single-axis columns
+    model = registry.get("fem_static")(vol, ELASTIC, fixed=bottom, cache_mb=small)
+    top = np.flatnonzero(np.isclose(X[:, 2], 0.02))
+    held = np.repeat(bottom[:, None], 3, axis=1)
+    for nodes in (top[:4], top[10:14], top[:4]):             # 4 + 4 + 4 nodes through a 6-node cache
+        f = -0.01 * np.ones(len(nodes))
+        model.apply_axial_forces(nodes, f, 2)
+        rhs = np.zeros_like(X)
+        rhs[nodes, 2] = f
+        ref = _full_solve(model, held, rhs, np.zeros(len(X)))
+        assert np.abs(model.positions - X - ref).max() <= 1e-9 * np.abs(ref).max()
+    assert model.compliance().columns_computed == 4 + 4 + 2  # the two least recently used of the first four again

@@ -16,7 +16,9 @@ the candidates for any forces on them from its compliance block ``W`` (capabilit
 
     z = Z + u0 - W_zz lambda
 
-so the complementarity problem lives on the candidates alone (a few dozen unknowns): an active-set
+(frictionless, so only the press axis's compliance columns are needed: one back-substitution per
+candidate, not three), so the complementarity problem lives on the candidates alone (a few dozen
+unknowns): an active-set
 iteration pins the candidate set (solve ``W_AA lambda_A = Z_A + u0_A - h_A``), frees the nodes that
 pull the probe and adds the free ones that penetrate it, until neither exists. It starts from the
 nodes whose rest position the sphere covers, so the result does not depend on the probe's path;
@@ -66,7 +68,7 @@ class CompliantUnilateralProbe:
         """Place the sphere away from the tissue (no contact): every node unloaded."""
         self.nodes = np.zeros(0, dtype=np.int64)
         self.lam = np.zeros(0)
-        self.model.apply_nodal_forces(self.nodes, np.zeros((0, 3)))
+        self.model.apply_axial_forces(self.nodes, np.zeros(0), self.axis)
         return self.nodes
 
     def press(self, centre, max_iterations: int = MAX_ACTIVE_SET_ITERATIONS) -> np.ndarray:
@@ -80,9 +82,8 @@ class CompliantUnilateralProbe:
         cand, h = self._footprint(c)
         ax = self.axis
         if len(cand):
-            w, u0 = self.model.compliance_block(cand)
-            w = w[ax::3, ax::3]
-            z_free = self.model.rest_positions[cand, ax] + u0[ax::3]      # no contact force
+            w, u0 = self.model.compliance_block(cand, axis=ax)             # single-axis columns: frictionless
+            z_free = self.model.rest_positions[cand, ax] + u0              # no contact force
         else:
             w, z_free = np.zeros((0, 0)), np.zeros(0)
         pen0 = z_free - h                                                  # > 0: inside the sphere unloaded
@@ -116,9 +117,7 @@ class CompliantUnilateralProbe:
             active = nxt
         self.nodes = cand[active]
         self.lam = lam[active]
-        forces = np.zeros((len(self.nodes), 3))
-        forces[:, ax] = -self.lam                 # the probe pushes the nodes along -axis
-        self.model.apply_nodal_forces(self.nodes, forces)
+        self.model.apply_axial_forces(self.nodes, -self.lam, ax)   # the probe pushes the nodes along -axis
         return self.nodes
 
     def force(self) -> np.ndarray:

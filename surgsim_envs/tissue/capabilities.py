@@ -25,7 +25,8 @@ CAPABILITIES: dict[str, str] = {
     "static_solve": "static_solve(forces) returns equilibrium positions",
     "condensed_compliance": "linear and static: compliance_block(nodes) gives the compliance (3m,3m) m/N of free "
                             "nodes and their unloaded displacement (3m,) m; apply_nodal_forces(nodes, forces) sets "
-                            "the equilibrium under forces (m,3) N on those nodes alone",
+                            "the equilibrium under forces (m,3) N on those nodes alone; compliance_block(nodes, axis=a) and "
+                            "apply_axial_forces(nodes, forces (m,), a) do the same for loads along one axis",
     "unstructured_mesh": "runs on any tet mesh (snapped organ lattices, user meshes), not only on regular "
                          "tensor-product grids",
     "subsurface_stiffness": "the interior carries load: a stiffer region below the surface (an inclusion in the "

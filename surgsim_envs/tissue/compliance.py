@@ -93,6 +93,63 @@ def add_response(cols, slots, g, out):
             out[d] += cols[s, d, 0] * g0 + cols[s, d, 1] * g1 + cols[s, d, 2] * g2
 
 
+@njit(cache=True, nogil=True)
+def gather_axis_block(cols, slots, nodes, axis, out):
+    """``out`` (m,m) = the ``axis`` rows of the dofs of ``nodes`` in their cached single-axis columns
+    ``cols[slots]`` ((capacity, 3N), m/N)."""
+    m = nodes.shape[0]
+    for b in range(m):
+        s = slots[b]
+        for a in range(m):
+            out[a, b] = cols[s, 3 * nodes[a] + axis]
+
+
+@njit(cache=True, nogil=True)
+def add_axis_response(cols, slots, g, out):
+    """``out`` (3N,) += sum_b cols[slots[b]] g[b] (m): the displacement of forces g (m,) N along one axis."""
+    n3 = out.shape[0]
+    for b in range(slots.shape[0]):
+        s = slots[b]
+        gb = g[b]
+        if gb == 0.0:
+            continue
+        for d in range(n3):
+            out[d] += cols[s, d] * gb
+
+
+def free_slots(slot_of: np.ndarray, node_in: np.ndarray, last_used: np.ndarray, nodes: np.ndarray,
+               count: int) -> np.ndarray:
+    """``count`` empty cache slots, evicting the least recently used columns (never those of ``nodes``)
+    where too few are empty; ``slot_of`` (node -> slot) and ``node_in`` (slot -> node) are updated
+    for the evicted ones."""
+    empty = np.flatnonzero(node_in < 0)
+    if len(empty) < count:
+        busy = slot_of[nodes]
+        busy = busy[busy >= 0]
+        order = np.argsort(last_used, kind="stable")
+        order = order[~np.isin(order, busy) & (node_in[order] >= 0)]
+        drop = order[:count - len(empty)]
+        slot_of[node_in[drop]] = -1
+        node_in[drop] = -1
+        empty = np.flatnonzero(node_in < 0)
+    return empty[:count]
+
+
+class AxisColumns:
+    """Cached single-axis compliance columns (the response to a unit force along ``axis`` on one node),
+    least recently used evicted beyond ``capacity`` nodes: a load along one axis only (a frictionless
+    press) needs a third of the back-substitutions of :meth:`CondensedCompliance.slots`."""
+
+    def __init__(self, n_nodes: int, axis: int, capacity: int):
+        self.axis = int(axis)
+        self.capacity = int(capacity)
+        self.cols = np.zeros((self.capacity, 3 * n_nodes))     # zero pages mapped lazily, as the 3-column cache
+        self.slot_of = -np.ones(n_nodes, dtype=np.int64)
+        self.node_in = -np.ones(self.capacity, dtype=np.int64)
+        self.last_used = np.zeros(self.capacity, dtype=np.int64)
+        self.tick = 0
+
+
 class CondensedCompliance:
     """Factorised stiffness ``K`` (3N x 3N, N/m, dof = 3 node + axis) on the dofs where ``free``
     ((3N,) bool) is True, with lazily cached compliance columns of loaded nodes.
@@ -141,6 +198,7 @@ class CondensedCompliance:
         self.last_used = np.zeros(self.capacity, dtype=np.int64)
         self.tick = 0
         self.columns_computed = 0
+        self._axes: dict[int, AxisColumns] = {}        # single-axis column caches, made on first use
 
     def _superlu(self, kff) -> None:
         try:   # K is symmetric: a symmetric ordering keeps the fill of the ANP matrix lower (measured 2x faster)
@@ -169,17 +227,7 @@ class CondensedCompliance:
                               f"({self.capacity} nodes); raise cache_mb")
         missing = nodes[self.slot_of[nodes] < 0]
         if len(missing):
-            empty = np.flatnonzero(self.node_in < 0)
-            if len(empty) < len(missing):        # evict the least recently used, never one of ``nodes``
-                busy = self.slot_of[nodes]
-                busy = busy[busy >= 0]
-                order = np.argsort(self.last_used, kind="stable")
-                order = order[~np.isin(order, busy) & (self.node_in[order] >= 0)]
-                drop = order[:len(missing) - len(empty)]
-                self.slot_of[self.node_in[drop]] = -1
-                self.node_in[drop] = -1
-                empty = np.flatnonzero(self.node_in < 0)
-            use = empty[:len(missing)]
+            use = free_slots(self.slot_of, self.node_in, self.last_used, nodes, len(missing))
             rhs = np.zeros((3 * self.n_nodes, 3 * len(missing)))
             for j in range(3):
                 rhs[3 * missing + j, 3 * np.arange(len(missing)) + j] = 1.0
@@ -191,6 +239,49 @@ class CondensedCompliance:
         s = self.slot_of[nodes]
         self.last_used[s] = self.tick
         return s
+
+    def _axis_cache(self, axis: int) -> AxisColumns:
+        axis = validate.integer(axis, "condensed compliance: axis", lo=0, hi=2, fix="0, 1 or 2 (2 = z)")
+        cache = self._axes.get(axis)
+        if cache is None:
+            cache = self._axes[axis] = AxisColumns(self.n_nodes, axis, 3 * self.capacity)
+        return cache
+
+    def axis_slots(self, nodes: np.ndarray, axis: int) -> np.ndarray:
+        """Slots of ``nodes`` ((m,) int) in the single-axis column cache of ``axis``, computing the missing
+        columns in one multi-rhs solve."""
+        nodes = np.asarray(nodes, dtype=np.int64)
+        c = self._axis_cache(axis)
+        c.tick += 1
+        if len(nodes) > c.capacity:
+            raise ConfigError(f"condensed compliance: {len(nodes)} loaded nodes exceed the axis column cache "
+                              f"({c.capacity} nodes); raise cache_mb")
+        missing = nodes[c.slot_of[nodes] < 0]
+        if len(missing):
+            use = free_slots(c.slot_of, c.node_in, c.last_used, nodes, len(missing))
+            rhs = np.zeros((3 * self.n_nodes, len(missing)))
+            rhs[3 * missing + c.axis, np.arange(len(missing))] = 1.0
+            c.cols[use] = self.solve(rhs).T                   # (m, 3N): response to unit forces along the axis
+            c.node_in[use] = missing
+            c.slot_of[missing] = use
+            self.columns_computed += len(missing)
+        s = c.slot_of[nodes]
+        c.last_used[s] = c.tick
+        return s
+
+    def axis_block(self, nodes: np.ndarray, axis: int, slots: np.ndarray | None = None) -> np.ndarray:
+        """W (m,m) m/N: displacement along ``axis`` of ``nodes`` per unit force along it on them."""
+        nodes = np.asarray(nodes, dtype=np.int64)
+        s = self.axis_slots(nodes, axis) if slots is None else slots
+        out = np.empty((len(nodes), len(nodes)))
+        gather_axis_block(self._axis_cache(axis).cols, s, nodes, int(axis), out)
+        return out
+
+    def axis_response(self, slots: np.ndarray, forces: np.ndarray, axis: int, out: np.ndarray) -> np.ndarray:
+        """``out`` (3N,) += displacement (m) of ``forces`` (m,) N along ``axis`` on the nodes at ``slots``."""
+        add_axis_response(self._axis_cache(axis).cols, np.asarray(slots, dtype=np.int64),
+                          np.ascontiguousarray(forces, dtype=np.float64), out)
+        return out
 
     def block(self, nodes: np.ndarray, slots: np.ndarray | None = None) -> np.ndarray:
         """W_AA (3m,3m) m/N: displacement of the dofs of ``nodes`` per unit force on them."""

@@ -412,10 +412,12 @@ class QuasiStaticFEMModel(TetFEMModel):
                               "single equilibrium; build it with an elastic material (relax_fraction 0) or "
                               "viscoelastic='relaxed'")
 
-    def compliance_block(self, nodes) -> tuple[np.ndarray, np.ndarray]:
+    def compliance_block(self, nodes, axis: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(W, u0) of free ``nodes`` (m,): W (3m, 3m) m/N the displacement of their dofs per unit force
         on them (cached compliance columns), u0 (3m,) m their displacement under the Dirichlet
-        targets and gravity alone. A contact solved on them needs no solve of the whole body."""
+        targets and gravity alone. A contact solved on them needs no solve of the whole body.
+        ``axis`` (0, 1 or 2): only that axis, W (m, m) and u0 (m,), from single-axis columns (a third
+        of the back-substitutions; for loads along that axis, :meth:`apply_axial_forces`)."""
         self._require_elastic("compliance_block")
         idx = self._as_indices(nodes, "compliance_block nodes")
         if np.any(self.fixed[idx]):
@@ -423,8 +425,31 @@ class QuasiStaticFEMModel(TetFEMModel):
                               "pass free nodes only")
         comp = self.compliance()
         u0 = self._base_displacement()
+        if axis is not None:
+            ax = validate.integer(axis, "fem_static.compliance_block axis", lo=0, hi=2, fix="0, 1 or 2 (2 = z)")
+            return comp.axis_block(idx, ax), u0[3 * idx + ax].copy()
         dofs = (3 * idx[:, None] + np.arange(3)).reshape(-1)
         return comp.block(idx, comp.slots(idx)), u0[dofs].copy()
+
+    def apply_axial_forces(self, nodes, forces, axis: int) -> np.ndarray:
+        """:meth:`apply_nodal_forces` for forces (m,) N along ``axis`` only, from single-axis compliance
+        columns (:meth:`compliance_block` with ``axis``). Returns the positions (N,3) m (a copy)."""
+        self._require_elastic("apply_axial_forces")
+        ax = validate.integer(axis, "fem_static.apply_axial_forces axis", lo=0, hi=2, fix="0, 1 or 2 (2 = z)")
+        idx = self._as_indices(nodes, "apply_axial_forces nodes")
+        f = np.asarray(forces, dtype=np.float64)
+        if f.shape != (len(idx),) or not np.all(np.isfinite(f)):
+            raise ConfigError(f"fem_static.apply_axial_forces: forces must be a finite ({len(idx)},) array (N), "
+                              f"got shape {f.shape}")
+        if np.any(self.fixed[idx]):
+            raise ConfigError("fem_static.apply_axial_forces: a fixed node takes no force; pass free nodes only")
+        comp = self.compliance()
+        u = self._base_displacement().copy()
+        if len(idx):
+            comp.axis_response(comp.axis_slots(idx, ax), f, ax, u)
+        full = np.zeros((len(idx), 3))
+        full[:, ax] = f
+        return self._set_static_state(u, idx, full)
 
     def apply_nodal_forces(self, nodes, forces) -> np.ndarray:
         """Set the equilibrium under ``forces`` (m,3) N on free ``nodes`` (m,) alone, plus the Dirichlet
@@ -443,6 +468,10 @@ class QuasiStaticFEMModel(TetFEMModel):
         u = self._base_displacement().copy()
         if len(idx):
             comp.response(comp.slots(idx), f, u)
+        return self._set_static_state(u, idx, f)
+
+    def _set_static_state(self, u: np.ndarray, idx: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """positions = rest + ``u`` (3N,) m at rest (velocities zeroed), forces ``f`` (m,3) N on ``idx``."""
         self.positions = self.rest_positions + u.reshape(-1, 3)
         self.velocities = np.zeros_like(self.positions)
         self.integrated_external_forces[:] = 0.0
