@@ -28,12 +28,19 @@ def test_cli_reports_a_task_without_a_batched_env(capsys):
     assert "--task 'SurgSim/PalpationPress-v0' has no batched env; choose one of ['SurgSim/Grasp-v0'" in capsys.readouterr().err
 
 
-def test_cli_reports_bad_outputs(capsys):
+def test_cli_reports_bad_outputs(capsys, monkeypatch):
     pytest.importorskip("warp")
     assert main(["bench", "batch", "--outputs", "host,gpu", "--worlds", "1"]) == 2
     assert "--outputs: 'gpu' is not one of ['host', 'device']; give e.g. host,device" in capsys.readouterr().err
+    assert main(["bench", "batch", "--outputs", "device,", "--worlds", "1"]) == 2
+    assert "--outputs: '' is not one of ['host', 'device']" in capsys.readouterr().err
+    # every batched task has device outputs; a task env without them is refused with the list of those that do
+    from surgsim_envs.batch.slippage_env import BatchedSlippageEnv
+
+    monkeypatch.setattr(BatchedSlippageEnv, "DEVICE_OUTPUTS", False)
     assert main(["bench", "batch", "--task", "SurgSim/Slippage-v0", "--outputs", "device", "--worlds", "1"]) == 2
     err = capsys.readouterr().err
     assert "--outputs device: SurgSim/Slippage-v0's batched env computes its observations and rewards on the host" \
         in err
-    assert "only SurgSim/Palpation-v0 and SurgSim/Grasp-v0 have device outputs. Use --outputs host" in err
+    assert ("only SurgSim/Palpation-v0, SurgSim/Grasp-v0 and SurgSim/Slippage-v0 have device outputs. Use --outputs "
+            "host") in err

@@ -157,17 +157,35 @@ def test_outputs_are_device_arrays_shared_through_dlpack(rollout):
 
 
 def test_device_outputs_refused_where_not_computed_on_the_device():
+    """Every batched task computes its outputs on the device; a task env without ``DEVICE_OUTPUTS``
+    (a host-only subclass here) is refused before anything is built, and so is a non-bool value."""
     import gymnasium as gym
 
+    from gymnasium.envs.registration import load_env_creator
+
+    from surgsim_envs.batch.slippage_env import BatchedSlippageEnv
+    from surgsim_envs.envs.registry import TASKS
     from surgsim_envs.errors import ConfigError
 
-    with pytest.raises(ConfigError, match=r"device_outputs=True: BatchedSlippageEnv computes its observations and "
-                                          r"rewards on the host .* Leave device_outputs out"):
-        gym.make_vec("SurgSim/Slippage-v0", num_envs=2, vectorization_mode="vector_entry_point", device="cpu",
-                     device_outputs=True)
-    with pytest.raises(ConfigError, match=r"device_outputs='yes' must be True .* or False"):
-        gym.make_vec("SurgSim/Palpation-v0", num_envs=2, vectorization_mode="vector_entry_point", device="cpu",
-                     device_outputs="yes")
+    batched = [spec.batched for spec in TASKS.values() if spec.batched is not None]
+    assert len(batched) == 3
+    for spec in TASKS.values():
+        if spec.batched is not None:
+            assert load_env_creator(spec.batched).DEVICE_OUTPUTS, spec.batched
+
+    class HostOnlySlippage(BatchedSlippageEnv):
+        DEVICE_OUTPUTS = False
+
+    with pytest.raises(ConfigError, match=r"device_outputs=True: HostOnlySlippage computes its observations and "
+                                          r"rewards on the host \(numpy\); only BatchedPalpationEnv "
+                                          r"\(SurgSim/Palpation-v0\), BatchedGraspEnv \(SurgSim/Grasp-v0\) and "
+                                          r"BatchedSlippageEnv \(SurgSim/Slippage-v0\) compute them on the device\. "
+                                          r"Leave device_outputs out"):
+        HostOnlySlippage(2, device="cpu", device_outputs=True)
+    for task in ("SurgSim/Palpation-v0", "SurgSim/Slippage-v0"):
+        with pytest.raises(ConfigError, match=r"device_outputs='yes' must be True .* or False"):
+            gym.make_vec(task, num_envs=2, vectorization_mode="vector_entry_point", device="cpu",
+                         device_outputs="yes")
 
 
 def test_kernel_arithmetic_is_numpys_bit_for_bit():

@@ -23,7 +23,7 @@ A task's batched env is one small module on this base (``batch/palpation_env.py`
   ``wp.to_torch``, ``wp.to_jax`` share them without copies). Observations and rewards come back
   as numpy arrays, unless the task computes them on the device (``DEVICE_OUTPUTS``) and the env
   is built with ``device_outputs=True``: then ``step`` and ``reset`` return Warp arrays on the
-  device (the task's ``_device_step``; Palpation-v0 and Grasp-v0, docs/batch.md).
+  device (the task's ``_device_step``; Palpation-v0, Grasp-v0 and Slippage-v0, docs/batch.md).
 
 A task module supplies ``TEMPLATE`` (the single env's class), ``_reset_worlds``,
 ``_apply_actions``, ``_evaluate``, ``_observe`` and ``_reset_info`` (and ``_physics`` where its
@@ -72,9 +72,9 @@ class BatchedTaskEnv(VectorEnv):
                               "Warp arrays on the device) or False (numpy arrays, the default)")
         if device_outputs and not self.DEVICE_OUTPUTS:
             raise ConfigError(f"device_outputs=True: {type(self).__name__} computes its observations and rewards on "
-                              "the host (numpy); only BatchedPalpationEnv (SurgSim/Palpation-v0) and "
-                              "BatchedGraspEnv (SurgSim/Grasp-v0) compute them on the device. Leave device_outputs "
-                              "out for this task")
+                              "the host (numpy); only BatchedPalpationEnv (SurgSim/Palpation-v0), "
+                              "BatchedGraspEnv (SurgSim/Grasp-v0) and BatchedSlippageEnv (SurgSim/Slippage-v0) "
+                              "compute them on the device. Leave device_outputs out for this task")
         self.device_outputs = bool(device_outputs)
         if config is None:
             overrides = {**self.BATCHED_DEFAULTS, **overrides}

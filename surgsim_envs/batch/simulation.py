@@ -216,11 +216,38 @@ class BatchSimulation:
         if not len(vals):
             return
         wp = self._wp
+        with wp.ScopedDevice(self.device):
+            vals_d = wp.array(np.ascontiguousarray(vals), dtype=wp.float64)
+        self._scheduled_steps(ids, vals_d)
+
+    def step_with_control_array(self, actuators, values) -> None:
+        """:meth:`step_with_controls` with the schedule already on the device: ``values`` a float64
+        Warp array (K, W, A) on this batch's device (e.g. filled by a task's schedule kernel),
+        stepped without a host copy; the caller keeps its values finite."""
+        wp = self._wp
+        ids = self._actuator_ids(actuators)
+        if not isinstance(values, wp.array) or values.dtype != wp.float64 or values.ndim != 3 \
+                or tuple(values.shape[1:]) != (self.W, len(ids)):
+            raise ConfigError(f"values must be a float64 Warp array of shape (steps, {self.W}, {len(ids)}) (MuJoCo "
+                              f"steps, worlds, actuators); got {type(values).__name__} "
+                              f"{getattr(values, 'shape', None)}; give numpy values to step_with_controls instead")
+        if str(values.device) != str(wp.get_device(self.device)):
+            raise ConfigError(f"values are on device {values.device}, the batch on {self.device}; allocate them "
+                              f"on {self.device}")
+        self._scheduled_steps(ids, values)
+
+    def controls_array(self):
+        """(W, nu) float64 device array: every actuator's float64 control in every world (what
+        :meth:`controls` copies to the host), the batch's own: read it, do not write it."""
+        return self.tools.ctrl64
+
+    def _scheduled_steps(self, ids: np.ndarray, vals_d) -> None:
+        """The MuJoCo steps of the (K, W, A) device schedule ``vals_d`` of actuators ``ids``."""
+        wp = self._wp
         t = self.tools
         with wp.ScopedDevice(self.device):
             ids_d = wp.array(ids.astype(np.int32), dtype=wp.int32)
-            vals_d = wp.array(np.ascontiguousarray(vals), dtype=wp.float64)
-        for k in range(len(vals)):
+        for k in range(vals_d.shape[0]):
             with wp.ScopedDevice(self.device):
                 wp.launch(rk.set_controls, dim=(self.W, len(ids)), inputs=[k, ids_d, vals_d, t.ctrl64, t.data.ctrl])
             self._one_step()

@@ -18,6 +18,21 @@ with the single env's observation (12 entries), reward and termination terms (``
 * the slip tracker, the pull, the squeeze and the loss of grasp of the single env's ``_update`` run
   per live world on the host.
 
+``device_outputs=True`` (``gym.make_vec(..., device="cpu", device_outputs=True)``) moves the
+control step's jaw and pull schedule (a Warp kernel per world from the per-world pull parameters
+and a float64 clock on the device, stepped without a host copy), the per-step bookkeeping (slip
+tracker, pull and squeeze readouts, loss of grasp, truncation, success), the observation and the
+reward terms onto the Warp device: the kernels of :mod:`surgsim_envs.batch.slippage_kernels` on the
+state of :class:`~surgsim_envs.batch.slippage_device_terms.SlippageDeviceTerms`, one thread per
+world, the same arithmetic as the numpy path. ``step`` and ``reset`` then return observations
+(W, 12) float32, rewards (W,) float64, terminated and truncated (W,) bool as fresh Warp arrays on
+the device, and the info entries (``reward_terms``, ``steps``, ``pull_force_N``,
+``normal_force_N``, ``least_squeeze_N``, ``dropped``, ``success`` / ``is_success``, ``mu``,
+``mu_static``, ``young_scale``, ``slip_distance_m``, ``peak_force_N``) as device arrays too;
+``info["unstable"]`` (a diverged world, found on the host) stays numpy. A reset stays on the host
+(each world's draws from its numpy generator, the settle's schedule) and starts the episode on the
+device.
+
 Per-world randomisation in the single env's order from each world's generator: friction, Young's
 modulus scale, the physics seed draw, pull rate, amplitude, frequency, phase. The ``organ`` option
 is refused (a batch holds one mesh).
@@ -31,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from surgsim_envs.batch.env import BatchedTaskEnv
+from surgsim_envs.batch.slippage_device_terms import SlippageDeviceTerms
 from surgsim_envs.envs.checks import sample
 from surgsim_envs.envs.grasp.terms import SlipTracker
 from surgsim_envs.envs.slippage import SlippageEnv
@@ -58,12 +74,14 @@ class BatchedSlippageEnv(BatchedTaskEnv):
     """Slippage-v0 in ``num_envs`` batched worlds on Warp device ``device`` (module docstring)."""
 
     TEMPLATE = SlippageEnv
+    DEVICE_OUTPUTS = True
     REFUSED = {"organ": "it changes the tissue mesh and a batch holds one mesh for all worlds; build the batched "
                         "env with the organ in its config (gym.make_vec(..., organ=...)) instead"}
 
     def __init__(self, num_envs: int = 1, *, device: str = "cpu", config=None, max_episode_steps: int | None = None,
-                 **overrides):
-        super().__init__(num_envs, device=device, config=config, max_episode_steps=max_episode_steps, **overrides)
+                 device_outputs: bool = False, **overrides):
+        super().__init__(num_envs, device=device, config=config, max_episode_steps=max_episode_steps,
+                         device_outputs=device_outputs, **overrides)
         t, c = self.template, self.config
         tsim = t.sim
         tool = tsim.tool(t.tool_name)
@@ -91,6 +109,10 @@ class BatchedSlippageEnv(BatchedTaskEnv):
         self._worlds = [_SlippageWorld() for _ in range(self.num_envs)]
         self._clock = np.zeros(self.num_envs)
         self._pending = None
+        self._device_terms = (SlippageDeviceTerms(self.sim, c, self.rewards.terms, tool, self.tool_name, self.acts,
+                                                  self.pull_dir, self.rigid_dt, self.max_episode_steps)
+                              if self.device_outputs else None)
+        self._device_metrics = None
 
     def _schedule(self, steps: int, jaw: float, t: float, goal: float, world: _SlippageWorld | None = None):
         """(steps, 2) jaw and pull controls of one world (the single env's ``_run``); no world: no pull."""
@@ -139,6 +161,11 @@ class BatchedSlippageEnv(BatchedTaskEnv):
             for w in idx:                   # the held worlds' rows are restored afterwards
                 values[:, w] = self._schedule(K, float(jaw[w]), float(t[w]), self.settle_goal)
             self._run(values, idx)
+        self._steps[idx] = 0
+        self._readings = None
+        if self._device_terms is not None:
+            self._start_on_device(idx)
+            return
         pos = sim.tool_positions(self.tool_name)
         mask = sim.contact_node_mask().numpy()
         x = sim.tissue_positions()
@@ -155,8 +182,16 @@ class BatchedSlippageEnv(BatchedTaskEnv):
             wd.jaw_goal = self.settle_goal
             wd.pull = wd.slip_distance = wd.slip_before = wd.normal_total = wd.peak_force = 0.0
             wd.lost = False
-        self._steps[idx] = 0
-        self._readings = None
+
+    def _start_on_device(self, idx: np.ndarray) -> None:
+        """The reset worlds' episodes on the device (device_outputs): their draws and clocks, the slip
+        tracker on the contacted nodes (the numpy path's ``slip.start`` in a kernel)."""
+        ws = [self._worlds[w] for w in idx]
+        f = lambda name: np.array([getattr(wd, name) for wd in ws])  # noqa: E731
+        counts = self._device_terms.reset(idx, self._clock[idx], f("mu"), f("young_scale"), f("rate"), f("amplitude"),
+                                          f("frequency"), f("phase"))
+        if not np.all(counts > 0):
+            raise ConfigError("Slippage: the jaws closed on nothing during the settle; raise initial_closure")
 
     def _times(self) -> np.ndarray:
         """(W,) s, each world's simulation time in float64 as the CPU scene's ``d.time`` (MuJoCo
@@ -165,6 +200,8 @@ class BatchedSlippageEnv(BatchedTaskEnv):
         return self._clock.copy()
 
     def _reset_info(self, idx) -> dict:
+        if self._device_terms is not None:
+            return {k: v for k, v in self._device_metrics.items() if k != "steps"}
         return self._metrics()
 
     # -- stepping ---------------------------------------------------------------------------------
@@ -173,6 +210,9 @@ class BatchedSlippageEnv(BatchedTaskEnv):
         other worlds keep their controls."""
         g, sim = self.gcfg, self.sim
         K = -(-self.substeps // self.n)
+        if self._device_terms is not None:      # the schedule is computed on the device (_physics)
+            self._pending = (a[:, 0].copy(), live.copy())
+            return
         ctrl = sim.controls(self.acts)
         t = self._times()
         values = np.repeat(ctrl[None], K, axis=0)
@@ -188,6 +228,12 @@ class BatchedSlippageEnv(BatchedTaskEnv):
         """The control step's schedule (:meth:`_apply_actions`; worlds without an action hold their
         controls) in every world."""
         values = self._pending
+        if self._device_terms is not None:
+            a, live = values if values is not None else (np.zeros(self.num_envs), np.zeros(self.num_envs, dtype=bool))
+            self._pending = None
+            K = -(-self.substeps // self.n)
+            self.sim.step_with_control_array(self.acts, self._device_terms.schedule(K, a, live))
+            return
         if values is None:
             K = -(-self.substeps // self.n)
             values = np.repeat(self.sim.controls(self.acts)[None], K, axis=0)
@@ -256,7 +302,28 @@ class BatchedSlippageEnv(BatchedTaskEnv):
                 "slip_distance_m": np.array([wd.slip_distance for wd in ws]),
                 "peak_force_N": np.array([wd.peak_force for wd in ws])}
 
-    def _observe(self) -> np.ndarray:
+    def _device_step(self, a: np.ndarray, live: np.ndarray, unstable: np.ndarray):
+        terms = self._device_terms
+        out, done = terms.evaluate(live & ~unstable, unstable & live)    # as the base: an autoreset world is not terminated
+        done_before = np.flatnonzero(self._autoreset)
+        if len(done_before):                  # not live this step: reward 0, not terminated nor truncated
+            self._reset_worlds(done_before, {})
+        self._autoreset = done
+        obs = self._observe()                 # after the resets: their metrics rows are the new episode's
+        info = {k: v for k, v in self._device_metrics.items() if k != "steps"}
+        info.update({"reward_terms": {name: out["terms"][j] for j, name in enumerate(self.reward_term_names)},
+                     "steps": self._device_metrics["steps"], "pull_force_N": out["pull_force"],
+                     "normal_force_N": out["normal_force"], "least_squeeze_N": out["least_squeeze"],
+                     "dropped": out["dropped"], "success": out["success"], "is_success": out["success"]})
+        if unstable.any():
+            info["unstable"], info["_unstable"] = unstable.copy(), unstable.copy()
+        return obs, out["reward"], out["terminated"], out["truncated"], info
+
+    def _observe(self):
+        if self._device_terms is not None:
+            obs, metrics = self._device_terms.observe()
+            self._device_metrics = metrics
+            return obs
         pos, fn, ft, rep, opening = self._read()
         obs, ws = self._obs, self._worlds
         obs[:, 0] = opening

@@ -10,7 +10,7 @@ and with MuJoCo Warp's data). Medians over ``--repeats``; the load average is re
 Warp's CPU device runs kernels on one thread: CPU figures are for checking, not for speed.
 ``--outputs host,device`` measures each world count twice in the same process: the task's
 bookkeeping, observations and rewards on the host in numpy (``host``, the default) and on the
-device (``device``: the env built with ``device_outputs=True``; Palpation-v0 and Grasp-v0).
+device (``device``: the env built with ``device_outputs=True``; Palpation-v0, Grasp-v0 and Slippage-v0).
 Writes batch_speed.json, batch_speed.md (the table) and batch_speed.png (the chart) to ``--out``.
 """
 
@@ -41,7 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per figure; medians reported (default 3)")
     parser.add_argument("--outputs", default="host",
                         help="where the task's observations and rewards are computed: host (numpy, default), "
-                             "device (device_outputs=True; Palpation-v0, Grasp-v0), or host,device for both")
+                             "device (device_outputs=True; Palpation-v0, Grasp-v0, Slippage-v0), or host,device for both")
     parser.add_argument("--json", action="store_true", help="print the results as JSON instead of the table")
     parser.add_argument("--out", default="surgsim-out/bench_batch", help="output directory")
 
@@ -202,7 +202,8 @@ def run(args: argparse.Namespace) -> int:
 
         if not getattr(load_env_creator(env_class), "DEVICE_OUTPUTS", False):
             raise ConfigError(f"--outputs device: {args.task}'s batched env computes its observations and rewards on "
-                              "the host; only SurgSim/Palpation-v0 and SurgSim/Grasp-v0 have device outputs. Use --outputs host")
+                              "the host; only SurgSim/Palpation-v0, SurgSim/Grasp-v0 and SurgSim/Slippage-v0 have device "
+                              "outputs. Use --outputs host")
     load_before = os.getloadavg()
     rows = []
     for w in worlds:
