@@ -156,7 +156,26 @@ class BatchedTaskEnv(VectorEnv):
 
     def _device_step(self, a: np.ndarray, live: np.ndarray, unstable: np.ndarray):
         """The rest of :meth:`step` (evaluation, autoreset, observation) on the device, for a task
-        with ``DEVICE_OUTPUTS``: ``(obs, rewards, terminated, truncated, info)`` as device arrays."""
+        with ``DEVICE_OUTPUTS``: ``(obs, rewards, terminated, truncated, info)`` as device arrays.
+        This is the grasp scene's flow: the task's ``_device_terms.evaluate(live, unstable)`` gives
+        the step's outputs and the ended worlds, the autoreset worlds restart, ``_observe`` sets
+        ``_device_metrics`` (the episode metrics, their rows the new episode's after a reset) and
+        ``_device_info(out)`` names the task's own info entries."""
+        out, done = self._device_terms.evaluate(live & ~unstable, unstable & live)   # an autoreset world is not terminated
+        done_before = np.flatnonzero(self._autoreset)
+        if len(done_before):                  # not live this step: reward 0, not terminated nor truncated
+            self._reset_worlds(done_before, {})
+        self._autoreset = done
+        obs = self._observe()
+        info = {k: v for k, v in self._device_metrics.items() if k != "steps"}
+        info.update({"reward_terms": {name: out["terms"][j] for j, name in enumerate(self.reward_term_names)},
+                     "steps": self._device_metrics["steps"], **self._device_info(out)})
+        if unstable.any():
+            info["unstable"], info["_unstable"] = unstable.copy(), unstable.copy()
+        return obs, out["reward"], out["terminated"], out["truncated"], info
+
+    def _device_info(self, out: dict) -> dict:
+        """The task's own info entries of a device step, from ``out`` (its device terms' outputs)."""
         raise NotImplementedError
 
     def step(self, actions):

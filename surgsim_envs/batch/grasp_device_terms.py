@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from surgsim_envs.batch.backend import require
+from surgsim_envs.batch.device_terms import GraspSceneDeviceTerms
 from surgsim_envs.errors import ConfigError
 
 #: Grasp-v0's declared reward terms (name, weight field), in the order the kernel sums them
@@ -29,7 +30,7 @@ DEVICE_TERMS = (("excess_force", "force_weight"), ("contact", "contact_weight"),
                 ("slip", "slip_weight"), ("drop", "drop_penalty"), ("success", "success_bonus"))
 
 
-class GraspDeviceTerms:
+class GraspDeviceTerms(GraspSceneDeviceTerms):
     """The device state and kernels of ``sim.W`` Grasp-v0 episodes (module docstring).
 
     sim: the env's :class:`BatchSimulation`; config: its :class:`GraspConfig`; reward_terms: the
@@ -37,6 +38,8 @@ class GraspDeviceTerms:
     template's grasper (its body, jaw geoms, jaw joint and opening); tool_name: its name in the
     scene; max_episode_steps: the truncation step.
     """
+
+    OBS_WIDTH = 15
 
     def __init__(self, sim, config, reward_terms, tool, tool_name: str, max_episode_steps: int):
         wp, _ = require()
@@ -84,9 +87,6 @@ class GraspDeviceTerms:
         s.slip_nodes = z((W, N), wp.int32)
         self.state = s
 
-    def _host(self, values, dtype):
-        return self.wp.array(np.ascontiguousarray(values, dtype=dtype), device=self.device)
-
     def reset(self, worlds: np.ndarray, goals: np.ndarray, goal_dist0: np.ndarray, mu: np.ndarray,
               young_scale: np.ndarray) -> None:
         """A new episode in ``worlds`` with targets ``goals`` (k, 3) m, initial distances (k,) m,
@@ -122,20 +122,3 @@ class GraspDeviceTerms:
                   outputs=[out[k] for k in ("reward", "terms", "terminated", "truncated", "ended", "grasped",
                                             "success", "dropped", "distance")])
         return out, out["ended"].numpy().copy()
-
-    def observe(self) -> tuple:
-        """(observations (W, 15) float32, {info name: (W,) array}: steps int64, mu, mu_static,
-        young_scale, slip_distance_m, peak_force_N float64): fresh device arrays."""
-        wp, W, sim = self.wp, self.W, self.sim
-        arrays = sim.arrays()
-        geom_fn, geom_ft = sim.geom_sum_arrays()
-        obs = wp.empty((W, 15), dtype=wp.float32, device=self.device)
-        metrics = {"steps": wp.empty(W, dtype=wp.int64, device=self.device)}
-        for key in ("mu", "mu_static", "young_scale", "slip_distance_m", "peak_force_N"):
-            metrics[key] = wp.empty(W, dtype=wp.float64, device=self.device)
-        wp.launch(self.K.observe, dim=W, device=self.device,
-                  inputs=[self.state, self.params, arrays["xpos"], self.body, arrays["qpos"], self.jaw_qpos, geom_fn,
-                          geom_ft, self.jaw_columns, arrays["tool_contacts"], arrays["tool_slipping"], self.tool_rows],
-                  outputs=[obs, metrics["steps"], metrics["mu"], metrics["mu_static"], metrics["young_scale"],
-                           metrics["slip_distance_m"], metrics["peak_force_N"]])
-        return obs, metrics

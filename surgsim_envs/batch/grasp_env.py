@@ -232,22 +232,9 @@ class BatchedGraspEnv(BatchedTaskEnv):
                 "slip_distance_m": np.array([wd.slip_distance for wd in ws]),
                 "peak_force_N": np.array([wd.peak_force for wd in ws])}
 
-    def _device_step(self, a: np.ndarray, live: np.ndarray, unstable: np.ndarray):
-        terms = self._device_terms
-        out, done = terms.evaluate(live & ~unstable, unstable & live)    # as the base: an autoreset world is not terminated
-        done_before = np.flatnonzero(self._autoreset)
-        if len(done_before):                  # not live this step: reward 0, not terminated nor truncated
-            self._reset_worlds(done_before, {})
-        self._autoreset = done
-        obs = self._observe()                 # after the resets: their metrics rows are the new episode's
-        info = {k: v for k, v in self._device_metrics.items() if k != "steps"}
-        info.update({"reward_terms": {name: out["terms"][j] for j, name in enumerate(self.reward_term_names)},
-                     "steps": self._device_metrics["steps"], "grasped": out["grasped"],
-                     "distance_to_target_m": out["distance"], "success": out["success"],
-                     "is_success": out["success"], "dropped": out["dropped"]})
-        if unstable.any():
-            info["unstable"], info["_unstable"] = unstable.copy(), unstable.copy()
-        return obs, out["reward"], out["terminated"], out["truncated"], info
+    def _device_info(self, out: dict) -> dict:
+        return {"grasped": out["grasped"], "distance_to_target_m": out["distance"], "success": out["success"],
+                "is_success": out["success"], "dropped": out["dropped"]}
 
     def _observe(self):
         if self._device_terms is not None:

@@ -28,6 +28,7 @@ from __future__ import annotations
 import warp as wp
 
 from surgsim_envs.batch.device_reductions import dot_norm, python_sum_add, python_sum_total
+from surgsim_envs.batch.grasp_scene_funcs import node_centroid, tool_count, wrist_position
 
 wp.set_module_options({"fuse_fp": False})
 
@@ -73,44 +74,6 @@ class GraspState:
     steps: wp.array(dtype=wp.int32)
     mu: wp.array(dtype=wp.float64)
     young_scale: wp.array(dtype=wp.float64)
-
-
-@wp.func
-def _wrist(xpos: wp.array2d(dtype=wp.vec3f), w: int, body: int) -> wp.vec3d:
-    p = xpos[w, body]
-    return wp.vec3d(wp.float64(p[0]), wp.float64(p[1]), wp.float64(p[2]))
-
-
-@wp.func
-def _count(counts: wp.array2d(dtype=wp.int32), rows: wp.array(dtype=wp.int32), w: int) -> int:
-    """The tool's contact (or slipping) points: its bodies' counts summed."""
-    n = int(0)
-    for r in range(rows.shape[0]):
-        n = n + counts[w, rows[r]]
-    return n
-
-
-@wp.func
-def _centroid(x: wp.array2d(dtype=wp.vec3d), nodes: wp.array2d(dtype=wp.int32), w: int, count: int) -> wp.vec3d:
-    """``x[w][nodes].mean(axis=0)``: the rows added in node order, divided by the count."""
-    sx = wp.float64(0.0)
-    sy = wp.float64(0.0)
-    sz = wp.float64(0.0)
-    first = int(1)
-    for i in range(nodes.shape[1]):
-        if nodes[w, i] != 0:
-            p = x[w, i]
-            if first == 1:
-                sx = p[0]
-                sy = p[1]
-                sz = p[2]
-                first = 0
-            else:
-                sx = sx + p[0]
-                sy = sy + p[1]
-                sz = sz + p[2]
-    n = wp.float64(count)
-    return wp.vec3d(sx / n, sy / n, sz / n)
 
 
 @wp.kernel
@@ -165,12 +128,12 @@ def evaluate_step(s: GraspState, p: GraspParams, xpos: wp.array2d(dtype=wp.vec3f
     if live[w] != 0:
         steps = s.steps[w] + 1
         s.steps[w] = steps
-        pos = _wrist(xpos, w, body)
+        pos = wrist_position(xpos, w, body)
         fn0 = geom_fn[w, jaw_columns[0]]
         fn1 = geom_fn[w, jaw_columns[1]]
         fn2 = geom_fn[w, jaw_columns[2]]
-        contacts = _count(tool_contacts, tool_rows, w)
-        slipping = _count(tool_slipping, tool_rows, w)
+        contacts = tool_count(tool_contacts, tool_rows, w)
+        slipping = tool_count(tool_slipping, tool_rows, w)
         holding = int(0)                                    # jaws_in_contact
         if fn0 > p.hold_force:
             holding += 1
@@ -190,10 +153,10 @@ def evaluate_step(s: GraspState, p: GraspParams, xpos: wp.array2d(dtype=wp.vec3f
                 s.slip_active[w] = 1
                 s.slip_count[w] = n
                 s.tool0[w] = pos
-                s.centroid0[w] = _centroid(x, s.slip_nodes, w, n)
+                s.centroid0[w] = node_centroid(x, s.slip_nodes, w, n)
         slip = zero
         if s.slip_active[w] != 0:
-            rel = (pos - s.tool0[w]) - (_centroid(x, s.slip_nodes, w, s.slip_count[w]) - s.centroid0[w])
+            rel = (pos - s.tool0[w]) - (node_centroid(x, s.slip_nodes, w, s.slip_count[w]) - s.centroid0[w])
             slip = dot_norm(rel)
         s.slip_distance[w] = slip
         force = (fn0 + fn1) + fn2                           # total_normal_force
@@ -272,7 +235,7 @@ def observe(s: GraspState, p: GraspParams, xpos: wp.array2d(dtype=wp.vec3f), bod
     """Thread per world: the observation row (the single env's layout, float32) and the info
     metrics of the world's current episode."""
     w = wp.tid()
-    pos = _wrist(xpos, w, body)
+    pos = wrist_position(xpos, w, body)
     to_goal = s.goal[w] - pos
     for i in range(3):
         obs[w, i] = wp.float32(pos[i])
@@ -281,8 +244,8 @@ def observe(s: GraspState, p: GraspParams, xpos: wp.array2d(dtype=wp.vec3f), bod
     for j in range(JAWS):
         obs[w, 7 + j] = wp.float32(geom_fn[w, jaw_columns[j]])
         obs[w, 10 + j] = wp.float32(geom_ft[w, jaw_columns[j]])
-    obs[w, 13] = wp.float32(_count(tool_slipping, tool_rows, w))
-    obs[w, 14] = wp.float32(_count(tool_contacts, tool_rows, w))
+    obs[w, 13] = wp.float32(tool_count(tool_slipping, tool_rows, w))
+    obs[w, 14] = wp.float32(tool_count(tool_contacts, tool_rows, w))
     steps[w] = wp.int64(s.steps[w])
     mu[w] = s.mu[w]
     mu_static[w] = p.static_friction_ratio * s.mu[w]

@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from surgsim_envs.batch.backend import require
+from surgsim_envs.batch.device_terms import DeviceTerms
 from surgsim_envs.errors import ConfigError
 
 #: Palpation-v0's declared reward terms (name, weight field), in the order the kernel sums them
@@ -30,7 +31,7 @@ DEVICE_TERMS = (("damage", "damage_weight"), ("coverage", "cell_reward"), ("shap
                 ("time", "time_cost"), ("press_site", "press_reward"), ("localisation", "localisation_weight"))
 
 
-class PalpationDeviceTerms:
+class PalpationDeviceTerms(DeviceTerms):
     """The device state and kernels of ``num_worlds`` Palpation-v0 episodes (module docstring).
 
     sim: the env's :class:`BatchSimulation`; config: its :class:`PalpationConfig`; reward_terms:
@@ -99,9 +100,6 @@ class PalpationDeviceTerms:
     def _physics(self):
         arrays = self.sim.arrays()
         return arrays["xpos"], arrays["tool_force"]
-
-    def _host(self, values, dtype):
-        return self.wp.array(np.ascontiguousarray(values, dtype=dtype), device=self.device)
 
     def reset(self, worlds: np.ndarray, centres_xy: np.ndarray) -> None:
         """A new episode in ``worlds`` with inclusion centres ``centres_xy`` (len(worlds), 2) m, the

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from surgsim_envs.batch.backend import require
+from surgsim_envs.batch.device_terms import GraspSceneDeviceTerms
 from surgsim_envs.errors import ConfigError
 
 #: Slippage-v0's declared reward terms (name, weight field), in the order the kernel sums them
@@ -31,7 +32,7 @@ DEVICE_TERMS = (("slip", "slip_weight"), ("excess_squeeze", "squeeze_weight"), (
                 ("drop", "drop_penalty"))
 
 
-class SlippageDeviceTerms:
+class SlippageDeviceTerms(GraspSceneDeviceTerms):
     """The device state and kernels of ``sim.W`` Slippage-v0 episodes (module docstring).
 
     sim: the env's :class:`BatchSimulation`; config: its :class:`SlippageConfig`; reward_terms: the
@@ -39,6 +40,8 @@ class SlippageDeviceTerms:
     template's grasper; tool_name: its name in the scene; actuators: (jaw, pull) actuator ids;
     pull_dir: the pull's unit direction; h: s, one MuJoCo step; max_episode_steps: the truncation step.
     """
+
+    OBS_WIDTH = 12
 
     def __init__(self, sim, config, reward_terms, tool, tool_name: str, actuators, pull_dir, h: float,
                  max_episode_steps: int):
@@ -93,9 +96,6 @@ class SlippageDeviceTerms:
         self.state = s
         self._values = None                # the (K, W, 2) schedule, rewritten every control step
 
-    def _host(self, values, dtype):
-        return self.wp.array(np.ascontiguousarray(values, dtype=dtype), device=self.device)
-
     def reset(self, worlds: np.ndarray, clock: np.ndarray, mu: np.ndarray, young_scale: np.ndarray,
               rate: np.ndarray, amplitude: np.ndarray, frequency: np.ndarray, phase: np.ndarray) -> np.ndarray:
         """A new episode in ``worlds`` after their settle: the host's draws and clocks, (k,) each;
@@ -148,20 +148,3 @@ class SlippageDeviceTerms:
                           self._host(live, np.int32), self._host(unstable, np.int32)],
                   outputs=[out[k] for k in keys])
         return out, out["ended"].numpy().copy()
-
-    def observe(self) -> tuple:
-        """(observations (W, 12) float32, {info name: (W,) array}: steps int64, mu, mu_static,
-        young_scale, slip_distance_m, peak_force_N float64): fresh device arrays."""
-        wp, W, sim = self.wp, self.W, self.sim
-        arrays = sim.arrays()
-        geom_fn, geom_ft = sim.geom_sum_arrays()
-        obs = wp.empty((W, 12), dtype=wp.float32, device=self.device)
-        metrics = {"steps": wp.empty(W, dtype=wp.int64, device=self.device)}
-        for key in ("mu", "mu_static", "young_scale", "slip_distance_m", "peak_force_N"):
-            metrics[key] = wp.empty(W, dtype=wp.float64, device=self.device)
-        wp.launch(self.K.observe, dim=W, device=self.device,
-                  inputs=[self.state, self.params, arrays["xpos"], self.body, arrays["qpos"], self.jaw_qpos, geom_fn,
-                          geom_ft, self.jaw_columns, arrays["tool_contacts"], arrays["tool_slipping"], self.tool_rows],
-                  outputs=[obs, metrics["steps"], metrics["mu"], metrics["mu_static"], metrics["young_scale"],
-                           metrics["slip_distance_m"], metrics["peak_force_N"]])
-        return obs, metrics

@@ -36,6 +36,7 @@ import math
 import warp as wp
 
 from surgsim_envs.batch.device_reductions import python_sum_add, python_sum_total
+from surgsim_envs.batch.grasp_scene_funcs import node_centroid, tool_count, wrist_position
 
 wp.set_module_options({"fuse_fp": False})
 
@@ -94,44 +95,6 @@ class SlippageState:
 
 
 @wp.func
-def _wrist(xpos: wp.array2d(dtype=wp.vec3f), w: int, body: int) -> wp.vec3d:
-    p = xpos[w, body]
-    return wp.vec3d(wp.float64(p[0]), wp.float64(p[1]), wp.float64(p[2]))
-
-
-@wp.func
-def _count(counts: wp.array2d(dtype=wp.int32), rows: wp.array(dtype=wp.int32), w: int) -> int:
-    """The tool's contact (or slipping) points: its bodies' counts summed."""
-    n = int(0)
-    for r in range(rows.shape[0]):
-        n = n + counts[w, rows[r]]
-    return n
-
-
-@wp.func
-def _centroid(x: wp.array2d(dtype=wp.vec3d), nodes: wp.array2d(dtype=wp.int32), w: int, count: int) -> wp.vec3d:
-    """``x[w][nodes].mean(axis=0)``: the rows added in node order, divided by the count."""
-    sx = wp.float64(0.0)
-    sy = wp.float64(0.0)
-    sz = wp.float64(0.0)
-    first = int(1)
-    for i in range(nodes.shape[1]):
-        if nodes[w, i] != 0:
-            p = x[w, i]
-            if first == 1:
-                sx = p[0]
-                sy = p[1]
-                sz = p[2]
-                first = 0
-            else:
-                sx = sx + p[0]
-                sy = sy + p[1]
-                sz = sz + p[2]
-    n = wp.float64(count)
-    return wp.vec3d(sx / n, sy / n, sz / n)
-
-
-@wp.func
 def _dot(a: wp.vec3d, b: wp.vec3d) -> wp.float64:
     """``a @ b`` of two 3-vectors: BLAS's in-order dot."""
     return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
@@ -180,7 +143,7 @@ def reset_worlds(s: SlippageState, worlds: wp.array(dtype=wp.int32), rate: wp.ar
     s.young_scale[w] = young_scale[t]
     s.clock[w] = clock[t]
     s.t0[w] = clock[t]
-    pos = _wrist(xpos, w, body)
+    pos = wrist_position(xpos, w, body)
     s.pos0[w] = pos
     n = int(0)
     for i in range(contact_mask.shape[1]):
@@ -190,7 +153,7 @@ def reset_worlds(s: SlippageState, worlds: wp.array(dtype=wp.int32), rate: wp.ar
             n += 1
     s.slip_count[w] = n
     if n > 0:
-        s.centroid0[w] = _centroid(x, s.slip_nodes, w, n)
+        s.centroid0[w] = node_centroid(x, s.slip_nodes, w, n)
     count[t] = n
     s.pull[w] = zero
     s.slip_distance[w] = zero
@@ -269,14 +232,14 @@ def evaluate_step(s: SlippageState, p: SlippageParams, xpos: wp.array2d(dtype=wp
     if live[w] != 0:
         steps = s.steps[w] + 1
         s.steps[w] = steps
-        pos = _wrist(xpos, w, body)
+        pos = wrist_position(xpos, w, body)
         fn0 = geom_fn[w, jaw_columns[0]]
         fn1 = geom_fn[w, jaw_columns[1]]
         fn2 = geom_fn[w, jaw_columns[2]]
-        contacts = _count(tool_contacts, tool_rows, w)
+        contacts = tool_count(tool_contacts, tool_rows, w)
         before = s.slip_distance[w]
         s.slip_before[w] = before
-        rel = (pos - s.pos0[w]) - (_centroid(x, s.slip_nodes, w, s.slip_count[w]) - s.centroid0[w])
+        rel = (pos - s.pos0[w]) - (node_centroid(x, s.slip_nodes, w, s.slip_count[w]) - s.centroid0[w])
         slip = wp.sqrt(_dot(rel, rel))                      # np.linalg.norm
         s.slip_distance[w] = slip
         force = (fn0 + fn1) + fn2                           # np.sum(fn)
@@ -330,13 +293,13 @@ def observe(s: SlippageState, p: SlippageParams, xpos: wp.array2d(dtype=wp.vec3f
     """Thread per world: the observation row (the single env's layout, float32) and the info
     metrics of the world's current episode."""
     w = wp.tid()
-    pos = _wrist(xpos, w, body)
+    pos = wrist_position(xpos, w, body)
     obs[w, 0] = wp.float32(p.open_radius - wp.float64(qpos[w, jaw_qpos]))
     for j in range(JAWS):
         obs[w, 1 + j] = wp.float32(geom_fn[w, jaw_columns[j]])
         obs[w, 4 + j] = wp.float32(geom_ft[w, jaw_columns[j]])
-    obs[w, 7] = wp.float32(_count(tool_slipping, tool_rows, w))
-    obs[w, 8] = wp.float32(_count(tool_contacts, tool_rows, w))
+    obs[w, 7] = wp.float32(tool_count(tool_slipping, tool_rows, w))
+    obs[w, 8] = wp.float32(tool_count(tool_contacts, tool_rows, w))
     obs[w, 9] = wp.float32(s.pull[w])
     obs[w, 10] = wp.float32(_dot(pos - s.pos0[w], p.pull_dir))
     obs[w, 11] = wp.float32(s.slip_distance[w])
