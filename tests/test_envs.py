@@ -142,7 +142,9 @@ def _random_policy(env):
                                            ("SurgSim/Slippage-v0", slippage_expert)])
 def test_expert_beats_random(envs, env_id, expert):
     env = envs[env_id]
-    seeds = range(100, 104)
+    # Palpation-v0's default steps the quasi-static FEM (about 4 ms an env step against 0.5 ms for the
+    # grasp tasks' network): two of its seeds keep the default run short; the expert wins all four
+    seeds = range(100, 102) if env_id == "SurgSim/Palpation-v0" else range(100, 104)
     s_exp, r_exp = _episodes(env, expert, seeds)
     s_rand, r_rand = _episodes(env, _random_policy, seeds)
     assert s_exp >= 0.5 and s_exp > s_rand
