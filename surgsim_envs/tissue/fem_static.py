@@ -56,7 +56,8 @@ from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue import fem_viscous as visc
-from surgsim_envs.tissue.compliance import DEFAULT_CACHE_MB, SOLVERS, CondensedCompliance
+from surgsim_envs.tissue.compliance import (DEFAULT_CACHE_MB, SOLVERS, CondensedCompliance, add_response,
+                                             gather_block)
 from surgsim_envs.tissue.fem import TetFEMModel
 from surgsim_envs.tissue.guard import StabilityGuard
 
@@ -112,6 +113,59 @@ def commit_positions(u, rest, positions, velocities, dt):
             x = rest[i, j] + u[3 * i + j]
             velocities[i, j] = (x - positions[i, j]) / dt
             positions[i, j] = x
+
+
+@njit(cache=True, nogil=True)
+def condensed_contact_solve(cols, slots, loaded, u0, forces, kc, use_kc, positions, rest, c, u, applied):
+    """One quasi-static step on the condensed loaded nodes (equations (2)-(3)): W (3m,3m) gathered
+    from the cached compliance columns ``cols[slots]`` and divided by ``c``; with contact stiffness
+    (``use_kc``) the loaded dofs solve ``(I + W k) u_A = u0_A + W (f + k u_n)`` and carry
+    ``g = f - k (u_A - u_n)``, else ``g = f``. Writes u (3N,) = u0 + C_A g / c and ``applied[loaded]`` =
+    g (N). The numpy expressions it replaces, operation for operation."""
+    m = loaded.shape[0]
+    n3 = 3 * m
+    w = np.empty((n3, n3))
+    gather_block(cols, slots, loaded, w)
+    if c != 1.0:
+        for i in range(n3):
+            for j in range(n3):
+                w[i, j] = w[i, j] / c
+    g = np.empty(n3)
+    for b in range(m):
+        for j in range(3):
+            g[3 * b + j] = forces[loaded[b], j]
+    if use_kc:
+        k_a = np.empty(n3)
+        un_a = np.empty(n3)
+        v = np.empty(n3)
+        rhs = np.empty(n3)
+        for b in range(m):
+            i = loaded[b]
+            for j in range(3):
+                d = 3 * b + j
+                k_a[d] = kc[i]
+                un_a[d] = positions[i, j] - rest[i, j]
+                v[d] = g[d] + k_a[d] * un_a[d]
+        wv = w @ v
+        for b in range(m):
+            for j in range(3):
+                d = 3 * b + j
+                rhs[d] = u0[3 * loaded[b] + j] + wv[d]
+        a = np.empty((n3, n3))
+        for i in range(n3):
+            for j in range(n3):
+                a[i, j] = (1.0 if i == j else 0.0) + w[i, j] * k_a[j]
+        u_a = np.linalg.solve(a, rhs)
+        for d in range(n3):
+            g[d] = g[d] - k_a[d] * (u_a[d] - un_a[d])
+    for d in range(u.shape[0]):
+        u[d] = u0[d]
+    gs = np.empty((m, 3))
+    for b in range(m):
+        for j in range(3):
+            gs[b, j] = g[3 * b + j] / c if c != 1.0 else g[3 * b + j]
+            applied[loaded[b], j] = g[3 * b + j]
+    add_response(cols, slots, gs, u)
 
 
 class QuasiStaticFEMModel(TetFEMModel):
@@ -190,8 +244,10 @@ class QuasiStaticFEMModel(TetFEMModel):
         self._u_step = np.zeros(3 * n)         # u at the end of the last step (equation (4)'s u_n), m
         self._shift_buf = np.zeros(3 * n)      # s of equation (4), m (rewritten every step)
         self._u0_buf = np.zeros(3 * n)         # u0 of the hereditary step, m (rewritten every step)
+        self._u_buf = np.zeros(3 * n)          # u of the step, m (rewritten every step)
         self._branch_key, self._branch_value = None, (1.0, 1.0)
         self._wd_key = None                    # Dirichlet targets of the cached elastic response (equation (4))
+        self._held_dofs, self._held_of = np.zeros(0, dtype=np.int64), None
         self.last_loaded = 0
         self._loaded_buf = np.zeros(n, dtype=np.int64)
         self._zero_kc = np.zeros(n)
@@ -298,11 +354,16 @@ class QuasiStaticFEMModel(TetFEMModel):
     def _hereditary_base(self, c: float, s: np.ndarray) -> np.ndarray:
         """w0 (3N,) of equation (4): K0's equilibrium under gravity with the Dirichlet dofs at
         ``c u_D + s_D`` (cached while those stay the same, e.g. nodes held at rest)."""
-        self.compliance()
+        comp = self.compliance()
         u_d = self._base_displacement()
-        wd = np.where(self._comp.free, 0.0, c * u_d + s)
-        key = (c, wd.tobytes())
+        if self._held_of is not comp:                 # the held dofs of this factorisation
+            self._held_dofs, self._held_of = np.flatnonzero(~comp.free), comp
+        held = self._held_dofs
+        wd_held = c * u_d[held] + s[held]             # only the held dofs enter: the key costs O(held), not O(N)
+        key = (c, held.tobytes(), wd_held.tobytes())
         if self._wd_key != key:
+            wd = np.zeros(3 * self.n_nodes)
+            wd[held] = wd_held
             self._w0 = self._elastic_response(wd)
             self._wd_key = key
         return self._w0
@@ -332,26 +393,15 @@ class QuasiStaticFEMModel(TetFEMModel):
         else:
             kc = None
         loaded = self._loaded_buf[:find_loaded(forces, self._zero_kc if kc is None else kc, held, self._loaded_buf)]
-        x_prev = self.positions
-        u = u0.copy()
+        u = self._u_buf
         self.last_loaded = len(loaded)
         if len(loaded):
             slots = comp.slots(loaded)
-            w = comp.block(loaded, slots)
-            if c != 1.0:
-                w = w / c
-            f_a = forces[loaded].reshape(-1)
-            un_a = (x_prev[loaded] - self.rest_positions[loaded]).reshape(-1)
-            dofs = (3 * loaded[:, None] + np.arange(3)).reshape(-1)
-            if kc is not None:
-                k_a = np.repeat(kc[loaded], 3)
-                rhs = u0[dofs] + w @ (f_a + k_a * un_a)
-                u_a = np.linalg.solve(np.eye(len(dofs)) + w * k_a[None, :], rhs)
-                g_a = f_a - k_a * (u_a - un_a)
-            else:
-                g_a = f_a
-            comp.response(slots, (g_a / c if c != 1.0 else g_a).reshape(-1, 3), u)
-            self.integrated_external_forces[loaded] = g_a.reshape(-1, 3)
+            condensed_contact_solve(comp.cols, slots, loaded, u0, forces, self._zero_kc if kc is None else kc,
+                                    kc is not None, self.positions, self.rest_positions, c, u,
+                                    self.integrated_external_forces)
+        else:
+            u[:] = u0
         if s is not None:
             hereditary_advance(u, decay, gamma, self._hist, self._u_step)
         commit_positions(u, self.rest_positions, self.positions, self.velocities, dt)
