@@ -357,3 +357,21 @@ def test_single_axis_columns_are_evicted_least_recently_used_and_stay_exact():
         ref = _full_solve(model, held, rhs, np.zeros(len(X)))
         assert np.abs(model.positions - X - ref).max() <= 1e-9 * np.abs(ref).max()
     assert model.compliance().columns_computed == 4 + 4 + 2  # the two least recently used of the first four again
+
+
+def test_a_superlu_factorisation_of_minutes_warns_and_names_pardiso(monkeypatch):
+    """Above SLOW_SUPERLU_DOFS free dofs SuperLU warns before it factorises (minutes on a layered wall) and
+    names the optional PARDISO; below it, and with PARDISO, it says nothing."""
+    import warnings
+
+    from surgsim_envs.tissue import compliance
+
+    model, bottom = _block(solver="superlu")
+    n_free = 3 * int((~bottom).sum())
+    monkeypatch.setattr(compliance, "SLOW_SUPERLU_DOFS", n_free - 1)
+    with pytest.warns(UserWarning, match=rf"factorising {n_free:,} free dofs with SuperLU .*pip install pypardiso"):
+        model.compliance()
+    monkeypatch.setattr(compliance, "SLOW_SUPERLU_DOFS", n_free)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _block(solver="superlu")[0].compliance()
