@@ -4,9 +4,10 @@
     python scripts/train_batched.py --device cpu --worlds 8 --iterations 10 --out /tmp/ppo_cpu
 
 The env is ``gym.make_vec("SurgSim/Palpation-v0", num_envs=W, vectorization_mode="vector_entry_point",
-device=...)``; its physics arrays stay on the Warp device (``env.device_arrays()``, shared with torch by
-``wp.to_torch`` without copies); observations and rewards come back as numpy arrays, which
-``torch.from_numpy`` shares on the CPU and one host-to-device copy moves to the GPU.
+device=..., device_outputs=True)``: observations, rewards and the episode flags come back as Warp arrays
+on the device, which ``wp.to_torch`` hands to torch without copies (``--outputs host``: numpy arrays,
+shared by ``torch.from_numpy`` on the CPU and copied to the GPU once per step; the same numbers). The
+actions still go to the env as a numpy array (one device-to-host copy of (W, 4) numbers per step).
 
 Why a hand-written PPO rather than an RL library: the batched env already is the vector env, so a
 library's own env wrappers and worker processes would add copies and nothing else; ~150 lines of
@@ -39,6 +40,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--lr", type=float, default=3e-4, help="Adam learning rate (default 3e-4)")
     p.add_argument("--epochs", type=int, default=4, help="update epochs per iteration (default 4)")
     p.add_argument("--minibatches", type=int, default=4, help="minibatches per epoch (default 4)")
+    p.add_argument("--outputs", choices=("device", "host"), default="device",
+                   help="device (default): the env's outputs as Warp arrays, taken by torch without copies; host: "
+                   "numpy arrays (the same numbers)")
     p.add_argument("--out", default="runs/train_batched", help="output folder for curve.csv and curve.png")
     args = p.parse_args(argv)
     for name in ("worlds", "iterations", "rollout_steps", "epochs", "minibatches"):
@@ -79,7 +83,9 @@ def train(args) -> list[dict]:
     torch.manual_seed(args.seed)
     dev = torch.device(args.device)
     env = gym.make_vec("SurgSim/Palpation-v0", num_envs=args.worlds, vectorization_mode="vector_entry_point",
-                       device=args.device, episode_seconds=args.episode_seconds,
+                       device=args.device, episode_seconds=args.episode_seconds, device_outputs=args.outputs == "device",
+                       # a report may come no earlier than min_report_seconds: never later than a short episode's end
+                       min_report_seconds=min(PalpationConfig().min_report_seconds, args.episode_seconds),
                        max_episode_steps=round(args.episode_seconds * PalpationConfig().control_hz))
     n_obs = env.single_observation_space.shape[0]
     n_act = env.single_action_space.shape[0]
@@ -94,6 +100,11 @@ def train(args) -> list[dict]:
     mean, var, count = torch.zeros(n_obs, device=dev), torch.ones(n_obs, device=dev), 1e-4
 
     def to_dev(x):
+        """A float32 tensor on ``dev`` of an env output; its own storage (the env reuses its output buffers)."""
+        if args.outputs == "device":
+            import warp as wp
+
+            return wp.to_torch(x).to(torch.float32).clone()      # a copy on the device, never through the host
         return torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32)).to(dev)
 
     T, W, gamma, lam, clip = args.rollout_steps, args.worlds, 0.99, 0.95, 0.2
@@ -119,7 +130,7 @@ def train(args) -> list[dict]:
                 lp = dist.log_prob(a).sum(-1)
                 v = critic(o).squeeze(-1)
             obs_np, r, te, tr, _ = env.step(a.clamp(-1, 1).cpu().numpy())
-            r_t, done = to_dev(r), to_dev(te | tr)
+            r_t, done = to_dev(r), torch.maximum(to_dev(te), to_dev(tr))
             ep_ret += r_t
             finished += ep_ret[done > 0].tolist()
             ep_ret = ep_ret * (1 - done)

@@ -35,3 +35,28 @@ def test_a_bad_count_is_refused_with_its_bound():
     out = _run(NO_TORCH, "--worlds", "0")
     assert out.returncode == 2
     assert "--worlds=0 must be >= 1" in out.stderr
+
+
+def test_device_and_host_outputs_train_the_same_curve_with_torch(tmp_path):
+    """With torch (not a test dependency: skipped without it) and the [batch] extra, the PPO taking the env's
+    outputs as Warp arrays without copies (--outputs device) sees the same numbers as through numpy (host):
+    the same curve, episode ends included (0.5 s episodes end inside the 60-step rollouts)."""
+    import importlib.util
+
+    import pytest
+
+    if importlib.util.find_spec("torch") is None:
+        pytest.skip("torch is not installed (not a test dependency)")
+    from surgsim_envs.batch.backend import available
+
+    if not available():
+        pytest.skip("the [batch] extra (warp-lang, mujoco-warp) is not installed")
+    curves = {}
+    for outputs in ("host", "device"):
+        out = _run(RUN, "--device", "cpu", "--worlds", "4", "--iterations", "2", "--rollout-steps", "60",
+                   "--episode-seconds", "0.5", "--seed", "0", "--outputs", outputs, "--out", str(tmp_path / outputs))
+        assert out.returncode == 0, out.stderr
+        rows = (tmp_path / outputs / "curve.csv").read_text().splitlines()
+        curves[outputs] = [",".join(v for k, v in enumerate(r.split(",")) if k != 2) for r in rows]   # drop seconds
+    assert curves["device"] == curves["host"]
+    assert int(curves["device"][1].split(",")[3]) == 4, "every world ended an episode in the first rollout"
