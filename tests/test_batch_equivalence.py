@@ -171,6 +171,33 @@ def test_bad_arguments_raise_clear_errors(pair):
         batch.step(-1)
 
 
+def test_actuator_goals_are_written_for_the_listed_worlds_and_actuators_only():
+    """set_actuator_goals writes on the device: the listed worlds' listed actuators get their goals (and
+    their rates when a speed is given), those worlds move; every other entry is untouched."""
+    from surgsim_envs.batch.simulation import BatchSimulation
+    from surgsim_envs.errors import ConfigError
+
+    env = _palpation_sim(young_scale=(1.0, 1.0), stiffness_contrast=(1.0, 1.0))
+    batch = BatchSimulation(env.sim, 3, device="cpu")
+    t = batch.tools
+    goal0, rate0 = t.goal.numpy().copy(), t.rate.numpy().copy()
+    t.moving.zero_()
+    batch.set_actuator_goals([0, 2], [[0.001, -0.002]], worlds=[1])
+    goal, rate, moving = t.goal.numpy(), t.rate.numpy(), t.moving.numpy()
+    expect = goal0.copy()
+    expect[1, [0, 2]] = [0.001, -0.002]
+    assert np.array_equal(goal, expect) and np.array_equal(rate, rate0)
+    assert moving.tolist() == [0, 1, 0]
+    batch.set_actuator_goals([1], [0.003], speed=0.05, worlds=[0, 2])
+    rate_expect = rate0.copy()
+    rate_expect[[0, 2], 1] = 0.05
+    assert np.array_equal(t.rate.numpy(), rate_expect) and t.moving.numpy().tolist() == [1, 1, 1]
+    assert np.array_equal(t.goal.numpy()[[0, 2], 1], [0.003, 0.003])
+    with pytest.raises(ConfigError, match="speed must be a positive number"):
+        batch.set_actuator_goals([1], [0.004], speed=-1.0, worlds=[0])
+    assert np.array_equal(t.goal.numpy()[0, 1], 0.003), "a refused command writes nothing"
+
+
 @pytest.mark.skipif(not cuda_available(), reason="no CUDA device on this host (Warp sees none)")
 def test_one_world_on_cuda_matches_the_cpu_simulation():
     from surgsim_envs.batch.simulation import BatchSimulation

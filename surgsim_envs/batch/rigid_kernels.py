@@ -45,3 +45,19 @@ def set_controls(k: int, actuators: wp.array(dtype=wp.int32), values: wp.array3d
     c = values[k, w, j]
     ctrl64[w, a] = c
     ctrl[w, a] = wp.float32(c)
+
+
+@wp.kernel
+def write_goals(worlds: wp.array(dtype=wp.int32), actuators: wp.array(dtype=wp.int32), values: wp.array2d(dtype=f64),
+                set_rate: wp.int32, speed: f64, goal: wp.array2d(dtype=f64), rate: wp.array2d(dtype=f64),
+                moving: wp.array(dtype=wp.int32)):
+    """Listed world i x listed actuator j: ``goal[worlds[i], actuators[j]] = values[i, j]``, the world set
+    moving, and with ``set_rate`` the actuator's rate set to ``speed``; on the device, so a command does
+    not copy the (W, nu) goal arrays to the host and back (every thread of a world writes the same 1)."""
+    i, j = wp.tid()
+    w = worlds[i]
+    a = actuators[j]
+    goal[w, a] = values[i, j]
+    if set_rate != 0:
+        rate[w, a] = speed
+    moving[w] = 1

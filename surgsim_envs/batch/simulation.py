@@ -366,19 +366,9 @@ class BatchSimulation:
         if np.abs(local).max(initial=0.0) > travel + 1e-12:
             raise ConfigError(f"a target of tool {name!r} lies outside its reach of +-{travel} m about its home "
                               f"{self.tool_home[name].round(4).tolist()} m; choose closer targets")
-        act = self.tool_actuators[name][:3]
-        t = self.tools
-        goal, moving = t.goal.numpy(), t.moving.numpy()
-        goal[np.ix_(idx, act)] = local
-        moving[idx] = 1
-        t.goal.assign(goal)
-        t.moving.assign(moving)
-        if speed is not None:
-            if not (isinstance(speed, (int, float)) and speed > 0):
-                raise ConfigError(f"speed must be a positive number (m/s), or math.inf for no limit, got {speed!r}")
-            rate = t.rate.numpy()
-            rate[np.ix_(idx, act)] = float(speed)
-            t.rate.assign(rate)
+        if speed is not None and not (isinstance(speed, (int, float)) and speed > 0):
+            raise ConfigError(f"speed must be a positive number (m/s), or math.inf for no limit, got {speed!r}")
+        self._write_goals(idx, self.tool_actuators[name][:3], local, speed)
 
     def set_actuator_goals(self, actuators, goals, speed: float | None = None, worlds=None) -> None:
         """Move actuators ``actuators`` (A,) ids towards ``goals`` ((W, A), or (A,) for every listed
@@ -392,18 +382,33 @@ class BatchSimulation:
         g = np.broadcast_to(np.asarray(goals, dtype=np.float64), (len(idx), len(ids)))
         if not np.all(np.isfinite(g)):
             raise ConfigError("actuator goals must be finite numbers")
-        t = self.tools
-        goal, moving = t.goal.numpy(), t.moving.numpy()
-        goal[np.ix_(idx, ids)] = g
-        moving[idx] = 1
-        t.goal.assign(goal)
-        t.moving.assign(moving)
-        if speed is not None:
-            if not (isinstance(speed, (int, float)) and speed > 0):
-                raise ConfigError(f"speed must be a positive number, or math.inf for no limit, got {speed!r}")
-            rate = t.rate.numpy()
-            rate[np.ix_(idx, ids)] = float(speed)
-            t.rate.assign(rate)
+        if speed is not None and not (isinstance(speed, (int, float)) and speed > 0):
+            raise ConfigError(f"speed must be a positive number, or math.inf for no limit, got {speed!r}")
+        self._write_goals(idx, ids, g, speed)
+
+    def _index_array(self, ids) -> object:
+        """An int32 device array of ``ids``, kept for the ids met before (all worlds, a tool's actuators)."""
+        key = np.asarray(ids, dtype=np.int32).tobytes()
+        cache = self.__dict__.setdefault("_index_arrays", {})
+        if key not in cache:
+            if len(cache) > 64:
+                cache.clear()
+            cache[key] = self._wp.array(np.frombuffer(key, dtype=np.int32), dtype=self._wp.int32,
+                                        device=self.tools.goal.device)
+        return cache[key]
+
+    def _write_goals(self, worlds: np.ndarray, actuators, values: np.ndarray, speed: float | None) -> None:
+        """Goals ``values`` (len(worlds), len(actuators)) of the listed worlds' actuators, those worlds set
+        moving, and their rates set to ``speed`` unless it is None, written on the device
+        (:func:`~surgsim_envs.batch.rigid_kernels.write_goals`: only the listed values travel)."""
+        if len(worlds) == 0:
+            return
+        wp, t, dev = self._wp, self.tools, self.tools.goal.device
+        wp.launch(rk.write_goals, dim=(len(worlds), len(actuators)), device=dev,
+                  inputs=[self._index_array(worlds), self._index_array(actuators),
+                          wp.array(np.ascontiguousarray(values, dtype=np.float64), dtype=wp.float64, device=dev),
+                          wp.int32(speed is not None), wp.float64(0.0 if speed is None else float(speed)),
+                          t.goal, t.rate, t.moving])
 
     #: MuJoCo state components (mjtState bits, in the state vector's order) and the MuJoCo Warp
     #: ``Data`` field each restores into (None: must be empty in a batched scene)
