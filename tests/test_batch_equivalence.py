@@ -107,11 +107,14 @@ def test_worlds_step_independently():
     np.testing.assert_array_equal(x[0], x[2])
     np.testing.assert_array_equal(f[0], f[2])
     assert np.abs(x[1] - x[0]).max() > 1e-4
-    # a reset world is back at rest while the others keep their state
+    # a reset world is back at rest while the others keep their state and their tool readouts (MuJoCo's
+    # forward runs in every world: the others' poses are put back)
+    tool = batch.tool_positions("probe").copy()
     batch.reset_worlds([2])
     x2 = batch.tissue_positions()
     np.testing.assert_array_equal(x2[2], batch.topology.rest)
     np.testing.assert_array_equal(x2[0], x[0])
+    np.testing.assert_array_equal(batch.tool_positions("probe")[:2], tool[:2])
     batch.set_tool_targets("probe", targets[2:], speed=0.2, worlds=[2])
     batch.step(40)
     x3 = batch.tissue_positions()

@@ -78,3 +78,13 @@ def reset_world_scalars(worlds: wp.array(dtype=wp.int32), fresh: wp.array(dtype=
         tool_depth[w, t] = f64(0.0)
         sum_force[w, t] = wp.vec3d()
         sum_torque[w, t] = wp.vec3d()
+
+
+@wp.kernel
+def keep_rows(reset: wp.array(dtype=wp.int32), before: wp.array2d(dtype=wp.float32),
+              now: wp.array2d(dtype=wp.float32)):
+    """``now[w, j] = before[w, j]`` in every world ``w`` not being reset (``reset[w] == 0``): a whole-batch
+    computation put back where it was not asked for, on the device (float32 rows: MuJoCo Warp's data)."""
+    w, j = wp.tid()
+    if reset[w] == 0:
+        now[w, j] = before[w, j]

@@ -510,6 +510,17 @@ class BatchSimulation:
     #: MuJoCo Warp ``Data`` fields computed by a step that the readouts read between steps
     _READOUT_FIELDS = ("xpos", "xquat", "xmat", "xipos", "ximat", "geom_xpos", "geom_xmat", "actuator_force")
 
+    def _float_rows(self, arr):
+        """A (W, M) float32 view of MuJoCo Warp data field ``arr`` (W, ...) of float32 scalars, vectors,
+        quaternions or matrices (one row per world, no copy)."""
+        wp = self._wp
+        comps = wp.types.type_size_in_bytes(arr.dtype) // 4
+        if not arr.is_contiguous or getattr(arr.dtype, "_wp_scalar_type_", arr.dtype) is not wp.float32 \
+                or arr.shape[0] != self.W:
+            raise ValueError(f"a (W, ...) contiguous float32 field is needed, got {arr.dtype} {arr.shape}")
+        return wp.array(ptr=arr.ptr, dtype=wp.float32, shape=(self.W, arr.size // self.W * comps),
+                        device=arr.device)
+
     def reset_worlds(self, worlds=None) -> None:
         """Back to the template's reset state in the listed worlds (all if None): tissue at rest,
         branches and contacts cleared, MuJoCo data reset (``reset_data`` + ``forward``), controls
@@ -537,14 +548,13 @@ class BatchSimulation:
                                                               c.tool_contacts, c.tool_slipping, c.tool_depth,
                                                               c.sum_force, c.sum_torque])
             mjw.reset_data(t.model, t.data, reset=wp.array(mask, dtype=bool))
-            keep = np.flatnonzero(~mask)
-            saved = [(f, getattr(t.data, f).numpy().copy()) for f in self._READOUT_FIELDS] if len(keep) else []
+            rows = [self._float_rows(getattr(t.data, f)) for f in self._READOUT_FIELDS] if not mask.all() else []
+            saved = [wp.clone(r) for r in rows]
             mjw.forward(t.model, t.data)
-            for f, before in saved:         # forward runs in every world: the others' readouts stay as they were
-                arr = getattr(t.data, f)
-                now = arr.numpy()
-                now[keep] = before[keep]
-                arr.assign(now)
+            if rows:                        # forward runs in every world: the others' readouts stay as they were
+                flags = wp.array(mask.astype(np.int32), dtype=wp.int32)
+                for now, before in zip(rows, saved):
+                    wp.launch(rsk.keep_rows, dim=now.shape, inputs=[flags, before, now])
 
     def set_tool_friction(self, mu, mu_static=None, worlds=None) -> None:
         """Coulomb friction of every tool body in the listed worlds (all if None): ``mu`` kinetic,
