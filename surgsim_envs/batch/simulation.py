@@ -514,9 +514,9 @@ class BatchSimulation:
         """A (W, M) float32 view of MuJoCo Warp data field ``arr`` (W, ...) of float32 scalars, vectors,
         quaternions or matrices (one row per world, no copy)."""
         wp = self._wp
-        comps = wp.types.type_size_in_bytes(arr.dtype) // 4
-        if not arr.is_contiguous or getattr(arr.dtype, "_wp_scalar_type_", arr.dtype) is not wp.float32 \
-                or arr.shape[0] != self.W:
+        comps = wp.types.type_size(arr.dtype)
+        float32_based = any(wp.types.types_equal(arr.dtype, t) for t in (wp.float32, wp.vec3f, wp.quatf, wp.mat33f))
+        if not arr.is_contiguous or not float32_based or arr.shape[0] != self.W:
             raise ValueError(f"a (W, ...) contiguous float32 field is needed, got {arr.dtype} {arr.shape}")
         return wp.array(ptr=arr.ptr, dtype=wp.float32, shape=(self.W, arr.size // self.W * comps),
                         device=arr.device)
