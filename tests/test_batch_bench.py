@@ -44,3 +44,10 @@ def test_cli_reports_bad_outputs(capsys, monkeypatch):
         in err
     assert ("only SurgSim/Palpation-v0, SurgSim/Grasp-v0 and SurgSim/Slippage-v0 have device outputs. Use --outputs "
             "host") in err
+
+
+def test_cli_reports_graphs_where_they_cannot_be_captured(capsys):
+    pytest.importorskip("warp")
+    assert main(["bench", "batch", "--graphs", "on", "--worlds", "1"]) == 2
+    assert "graphs='on' on device cpu: Warp's CPU device cannot capture graphs; use graphs='auto' or 'off'" \
+        in capsys.readouterr().err

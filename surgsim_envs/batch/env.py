@@ -48,8 +48,10 @@ from surgsim_envs.errors import ConfigError
 class BatchedTaskEnv(VectorEnv):
     """A task's episodes in ``num_envs`` batched worlds on Warp device ``device`` (module docstring).
 
-    num_envs: worlds W; device: "cpu" (Warp's CPU device, everywhere) or "cuda"; config / overrides:
-    as for ``gym.make(task_id, ...)`` (the task's config dataclass and field overrides).
+    num_envs: worlds W; device: "cpu" (Warp's CPU device, everywhere) or "cuda"; graphs: "auto"
+    (the physics of a step replayed as a CUDA graph on a GPU, :mod:`~surgsim_envs.batch.step_graph`),
+    "on" or "off"; config / overrides: as for ``gym.make(task_id, ...)`` (the task's config dataclass
+    and field overrides).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -64,7 +66,7 @@ class BatchedTaskEnv(VectorEnv):
     DEVICE_OUTPUTS: ClassVar[bool] = False
 
     def __init__(self, num_envs: int = 1, *, device: str = "cpu", config=None, max_episode_steps: int | None = None,
-                 device_outputs: bool = False, **overrides):
+                 device_outputs: bool = False, graphs: str = "auto", **overrides):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ConfigError(f"num_envs={num_envs!r} must be a positive integer (batched worlds)")
         if not isinstance(device_outputs, (bool, np.bool_)):
@@ -84,7 +86,7 @@ class BatchedTaskEnv(VectorEnv):
                               f"{self.template.max_episode_steps} control steps (episode_seconds x control_hz); "
                               "change episode_seconds instead")
         self.config = self.template.config
-        self.sim = BatchSimulation(self.template.sim, int(num_envs), device=device)
+        self.sim = BatchSimulation(self.template.sim, int(num_envs), device=device, graphs=graphs)
         self.num_envs = W = int(num_envs)
         self.device = self.sim.device
         self.single_observation_space = self.template.observation_space

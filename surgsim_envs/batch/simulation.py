@@ -12,7 +12,9 @@ step"), for all worlds at once:
 5. :func:`~surgsim_envs.batch.contact_kernels.write_reaction` - the reaction into ``xfrc_applied``;
 6. ``mujoco_warp.step2`` - tools to t + dt with that reaction (``mj_step2``); the rows are cleared.
 
-Tools and tissue see the same force over the same interval, as on the CPU. Built from a CPU
+Tools and tissue see the same force over the same interval, as on the CPU. On a GPU each call of
+:meth:`BatchSimulation.step` (and of a control schedule) is captured once as a CUDA graph and
+replayed (:mod:`~surgsim_envs.batch.step_graph`): the steps above do device work only. Built from a CPU
 :class:`~surgsim_envs.scene.Simulation` (the template: its MuJoCo model, its tissue's parameters
 and its contact law), so a one-world batch steps the same scene as the template.
 
@@ -36,6 +38,7 @@ from surgsim_envs.batch import rigid_kernels as rk
 from surgsim_envs.batch.backend import BatchUnavailableError, device_name, require
 from surgsim_envs.batch.state import (ContactState, MassSpringFields, MassSpringTopology, TissueState, ToolState,
                                       _put, _tiled, csr)
+from surgsim_envs.batch.step_graph import StepGraphs
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.tissue.mass_spring import MassSpringModel
 
@@ -95,9 +98,11 @@ class BatchSimulation:
     Commands: :meth:`set_goals` (actuator goals per world, the rate limiter moves the controls as
     the CPU scene does), :meth:`step` (physics steps), :meth:`reset_worlds`. Readouts as numpy
     arrays (a copy) or the device arrays themselves (``.arrays()``; DLPack-capable Warp arrays).
+    ``graphs``: "auto" (CUDA graphs of the physics calls on a GPU, plain launches elsewhere), "on"
+    (ConfigError where impossible) or "off" (:class:`~surgsim_envs.batch.step_graph.StepGraphs`).
     """
 
-    def __init__(self, template, worlds: int, *, device: str = "cpu"):
+    def __init__(self, template, worlds: int, *, device: str = "cpu", graphs: str = "auto"):
         wp, mjw = require()
         if isinstance(worlds, bool) or not isinstance(worlds, (int, np.integer)) or not 1 <= worlds <= MAX_WORLDS:
             raise ConfigError(f"worlds={worlds!r} must be an integer in [1, {MAX_WORLDS}] (scene copies)")
@@ -183,6 +188,11 @@ class BatchSimulation:
         self._mjw, self._wp = mjw, wp
         self._model_name = type(tissue).name
         self._critical_dt = float(tissue.critical_dt())     # at rest, for the divergence message
+        #: CUDA graphs of the physics calls (:mod:`surgsim_envs.batch.step_graph`; plain launches on the CPU)
+        self.graphs = StepGraphs(wp, self.device, graphs)
+        self._schedule_buffers: dict = {}
+        if self.graphs.enabled:               # a graph keeps the addresses it recorded: allocate before it
+            self._f_spring, self._f_corner
 
     # ------------------------------------------------------------------------------------------
     # stepping
@@ -194,8 +204,22 @@ class BatchSimulation:
         if n % self.subcycles:
             raise ConfigError(f"step(n): with tissue_subcycles={self.subcycles} the worlds advance in whole MuJoCo "
                               f"steps of {self.subcycles} physics steps; {n} is not a multiple of it")
-        for _ in range(int(n) // self.subcycles):
+        K = int(n) // self.subcycles
+        if K:
+            self._run(("step", K), lambda: self._mujoco_steps(K))
+            self.steps += int(n)
+
+    def _mujoco_steps(self, K: int) -> None:
+        for _ in range(K):
             self._one_step()
+
+    def _run(self, key, body) -> None:
+        """``body`` (device work only) as a replayed CUDA graph where graphs are on, plainly while
+        profiling (its phases synchronise the device)."""
+        if self.phase_seconds is None:
+            self.graphs.run(key, body)
+        else:
+            body()
 
     def step_with_controls(self, actuators, values) -> None:
         """``K`` MuJoCo steps (each ``subcycles`` physics steps) with a per-world control schedule
@@ -244,12 +268,32 @@ class BatchSimulation:
     def _scheduled_steps(self, ids: np.ndarray, vals_d) -> None:
         """The MuJoCo steps of the (K, W, A) device schedule ``vals_d`` of actuators ``ids``."""
         wp = self._wp
-        t = self.tools
-        with wp.ScopedDevice(self.device):
-            ids_d = wp.array(ids.astype(np.int32), dtype=wp.int32)
+        K = int(vals_d.shape[0])
+        if not K:
+            return
+        if self.graphs.enabled and self.phase_seconds is None:
+            # the graph records the addresses of its schedule: the values are copied into its own buffer
+            key = ("schedule", K, ids.tobytes())
+            if key not in self._schedule_buffers:
+                with wp.ScopedDevice(self.device):
+                    self._schedule_buffers[key] = (wp.array(ids.astype(np.int32), dtype=wp.int32),
+                                                   wp.empty(tuple(vals_d.shape), dtype=wp.float64))
+            ids_d, buf = self._schedule_buffers[key]
+            wp.copy(buf, vals_d)
+            self.graphs.run(key, lambda: self._schedule_body(ids_d, buf))
+        else:
+            with wp.ScopedDevice(self.device):
+                ids_d = wp.array(ids.astype(np.int32), dtype=wp.int32)
+            self._schedule_body(ids_d, vals_d)
+        self.steps += K * self.subcycles
+
+    def _schedule_body(self, ids_d, vals_d) -> None:
+        """The MuJoCo steps of the schedule ``vals_d`` (K, W, A) of actuators ``ids_d`` (device work only)."""
+        wp, t = self._wp, self.tools
         for k in range(vals_d.shape[0]):
             with wp.ScopedDevice(self.device):
-                wp.launch(rk.set_controls, dim=(self.W, len(ids)), inputs=[k, ids_d, vals_d, t.ctrl64, t.data.ctrl])
+                wp.launch(rk.set_controls, dim=(self.W, ids_d.shape[0]), inputs=[k, ids_d, vals_d, t.ctrl64,
+                                                                                 t.data.ctrl])
             self._one_step()
 
     def _one_step(self) -> None:
@@ -296,7 +340,6 @@ class BatchSimulation:
             mjw.step2(t.model, d)
             wp.launch(ck.zero_reaction, dim=(W, B), inputs=[self._bodies, d.xfrc_applied])
             mark("mujoco_warp.step2")
-        self.steps += n
 
     #: phase -> seconds spent in it (wall clock, device synchronised after each phase) while
     #: profiling (:meth:`profile`); None: not profiling (no synchronisation between phases)

@@ -11,6 +11,10 @@ Warp's CPU device runs kernels on one thread: CPU figures are for checking, not 
 ``--outputs host,device`` measures each world count twice in the same process: the task's
 bookkeeping, observations and rewards on the host in numpy (``host``, the default) and on the
 device (``device``: the env built with ``device_outputs=True``; Palpation-v0, Grasp-v0 and Slippage-v0).
+``--graphs auto`` (the default) replays the physics of each call as a CUDA graph on a GPU
+(``batch/step_graph.py``; plain launches on the CPU, where Warp cannot capture); ``off`` measures
+plain launches there too; the rows record which ran. The phase shares come from plain launches
+(each phase synchronises the device).
 Writes batch_speed.json, batch_speed.md (the table) and batch_speed.png (the chart) to ``--out``.
 """
 
@@ -42,6 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--outputs", default="host",
                         help="where the task's observations and rewards are computed: host (numpy, default), "
                              "device (device_outputs=True; Palpation-v0, Grasp-v0, Slippage-v0), or host,device for both")
+    parser.add_argument("--graphs", default="auto", choices=("auto", "on", "off"),
+                        help="CUDA graphs of the physics calls: auto (on a GPU; default), on, off")
     parser.add_argument("--json", action="store_true", help="print the results as JSON instead of the table")
     parser.add_argument("--out", default="surgsim-out/bench_batch", help="output directory")
 
@@ -96,13 +102,15 @@ def batched_task(task: str) -> str:
 
 
 def measure(device: str, worlds: int, steps: int, repeats: int, task: str = "SurgSim/Palpation-v0",
-            outputs: str = "host") -> dict:
+            outputs: str = "host", graphs: str = "auto") -> dict:
     """The figures of one world count (module docstring); ``outputs``: "host" or "device"
-    (the env's ``device_outputs``)."""
+    (the env's ``device_outputs``); ``graphs``: the batch's CUDA graph mode (the row records
+    whether the physics was replayed as graphs)."""
     import warp as wp
     from gymnasium.envs.registration import load_env_creator
 
-    env = load_env_creator(batched_task(task))(worlds, device=device, device_outputs=outputs == "device")
+    env = load_env_creator(batched_task(task))(worlds, device=device, device_outputs=outputs == "device",
+                                               graphs=graphs)
     sim = env.sim
     rng = np.random.default_rng(0)
     shape = (worlds,) + env.single_action_space.shape
@@ -131,7 +139,8 @@ def measure(device: str, worlds: int, steps: int, repeats: int, task: str = "Sur
     node_worlds = worlds * sim.topology.n_nodes
     backend = sum(mem.values())
     with_mjw = backend + _data_bytes(sim.tools.data)
-    out = {"task": task, "worlds": worlds, "outputs": outputs, "nodes": sim.topology.n_nodes, "springs": sim.topology.n_springs,
+    out = {"task": task, "worlds": worlds, "outputs": outputs, "graphs": bool(sim.graphs.enabled),
+           "graph_failure": sim.graphs.failure, "nodes": sim.topology.n_nodes, "springs": sim.topology.n_springs,
            "tets": sim.topology.n_tets, "substeps": env.substeps,
            "env_steps_per_s": statistics.median(env_rates), "physics_world_steps_per_s": statistics.median(phys_rates),
            "physics_node_steps_per_s": statistics.median(phys_rates) * sim.topology.n_nodes,
@@ -143,12 +152,13 @@ def measure(device: str, worlds: int, steps: int, repeats: int, task: str = "Sur
 
 
 def _table(rows: list[dict], device: str) -> str:
-    head = ("| worlds | outputs | env steps/s | physics world-steps/s | node-steps/s | B per node-world (with MJW) | "
-            + " | ".join(PHASES) + " |")
-    lines = [head, "|" + "---|" * (6 + len(PHASES))]
+    head = ("| worlds | outputs | graphs | env steps/s | physics world-steps/s | node-steps/s | "
+            "B per node-world (with MJW) | " + " | ".join(PHASES) + " |")
+    lines = [head, "|" + "---|" * (7 + len(PHASES))]
     for r in rows:
         shares = " | ".join(f"{100 * r['phase_share'][p]:.0f} %" for p in PHASES)
-        lines.append(f"| {r['worlds']} | {r.get('outputs', 'host')} | {r['env_steps_per_s']:,.0f} | "
+        lines.append(f"| {r['worlds']} | {r.get('outputs', 'host')} | {'yes' if r.get('graphs') else 'no'} | "
+                     f"{r['env_steps_per_s']:,.0f} | "
                      f"{r['physics_world_steps_per_s']:,.0f} | "
                      f"{r['physics_node_steps_per_s']:.3g} | {r['bytes_per_node_world']:.0f} "
                      f"({r['bytes_per_node_world_with_mujoco_warp']:.0f}) | {shares} |")
@@ -209,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
     for w in worlds:
         for mode in outputs:
             print(f"bench batch: {args.task}, {w} worlds on {device}, {mode} outputs ...", file=sys.stderr)
-            rows.append(measure(device, w, args.steps, args.repeats, args.task, mode))
+            rows.append(measure(device, w, args.steps, args.repeats, args.task, mode, args.graphs))
     load = os.getloadavg()
     result = {"task": args.task, "device": device, "load_average": load, "load_average_before": load_before,
               "steps": args.steps, "repeats": args.repeats, "rows": rows,
