@@ -88,3 +88,12 @@ def keep_rows(reset: wp.array(dtype=wp.int32), before: wp.array2d(dtype=wp.float
     w, j = wp.tid()
     if reset[w] == 0:
         now[w, j] = before[w, j]
+
+
+@wp.kernel
+def restore_rows(worlds: wp.array(dtype=wp.int32), snapshot: wp.array(dtype=wp.uint8),
+                 rows: wp.array2d(dtype=wp.uint8)):
+    """``rows[worlds[k], j] = snapshot[j]``: one world's recorded reset state (the raw bytes of its
+    row of a MuJoCo Warp ``Data`` field) into the listed worlds."""
+    k, j = wp.tid()
+    rows[worlds[k], j] = snapshot[j]
