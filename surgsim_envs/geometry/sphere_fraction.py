@@ -13,7 +13,9 @@ has fraction 1, one whose bounding sphere misses it 0; an element the surface cu
 tetrahedron by sorting each point's coordinates: a measure-preserving map, so every point carries
 the same volume). With the default ``n = 10`` (1,000 points) a cut element's fraction is within 0.012 of
 its exact value (a tetrahedron cut by planes parallel and oblique to its faces, tested; 0.031 with
-216 points). Cost: 8 ms for the 1,200 tets of a 10 mm slab lattice, 0.3 s for 150,000 at 2 mm.
+216 points). Cost (median over random spheres of radius 3-12 mm in a 10 x 10 x 2 cm slab): 1.0 ms
+for its 1,200 tets at 10 mm, 4.3 ms for 9,600 at 5 mm, 74 ms for 150,000 at 2 mm (the sample
+points by one batched matrix product; the distances summed in the order of ``np.sum``).
 """
 
 from __future__ import annotations
@@ -70,9 +72,12 @@ def sphere_volume_fractions(vertices, centre, radius: float, samples_per_axis: i
     bary = _simplex_barycentric(n ** 3)
     for start in range(0, len(cut), _CHUNK):
         idx = cut[start:start + _CHUNK]
-        pts = np.einsum("sk,tkd->tsd", bary, v[idx])               # (t, n^3, 3)
-        inside = np.sum((pts - c) ** 2, axis=2) < r * r
-        frac[idx] = inside.mean(axis=1)
+        pts = np.matmul(bary[None], v[idx])                          # (t, n^3, 3): BLAS, not einsum's loop
+        pts -= c
+        np.square(pts, out=pts)
+        dist2 = pts[..., 0] + pts[..., 1]                           # summed in np.sum's order: the same bits
+        dist2 += pts[..., 2]
+        frac[idx] = np.count_nonzero(dist2 < r * r, axis=1) / bary.shape[0]
     return frac
 
 
