@@ -103,3 +103,30 @@ def integrate_nodes(x: wp.array2d(dtype=wp.vec3d), v: wp.array2d(dtype=wp.vec3d)
     x[w, i] = xn
     if not (wp.isfinite(xn[0]) and wp.isfinite(xn[1]) and wp.isfinite(xn[2])):
         diverged[w] = 1
+
+
+@wp.kernel
+def scale_spring_constants(worlds: wp.array(dtype=wp.int32), factors: wp.array2d(dtype=f64),
+                           indptr: wp.array(dtype=wp.int32), cols: wp.array(dtype=wp.int32),
+                           weights: wp.array(dtype=f64), base: wp.array2d(dtype=f64), K1: wp.array2d(dtype=f64),
+                           K2: wp.array2d(dtype=f64), kM: wp.array2d(dtype=f64), kMg: wp.array2d(dtype=f64)):
+    """World ``worlds[k]``'s spring constants from per-tet Young's factors ``factors[k]``: each is the
+    template's (``base`` rows K1, K2, kM, kMg) times the E V-weighted mean factor of the spring's
+    tets (CSR row e of ``BatchSimulation``'s spring weights, summed in its order as scipy's product)."""
+    k, e = wp.tid()
+    acc = f64(0.0)
+    for jj in range(indptr[e], indptr[e + 1]):
+        acc += weights[jj] * factors[k, cols[jj]]
+    w = worlds[k]
+    K1[w, e] = base[0, e] * acc
+    K2[w, e] = base[1, e] * acc
+    kM[w, e] = base[2, e] * acc
+    kMg[w, e] = base[3, e] * acc
+
+
+@wp.kernel
+def scale_volume_constants(worlds: wp.array(dtype=wp.int32), factors: wp.array2d(dtype=f64),
+                           base: wp.array(dtype=f64), kv: wp.array2d(dtype=f64)):
+    """World ``worlds[k]``'s volume stiffness of tet t: the template's times its factor."""
+    k, t = wp.tid()
+    kv[worlds[k], t] = base[t] * factors[k, t]

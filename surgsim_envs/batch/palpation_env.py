@@ -16,7 +16,9 @@ on the per-world arrays:
 Per-world randomisation as the single env's ``reset``: inclusion position, depth, radius,
 stiffness contrast and Young's scale, drawn from each world's own generator (the base's seeding:
 world i of ``reset(seed=s)`` has the inclusion of ``gym.make("SurgSim/Palpation-v0").reset(seed=s + i)``);
-they enter the tissue as per-tet Young's factors (:meth:`BatchSimulation.set_young_factors`).
+they enter the tissue as per-tet Young's factors, computed on the device for the reset worlds
+(:class:`~surgsim_envs.batch.inclusions.SphereInclusionFactors`,
+:meth:`BatchSimulation.set_young_factor_array`: the single env's volume-fraction lump).
 Autoreset, diverged worlds and the device arrays: the base's.
 
 ``device_outputs=True`` (``gym.make_vec(..., device="cpu", device_outputs=True)``) moves the
@@ -39,15 +41,16 @@ import math
 from typing import Any
 
 import numpy as np
+import warp as wp
 
 from surgsim_envs.batch.env import BatchedTaskEnv
+from surgsim_envs.batch.inclusions import SphereInclusionFactors
 from surgsim_envs.batch.palpation_device_terms import PalpationDeviceTerms
 from surgsim_envs.envs.checks import sample
 from surgsim_envs.envs.palpation import (PalpationEnv, is_new_site, localisation_error,
                                          localisation_reward, map_cell, stiffness_map,
                                          stiffness_weighted_estimate)
 from surgsim_envs.envs.palpation.terms import localisation_potential
-from surgsim_envs.envs.tissue_setup import inclusion_young_factors
 from surgsim_envs.errors import ConfigError
 
 
@@ -97,9 +100,9 @@ class BatchedPalpationEnv(BatchedTaskEnv):
         W, c = self.num_envs, self.config
         self.surface_z = self.template.surface_z
         self.home = np.array(self.template.home, dtype=np.float64)
-        self._tissue = self.template.sim.tissue()     # the template's tissue: the mesh the inclusion is cut from
+        # the template's tets: the mesh the inclusion is cut from, its factors computed on the device
+        self._inclusions = SphereInclusionFactors(self.template.sim.tissue().element_vertices(), self.sim.device)
         self.n_cells = int(c.map_cells) ** 2
-        self._factors = np.ones((W, self.sim.topology.n_tets))
         self._tasks = [_WorldTask(self.n_cells) for _ in range(W)]
         self._target = np.tile(self.home, (W, 1))
         self._best = np.zeros((W, 3))
@@ -116,6 +119,7 @@ class BatchedPalpationEnv(BatchedTaskEnv):
         half = float(min(c.slab_size[:2])) / 2
         sim = self.sim
         sim.reset_worlds(idx)
+        lumps = []                          # (centre, radius, contrast, scale) per reset world
         for w in idx:
             task = self._tasks[w]
             rng = self._rngs[w]
@@ -132,10 +136,14 @@ class BatchedPalpationEnv(BatchedTaskEnv):
             scale = sample(rng, get("young_scale"), "young_scale", 0.1, 10.0)
             rng.integers(2**31)             # the single env's physics seed draw: keeps the streams aligned
             centre = np.array([x, y, self.surface_z - depth])
-            self._factors[w] = inclusion_young_factors(self._tissue, centre, radius, contrast, scale)
+            lumps.append((centre, radius, contrast, scale))
             task.start({"centre": centre, "radius": radius, "contrast": contrast, "young_scale": scale},
                        self.home.copy())
-        sim.set_young_factors(self._factors[idx], worlds=idx)
+        if len(idx):
+            centres, radii, contrasts, scales = zip(*lumps)
+            factors = self._inclusions.factors(np.array(centres), radii, contrasts, scales)
+            worlds = wp.array(np.asarray(idx, dtype=np.int32), dtype=wp.int32, device=sim.device)
+            sim.set_young_factor_array(factors, worlds)
         self._target[idx] = self.home
         sim.set_tool_targets("probe", self._target[idx], speed=c.probe_speed, worlds=idx)
         self._steps[idx] = 0

@@ -195,6 +195,7 @@ class BatchSimulation:
         #: [(one world's reset row, (W, bytes) rows)] of every per-world MuJoCo Warp Data array, recorded
         #: at the first reset (MuJoCo Warp's reset_data + forward) and restored at the later ones
         self._reset_snapshot = None
+        self._csr = self._kv_base = None        # device copies of the spring weights and volume constants
         if self.graphs.enabled:               # a graph keeps the addresses it recorded: allocate before it
             self._f_spring, self._f_corner
 
@@ -699,6 +700,57 @@ class BatchSimulation:
             self._assign_rows(getattr(self.fields, key), idx, (base[key][:, None] * edge).T)
         if self.topology.n_tets:
             self._assign_rows(self.fields.kv, idx, base["kv"][None, :] * f)
+
+    def set_young_factor_array(self, factors, worlds) -> None:
+        """:meth:`set_young_factors` with the factors already on the device: ``factors`` a float64
+        Warp array (k, T) (e.g. written by a task's reset kernels), ``worlds`` an int32 Warp array
+        (k,) of the worlds they belong to, both on this batch's device; no host copy. The caller
+        keeps the factors positive and finite (they are not read back to check)."""
+        wp = self._wp
+        nt = self.material_tets
+        ok = (isinstance(factors, wp.array) and factors.dtype == wp.float64 and factors.ndim == 2
+              and factors.shape[1] == nt and isinstance(worlds, wp.array) and worlds.dtype == wp.int32
+              and worlds.ndim == 1 and worlds.shape[0] == factors.shape[0])
+        if not ok:
+            raise ConfigError(f"factors must be a float64 Warp array (k, {nt}) and worlds an int32 Warp array (k,); got "
+                              f"{type(factors).__name__} {getattr(factors, 'shape', None)} and {type(worlds).__name__} "
+                              f"{getattr(worlds, 'shape', None)}; give numpy factors to set_young_factors instead")
+        for a in (factors, worlds):
+            if str(a.device) != str(wp.get_device(self.device)):
+                raise ConfigError(f"factors and worlds must be on the batch's device {self.device}, got {a.device}")
+        k = factors.shape[0]
+        if not k:
+            return
+        csr = self._spring_weight_arrays()
+        f = self.fields
+        with wp.ScopedDevice(self.device):
+            wp.launch(msk.scale_spring_constants, dim=(k, self.topology.n_springs),
+                      inputs=[worlds, factors, *csr, f.K1, f.K2, f.kM, f.kMg])
+            if self.topology.n_tets:
+                wp.launch(msk.scale_volume_constants, dim=(k, self.topology.n_tets),
+                          inputs=[worlds, factors, self._base_kv_array(), f.kv])
+
+    def _spring_weight_arrays(self) -> tuple:
+        """The spring weights (:meth:`_spring_weights`) as device CSR arrays (indptr, cols, weights)
+        and the template's K1, K2, kM, kMg rows (4, E), built at first use."""
+        if self._csr is None:
+            wp = self._wp
+            sw = self._spring_weights().tocsr()
+            base = np.stack([self._base_fields[k] for k in ("K1", "K2", "kM", "kMg")])
+            with wp.ScopedDevice(self.device):
+                self._csr = (wp.array(sw.indptr.astype(np.int32), dtype=wp.int32),
+                             wp.array(sw.indices.astype(np.int32), dtype=wp.int32),
+                             wp.array(sw.data.astype(np.float64), dtype=wp.float64),
+                             wp.array(np.ascontiguousarray(base), dtype=wp.float64))
+        return self._csr
+
+    def _base_kv_array(self):
+        """The template's volume stiffness per tet (T,) on the device."""
+        if self._kv_base is None:
+            wp = self._wp
+            with wp.ScopedDevice(self.device):
+                self._kv_base = wp.array(np.ascontiguousarray(self._base_fields["kv"]), dtype=wp.float64)
+        return self._kv_base
 
     def _assign_rows(self, arr, idx: np.ndarray, values: np.ndarray) -> None:
         """``arr[idx] = values`` on the device (all rows at once when idx is every world; else only

@@ -32,7 +32,7 @@ SAMPLES_PER_AXIS = 10
 _CHUNK = 2048
 
 
-def _simplex_barycentric(count: int) -> np.ndarray:
+def simplex_sample_points(count: int) -> np.ndarray:
     """(count, 4) barycentric coordinates of ``count`` equal-volume points spread over a tetrahedron:
     the first points of Roberts' R3 low-discrepancy sequence in the unit cube, mapped onto the
     tetrahedron by sorting their coordinates. (A regular grid would alias: its sorted points fall on
@@ -69,7 +69,7 @@ def sphere_volume_fractions(vertices, centre, radius: float, samples_per_axis: i
     mid = v.mean(axis=1)
     reach = np.linalg.norm(v - mid[:, None, :], axis=2).max(axis=1)
     cut = np.flatnonzero((np.linalg.norm(mid - c, axis=1) < r + reach) & (frac < 1.0))
-    bary = _simplex_barycentric(n ** 3)
+    bary = simplex_sample_points(n ** 3)
     for start in range(0, len(cut), _CHUNK):
         idx = cut[start:start + _CHUNK]
         pts = np.matmul(bary[None], v[idx])                          # (t, n^3, 3): BLAS, not einsum's loop
