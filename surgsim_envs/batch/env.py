@@ -12,6 +12,7 @@ A task's batched env is one small module on this base (``batch/palpation_env.py`
   Gymnasium's vector envs seed their copies, so it is ``gym.make(task_id).reset(seed=s + i)``;
 * reset options: the task's ``OPTIONS`` less those a batch cannot honour (``REFUSED``: option ->
   why), refused with a :class:`~surgsim_envs.errors.ConfigError` naming the option and the reason;
+  ``reset_mask`` (Gymnasium's vector-env option) restarts only the masked worlds;
 * the step: action checks, the task's commands for the live worlds, the physics, diverged worlds
   (``on_unstable``), the task's evaluation, and Gymnasium's NEXT_STEP autoreset per world (the step
   after a world's episode ended resets it: its action is ignored, reward 0, terminated/truncated
@@ -136,7 +137,12 @@ class BatchedTaskEnv(VectorEnv):
 
     # -- episodes ---------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
+        """Reset every world, or with ``options={"reset_mask": mask}`` (a (W,) numpy bool array, as
+        Gymnasium's vector envs take it) only the worlds where ``mask`` is True: the others keep their
+        episodes, and the returned observations hold every world's current one. ``seed``: an int s
+        seeds world i with s + i, or a list of W seeds (with a mask, only the masked worlds are reseeded)."""
         options = dict(options or {})
+        mask = self._reset_mask(options.pop("reset_mask", None))
         refused = sorted(set(options) & set(self.REFUSED))
         if refused:
             name = refused[0]
@@ -146,15 +152,30 @@ class BatchedTaskEnv(VectorEnv):
         if unknown:
             raise ConfigError(f"unknown reset option(s) {unknown} for {type(self).__name__}; accepted options: "
                               f"{list(self.OPTIONS)}")
+        idx = np.arange(self.num_envs) if mask is None else np.flatnonzero(mask)
         if seed is not None:
             seeds = [int(seed) + i for i in range(self.num_envs)] if not hasattr(seed, "__len__") else list(seed)
             if len(seeds) != self.num_envs:
                 raise ConfigError(f"seed must be an int or {self.num_envs} ints, got {len(seeds)}")
-            self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        idx = np.arange(self.num_envs)
+            for i in idx:
+                self._rngs[i] = seeding.np_random(seeds[i])[0]
         self._reset_worlds(idx, options)
-        self._autoreset[:] = False
-        return self._observe(), self._reset_info(idx)
+        self._autoreset[idx] = False
+        info = self._reset_info(idx)
+        if mask is not None:                  # Gymnasium's convention: which worlds the entries are new for
+            info.update({f"_{key}": mask.copy() for key in list(info)})
+        return self._observe(), info
+
+    def _reset_mask(self, mask):
+        """``options["reset_mask"]`` checked: None, or a (W,) numpy bool array with a True."""
+        if mask is None:
+            return None
+        W = self.num_envs
+        if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.shape != (W,) or not mask.any():
+            raise ConfigError(f"options['reset_mask'] must be a numpy bool array of shape ({W},) with at least one "
+                              f"True (the worlds to reset), got {type(mask).__name__} "
+                              f"{getattr(mask, 'dtype', '')} {getattr(mask, 'shape', '')}")
+        return mask
 
     def _device_step(self, a: np.ndarray, live: np.ndarray, unstable: np.ndarray):
         """The rest of :meth:`step` (evaluation, autoreset, observation) on the device, for a task

@@ -2,7 +2,8 @@
 
 For each world count W: env steps/s of the batched vector env of ``--task`` (Palpation-v0 by
 default, or any task with a batched env, e.g. Grasp-v0; random actions, autoreset), physics
-world-steps/s of the bare :class:`BatchSimulation` (W x physics steps per second), the share of
+world-steps/s of the bare :class:`BatchSimulation` (W x physics steps per second), the wall time
+of one world's new episode (``reset(options={"reset_mask": ...})``, the others kept), the share of
 each phase of a physics step (rate limiter, MuJoCo Warp step1, contact, tissue, reaction, MuJoCo
 Warp step2; timed with the device synchronised after each phase, in a
 separate run), and the memory of the batched state per tissue node-world (the backend's arrays,
@@ -130,6 +131,15 @@ def measure(device: str, worlds: int, steps: int, repeats: int, task: str = "Sur
         sim.step(n)
         wp.synchronize_device(sim.device)
         phys_rates.append(n * worlds / (time.perf_counter() - t0))
+    one = np.zeros(worlds, dtype=bool)
+    one[min(3, worlds - 1)] = True
+    reset_s = []
+    for _ in range(max(repeats, 5)):              # one world's new episode (reset_mask), the others kept
+        wp.synchronize_device(sim.device)
+        t0 = time.perf_counter()
+        env.reset(options={"reset_mask": one})
+        wp.synchronize_device(sim.device)
+        reset_s.append(time.perf_counter() - t0)
     sim.profile(True)
     sim.step(steps * env.substeps)
     phases = dict(sim.phase_seconds)
@@ -144,6 +154,7 @@ def measure(device: str, worlds: int, steps: int, repeats: int, task: str = "Sur
            "tets": sim.topology.n_tets, "substeps": env.substeps,
            "env_steps_per_s": statistics.median(env_rates), "physics_world_steps_per_s": statistics.median(phys_rates),
            "physics_node_steps_per_s": statistics.median(phys_rates) * sim.topology.n_nodes,
+           "reset_one_world_ms": 1e3 * statistics.median(reset_s),
            "phase_share": {p: phases.get(p, 0.0) / total for p in PHASES},
            "bytes_per_node_world": backend / node_worlds, "bytes_per_node_world_with_mujoco_warp": with_mjw / node_worlds,
            "memory_bytes": mem, "env_rates": env_rates, "physics_rates": phys_rates}
@@ -152,15 +163,16 @@ def measure(device: str, worlds: int, steps: int, repeats: int, task: str = "Sur
 
 
 def _table(rows: list[dict], device: str) -> str:
-    head = ("| worlds | outputs | graphs | env steps/s | physics world-steps/s | node-steps/s | "
+    head = ("| worlds | outputs | graphs | env steps/s | physics world-steps/s | node-steps/s | one-world reset | "
             "B per node-world (with MJW) | " + " | ".join(PHASES) + " |")
-    lines = [head, "|" + "---|" * (7 + len(PHASES))]
+    lines = [head, "|" + "---|" * (8 + len(PHASES))]
     for r in rows:
         shares = " | ".join(f"{100 * r['phase_share'][p]:.0f} %" for p in PHASES)
         lines.append(f"| {r['worlds']} | {r.get('outputs', 'host')} | {'yes' if r.get('graphs') else 'no'} | "
                      f"{r['env_steps_per_s']:,.0f} | "
                      f"{r['physics_world_steps_per_s']:,.0f} | "
-                     f"{r['physics_node_steps_per_s']:.3g} | {r['bytes_per_node_world']:.0f} "
+                     f"{r['physics_node_steps_per_s']:.3g} | {r.get('reset_one_world_ms', float('nan')):.2f} ms | "
+                     f"{r['bytes_per_node_world']:.0f} "
                      f"({r['bytes_per_node_world_with_mujoco_warp']:.0f}) | {shares} |")
     return "\n".join(lines)
 
