@@ -161,10 +161,11 @@ class BatchedTaskEnv(VectorEnv):
                 self._rngs[i] = seeding.np_random(seeds[i])[0]
         self._reset_worlds(idx, options)
         self._autoreset[idx] = False
+        obs = self._observe()                 # before the info: a device task's info reads what it observed
         info = self._reset_info(idx)
         if mask is not None:                  # Gymnasium's convention: which worlds the entries are new for
             info.update({f"_{key}": mask.copy() for key in list(info)})
-        return self._observe(), info
+        return obs, info
 
     def _reset_mask(self, mask):
         """``options["reset_mask"]`` checked: None, or a (W,) numpy bool array with a True."""

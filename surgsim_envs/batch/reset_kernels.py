@@ -97,3 +97,12 @@ def restore_rows(worlds: wp.array(dtype=wp.int32), snapshot: wp.array(dtype=wp.u
     row of a MuJoCo Warp ``Data`` field) into the listed worlds."""
     k, j = wp.tid()
     rows[worlds[k], j] = snapshot[j]
+
+
+@wp.kernel
+def copy_rows(src_worlds: wp.array(dtype=wp.int32), dst_worlds: wp.array(dtype=wp.int32),
+              src: wp.array2d(dtype=wp.uint8), dst: wp.array2d(dtype=wp.uint8)):
+    """``dst[dst_worlds[k], j] = src[src_worlds[k], j]``: whole world rows (raw bytes) from one batch to
+    another of the same scene."""
+    k, j = wp.tid()
+    dst[dst_worlds[k], j] = src[src_worlds[k], j]

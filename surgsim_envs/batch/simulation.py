@@ -196,6 +196,7 @@ class BatchSimulation:
         #: at the first reset (MuJoCo Warp's reset_data + forward) and restored at the later ones
         self._reset_snapshot = None
         self._csr = self._kv_base = None        # device copies of the spring weights and volume constants
+        self._world_rows = None                 # world_rows(), built at first use
         if self.graphs.enabled:               # a graph keeps the addresses it recorded: allocate before it
             self._f_spring, self._f_corner
 
@@ -611,10 +612,62 @@ class BatchSimulation:
                 for now, before in zip(rows, saved):
                     wp.launch(rsk.keep_rows, dim=now.shape, inputs=[flags, before, now])
             first = int(np.flatnonzero(mask)[0])
-            self._reset_snapshot = [(wp.clone(view[first]), view) for view in self._data_rows()]
+            self._reset_snapshot = [(wp.clone(view[first]), view) for _, view in self._data_rows()]
+
+    def world_rows(self) -> dict:
+        """{name: (W, row bytes) uint8 view} of every per-world array of the batch: tissue and contact
+        state, the per-world material, the rate limiter's commands and every per-world MuJoCo Warp
+        ``Data`` array; a world's rows are its whole state (views of the arrays, built once: their
+        addresses do not change)."""
+        if self._world_rows is None:
+            wp, W = self._wp, self.W
+            rows = {}
+            t = self.tools
+            records = {"tissue": self.tissue_state, "contact": self.contact, "fields": self.fields}
+            for rec_name, rec in records.items():
+                for f in dataclasses.fields(rec):
+                    a = getattr(rec, f.name)
+                    if isinstance(a, wp.array) and a.ndim and a.shape[0] == W and a.size:
+                        rows[f"{rec_name}.{f.name}"] = self._byte_rows(a)
+            for name in ("ctrl64", "goal", "rate", "moving"):
+                rows[f"tools.{name}"] = self._byte_rows(getattr(t, name))
+            rows.update({f"data.{name}": view for name, view in self._data_rows()})
+            self._world_rows = rows
+        return self._world_rows
+
+    def copy_worlds_from(self, src: "BatchSimulation", src_worlds, dst_worlds) -> None:
+        """Worlds ``dst_worlds`` of this batch take the whole state (:meth:`world_rows`) of worlds
+        ``src_worlds`` of ``src``, a batch of the same scene (e.g. a small batch that ran a reset's
+        settle for a few worlds, so that the others need not step); device copies, no host round trip."""
+        wp = self._wp
+        s_idx = np.asarray(src_worlds, dtype=np.int64).reshape(-1)
+        d_idx = np.asarray(dst_worlds, dtype=np.int64).reshape(-1)
+        if len(s_idx) != len(d_idx) or (len(s_idx) and (s_idx.min() < 0 or s_idx.max() >= src.W
+                                                           or d_idx.min() < 0 or d_idx.max() >= self.W)):
+            raise ConfigError(f"src_worlds and dst_worlds must be as many indices in [0, {src.W}) and [0, {self.W}), "
+                              f"got {s_idx.tolist()} and {d_idx.tolist()}")
+        if not len(s_idx):
+            return
+        mine, theirs = self.world_rows(), src.world_rows()
+        if set(mine) != set(theirs) or any(mine[k].shape[1] != theirs[k].shape[1] for k in mine):
+            raise ConfigError("copy_worlds_from needs a batch of the same scene (its per-world arrays differ)")
+        with wp.ScopedDevice(self.device):
+            si = wp.array(s_idx.astype(np.int32), dtype=wp.int32)
+            di = wp.array(d_idx.astype(np.int32), dtype=wp.int32)
+            for name, dst in mine.items():
+                wp.launch(rsk.copy_rows, dim=(len(s_idx), dst.shape[1]), inputs=[si, di, theirs[name], dst])
+
+    def _byte_rows(self, a):
+        """A (W, row bytes) uint8 view of the contiguous per-world array ``a``."""
+        wp = self._wp
+        if not a.is_contiguous:
+            raise BatchUnavailableError(f"a per-world array of shape {a.shape} is not contiguous; it cannot be copied "
+                                        "row by row")
+        nbytes = a.size * wp.types.type_size_in_bytes(a.dtype)
+        return wp.array(ptr=a.ptr, dtype=wp.uint8, shape=(self.W, nbytes // self.W), device=a.device)
 
     def _data_rows(self) -> list:
-        """(W, row bytes) uint8 views of every per-world MuJoCo Warp ``Data`` array (those whose
+        """[(name, (W, row bytes) uint8 view)] of every per-world MuJoCo Warp ``Data`` array (those whose
         leading dimension is the world count: found by comparing one- and two-world ``put_data``)."""
         wp, mjw, W = self._wp, self._mjw, self.W
         probes = [mjw.put_data(self._mjm, self.template.data, nworld=n) for n in (1, 2)]
@@ -635,11 +688,7 @@ class BatchSimulation:
                          and p1.shape[1:] == p2.shape[1:] == a.shape[1:])
             if not per_world or not a.size:
                 continue
-            if not a.is_contiguous:
-                raise BatchUnavailableError(f"MuJoCo Warp data field {name!r} is not contiguous; a reset cannot "
-                                            "restore it row by row")
-            nbytes = a.size * wp.types.type_size_in_bytes(a.dtype)
-            out.append(wp.array(ptr=a.ptr, dtype=wp.uint8, shape=(W, nbytes // W), device=a.device))
+            out.append((name, self._byte_rows(a)))
         return out
 
     def set_tool_friction(self, mu, mu_static=None, worlds=None) -> None:

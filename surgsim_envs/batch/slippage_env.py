@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from surgsim_envs.batch.env import BatchedTaskEnv
+from surgsim_envs.batch.simulation import BatchSimulation
 from surgsim_envs.batch.slippage_device_terms import SlippageDeviceTerms
 from surgsim_envs.envs.checks import sample
 from surgsim_envs.envs.grasp.terms import SlipTracker
@@ -108,6 +109,8 @@ class BatchedSlippageEnv(BatchedTaskEnv):
             tsim.reset()
         self._worlds = [_SlippageWorld() for _ in range(self.num_envs)]
         self._clock = np.zeros(self.num_envs)
+        self._settle_batches: dict[int, BatchSimulation] = {}
+        self._settle_time = 0.0
         self._pending = None
         self._device_terms = (SlippageDeviceTerms(self.sim, c, self.rewards.terms, tool, self.tool_name, self.acts,
                                                   self.pull_dir, self.rigid_dt, self.max_episode_steps)
@@ -143,24 +146,16 @@ class BatchedSlippageEnv(BatchedTaskEnv):
             wd.frequency = sample(rng, options.get("pull_frequency", c.pull_frequency), "pull_frequency", 0.0, 50.0)
             wd.phase = float(rng.uniform(0.0, 2.0 * math.pi))
             wd.mu, wd.young_scale = float(mu[k]), float(scale[k])
-        others = np.setdiff1d(np.arange(self.num_envs), idx)
-        with sim.held(others):
-            sim.reset_worlds(idx)
-            sim.set_tool_friction(mu, c.static_friction_ratio * mu, worlds=idx)
-            sim.set_young_factors(np.repeat(scale[:, None], sim.material_tets, axis=1), worlds=idx)
-            done = 0
-            self._clock[idx] = 0.0
-            if self._snapshot is not None and 0 < self._snapshot_steps <= self.settle_steps:
-                sim.set_rigid_states(self._snapshot, worlds=idx)
-                done = self._snapshot_steps
-                self._clock[idx] = float(self._snapshot[0])      # mjSTATE_TIME comes first
-            K = -(-(self.settle_steps - done) // self.n)
-            jaw = sim.controls(self.acts[:1])[:, 0]
-            t = self._times()
-            values = np.zeros((K, self.num_envs, 2))
-            for w in idx:                   # the held worlds' rows are restored afterwards
-                values[:, w] = self._schedule(K, float(jaw[w]), float(t[w]), self.settle_goal)
-            self._run(values, idx)
+        settle = self._settle_batch(len(idx))
+        if settle is None:                  # every world (or most) resets: settle them in the batch itself
+            with sim.held(np.setdiff1d(np.arange(self.num_envs), idx)):
+                self._settle(sim, idx, mu, scale)
+            self._clock[idx] = self._settle_time
+        else:                               # a few: in a small batch, then copied in; the others do not step
+            rows = np.minimum(np.arange(settle.W), len(idx) - 1)     # extra rows repeat the last world's draws
+            self._settle(settle, np.arange(settle.W), mu[rows], scale[rows])
+            sim.copy_worlds_from(settle, np.arange(len(idx)), idx)
+            self._clock[idx] = self._settle_time
         self._steps[idx] = 0
         self._readings = None
         if self._device_terms is not None:
@@ -182,6 +177,41 @@ class BatchedSlippageEnv(BatchedTaskEnv):
             wd.jaw_goal = self.settle_goal
             wd.pull = wd.slip_distance = wd.slip_before = wd.normal_total = wd.peak_force = 0.0
             wd.lost = False
+
+    def _settle(self, sim, rows: np.ndarray, mu: np.ndarray, scale: np.ndarray) -> None:
+        """Worlds ``rows`` of batch ``sim`` reset, given friction ``mu`` and Young's scale ``scale``,
+        and settled as the single env's reset: the recorded approach restored, then the jaws' closure
+        simulated (sets :attr:`_settle_time`, the time the settle ends at)."""
+        c = self.config
+        sim.reset_worlds(rows)
+        sim.set_tool_friction(mu, c.static_friction_ratio * mu, worlds=rows)
+        sim.set_young_factors(np.repeat(scale[:, None], sim.material_tets, axis=1), worlds=rows)
+        done, t0 = 0, 0.0
+        if self._snapshot is not None and 0 < self._snapshot_steps <= self.settle_steps:
+            sim.set_rigid_states(self._snapshot, worlds=rows)
+            done = self._snapshot_steps
+            t0 = float(self._snapshot[0])       # mjSTATE_TIME comes first
+        K = -(-(self.settle_steps - done) // self.n)
+        jaw = sim.controls(self.acts[:1])[:, 0]
+        values = np.zeros((K, sim.W, 2))
+        for w in rows:                      # worlds not in rows (held by the caller) keep zeros
+            values[:, w] = self._schedule(K, float(jaw[w]), t0, self.settle_goal)
+        sim.step_with_controls(self.acts, values)
+        t = t0
+        for _ in range(K):                  # MuJoCo's float64 time update, d.time += h, per step
+            t += self.rigid_dt
+        self._settle_time = t
+
+    def _settle_batch(self, k: int):
+        """A batch of the scene with the smallest power of two >= k worlds, for the settles of k
+        reset worlds (built at first use), or None when that is not smaller than this batch."""
+        size = 1 << (int(k) - 1).bit_length()
+        if size >= self.num_envs:
+            return None
+        if size not in self._settle_batches:
+            self._settle_batches[size] = BatchSimulation(self.template.sim, size, device=self.sim.device,
+                                                         graphs=self.sim.graphs.mode)
+        return self._settle_batches[size]
 
     def _start_on_device(self, idx: np.ndarray) -> None:
         """The reset worlds' episodes on the device (device_outputs): their draws and clocks, the slip
