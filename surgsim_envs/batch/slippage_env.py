@@ -13,7 +13,9 @@ with the single env's observation (12 entries), reward and termination terms (``
 * the reset's settle: the contact-free approach is recorded once on the template's CPU scene
   (:class:`~surgsim_envs.scene.approach_snapshot.ApproachSnapshot`) and restored into the reset
   worlds (:meth:`BatchSimulation.set_rigid_states`); the rest of the settle (jaws closing on the
-  organ) is simulated. When only some worlds reset (autoreset), the others are held
+  organ) is simulated. When only a few worlds reset (autoreset), they settle in a small batch of
+  the scene whose worlds are then copied in (:meth:`BatchSimulation.copy_worlds_from`), and the
+  other worlds do not step; when many reset, in the batch itself, the others held
   (:meth:`BatchSimulation.held`) while the reset worlds settle;
 * the slip tracker, the pull, the squeeze and the loss of grasp of the single env's ``_update`` run
   per live world on the host.
@@ -132,7 +134,8 @@ class BatchedSlippageEnv(BatchedTaskEnv):
     # -- episodes ---------------------------------------------------------------------------------
     def _reset_worlds(self, idx: np.ndarray, options: dict[str, Any]) -> None:
         """Randomise worlds ``idx`` as the single env's ``_randomise`` (same draws, same order), then
-        settle them (snapshot restore plus the simulated rest), the other worlds held."""
+        settle them (snapshot restore plus the simulated rest): a few in a small batch copied in, many
+        in the batch itself with the other worlds held."""
         c, sim = self.config, self.sim
         idx = np.asarray(idx, dtype=np.int64)
         mu, scale = np.zeros(len(idx)), np.zeros(len(idx))
