@@ -523,10 +523,10 @@ class BatchSimulation:
         the state they had on entering: tissue and contact state, controls, goals and rate-limiter
         flags, MuJoCo's integration state and the kinematics the readouts read between steps (body
         and geom poses, actuator forces; MuJoCo Warp recomputes the rest at the next ``step1``), so
-        they read and step on bit for bit as if nothing had run. So a few worlds
-        can run a reset's settle while the others stand still (a per-world settle, e.g. Slippage-v0's
-        grasp, when only some worlds autoreset). Costs a host copy of every per-world array and the
-        steps inside for all worlds: for resets, not for every step."""
+        they read and step on bit for bit as if nothing had run. So some worlds can run a reset's
+        settle while the others stand still (Slippage-v0's grasp when many worlds autoreset at once;
+        a few settle in a small batch instead, :meth:`copy_worlds_from`). Costs a host copy of every
+        per-world array and the steps inside for all worlds: for resets, not for every step."""
         W = self.W
         idx = np.asarray(worlds, dtype=np.int64).reshape(-1)
         if len(idx) and (idx.min() < 0 or idx.max() >= W):
