@@ -112,7 +112,6 @@ class BatchedSlippageEnv(BatchedTaskEnv):
         self._worlds = [_SlippageWorld() for _ in range(self.num_envs)]
         self._clock = np.zeros(self.num_envs)
         self._settle_batches: dict[int, BatchSimulation] = {}
-        self._settle_time = 0.0
         self._pending = None
         self._device_terms = (SlippageDeviceTerms(self.sim, c, self.rewards.terms, tool, self.tool_name, self.acts,
                                                   self.pull_dir, self.rigid_dt, self.max_episode_steps)
@@ -150,15 +149,13 @@ class BatchedSlippageEnv(BatchedTaskEnv):
             wd.phase = float(rng.uniform(0.0, 2.0 * math.pi))
             wd.mu, wd.young_scale = float(mu[k]), float(scale[k])
         settle = self._settle_batch(len(idx))
-        if settle is None:                  # every world (or most) resets: settle them in the batch itself
+        if settle is None:                  # many reset: they settle in the batch itself, the others held
             with sim.held(np.setdiff1d(np.arange(self.num_envs), idx)):
-                self._settle(sim, idx, mu, scale)
-            self._clock[idx] = self._settle_time
+                self._clock[idx] = self._settle(sim, idx, mu, scale)
         else:                               # a few: in a small batch, then copied in; the others do not step
             rows = np.minimum(np.arange(settle.W), len(idx) - 1)     # extra rows repeat the last world's draws
-            self._settle(settle, np.arange(settle.W), mu[rows], scale[rows])
+            self._clock[idx] = self._settle(settle, np.arange(settle.W), mu[rows], scale[rows])
             sim.copy_worlds_from(settle, np.arange(len(idx)), idx)
-            self._clock[idx] = self._settle_time
         self._steps[idx] = 0
         self._readings = None
         if self._device_terms is not None:
@@ -181,10 +178,10 @@ class BatchedSlippageEnv(BatchedTaskEnv):
             wd.pull = wd.slip_distance = wd.slip_before = wd.normal_total = wd.peak_force = 0.0
             wd.lost = False
 
-    def _settle(self, sim, rows: np.ndarray, mu: np.ndarray, scale: np.ndarray) -> None:
+    def _settle(self, sim, rows: np.ndarray, mu: np.ndarray, scale: np.ndarray) -> float:
         """Worlds ``rows`` of batch ``sim`` reset, given friction ``mu`` and Young's scale ``scale``,
         and settled as the single env's reset: the recorded approach restored, then the jaws' closure
-        simulated (sets :attr:`_settle_time`, the time the settle ends at)."""
+        simulated. Returns the simulated time (s, float64) the settle ends at."""
         c = self.config
         sim.reset_worlds(rows)
         sim.set_tool_friction(mu, c.static_friction_ratio * mu, worlds=rows)
@@ -203,7 +200,7 @@ class BatchedSlippageEnv(BatchedTaskEnv):
         t = t0
         for _ in range(K):                  # MuJoCo's float64 time update, d.time += h, per step
             t += self.rigid_dt
-        self._settle_time = t
+        return t
 
     def _settle_batch(self, k: int):
         """A batch of the scene with the smallest power of two >= k worlds, for the settles of k
