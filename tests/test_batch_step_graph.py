@@ -228,3 +228,21 @@ def test_cuda_graph_replays_the_same_steps():
 
 def _make_cuda(graphs):
     return _make("SurgSim/Palpation-v0", graphs=graphs, device="cuda", **TASKS["SurgSim/Palpation-v0"])
+
+
+def test_profiling_and_make_vec_pass_through():
+    """Profiling runs plain launches (its phases synchronise); gym.make_vec passes ``graphs`` on."""
+    import gymnasium as gym
+
+    env = gym.make_vec("SurgSim/Palpation-v0", num_envs=W, vectorization_mode="vector_entry_point", device="cpu",
+                       graphs="off", max_episode_steps=20, **TASKS["SurgSim/Palpation-v0"])
+    assert env.sim.graphs.mode == "off" and not env.sim.graphs.enabled
+    env.reset(seed=0)
+    replays = stand_in_graphs(env.sim)
+    env.sim.step(env.substeps)
+    assert len(replays) == 1
+    env.sim.profile(True)
+    env.sim.step(env.substeps)
+    env.sim.profile(False)
+    assert len(replays) == 1 and env.sim.phase_seconds is None
+    env.close()
