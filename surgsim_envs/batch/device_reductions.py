@@ -18,7 +18,8 @@ import sys
 
 import warp as wp
 
-wp.set_module_options({"fuse_fp": False})
+# forward kernels only: nothing differentiates them, and adjoints would double the compile time
+wp.set_module_options({"fuse_fp": False, "enable_backward": False})
 
 #: this interpreter's ``sum()`` of floats is compensated (Neumaier's algorithm, Python 3.12+)
 PYTHON_SUM_COMPENSATED = sys.version_info >= (3, 12)

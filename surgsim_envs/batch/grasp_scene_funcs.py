@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import warp as wp
 
-wp.set_module_options({"fuse_fp": False})     # as the calling kernels' modules: no floating-point contraction
+# as the calling kernels' modules: no floating-point contraction; forward kernels only (nothing differentiates
+# them, and adjoints would double the compile time)
+wp.set_module_options({"fuse_fp": False, "enable_backward": False})
 
 @wp.func
 def wrist_position(xpos: wp.array2d(dtype=wp.vec3f), w: int, body: int) -> wp.vec3d:

@@ -29,7 +29,8 @@ import warp as wp
 
 from surgsim_envs.batch.device_reductions import dot_norm, einsum_norm
 
-wp.set_module_options({"fuse_fp": False})
+# forward kernels only: nothing differentiates them, and adjoints would double the compile time
+wp.set_module_options({"fuse_fp": False, "enable_backward": False})
 
 #: numpy's pairwise summation block (``PW_BLOCKSIZE``)
 PAIRWISE_BLOCK = 128

@@ -7,6 +7,9 @@ from __future__ import annotations
 
 import warp as wp
 
+# forward kernels only: nothing differentiates them, and adjoints would double the compile time
+wp.set_module_options({"enable_backward": False})
+
 f64 = wp.float64
 
 

@@ -38,7 +38,8 @@ import warp as wp
 from surgsim_envs.batch.device_reductions import python_sum_add, python_sum_total
 from surgsim_envs.batch.grasp_scene_funcs import node_centroid, tool_count, wrist_position
 
-wp.set_module_options({"fuse_fp": False})
+# forward kernels only: nothing differentiates them, and adjoints would double the compile time
+wp.set_module_options({"fuse_fp": False, "enable_backward": False})
 
 #: the grasper's jaws (the per-jaw observation entries)
 JAWS = 3
