@@ -49,6 +49,8 @@ BENCH: dict[str, tuple[str, str]] = {
                    "record seeded task trajectories, or compare two records bit for bit"),
     "layers": ("surgsim_envs.bench.layers", "layered model (Lin et al. 2008) at haptic rate: step time, active nodes, force vs all-node"),
     "batch": ("surgsim_envs.bench.batch_speed", "batched Warp backend: env and physics steps/s, memory, phase shares"),
+    "cuda-build": ("surgsim_envs.bench.cuda_build",
+                   "build the batched backend's kernels for CUDA GPUs here (no GPU needed): registers, spills, occupancy"),
 }
 
 
