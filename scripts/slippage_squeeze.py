@@ -9,7 +9,8 @@ area) and the probe set's settle (:mod:`surgsim_envs.bench.probe_sets.slippage_p
 
     python scripts/slippage_squeeze.py --mu 0.6 --samples 1 --spacings 0.011,0.00778,0.0055,0.00389,0.00275
 
-``--samples n`` puts n - 1 contact samples on every surface edge (1: the nodes only).
+``--samples n`` puts n - 1 contact samples on every surface edge (1: the nodes only); ``--jaw-edges
+round`` rounds the jaws' edges in the tissue contact (``GrasperConfig.jaw_edges``).
 """
 
 from __future__ import annotations
@@ -28,12 +29,16 @@ from surgsim_envs.envs.terms.action import jaw_closure
 from surgsim_envs.scene import Simulation, build_scene
 
 
-def settle(env, spacing: float, mu: float, samples: int) -> Simulation:
+def settle(env, spacing: float, mu: float, samples: int, jaw_edges: str = "sharp") -> Simulation:
     c, g, name = env.config, env.gcfg, env.tool_name
     sim = ref.reference_simulation(env, spacing)
-    if samples > 1:
+    if samples > 1 or jaw_edges != "sharp":
         cfg = copy.deepcopy(sim.scene.config)
-        cfg.contact.surface_samples = samples
+        if samples > 1:
+            cfg.contact.surface_samples = samples
+        for tool in cfg.tools:
+            if hasattr(tool, "jaw_edges"):
+                tool.jaw_edges = jaw_edges
         sim = Simulation(build_scene(cfg), dt=sim.dt, substeps=sim.substeps, tissue_subcycles=sim.tissue_subcycles)
     jaw_act, pull_act = sp.motorise(sim, sim.tool(name), float(c.max_pull), float(c.pull_damping))
     n = sim.tissue_subcycles
@@ -74,13 +79,16 @@ def main() -> None:
     parser.add_argument("--mu", type=float, default=0.6, help="tool friction (default 0.6)")
     parser.add_argument("--samples", type=int, default=1, help="edge subdivisions of the contact samples (1 = nodes)")
     parser.add_argument("--spacings", default="0.011,0.00778,0.0055,0.00389,0.00275", help="lattice spacings, m")
+    parser.add_argument("--jaw-edges", default="sharp", choices=("sharp", "round"),
+                        help="the jaws' edges in the tissue contact: sharp boxes (the task's) or rounded to half the "
+                             "jaw thickness")
     args = parser.parse_args()
     env = sp.make_env(ref.REFERENCE_MODEL, None, sp.CLOSURE)
     try:
         for h in (float(s) for s in args.spacings.split(",")):
-            sim = settle(env, h, args.mu, args.samples)
+            sim = settle(env, h, args.mu, args.samples, args.jaw_edges)
             fn = sim.jaw_forces(env.tool_name)["normal"]
-            print(json.dumps({"mu": args.mu, "samples": args.samples, "spacing_mm": round(h * 1e3, 3),
+            print(json.dumps({"mu": args.mu, "samples": args.samples, "jaw_edges": args.jaw_edges, "spacing_mm": round(h * 1e3, 3),
                               "nodes": int(len(sim.tissue().positions)), "jaw_normals_N": [round(float(v), 4) for v in fn],
                               "sum_N": round(float(np.sum(fn)), 4), "edge_reach": edge_reach(sim, env)}), flush=True)
     finally:

@@ -40,6 +40,7 @@ from surgsim_envs.batch.backend import BatchUnavailableError, device_name, requi
 from surgsim_envs.batch.state import (ContactState, MassSpringFields, MassSpringTopology, TissueState, ToolState,
                                       _put, _tiled, csr)
 from surgsim_envs.batch.step_graph import StepGraphs
+from surgsim_envs.contact import ROUNDED_BOX
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.tissue.mass_spring import MassSpringModel
 
@@ -133,6 +134,9 @@ class BatchSimulation:
                 raise BatchUnavailableError(f"tool geom {name!r} (type {t}) is not batched yet: the batched contact "
                                             "supports sphere, capsule, box and cylinder geoms")
             kinds.append(_GEOM_KIND[t])
+        if np.any(template.shape_kinds == ROUNDED_BOX):
+            raise BatchUnavailableError("rounded tool edges (a grasper's jaw_edges='round') are not batched yet; "
+                                        "use jaw_edges='sharp'")
         if contact.n_samples:
             raise BatchUnavailableError(f"embedded surface contact samples ({contact.surface_subdivisions} "
                                         "subdivisions) are not batched yet; build the scene with surface_samples=None")

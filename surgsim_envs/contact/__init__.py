@@ -16,10 +16,10 @@ from surgsim_envs.contact.friction import stick_slip
 from surgsim_envs.contact.model import (AUTO_STIFFNESS_RATIO, ContactModel, ContactParams, ContactResult,
                                         auto_stiffness)
 from surgsim_envs.contact.report import ContactReport
-from surgsim_envs.contact.shapes import (BOX, CAPSULE, CYLINDER, SHAPE_NAMES, SPHERE, check_shape,
+from surgsim_envs.contact.shapes import (BOX, CAPSULE, CYLINDER, ROUNDED_BOX, SHAPE_NAMES, SPHERE, check_shape,
                                          signed_distance)
 from surgsim_envs.contact.surface_points import subdivisions_for_spacing, surface_samples
 
-__all__ = ["SPHERE", "CAPSULE", "BOX", "CYLINDER", "SHAPE_NAMES", "signed_distance", "check_shape",
+__all__ = ["SPHERE", "CAPSULE", "BOX", "CYLINDER", "ROUNDED_BOX", "SHAPE_NAMES", "signed_distance", "check_shape",
            "ContactParams", "ContactModel", "ContactResult", "ContactReport", "auto_stiffness",
            "AUTO_STIFFNESS_RATIO", "stick_slip", "surface_samples", "subdivisions_for_spacing"]

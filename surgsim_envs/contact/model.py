@@ -44,7 +44,8 @@ from numba import njit
 
 from surgsim_envs.contact.friction import stick_slip
 from surgsim_envs.contact.report import ContactReport
-from surgsim_envs.contact.shapes import BOX, CAPSULE, CYLINDER, N_KINDS, bounding_radius, local_outside, world_sdf
+from surgsim_envs.contact.shapes import (BOX, CAPSULE, CYLINDER, N_KINDS, ROUNDED_BOX, bounding_radius, local_outside,
+                                         world_sdf)
 from surgsim_envs.contact.surface_points import check_surface, subdivisions_for_spacing, surface_samples
 from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
@@ -143,7 +144,7 @@ _OK, _BAD_KIND, _BAD_TOOL, _BAD_SIZE = 0, 1, 2, 3
 @njit(cache=True, inline="always")
 def _local_extents(kind, s0, s1, s2):
     """Half extents (m) along the local axes of a shape of size (s0, s1, s2) (module ``shapes``)."""
-    if kind == BOX:
+    if kind == BOX or kind == ROUNDED_BOX:
         return s0, s1, s2
     if kind == CAPSULE:
         return s0, s0, s1 + s0
@@ -217,7 +218,7 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
     T = tool_force.shape[0]
     # validate geoms and precompute bounding radii
     for g in range(G):
-        if kind[g] < 0 or kind[g] >= 4:
+        if kind[g] < 0 or kind[g] >= N_KINDS:
             err[0] = 1
             err[1] = g
             return
@@ -692,7 +693,7 @@ class ContactModel:
         """Contact forces for the current tissue state and tool poses (see module docstring).
 
         positions, velocities: (N,3) tissue nodes, m and m/s.
-        shape_kind (G,) int codes (SPHERE, CAPSULE, BOX, CYLINDER); shape_tool (G,) int tool index;
+        shape_kind (G,) int codes (SPHERE, CAPSULE, BOX, CYLINDER, ROUNDED_BOX); shape_tool (G,) int tool index;
         shape_size (G,3) m (MuJoCo geom_size); shape_pos (G,3) m (d.geom_xpos);
         shape_mat (G,9) row-major rotations (d.geom_xmat); shape_vel (G,6) [angular rad/s, linear m/s]
         world velocity of each geom frame origin (zeros allowed); tool_com (T,3) m, torque reference
@@ -753,7 +754,7 @@ class ContactModel:
         g = int(err[1])
         if err[0] == _BAD_KIND:
             raise ConfigError(f"shape_kind[{g}] = {kind[g]} is not a shape code; use 0..{N_KINDS - 1} "
-                              "(SPHERE, CAPSULE, BOX, CYLINDER)")
+                              "(SPHERE, CAPSULE, BOX, CYLINDER, ROUNDED_BOX)")
         if err[0] == _BAD_TOOL:
             raise ConfigError(f"shape_tool[{g}] = {tool[g]} is not a tool index in [0, {T})")
         raise ConfigError(f"shape_size[{g}] = {size[g].tolist()} m is invalid for shape kind {kind[g]}; "

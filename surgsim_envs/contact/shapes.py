@@ -4,14 +4,23 @@ Shapes follow MuJoCo's ``geom_size`` convention and are posed in the world frame
 reports them: centre ``pos`` (3,) = ``d.geom_xpos[g]`` and rotation ``mat`` (9,) = ``d.geom_xmat[g]``,
 row-major, mapping local to world coordinates (``x_world = pos + R @ x_local``).
 
-=========  ====  ============================================  ==========================
-kind       code  size (m)                                      bounding-sphere radius
-=========  ====  ============================================  ==========================
-SPHERE     0     (r, -, -)                                     r
-CAPSULE    1     (r, half_length, -), axis = local z           r + half_length
-BOX        2     (hx, hy, hz) half extents                      |(hx, hy, hz)|
-CYLINDER   3     (r, half_length, -), axis = local z           sqrt(r^2 + half_length^2)
-=========  ====  ============================================  ==========================
+===========  ====  ============================================  ==========================
+kind         code  size (m)                                      bounding-sphere radius
+===========  ====  ============================================  ==========================
+SPHERE       0     (r, -, -)                                     r
+CAPSULE      1     (r, half_length, -), axis = local z           r + half_length
+BOX          2     (hx, hy, hz) half extents                      |(hx, hy, hz)|
+CYLINDER     3     (r, half_length, -), axis = local z           sqrt(r^2 + half_length^2)
+ROUNDED_BOX  4     (hx, hy, hz); edges rounded, r = min of them   |(hx, hy, hz)|
+===========  ====  ============================================  ==========================
+
+A rounded box is the box of the same size with every edge and corner rounded to the radius of its
+thinnest half extent (a 3 mm thick grasper jaw gets 1.5 mm round edges: its cross-section is a
+stadium): the points within that radius of the inner box of half extents ``h - r``. MuJoCo has no
+such geom; a tool declares which of its box geoms the tissue contact treats as rounded
+(``ToolSpec.rounded_geoms``; the grasper's ``jaw_edges="round"``). A flat box edge presses into
+tissue like the edge of a flat punch, where the contact pressure is singular and the force depends
+on how the lattice's contact points meet the edge; a rounded edge has a finite curvature.
 
 Signed distance ``d`` (m) is negative inside the shape; the normal is the unit outward normal of
 the shape at the closest surface point (it points from the shape towards the query point when the
@@ -29,9 +38,9 @@ from numba import njit
 
 from surgsim_envs.errors import ConfigError
 
-SPHERE, CAPSULE, BOX, CYLINDER = 0, 1, 2, 3
-SHAPE_NAMES = {SPHERE: "sphere", CAPSULE: "capsule", BOX: "box", CYLINDER: "cylinder"}
-N_KINDS = 4
+SPHERE, CAPSULE, BOX, CYLINDER, ROUNDED_BOX = 0, 1, 2, 3, 4
+SHAPE_NAMES = {SPHERE: "sphere", CAPSULE: "capsule", BOX: "box", CYLINDER: "cylinder", ROUNDED_BOX: "rounded box"}
+N_KINDS = 5
 
 
 @njit(cache=True, inline="always")
@@ -42,7 +51,7 @@ def bounding_radius(kind, s0, s1, s2):
         return s0
     if kind == CAPSULE:
         return s0 + s1
-    if kind == BOX:
+    if kind == BOX or kind == ROUNDED_BOX:
         return math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
     if kind == CYLINDER:
         return math.sqrt(s0 * s0 + s1 * s1)
@@ -52,7 +61,7 @@ def bounding_radius(kind, s0, s1, s2):
 @njit(cache=True, inline="always")
 def local_outside(kind, s0, s1, s2, qx, qy, qz):
     """Cheap exact test that local point (qx, qy, qz) is outside (or on) the shape: no square roots."""
-    if kind == BOX:
+    if kind == BOX or kind == ROUNDED_BOX:       # a rounded box lies inside its box
         return abs(qx) >= s0 or abs(qy) >= s1 or abs(qz) >= s2
     if kind == SPHERE:
         return qx * qx + qy * qy + qz * qz >= s0 * s0
@@ -62,6 +71,55 @@ def local_outside(kind, s0, s1, s2, qx, qy, qz):
         sz = min(max(qz, -s1), s1)
         return qx * qx + qy * qy + (qz - sz) * (qz - sz) >= s0 * s0
     return True
+
+
+@njit(cache=True, inline="always")
+def _rounded_box_sdf(s0, s1, s2, qx, qy, qz, n_out, c_out):
+    """Signed distance (m) of local point q to the rounded box of half extents (s0, s1, s2), radius
+    r = min(s0, s1, s2): the distance to the inner box of half extents (s - r) minus r, its normal,
+    and the closest point moved out by r along it. The inner box is flat (zero thickness) along the
+    thinnest axis; a point exactly on it takes that axis as its normal."""
+    r = min(s0, min(s1, s2))
+    hx, hy, hz = s0 - r, s1 - r, s2 - r
+    ax, ay, az = abs(qx) - hx, abs(qy) - hy, abs(qz) - hz
+    if ax > 0.0 or ay > 0.0 or az > 0.0:
+        cx = min(max(qx, -hx), hx)
+        cy = min(max(qy, -hy), hy)
+        cz = min(max(qz, -hz), hz)
+        dx, dy, dz = qx - cx, qy - cy, qz - cz
+        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if dist > 1e-300:
+            n_out[0] = dx / dist
+            n_out[1] = dy / dist
+            n_out[2] = dz / dist
+        else:                                      # on the flat inner box: its thin axis
+            n_out[0] = 1.0 if s0 <= s1 and s0 <= s2 else 0.0
+            n_out[1] = 1.0 if n_out[0] == 0.0 and s1 <= s2 else 0.0
+            n_out[2] = 1.0 if n_out[0] == 0.0 and n_out[1] == 0.0 else 0.0
+        c_out[0] = cx + r * n_out[0]
+        c_out[1] = cy + r * n_out[1]
+        c_out[2] = cz + r * n_out[2]
+        return dist - r
+    c_out[0] = qx
+    c_out[1] = qy
+    c_out[2] = qz
+    n_out[0] = 0.0
+    n_out[1] = 0.0
+    n_out[2] = 0.0
+    if ax >= ay and ax >= az:
+        sg = 1.0 if qx >= 0.0 else -1.0
+        n_out[0] = sg
+        c_out[0] = sg * s0
+        return ax - r
+    if ay >= az:
+        sg = 1.0 if qy >= 0.0 else -1.0
+        n_out[1] = sg
+        c_out[1] = sg * s1
+        return ay - r
+    sg = 1.0 if qz >= 0.0 else -1.0
+    n_out[2] = sg
+    c_out[2] = sg * s2
+    return az - r
 
 
 @njit(cache=True)
@@ -95,6 +153,8 @@ def local_sdf(kind, s0, s1, s2, qx, qy, qz, n_out, c_out):
         c_out[1] = n_out[1] * r
         c_out[2] = sz + n_out[2] * r
         return nv - r
+    if kind == ROUNDED_BOX:
+        return _rounded_box_sdf(s0, s1, s2, qx, qy, qz, n_out, c_out)
     if kind == BOX:
         hx, hy, hz = s0, s1, s2
         ax, ay, az = abs(qx) - hx, abs(qy) - hy, abs(qz) - hz
@@ -206,11 +266,11 @@ def _sdf_points(points, kind, size, pos, mat, dist, normals, closest):
 def check_shape(kind: int, size) -> np.ndarray:
     """Validate a shape kind code and its MuJoCo-style size; returns size as a (3,) float array."""
     if int(kind) not in SHAPE_NAMES:
-        raise ConfigError(f"unknown shape kind {kind!r}; use SPHERE=0, CAPSULE=1, BOX=2 or CYLINDER=3")
+        raise ConfigError(f"unknown shape kind {kind!r}; use SPHERE=0, CAPSULE=1, BOX=2, CYLINDER=3 or ROUNDED_BOX=4")
     flat = np.asarray(size, dtype=np.float64).reshape(-1)[:3]
     size = np.zeros(3)
     size[:len(flat)] = flat
-    need = {SPHERE: 1, CAPSULE: 2, BOX: 3, CYLINDER: 2}[int(kind)]
+    need = {SPHERE: 1, CAPSULE: 2, BOX: 3, CYLINDER: 2, ROUNDED_BOX: 3}[int(kind)]
     if not np.all(np.isfinite(size[:need])) or np.any(size[:need] <= 0):
         raise ConfigError(f"{SHAPE_NAMES[int(kind)]} size {size[:need].tolist()} m is invalid; "
                           f"the first {need} entries must be positive lengths (MuJoCo geom_size convention)")

@@ -132,6 +132,10 @@ class GrasperConfig:
     roll: rad, angle of jaw 1 about the axis, measured from the wrist frame's x axis (for a
         horizontal axis pi/2 puts jaw 1 on top and the other two below at +-120 degrees).
     closing_speed: m/s, default rate of the jaw opening changes (the grasping simulation paper closes in 4 s).
+    jaw_edges: "sharp" (default: the tissue meets the jaws as boxes) or "round": the tissue contact
+        rounds every jaw edge to half the jaw's thickness (MuJoCo keeps the box); a sharp edge presses
+        like a flat punch, whose force depends on how the lattice's contact points meet it
+        (docs/contact.md).
     kp, jaw_kp: N/m, wrist and jaw position actuator stiffness.
     """
 
@@ -148,6 +152,7 @@ class GrasperConfig:
     shaft_length: float = 0.12
     drive: str = "position"
     closing_speed: float = 0.005
+    jaw_edges: str = "sharp"
     speed: float = math.inf
     travel: float = 0.2
     kp: float = 20_000.0

@@ -33,7 +33,7 @@ import math
 import mujoco
 import numpy as np
 
-from surgsim_envs.contact import BOX, CAPSULE, CYLINDER, SPHERE, ContactModel, ContactParams
+from surgsim_envs.contact import BOX, CAPSULE, CYLINDER, ROUNDED_BOX, SPHERE, ContactModel, ContactParams
 from surgsim_envs.scene.contact_options import contact_params_for, static_friction_ratio
 from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
@@ -166,12 +166,16 @@ class Simulation:
         self._geom_root = np.array([m.body_rootid[b] for b in self._geom_body], dtype=np.int64)
         self._shape_tool = np.array([body_index[int(b)] for b in self._geom_body], dtype=np.int64)
         kinds = []
+        rounded = {int(g) for tool in self.tools.values() for g in tool.rounded_geom_ids}
         for g in geoms:
             t = int(m.geom_type[g])
+            name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g)
             if t not in _KIND:
-                raise ConfigError(f"tool geom {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g)!r} has a type the "
+                raise ConfigError(f"tool geom {name!r} has a type the "
                                   "contact model does not support; use sphere, capsule, box or cylinder")
-            kinds.append(_KIND[t])
+            if g in rounded and _KIND[t] != BOX:
+                raise ConfigError(f"tool geom {name!r} is declared rounded but is not a box; only box geoms round")
+            kinds.append(ROUNDED_BOX if g in rounded else _KIND[t])
         self._shape_kind = np.array(kinds, dtype=np.int64)
         self._shape_size = np.ascontiguousarray(m.geom_size[self._geom_ids], dtype=np.float64).reshape(-1, 3)
         G, T = len(geoms), max(len(bodies), 1)
@@ -486,6 +490,12 @@ class Simulation:
         if speed is not None:
             self._set_rate([actuator], speed)
         self._moving = True
+
+    @property
+    def shape_kinds(self) -> np.ndarray:
+        """(G,) the contact shape code of every tool geom, in the order of the contact arrays
+        (:mod:`surgsim_envs.contact.shapes`: a box a tool declares rounded is ROUNDED_BOX); a copy."""
+        return self._shape_kind.copy()
 
     def geom_rows(self, geom_ids) -> list[int]:
         """Rows of the contact arrays (``ContactModel.result.geom_*``) of the tool geoms ``geom_ids``."""

@@ -45,7 +45,9 @@ class ToolSpec:
     contact_geoms: geoms that touch tissue, each with the body that receives its reaction.
     joints/actuators: the translation (and tilt) drive, in order. jaw_*: grasper jaws.
     home: (3,) m, home position of the tool origin; frame: (3,3) rotation of the drive frame
-    (columns are the slide axes in world coordinates).
+    (columns are the slide axes in world coordinates). rounded_geoms: box geoms among
+    ``contact_geoms`` that the tissue contact treats as rounded boxes (every edge rounded to the box's
+    thinnest half extent, :data:`surgsim_envs.contact.ROUNDED_BOX`; MuJoCo keeps the plain box).
     """
 
     name: str
@@ -63,6 +65,7 @@ class ToolSpec:
     frame: np.ndarray = field(default_factory=lambda: np.eye(3))
     proxy: str | None = None            # mocap body name
     proxy_eq: str | None = None         # weld equality name
+    rounded_geoms: list[str] = field(default_factory=list)
     # ids, filled by bind()
     body_id: int = -1
     geom_ids: np.ndarray | None = None
@@ -71,6 +74,7 @@ class ToolSpec:
     actuator_ids: np.ndarray | None = None
     jaw_body_ids: np.ndarray | None = None
     jaw_geom_ids: np.ndarray | None = None
+    rounded_geom_ids: np.ndarray | None = None
     jaw_qpos_adr: np.ndarray | None = None
     jaw_actuator_id: int = -1
     mocap_id: int = -1
@@ -108,6 +112,11 @@ class ToolSpec:
 
         self.body_id = oid(mujoco.mjtObj.mjOBJ_BODY, self.body)
         self.geom_ids = np.array([oid(mujoco.mjtObj.mjOBJ_GEOM, g) for g in self.contact_geoms], dtype=np.int64)
+        unknown = sorted(set(self.rounded_geoms) - set(self.contact_geoms))
+        if unknown:
+            raise ConfigError(f"tool '{self.name}': rounded_geoms {unknown} are not among its contact geoms "
+                              f"{self.contact_geoms}")
+        self.rounded_geom_ids = np.array([oid(mujoco.mjtObj.mjOBJ_GEOM, g) for g in self.rounded_geoms], dtype=np.int64)
         jids = [oid(mujoco.mjtObj.mjOBJ_JOINT, j) for j in self.joints]
         self.dof_adr = np.array([m.jnt_dofadr[j] for j in jids], dtype=np.int64)
         self.qpos_adr = np.array([m.jnt_qposadr[j] for j in jids], dtype=np.int64)

@@ -26,6 +26,8 @@ from surgsim_envs.validate import positive
 
 KIND = "grasper"
 DRIVES = ("position", "proxy", "free")
+#: how the tissue contact meets the jaws' edges (GrasperConfig.jaw_edges)
+JAW_EDGES = ("sharp", "round")
 
 
 @dataclass
@@ -90,6 +92,9 @@ def validate(g: GrasperConfig) -> None:
     if math.sqrt(sum(a * a for a in ax)) < 1e-9:
         raise ConfigError(f"grasper '{g.name}' axis must be a non-zero direction, got {g.axis!r}")
     vec(g.position, 3, f"grasper '{g.name}' position")
+    if g.jaw_edges not in JAW_EDGES:
+        raise ConfigError(f"grasper '{g.name}' jaw_edges={g.jaw_edges!r}; choose 'sharp' (box jaws) or 'round' "
+                          "(jaw edges rounded to half the jaw thickness in the tissue contact)")
     if g.drive not in DRIVES:
         raise ConfigError(f"grasper '{g.name}' drive={g.drive!r}; choose 'position', 'proxy' or 'free'")
 
@@ -147,6 +152,7 @@ def build(spec: mujoco.MjSpec, cfg: GrasperConfig) -> ToolSpec:
     act.ctrlrange = [0.0, travel]
     act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
     return GrasperTool(name=name, kind=KIND, config=cfg, body=name, contact_geoms=[shaft, *jaw_geoms],
+                       rounded_geoms=list(jaw_geoms) if cfg.jaw_edges == "round" else [],
                     joints=joints, actuators=acts, jaw_bodies=jaw_bodies, jaw_geoms=jaw_geoms, jaw_joints=jaw_joints,
                     jaw_actuator=jact, home=np.asarray(cfg.position, dtype=float), frame=rot)
 
