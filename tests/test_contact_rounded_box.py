@@ -116,3 +116,16 @@ def test_batched_backend_refuses_round_jaw_edges():
 
     with pytest.raises(backend.BatchUnavailableError, match="jaw_edges='round'"):
         BatchSimulation(Simulation(grasp_scene(_grasp_config("round"))), 2, device="cpu")
+
+
+def test_grasp_reference_takes_the_jaw_edges():
+    from surgsim_envs.bench import grasp_reference as ref
+    from surgsim_envs.bench.probe_sets import slippage_pull as sp
+
+    env = sp.make_env(ref.REFERENCE_MODEL, None, sp.CLOSURE)
+    try:
+        kinds = {e: ref.reference_simulation(env, 0.015, e).shape_kinds for e in (None, "round")}
+    finally:
+        env.close()
+    assert ROUNDED_BOX not in kinds[None]                       # the task's jaws: sharp
+    assert np.sum(kinds["round"] == ROUNDED_BOX) == 3           # the three jaws, not the shaft

@@ -45,7 +45,7 @@ REFERENCE_MODEL = "fem_static"
 REFERENCE_OPTIONS = {"solver": "auto", "cache_mb": 1000.0}
 
 
-def reference_simulation(env, spacing: float):
+def reference_simulation(env, spacing: float, jaw_edges: str | None = None):
     """A Simulation of ``env``'s grasp scene (its organ, anchors, grasper and the grasper's placement,
     dt, sub-cycles; ``env`` built by the task at its default lattice with ``fem_static`` and the
     elastic material) with the organ's lattice at ``spacing`` (m) and the reference's contact:
@@ -55,7 +55,9 @@ def reference_simulation(env, spacing: float):
     around the lattice's tip nodes (:func:`surgsim_envs.scene.builder.place_grasper_around_tip`), so
     its open radius (34.2-36.2 mm), its axis's height (24.8-25.8 mm) and its sideways offset
     (4.2-6.3 mm) change with the lattice from 15 to 2.75 mm, and with them the jaw opening of a
-    closure action; the reference refines the organ only, under one grasper."""
+    closure action; the reference refines the organ only, under one grasper. ``jaw_edges`` ("sharp"
+    or "round", :class:`~surgsim_envs.scene.config.GrasperConfig`) overrides the task's jaws' edges
+    in the tissue contact; None keeps them."""
     from surgsim_envs.scene import Simulation, build_scene
 
     sim = env.sim
@@ -67,6 +69,10 @@ def reference_simulation(env, spacing: float):
     cfg.contact.stiffness_per_area = None            # the task's "auto" would scale by the median edge instead
     cfg.contact.tangential_stiffness = None          # = the normal one
     cfg.contact.surface_samples = None
+    if jaw_edges is not None:
+        for tool in cfg.tools:
+            if hasattr(tool, "jaw_edges"):
+                tool.jaw_edges = jaw_edges
     return Simulation(build_scene(cfg), dt=sim.dt, substeps=sim.substeps, tissue_subcycles=sim.tissue_subcycles)
 
 
