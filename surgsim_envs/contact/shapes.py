@@ -74,12 +74,12 @@ def local_outside(kind, s0, s1, s2, qx, qy, qz):
 
 
 @njit(cache=True, inline="always")
-def _rounded_box_sdf(s0, s1, s2, qx, qy, qz, n_out, c_out):
-    """Signed distance (m) of local point q to the rounded box of half extents (s0, s1, s2), radius
-    r = min(s0, s1, s2): the distance to the inner box of half extents (s - r) minus r, its normal,
-    and the closest point moved out by r along it. The inner box is flat (zero thickness) along the
-    thinnest axis; a point exactly on it takes that axis as its normal."""
-    r = min(s0, min(s1, s2))
+def _box_sdf(s0, s1, s2, r, qx, qy, qz, n_out, c_out):
+    """Signed distance (m) of local point q to the box of half extents (s0, s1, s2) with its edges
+    and corners rounded to ``r`` (0: the plain box; at most min(s0, s1, s2)): the distance to the
+    inner box of half extents (s - r) minus r, its normal, and the closest point moved out by r along
+    it. With r = min(s) the inner box is flat along the thinnest axis; a point exactly on it takes
+    that axis as its normal."""
     hx, hy, hz = s0 - r, s1 - r, s2 - r
     ax, ay, az = abs(qx) - hx, abs(qy) - hy, abs(qz) - hz
     if ax > 0.0 or ay > 0.0 or az > 0.0:
@@ -92,13 +92,17 @@ def _rounded_box_sdf(s0, s1, s2, qx, qy, qz, n_out, c_out):
             n_out[0] = dx / dist
             n_out[1] = dy / dist
             n_out[2] = dz / dist
-        else:                                      # on the flat inner box: its thin axis
+        else:                                      # on a flat inner box (r > 0 only): its thin axis
             n_out[0] = 1.0 if s0 <= s1 and s0 <= s2 else 0.0
             n_out[1] = 1.0 if n_out[0] == 0.0 and s1 <= s2 else 0.0
             n_out[2] = 1.0 if n_out[0] == 0.0 and n_out[1] == 0.0 else 0.0
-        c_out[0] = cx + r * n_out[0]
-        c_out[1] = cy + r * n_out[1]
-        c_out[2] = cz + r * n_out[2]
+        c_out[0] = cx
+        c_out[1] = cy
+        c_out[2] = cz
+        if r > 0.0:
+            c_out[0] += r * n_out[0]
+            c_out[1] += r * n_out[1]
+            c_out[2] += r * n_out[2]
         return dist - r
     c_out[0] = qx
     c_out[1] = qy
@@ -153,44 +157,10 @@ def local_sdf(kind, s0, s1, s2, qx, qy, qz, n_out, c_out):
         c_out[1] = n_out[1] * r
         c_out[2] = sz + n_out[2] * r
         return nv - r
-    if kind == ROUNDED_BOX:
-        return _rounded_box_sdf(s0, s1, s2, qx, qy, qz, n_out, c_out)
     if kind == BOX:
-        hx, hy, hz = s0, s1, s2
-        ax, ay, az = abs(qx) - hx, abs(qy) - hy, abs(qz) - hz
-        if ax > 0.0 or ay > 0.0 or az > 0.0:
-            cx = min(max(qx, -hx), hx)
-            cy = min(max(qy, -hy), hy)
-            cz = min(max(qz, -hz), hz)
-            dx, dy, dz = qx - cx, qy - cy, qz - cz
-            dist = math.sqrt(dx * dx + dy * dy + dz * dz)
-            n_out[0] = dx / dist
-            n_out[1] = dy / dist
-            n_out[2] = dz / dist
-            c_out[0] = cx
-            c_out[1] = cy
-            c_out[2] = cz
-            return dist
-        c_out[0] = qx
-        c_out[1] = qy
-        c_out[2] = qz
-        n_out[0] = 0.0
-        n_out[1] = 0.0
-        n_out[2] = 0.0
-        if ax >= ay and ax >= az:
-            s = 1.0 if qx >= 0.0 else -1.0
-            n_out[0] = s
-            c_out[0] = s * hx
-            return ax
-        if ay >= az:
-            s = 1.0 if qy >= 0.0 else -1.0
-            n_out[1] = s
-            c_out[1] = s * hy
-            return ay
-        s = 1.0 if qz >= 0.0 else -1.0
-        n_out[2] = s
-        c_out[2] = s * hz
-        return az
+        return _box_sdf(s0, s1, s2, 0.0, qx, qy, qz, n_out, c_out)
+    if kind == ROUNDED_BOX:
+        return _box_sdf(s0, s1, s2, min(s0, min(s1, s2)), qx, qy, qz, n_out, c_out)
     if kind == CYLINDER:
         r, h = s0, s1
         rho = math.sqrt(qx * qx + qy * qy)
