@@ -1,4 +1,5 @@
-"""The grasp tasks' reference readings level by level, with the task's jaws or rounded ones.
+"""The grasp tasks' reference readings level by level, with the task's jaws or rounded ones, at the
+nodes or with contact samples between them.
 
 Runs :func:`surgsim_envs.bench.probe_sets.slippage_pull.reference_row` (Slippage-v0: summed normal at
 the hold, held pull, held contact force, mu 0.3 and 0.6) or
@@ -20,6 +21,8 @@ def main() -> None:
     parser.add_argument("--task", default="SurgSim/Slippage-v0", choices=("SurgSim/Slippage-v0", "SurgSim/Grasp-v0"))
     parser.add_argument("--jaw-edges", default=None, choices=("sharp", "round"),
                         help="the jaws' edges in the tissue contact (default: the task's, sharp)")
+    parser.add_argument("--samples", type=int, default=None,
+                        help="contact samples: edge subdivisions n >= 2 (default: the nodes only)")
     parser.add_argument("--spacings", default="0.011,0.00778,0.0055,0.00389,0.00275", help="lattice spacings, m")
     args = parser.parse_args()
     if args.task == "SurgSim/Slippage-v0":
@@ -28,7 +31,7 @@ def main() -> None:
         from surgsim_envs.bench.probe_sets import grasp_closure as probes
     last = None
     for h in (float(s) for s in args.spacings.split(",")):
-        row = probes.reference_row(args.task, probes.FULL, h, args.jaw_edges)
+        row = probes.reference_row(args.task, probes.FULL, h, jaw_edges=args.jaw_edges, surface_samples=args.samples)
         forces = row["forces_N"]
         change = ({k: round(100.0 * (v / last[k] - 1.0), 1) for k, v in forces.items() if last.get(k)}
                   if last else {})

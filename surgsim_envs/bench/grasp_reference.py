@@ -45,7 +45,7 @@ REFERENCE_MODEL = "fem_static"
 REFERENCE_OPTIONS = {"solver": "auto", "cache_mb": 1000.0}
 
 
-def reference_simulation(env, spacing: float, jaw_edges: str | None = None):
+def reference_simulation(env, spacing: float, jaw_edges: str | None = None, surface_samples: int | None = None):
     """A Simulation of ``env``'s grasp scene (its organ, anchors, grasper and the grasper's placement,
     dt, sub-cycles; ``env`` built by the task at its default lattice with ``fem_static`` and the
     elastic material) with the organ's lattice at ``spacing`` (m) and the reference's contact:
@@ -57,7 +57,9 @@ def reference_simulation(env, spacing: float, jaw_edges: str | None = None):
     (4.2-6.3 mm) change with the lattice from 15 to 2.75 mm, and with them the jaw opening of a
     closure action; the reference refines the organ only, under one grasper. ``jaw_edges`` ("sharp"
     or "round", :class:`~surgsim_envs.scene.config.GrasperConfig`) overrides the task's jaws' edges
-    in the tissue contact; None keeps them."""
+    in the tissue contact; None keeps them. ``surface_samples`` (n >= 2 edge subdivisions,
+    ``ContactConfig.surface_samples``) adds contact samples between the nodes, each with the per-node
+    stiffness shared by area; None: nodes only."""
     from surgsim_envs.scene import Simulation, build_scene
 
     sim = env.sim
@@ -68,7 +70,7 @@ def reference_simulation(env, spacing: float, jaw_edges: str | None = None):
     cfg.contact.stiffness = CONTACT_STIFFNESS_PER_AREA * float(spacing) ** 2
     cfg.contact.stiffness_per_area = None            # the task's "auto" would scale by the median edge instead
     cfg.contact.tangential_stiffness = None          # = the normal one
-    cfg.contact.surface_samples = None
+    cfg.contact.surface_samples = surface_samples
     if jaw_edges is not None:
         for tool in cfg.tools:
             if hasattr(tool, "jaw_edges"):

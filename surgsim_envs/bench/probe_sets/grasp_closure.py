@@ -147,16 +147,17 @@ def measure(task: str, model: str, spacing: float, probes: ClosureSet) -> dict:
     return row
 
 
-def reference_row(task: str, probes: ClosureSet, fine: float, jaw_edges: str | None = None) -> dict:
-    """The reference readings of ``probes`` at lattice spacing ``fine`` (m) (module docstring); ``jaw_edges``
-    overrides the jaws' edges (:func:`surgsim_envs.bench.grasp_reference.reference_simulation`)."""
+def reference_row(task: str, probes: ClosureSet, fine: float, **contact) -> dict:
+    """The reference readings of ``probes`` at lattice spacing ``fine`` (m) (module docstring); ``contact``
+    (``jaw_edges``, ``surface_samples``) changes the reference's contact
+    (:func:`surgsim_envs.bench.grasp_reference.reference_simulation`)."""
     from surgsim_envs.bench import grasp_reference as ref
     from surgsim_envs.envs.terms.action import jaw_opening
     from surgsim_envs.tissue import TissueUnstableError
 
     t0 = time.perf_counter()
     env = make_env(ref.REFERENCE_MODEL, None)
-    sim = ref.reference_simulation(env, fine, jaw_edges)
+    sim = ref.reference_simulation(env, fine, **contact)
     name, home, g = env.tool_name, env.home.copy(), env.gcfg
     steps = int(round(probes.hold / env.control_dt))
     forces, settle, low = {}, {}, math.inf

@@ -207,9 +207,10 @@ def motorise(sim, tool, max_pull: float, damping: float) -> tuple[int, int]:
     return int(tool.jaw_actuator_id), a
 
 
-def reference_row(task: str, probes: PullSet, fine: float, jaw_edges: str | None = None) -> dict:
-    """The reference readings of ``probes`` at lattice spacing ``fine`` (m) (module docstring); ``jaw_edges``
-    overrides the jaws' edges (:func:`surgsim_envs.bench.grasp_reference.reference_simulation`)."""
+def reference_row(task: str, probes: PullSet, fine: float, **contact) -> dict:
+    """The reference readings of ``probes`` at lattice spacing ``fine`` (m) (module docstring); ``contact``
+    (``jaw_edges``, ``surface_samples``) changes the reference's contact
+    (:func:`surgsim_envs.bench.grasp_reference.reference_simulation`)."""
     from surgsim_envs.bench import grasp_reference as ref
     from surgsim_envs.envs.grasp.terms import SlipTracker, contact_nodes
     from surgsim_envs.envs.slippage.terms import control_schedule
@@ -219,7 +220,7 @@ def reference_row(task: str, probes: PullSet, fine: float, jaw_edges: str | None
     t0 = time.perf_counter()
     env = make_env(ref.REFERENCE_MODEL, None, probes.closure)
     c, g, name = env.config, env.gcfg, env.tool_name
-    sim = ref.reference_simulation(env, fine, jaw_edges)
+    sim = ref.reference_simulation(env, fine, **contact)
     jaw_act, pull_act = motorise(sim, sim.tool(name), float(c.max_pull), float(c.pull_damping))
     n = sim.tissue_subcycles
     dt = sim.dt * n
