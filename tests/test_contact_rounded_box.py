@@ -129,3 +129,21 @@ def test_grasp_reference_takes_the_jaw_edges():
         env.close()
     assert ROUNDED_BOX not in kinds[None]                       # the task's jaws: sharp
     assert np.sum(kinds["round"] == ROUNDED_BOX) == 3           # the three jaws, not the shaft
+
+
+@pytest.mark.parametrize("task", ["SurgSim/Grasp-v0", "SurgSim/Slippage-v0"])
+def test_grasp_tasks_take_round_jaw_edges(task):
+    import gymnasium as gym
+
+    import surgsim_envs.envs  # noqa: F401  (registers the tasks)
+
+    env = gym.make(task, jaw_edges="round")
+    try:
+        env.reset(seed=0)
+        obs, *_ = env.step(env.action_space.sample())
+        assert np.all(np.isfinite(obs))
+        assert np.sum(env.unwrapped.sim.shape_kinds == ROUNDED_BOX) == 3
+    finally:
+        env.close()
+    with pytest.raises(ConfigError, match="jaw_edges='rounded'; choose 'sharp'"):
+        gym.make(task, jaw_edges="rounded")

@@ -48,6 +48,9 @@ class GraspSceneConfig:
     # models (their equilibrium solve takes it at any spacing), the scene's 200 N/m per node for the
     # others (what an explicit step keeps stable); None = always per node (ContactConfig.stiffness_per_area)
     contact_stiffness_per_area: Any = "auto"
+    # the jaws' edges in the tissue contact: "sharp" (box jaws) or "round" (every edge rounded to half
+    # the jaw thickness; GrasperConfig.jaw_edges, docs/contact.md); not batched
+    jaw_edges: str = "sharp"
     mu: Sequence[float] = (0.6, 1.0)                 # tool-tissue Coulomb friction (kinetic)
     static_friction_ratio: float = 1.0  # static friction mu_s = ratio * mu (>= 1; 1 = one coefficient)
     young_scale: Sequence[float] = (0.8, 1.2)        # organ Young's modulus scale
@@ -65,6 +68,9 @@ class GraspSceneConfig:
         check_task_resolution(self, what)
         check_on_unstable(self.on_unstable, what)
         check_contact_stiffness_per_area(self.contact_stiffness_per_area, f"{what}.contact_stiffness_per_area")
+        if self.jaw_edges not in ("sharp", "round"):
+            raise ConfigError(f"{what}.jaw_edges={validate.short_repr(self.jaw_edges)}; choose 'sharp' (box jaws, the "
+                              "default) or 'round' (jaw edges rounded to half the jaw thickness in the tissue contact)")
         check_integrator(self, what)
         check_render_size(self, what)
         n = self.tissue_subcycles
@@ -129,7 +135,8 @@ class GraspSceneEnv(SurgSimEnv):
                                                        integrator=c.integrator, material=c.material,
                                                        max_young_scale=check_range(c.young_scale, "young_scale")[1],
                                                        tissue_subcycles=resolved_subcycles(c),
-                                                       contact_stiffness_per_area=c.contact_stiffness_per_area)
+                                                       contact_stiffness_per_area=c.contact_stiffness_per_area,
+                                                       jaw_edges=c.jaw_edges)
             self.sim = self._sims[key]
             self._select_tool()
             self._on_new_simulation(self.sim)

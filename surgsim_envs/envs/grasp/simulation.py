@@ -48,7 +48,7 @@ def organ_key(organ):
 def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: float, resolution=None,
                            error_tolerance: float = 0.1, step_budget_us: float = 5_000.0, model: str = "mass_spring",
                            integrator: str = "symplectic", max_young_scale: float = 1.0, tissue_subcycles: int = 1,
-                           material="spleen", contact_stiffness_per_area=None):
+                           material="spleen", contact_stiffness_per_area=None, jaw_edges: str = "sharp"):
     """A Simulation of the grasp scene for ``organ``: "spleen" or "liver_lobe", a closed mesh file
     (lattice spacing :data:`MESH_SPACING`) or a Volume (:func:`check_grasp_organ`).
 
@@ -62,6 +62,7 @@ def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: 
     material: the organ's material (a preset name, a Material or a dict, :func:`surgsim_envs.materials.get_material`).
     contact_stiffness_per_area: the jaws' contact stiffness per unit surface area (N/m^3), "auto" or None
     (the scene's stiffness per node); ``ContactConfig.stiffness_per_area``.
+    jaw_edges: "sharp" or "round", the jaws' edges in the tissue contact (``GrasperConfig.jaw_edges``).
     """
     from surgsim_envs.envs.tissue_setup import integrator_for_range, tissue_options
     from surgsim_envs.scene import Simulation, grasp_config, grasp_scene
@@ -74,6 +75,7 @@ def build_grasp_simulation(organ: str, dt: float, substeps: int, closing_speed: 
     t.resolution, t.error_tolerance, t.step_budget_us = resolution, error_tolerance, step_budget_us
     t.options = tissue_options(model, integrator)
     cfg.tool("grasper").closing_speed = float(closing_speed)
+    cfg.tool("grasper").jaw_edges = jaw_edges
     cfg.dt = float(dt)
     cfg.contact.stiffness_per_area = contact_stiffness_per_area
     sim = Simulation(grasp_scene(cfg), dt=dt, substeps=substeps, tissue_subcycles=tissue_subcycles)
