@@ -156,3 +156,18 @@ def test_cli_writes_the_report(tmp_path):
     kernels = {(k["module"].rsplit(".", 1)[-1], k["kernel"]) for k in data["kernels"]}
     assert ("contact_kernels", "contact_points") in kernels and ("palpation_kernels", "evaluate_step") in kernels
     assert "| contact_kernels | contact_points | sm_90 | yes |" in (tmp_path / "cuda_build.md").read_text()
+
+
+def test_cli_names_what_is_missing(monkeypatch, capsys):
+    """Without the [batch] extra (or without NVRTC) the command exits 2 with the reason, no traceback."""
+    from surgsim_envs.batch import backend, cuda_build
+    from surgsim_envs.cli import main
+
+    def missing():
+        raise backend.BatchUnavailableError(f"the batched backend needs NVIDIA Warp (warp-lang): test; {backend.INSTALL_HINT}")
+
+    monkeypatch.setattr(backend, "require", missing)
+    assert cuda_build.cuda_build_unavailable(90).startswith("the batched backend needs NVIDIA Warp")
+    assert main(["bench", "cuda-build", "--arch", "90"]) == 2
+    err = capsys.readouterr().err
+    assert "needs NVIDIA Warp" in err and "pip install" in err
