@@ -15,9 +15,13 @@ how many cache files there were; :func:`is_warm` says whether a stage's caches a
 (False after a source change, ``--clear`` or deleted cache files), so the demo can compile ahead
 with a progress bar instead of stalling on its first step.
 
-Caches numba keeps elsewhere (``NUMBA_CACHE_DIR``, or a user cache directory when the package
-folder is read-only) are left alone; ``python -m surgsim_envs.numba_cache --clear`` deletes the
-package's caches by hand.
+With ``NUMBA_CACHE_DIR`` set (common where the installed package is read-only, e.g. a cluster's
+site-packages), numba keeps each source folder's caches in ``NUMBA_CACHE_DIR/<folder
+name>_<SHA-1 of the folder's absolute path>`` (numba's ``get_suitable_cache_subpath``, numba
+0.5x-0.6x); the same check then runs on those folders, with its stamp in ``NUMBA_CACHE_DIR`` itself
+(:func:`external_cache_dirs`), so a stale callee cannot survive there either. The user-wide cache
+numba falls back to when the package folder is read-only and ``NUMBA_CACHE_DIR`` is unset is left
+alone. ``python -m surgsim_envs.numba_cache --clear`` deletes the package's caches by hand.
 """
 
 from __future__ import annotations
@@ -71,11 +75,31 @@ def cache_files(package: Path = PACKAGE) -> list[Path]:
     return out
 
 
-def clear_caches(package: Path = PACKAGE) -> int:
-    """Delete the package's numba cache files; returns how many were deleted (files another
-    process deletes at the same time are skipped)."""
+def external_cache_dirs(package: Path = PACKAGE) -> list[Path]:
+    """The folders numba keeps the package's caches in when ``NUMBA_CACHE_DIR`` is set (module
+    docstring): one per source folder, named as numba names it; [] when it is unset."""
+    root = os.environ.get("NUMBA_CACHE_DIR")
+    if not root:
+        return []
+    folders = set()
+    for path in _py_files(package):
+        for form in (os.path.abspath(path), os.path.realpath(path)):
+            folders.add(os.path.dirname(form))
+    return [Path(root) / f"{os.path.basename(d)}_{hashlib.sha1(d.encode()).hexdigest()}" for d in sorted(folders)]
+
+
+def external_cache_files(package: Path = PACKAGE) -> list[Path]:
+    """The numba cache files of the package under ``NUMBA_CACHE_DIR`` (:func:`external_cache_dirs`)."""
+    out = []
+    for folder in external_cache_dirs(package):
+        if folder.is_dir():
+            out.extend(sorted(f for f in folder.iterdir() if f.name.endswith(CACHE_SUFFIXES)))
+    return out
+
+
+def _delete(paths) -> int:
     n = 0
-    for path in cache_files(package):
+    for path in paths:
         try:
             path.unlink()
             n += 1
@@ -84,13 +108,22 @@ def clear_caches(package: Path = PACKAGE) -> int:
     return n
 
 
+def clear_caches(package: Path = PACKAGE) -> int:
+    """Delete the package's numba cache files, next to its modules and under ``NUMBA_CACHE_DIR``;
+    returns how many were deleted (files another process deletes at the same time are skipped)."""
+    return _delete(cache_files(package) + external_cache_files(package))
+
+
 def invalidate_stale_caches(package: Path = PACKAGE) -> int:
     """If a numba module's source changed since the stamp was written, delete the package's numba
     caches and write the new stamp. Returns the number of cache files deleted (0 when nothing
     changed or the package folder is not writable). Two levels: a stat of every .py file (about a
     millisecond); only when that changed, the content of the numba modules (so an edit elsewhere,
-    or a checkout that only touches mtimes, keeps the caches). Never raises: a failure only costs
-    a recompilation."""
+    or a checkout that only touches mtimes, keeps the caches). With ``NUMBA_CACHE_DIR`` set the
+    caches and the stamp live there (:func:`invalidate_external_caches`). Never raises: a failure
+    only costs a recompilation."""
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return invalidate_external_caches(package)
     try:
         stamp_dir = package / "__pycache__"
         stamp = stamp_dir / STAMP_NAME
@@ -107,6 +140,41 @@ def invalidate_stale_caches(package: Path = PACKAGE) -> int:
         deleted = clear_caches(package) if kernels != old_kernels else 0
         stamp_dir.mkdir(exist_ok=True)
         tmp = stamp_dir / f"{STAMP_NAME}.{os.getpid()}"
+        tmp.write_text(f"{files} {kernels}")
+        os.replace(tmp, stamp)
+        return deleted
+    except Exception:  # noqa: BLE001 - never stop an import over a cache
+        return 0
+
+
+def stamp_path(package: Path = PACKAGE) -> Path:
+    """Where the stamp of the package's caches is kept: ``__pycache__`` next to the package's
+    modules, or with ``NUMBA_CACHE_DIR`` set ``NUMBA_CACHE_DIR/<package name>_<SHA-1 of its
+    path>.numba_sources.stamp`` (one per package location)."""
+    root = os.environ.get("NUMBA_CACHE_DIR")
+    if not root:
+        return Path(package) / "__pycache__" / STAMP_NAME
+    where = os.path.abspath(package)
+    return Path(root) / f"{os.path.basename(where)}_{hashlib.sha1(where.encode()).hexdigest()}.{STAMP_NAME}"
+
+
+def invalidate_external_caches(package: Path = PACKAGE) -> int:
+    """:func:`invalidate_stale_caches` for the caches under ``NUMBA_CACHE_DIR``, with the stamp
+    there (:func:`stamp_path`). Returns the number of cache files deleted; never raises."""
+    try:
+        stamp = stamp_path(package)
+        root = stamp.parent
+        files = files_stamp(package)
+        try:
+            old_files, old_kernels = stamp.read_text().split()
+        except (OSError, ValueError):
+            old_files = old_kernels = ""
+        if files == old_files:
+            return 0
+        kernels = kernels_stamp(package)
+        deleted = _delete(external_cache_files(package)) if kernels != old_kernels else 0
+        root.mkdir(parents=True, exist_ok=True)
+        tmp = stamp.with_name(f"{stamp.name}.{os.getpid()}")
         tmp.write_text(f"{files} {kernels}")
         os.replace(tmp, stamp)
         return deleted

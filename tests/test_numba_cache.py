@@ -21,7 +21,8 @@ def _write(path, text):
     os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10_000_000))   # a visible mtime change
 
 
-def test_caches_go_only_when_a_numba_module_changes(tmp_path):
+def test_caches_go_only_when_a_numba_module_changes(tmp_path, monkeypatch):
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)      # the caches next to the modules
     pkg = tmp_path / "pkg"
     (pkg / "sub").mkdir(parents=True)
     _write(pkg / "sub" / "k.py", "from numba import njit\n")
@@ -40,7 +41,8 @@ def test_caches_go_only_when_a_numba_module_changes(tmp_path):
     assert nc.cache_files(pkg) == [] and (pkg / "sub" / "__pycache__" / "k.cpython-311.pyc").is_file()
 
 
-def test_a_broken_stamp_or_missing_folder_never_raises(tmp_path):
+def test_a_broken_stamp_or_missing_folder_never_raises(tmp_path, monkeypatch):
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     pkg = tmp_path / "pkg"
     pkg.mkdir()
     (pkg / "__pycache__").mkdir()
@@ -52,8 +54,8 @@ def test_a_broken_stamp_or_missing_folder_never_raises(tmp_path):
 def test_the_package_keeps_a_stamp_after_import():
     import surgsim_envs
 
-    stamp = nc.PACKAGE / "__pycache__" / nc.STAMP_NAME
-    if os.access(nc.PACKAGE, os.W_OK):
+    stamp = nc.stamp_path()                # next to the modules, or in NUMBA_CACHE_DIR when it is set
+    if os.access(stamp.parent.parent if not os.environ.get("NUMBA_CACHE_DIR") else stamp.parent, os.W_OK):
         files, kernels = stamp.read_text().split()
         assert files == nc.files_stamp() and kernels == nc.kernels_stamp()
     assert surgsim_envs.__version__
@@ -106,3 +108,33 @@ def test_run_stages_counts_the_kernels_really_compiled():
     res = run_stages(stages, progress=False, mark=False)
     assert [r.kernels_compiled for r in res] == [1, 0, 1]
     assert res[0].kernels == [f"{__name__}.test_run_stages_counts_the_kernels_really_compiled.<locals>.triple"]
+
+
+def test_caches_under_numba_cache_dir_go_when_a_numba_module_changes(tmp_path, monkeypatch):
+    """With NUMBA_CACHE_DIR set numba caches each source folder in a folder of its own there; the
+    same check clears those (and only those) when a numba module changes."""
+    import subprocess
+    import sys
+
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    _write(pkg / "sub" / "k.py", "from numba import njit\n\n\n@njit(cache=True)\ndef kern(x):\n    return x + 1\n")
+    cache_root = tmp_path / "numba_cache_dir"
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache_root))
+    # numba itself writes the kernel's cache where external_cache_dirs says it does
+    env = {**os.environ, "PYTHONPATH": str(pkg / "sub")}
+    subprocess.run([sys.executable, "-c", "import k; assert k.kern(1) == 2"], check=True, env=env, cwd=tmp_path)
+    written = nc.external_cache_files(pkg)
+    assert written and all(f.parent in nc.external_cache_dirs(pkg) for f in written)
+    other = cache_root / "elsewhere_0123"                    # another project's caches: never touched
+    other.mkdir()
+    (other / "x.kern-1.py311.nbi").write_bytes(b"x")
+    assert nc.invalidate_stale_caches(pkg) == len(written)  # no stamp yet: unknown caches go
+    subprocess.run([sys.executable, "-c", "import k; assert k.kern(1) == 2"], check=True, env=env, cwd=tmp_path)
+    n = len(nc.external_cache_files(pkg))
+    assert n and nc.invalidate_stale_caches(pkg) == 0      # nothing changed: kept
+    assert not (pkg / "__pycache__" / nc.STAMP_NAME).exists()   # the stamp lives in NUMBA_CACHE_DIR
+    assert nc.stamp_path(pkg).parent == cache_root and nc.stamp_path(pkg).is_file()
+    _write(pkg / "sub" / "k.py", "from numba import njit\n\n\n@njit(cache=True)\ndef kern(x):\n    return x + 2\n")
+    assert nc.invalidate_stale_caches(pkg) == n and nc.external_cache_files(pkg) == []
+    assert (other / "x.kern-1.py311.nbi").is_file()
