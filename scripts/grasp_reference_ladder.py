@@ -23,6 +23,8 @@ def main() -> None:
                         help="the jaws' edges in the tissue contact (default: the task's, sharp)")
     parser.add_argument("--samples", type=int, default=None,
                         help="contact samples: edge subdivisions n >= 2 (default: the nodes only)")
+    parser.add_argument("--cache-mb", type=float, default=None,
+                        help="fem_static's compliance column cache, MB (default 1000; about 6000 at 1.375 mm)")
     parser.add_argument("--spacings", default="0.011,0.00778,0.0055,0.00389,0.00275", help="lattice spacings, m")
     args = parser.parse_args()
     if args.task == "SurgSim/Slippage-v0":
@@ -31,7 +33,8 @@ def main() -> None:
         from surgsim_envs.bench.probe_sets import grasp_closure as probes
     last = None
     for h in (float(s) for s in args.spacings.split(",")):
-        row = probes.reference_row(args.task, probes.FULL, h, jaw_edges=args.jaw_edges, surface_samples=args.samples)
+        row = probes.reference_row(args.task, probes.FULL, h, jaw_edges=args.jaw_edges, surface_samples=args.samples,
+                                   cache_mb=args.cache_mb)
         forces = row["forces_N"]
         change = ({k: round(100.0 * (v / last[k] - 1.0), 1) for k, v in forces.items() if last.get(k)}
                   if last else {})

@@ -118,15 +118,17 @@ def test_batched_backend_refuses_round_jaw_edges():
         BatchSimulation(Simulation(grasp_scene(_grasp_config("round"))), 2, device="cpu")
 
 
-def test_grasp_reference_takes_the_jaw_edges():
+def test_grasp_reference_takes_the_jaw_edges_and_its_column_cache():
     from surgsim_envs.bench import grasp_reference as ref
     from surgsim_envs.bench.probe_sets import slippage_pull as sp
 
     env = sp.make_env(ref.REFERENCE_MODEL, None, sp.CLOSURE)
     try:
         kinds = {e: ref.reference_simulation(env, 0.015, e).shape_kinds for e in (None, "round")}
+        caches = [ref.reference_simulation(env, 0.015, cache_mb=c).tissue().cache_mb for c in (None, 2500.0)]
     finally:
         env.close()
+    assert caches == [ref.REFERENCE_OPTIONS["cache_mb"], 2500.0]
     assert ROUNDED_BOX not in kinds[None]                       # the task's jaws: sharp
     assert np.sum(kinds["round"] == ROUNDED_BOX) == 3           # the three jaws, not the shaft
 

@@ -45,7 +45,8 @@ REFERENCE_MODEL = "fem_static"
 REFERENCE_OPTIONS = {"solver": "auto", "cache_mb": 1000.0}
 
 
-def reference_simulation(env, spacing: float, jaw_edges: str | None = None, surface_samples: int | None = None):
+def reference_simulation(env, spacing: float, jaw_edges: str | None = None, surface_samples: int | None = None,
+                         cache_mb: float | None = None):
     """A Simulation of ``env``'s grasp scene (its organ, anchors, grasper and the grasper's placement,
     dt, sub-cycles; ``env`` built by the task at its default lattice with ``fem_static`` and the
     elastic material) with the organ's lattice at ``spacing`` (m) and the reference's contact:
@@ -59,7 +60,9 @@ def reference_simulation(env, spacing: float, jaw_edges: str | None = None, surf
     or "round", :class:`~surgsim_envs.scene.config.GrasperConfig`) overrides the task's jaws' edges
     in the tissue contact; None keeps them. ``surface_samples`` (n >= 2 edge subdivisions,
     ``ContactConfig.surface_samples``) adds contact samples between the nodes, each with the per-node
-    stiffness shared by area; None: nodes only."""
+    stiffness shared by area; None: nodes only. ``cache_mb``: the memory (MB) of fem_static's cached
+    compliance columns (72 x nodes bytes each), None: :data:`REFERENCE_OPTIONS`' 1000 MB, which holds
+    the loaded nodes of a step down to about 2 mm (the 1.375 mm lattice, 61,508 nodes, ran with 6000)."""
     from surgsim_envs.scene import Simulation, build_scene
 
     sim = env.sim
@@ -67,6 +70,8 @@ def reference_simulation(env, spacing: float, jaw_edges: str | None = None, surf
     tissue = cfg.tissues[0]
     tissue.spacing = tissue.resolution = float(spacing)
     tissue.options = {**dict(tissue.options), **REFERENCE_OPTIONS}
+    if cache_mb is not None:
+        tissue.options["cache_mb"] = float(cache_mb)
     cfg.contact.stiffness = CONTACT_STIFFNESS_PER_AREA * float(spacing) ** 2
     cfg.contact.stiffness_per_area = None            # the task's "auto" would scale by the median edge instead
     cfg.contact.tangential_stiffness = None          # = the normal one
