@@ -25,6 +25,9 @@ def main() -> None:
                         help="contact samples: edge subdivisions n >= 2 (default: the nodes only)")
     parser.add_argument("--cache-mb", type=float, default=None,
                         help="fem_static's compliance column cache, MB (default 1000; about 6000 at 1.375 mm)")
+    parser.add_argument("--graded-tip", type=float, default=None,
+                        help="grade the lattice: the spacing only over this length (m) of the organ's tip, "
+                             "2.75 mm along the rest (default: uniform)")
     parser.add_argument("--spacings", default="0.011,0.00778,0.0055,0.00389,0.00275", help="lattice spacings, m")
     args = parser.parse_args()
     if args.task == "SurgSim/Slippage-v0":
@@ -34,7 +37,7 @@ def main() -> None:
     last = None
     for h in (float(s) for s in args.spacings.split(",")):
         row = probes.reference_row(args.task, probes.FULL, h, jaw_edges=args.jaw_edges, surface_samples=args.samples,
-                                   cache_mb=args.cache_mb)
+                                   cache_mb=args.cache_mb, graded_tip=args.graded_tip)
         forces = row["forces_N"]
         change = ({k: round(100.0 * (v / last[k] - 1.0), 1) for k, v in forces.items() if last.get(k)}
                   if last else {})

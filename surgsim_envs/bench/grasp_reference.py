@@ -50,7 +50,7 @@ REFERENCE_OPTIONS = {"solver": "auto", "cache_mb": 1000.0}
 
 
 def reference_simulation(env, spacing: float, jaw_edges: str | None = None, surface_samples: int | None = None,
-                         cache_mb: float | None = None):
+                         cache_mb: float | None = None, graded_tip: float | None = None):
     """A Simulation of ``env``'s grasp scene (its organ, anchors, grasper and the grasper's placement,
     dt, sub-cycles; ``env`` built by the task at its default lattice with ``fem_static`` and the
     elastic material) with the organ's lattice at ``spacing`` (m) and the reference's contact:
@@ -66,12 +66,24 @@ def reference_simulation(env, spacing: float, jaw_edges: str | None = None, surf
     ``ContactConfig.surface_samples``) adds contact samples between the nodes, each with the per-node
     stiffness shared by area; None: nodes only. ``cache_mb``: the memory (MB) of fem_static's cached
     compliance columns (72 x nodes bytes each), None: :data:`REFERENCE_OPTIONS`' 1000 MB, which holds
-    the loaded nodes of a step down to about 2 mm (the 1.375 mm lattice, 61,508 nodes, ran with 6000)."""
+    the loaded nodes of a step down to about 2 mm (the 1.375 mm lattice, 61,508 nodes, ran with 6000).
+    ``graded_tip`` (m): the lattice is ``spacing`` only over that length of the organ's +x end, where
+    the jaws grasp, and grows to 2.75 mm along the held rest
+    (:func:`surgsim_envs.bench.grasp_tip_lattice.tip_graded_volume`, filled into the task's placed organ
+    surface); the per-node contact stiffness is that of ``spacing``, so the jaws must meet the organ
+    within that length (0.036 m covers the loaded nodes of the probe sets). None: the uniform lattice."""
     from surgsim_envs.scene import Simulation, build_scene
 
     sim = env.sim
     cfg = copy.deepcopy(sim.scene.config)
     tissue = cfg.tissues[0]
+    if graded_tip is not None:
+        from surgsim_envs.bench.grasp_tip_lattice import tip_graded_volume
+
+        volume = tip_graded_volume(tissue, spacing, graded_tip)
+        lo, hi = volume.bounds()
+        tissue.organ, tissue.volume_options = volume, {}
+        tissue.position = tuple(float(c) for c in (lo + hi) / 2.0)   # placed where it was filled
     tissue.spacing = tissue.resolution = float(spacing)
     tissue.options = {**dict(tissue.options), **REFERENCE_OPTIONS}
     if cache_mb is not None:

@@ -149,7 +149,7 @@ def measure(task: str, model: str, spacing: float, probes: ClosureSet) -> dict:
 
 def reference_row(task: str, probes: ClosureSet, fine: float, **contact) -> dict:
     """The reference readings of ``probes`` at lattice spacing ``fine`` (m) (module docstring); ``contact``
-    (``jaw_edges``, ``surface_samples``, ``cache_mb``) changes the reference's contact
+    (``jaw_edges``, ``surface_samples``, ``cache_mb``, ``graded_tip``) changes the reference's contact
     (:func:`surgsim_envs.bench.grasp_reference.reference_simulation`)."""
     from surgsim_envs.bench import grasp_reference as ref
     from surgsim_envs.envs.terms.action import jaw_opening

@@ -209,7 +209,7 @@ def motorise(sim, tool, max_pull: float, damping: float) -> tuple[int, int]:
 
 def reference_row(task: str, probes: PullSet, fine: float, **contact) -> dict:
     """The reference readings of ``probes`` at lattice spacing ``fine`` (m) (module docstring); ``contact``
-    (``jaw_edges``, ``surface_samples``, ``cache_mb``) changes the reference's contact
+    (``jaw_edges``, ``surface_samples``, ``cache_mb``, ``graded_tip``) changes the reference's contact
     (:func:`surgsim_envs.bench.grasp_reference.reference_simulation`)."""
     from surgsim_envs.bench import grasp_reference as ref
     from surgsim_envs.envs.grasp.terms import SlipTracker, contact_nodes
