@@ -7,6 +7,8 @@
 - :func:`load_surface` (STL/OBJ/PLY), :func:`load_tet_mesh` (legacy VTK): meshes from files.
 - :func:`lattice_volume`: fill any closed surface with lattice tets, boundary snapped by tri-ray
   node snapping (Lin et al. 2008).
+- :mod:`surgsim_envs.geometry.mapped_lattice`: the same fill on a graded tensor grid (fine where
+  a load needs it).
 - :func:`add_spherical_inclusion`: label the tets of a spherical inclusion.
 - :func:`sphere_volume_fractions`: the share of each tet inside a sphere (an inclusion that keeps
   its volume on any lattice).
