@@ -120,8 +120,8 @@ def test_the_node_limit_counts_the_continuum_lattice():
 @pytest.mark.slow
 def test_the_continuum_wall_at_2_mm_meets_the_tasks_20_percent_against_the_shipped_reference():
     """The probe set's presses on the full patch at 2 mm against the shipped reference (fem_static
-    on graded lattices, 1 mm at each site, penalty contact per area: an independent discretisation
-    and contact); the task declares 20 %. 30 s on an idle 2-core host (2 min loaded), 3.7 GB."""
+    on graded lattices, 0.71 mm at each site, penalty contact per area: an independent discretisation
+    and contact); the task declares 20 % (the 2 mm wall reads at most 18.8 % off, at the mirror site). 30 s on an idle 2-core host (2 min loaded), 3.7 GB."""
     import json
 
     from surgsim_envs.bench.probe_sets import layered_palpation as lp
@@ -133,5 +133,5 @@ def test_the_continuum_wall_at_2_mm_meets_the_tasks_20_percent_against_the_shipp
     err = {k: row["forces_N"][k] / ref[k] - 1 for k in ref}
     assert max(abs(e) for e in err.values()) <= 0.20, err
     over = [row["forces_N"][f"0/over/{d}mm"] / row["forces_N"][f"0/mirror/{d}mm"] for d in ("2.5", "3.5", "4.5")]
-    assert min(over) > 4.0          # the reference reads 4.77-4.84 x over the nodule what it reads beside it
+    assert min(over) > 4.0          # the reference reads 4.91-4.97 x over the nodule what it reads beside it
     assert row["path_difference"] < 1e-9 and row["max_tensile_N"] == 0.0

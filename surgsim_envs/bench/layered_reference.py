@@ -38,7 +38,8 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.wall_lattice import (SKIN_CELL_FRACTION, graded_wall_volume,  # noqa: F401
                                                layer_planes, wall_z_axis)
 
-#: MB of cached compliance columns: a press at h_f 1 mm (48,300 nodes) ran within 800 MB (230 columns);
+#: MB of cached compliance columns: a press at h_f 1 mm (48,300 nodes) ran within 800 MB (230 columns),
+#: one at 0.71 mm (107,520 nodes) peaked at 16.6 GB in all;
 #: task_reference's 4,000 MB let one process reach 9.5 GB at that level, more than a shared host had free
 CACHE_MB = 1000.0
 #: s and m/s: the quasi-static load stepping of a reference press (the probe moves 0.2 mm per step)

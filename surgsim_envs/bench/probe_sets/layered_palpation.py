@@ -67,7 +67,7 @@ def _nodule() -> Inclusion:
 NODULE = _nodule()
 FULL = ProbeSet(inclusions=(NODULE,), depths=(0.0025, 0.0035, 0.0045), hold=0.0,
                 spacings=(0.01, 0.005, 0.0025, 0.002),
-                reference_spacings=(0.002, 0.002 / math.sqrt(2), 0.001))
+                reference_spacings=(0.002, 0.002 / math.sqrt(2), 0.001, 0.001 / math.sqrt(2)))
 QUICK = ProbeSet(inclusions=(NODULE,), depths=(0.0025, 0.0045), hold=0.0, spacings=(0.005,),
                  reference_spacings=(0.004, 0.004 / math.sqrt(2), 0.002))
 
