@@ -27,6 +27,7 @@ lattice and the growth stay. Units: m, Pa, N.
 
 from __future__ import annotations
 
+import math
 import time
 from types import SimpleNamespace
 from typing import Sequence
@@ -34,6 +35,7 @@ from typing import Sequence
 import numpy as np
 
 from surgsim_envs.bench import task_reference
+from surgsim_envs.bench.memory_need import require_memory
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry.wall_lattice import (SKIN_CELL_FRACTION, graded_wall_volume,  # noqa: F401
                                                layer_planes, wall_z_axis)
@@ -42,6 +44,9 @@ from surgsim_envs.geometry.wall_lattice import (SKIN_CELL_FRACTION, graded_wall_
 #: one at 0.71 mm (107,520 nodes) peaked at 16.6 GB in all;
 #: task_reference's 4,000 MB let one process reach 9.5 GB at that level, more than a shared host had free
 CACHE_MB = 1000.0
+#: (nodes, bytes): the peak resident memory of one press site's reference solve (`/usr/bin/time -v`, MKL
+#: PARDISO, one site per process) at h_f 2 and 0.71 mm; :func:`peak_memory` interpolates a power law
+PEAK_MEMORY = ((11_600, 1.15e9), (107_520, 16.6e9))
 #: s and m/s: the quasi-static load stepping of a reference press (the probe moves 0.2 mm per step)
 DT = 1e-3
 PROBE_SPEED = 0.2
@@ -55,6 +60,26 @@ def wall_volume(size, planes, site, fine: float, nodule_centre, nodule_radius: f
     tet labels are the layer index (``planes`` order) for plain tets and ``len(planes)`` + the layer
     index for the nodule's tets (centroid within ``nodule_radius`` of ``nodule_centre``)."""
     return graded_wall_volume(size, planes, site, fine, nodule_centre, nodule_radius, coarse, ratio)
+
+
+def peak_memory(nodes: int) -> float:
+    """The expected peak memory (bytes) of one press site's solve on a lattice of ``nodes`` nodes: the
+    power law through :data:`PEAK_MEMORY` (exponent 1.2: the factorisation's fill grows faster than
+    the nodes)."""
+    (n0, m0), (n1, m1) = PEAK_MEMORY
+    return m1 * (float(nodes) / n1) ** (math.log(m1 / m0) / math.log(n1 / n0))
+
+
+def require_site_memory(task: str, volume, fine: float, site: str) -> None:
+    """ConfigError, before the solve, when the press at ``site`` on ``volume`` would need more memory
+    than this host has available (:func:`surgsim_envs.bench.memory_need.require_memory`)."""
+    require_memory(peak_memory(len(volume.nodes)),
+                   f"{task}: the reference at fine spacing {fine * 1e3:.3g} mm ({len(volume.nodes)} nodes at the "
+                   f"{site} site)",
+                   "Run the quick set (surgsim bench task-accuracy --quick), or this level one press site per "
+                   "process on a host with more memory (surgsim_envs.bench.probe_sets.layered_palpation."
+                   "reference_row(TASK, FULL, fine, sites=('mirror',))); the shipped table "
+                   "(surgsim_envs/tissue/data/task_accuracy_table.json) holds its forces.")
 
 
 def region_materials(planes, materials: dict, nodule_factor: float) -> dict:
@@ -128,6 +153,7 @@ def reference_row(task: str, sites: dict, depths: Sequence[float], fine: float, 
     for name, xy in sites.items():
         vol = wall_volume(size, planes, xy, fine, centre, nodule_radius, coarse=coarse)
         nodes[name] = int(len(vol.nodes))
+        require_site_memory(task, vol, fine, name)
         try:
             values = site_forces(vol, mats, xy, depths, tip_radius, fine, top)
         except TissueUnstableError as exc:
@@ -140,5 +166,5 @@ def reference_row(task: str, sites: dict, depths: Sequence[float], fine: float, 
             "forces_N": forces, "seconds": time.perf_counter() - t0, "nodule_centre": list(centre)}
 
 
-__all__ = ["layer_planes", "wall_z_axis", "wall_volume", "region_materials", "nodule_centre_z", "press_scene",
-           "site_forces", "reference_row"]
+__all__ = ["PEAK_MEMORY", "peak_memory", "require_site_memory", "layer_planes", "wall_z_axis", "wall_volume",
+           "region_materials", "nodule_centre_z", "press_scene", "site_forces", "reference_row"]

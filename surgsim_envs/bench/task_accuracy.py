@@ -261,6 +261,9 @@ def converged_reference(task: str, probes: ProbeSet, progress: Callable[[str], N
     extrapolated (:func:`task_reference.extrapolate`)."""
     driver = probe_sets.DRIVERS.get(task)
     material = task_material(task) if driver is None else None
+    check_memory = getattr(driver, "check_reference_memory", None)
+    if check_memory is not None:          # refused before the coarse levels, not killed at the finest
+        check_memory(task, probes)
     rows = []
     for spacing in probes.reference_spacings:
         progress(f"reference {task_reference.REFERENCE_MODEL} at {spacing * 1e3:.3g} mm")

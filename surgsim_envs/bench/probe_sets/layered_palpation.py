@@ -143,6 +143,25 @@ def measure(task: str, model: str, spacing: float, probes: ProbeSet) -> dict:
     return row
 
 
+def check_reference_memory(task: str, probes: ProbeSet) -> None:
+    """ConfigError, before any level runs, when the finest reference level of ``probes`` would need more
+    memory than this host has available (its lattice at the nodule site: every site's has as many
+    nodes, :func:`surgsim_envs.bench.layered_reference.require_site_memory`)."""
+    from surgsim_envs.bench import layered_reference
+    from surgsim_envs.envs.layered_palpation import LayeredPalpationConfig
+    from surgsim_envs.geometry.anatomy import ABDOMINAL_WALL_THICKNESS
+
+    if not probes.reference_spacings:
+        return
+    fine = min(probes.reference_spacings)
+    inc = probes.inclusions[0]
+    planes = layered_reference.layer_planes(ABDOMINAL_WALL_THICKNESS)
+    centre = (*inc.position, layered_reference.nodule_centre_z(planes, "fat", inc.radius))
+    vol = layered_reference.wall_volume(tuple(LayeredPalpationConfig().size), planes, inc.position, fine, centre,
+                                        inc.radius)
+    layered_reference.require_site_memory(task, vol, fine, "over")
+
+
 def reference_row(task: str, probes: ProbeSet, fine: float, sites: tuple[str, ...] = ("over", "mirror")) -> dict:
     """The reference of ``probes`` at fine spacing ``fine`` (m): :func:`layered_reference.reference_row`
     on the task's wall (its patch size, layers, materials, nodule and probe); ``sites``: the press sites
@@ -167,4 +186,5 @@ def reference_row(task: str, probes: ProbeSet, fine: float, sites: tuple[str, ..
         nodule_factor=inc.contrast, nodule_layer="fat", tip_radius=cfg.probe_radius)
 
 
-__all__ = ["TASK", "MODELS", "REFERENCE_DESCRIPTION", "NODULE", "FULL", "QUICK", "Presser", "measure", "reference_row"]
+__all__ = ["TASK", "MODELS", "REFERENCE_DESCRIPTION", "NODULE", "FULL", "QUICK", "Presser", "measure",
+           "check_reference_memory", "reference_row"]
