@@ -47,6 +47,8 @@ import numpy as np
 
 from surgsim_envs.bench import probe_sets, task_reference
 from surgsim_envs.bench.probe_set import Inclusion, ProbeSet, mirror
+from surgsim_envs.bench.task_accuracy_doc import (  # noqa: F401  (reference_summary, reference_table: re-exported)
+    check_doc, markdown, reference_summary, reference_table, update_doc)
 from surgsim_envs.errors import ConfigError
 
 
@@ -313,89 +315,6 @@ def rescore(table: dict, tasks: Iterable[str] | None = None, progress: Callable[
     return {**table, "rows": rows, "references": references}
 
 
-def reference_summary(ref: dict) -> str:
-    """One paragraph on a reference: its lattices, cost, the change of its last refinement and the
-    Richardson check."""
-    orders = [p for p in ref["observed_order"].values() if p is not None and math.isfinite(p)]
-    spacings = ", ".join(f"{h * 1e3:.3g}" for h in ref["spacings"])
-    nodes = ", ".join(str(n) for n in ref["nodes"])
-    cost = ", ".join(f"{t:.0f}" for t in ref["seconds"])
-    coarse = ref.get("coarse_spacing") or task_reference.COARSE_SPACING
-    what = ref.get("description") or (
-        f"`{task_reference.REFERENCE_MODEL}` (elastic, friction on, contact stiffness "
-        f"{task_reference.CONTACT_STIFFNESS_PER_AREA:.0e} N/m^3 per area, surface samples at half the spacing)")
-    text = (f"Reference: {what} "
-            f"on one lattice per press site, graded from fine spacings {spacings} mm at the site to {coarse * 1e3:.3g} mm "
-            f"(at most {nodes} nodes; {cost} s each for the {len(ref['forces_N'])} presses). ")
-    last = 100 * ref["last_refinement_change"]
-    if ref["reference_converged"]:
-        text += (f"**Converged**: the last refinement ({ref['spacings'][-2] * 1e3:.3g} -> {ref['spacings'][-1] * 1e3:.3g} mm) "
-                 f"changed every press by under 1 % (at most {last:.2g} %)")
-    else:
-        text += (f"**Not converged**: the last refinement changed the forces by up to {last:.2g} %")
-    if ref.get("reference_extrapolated"):
-        text += (f"; the forces are Richardson-extrapolated from the three finest (observed orders "
-                 f"{min(orders):.2g}-{max(orders):.2g}), which the three coarsest confirm to "
-                 f"{100 * max(ref['extrapolation_change'].values()):.2g} %")
-    else:
-        text += f"; the errors below are against the finest solution ({ref['spacings'][-1] * 1e3:.3g} mm)"
-        if orders:
-            check = [c for c in ref["extrapolation_change"].values() if c is not None and math.isfinite(c)]
-            text += (f". Richardson extrapolation from the three finest gives observed orders "
-                     f"{min(orders):.2g}-{max(orders):.2g}")
-            if ref.get("not_extrapolated"):
-                text += f" ({len(ref['not_extrapolated'])} presses outside {task_reference.MIN_ORDER}-{task_reference.MAX_ORDER})"
-            if check:
-                text += (f", and the extrapolation from the three coarsest differs from it by "
-                         f"{100 * min(check):.2g}-{100 * max(check):.2g} %, so it is not used")
-    return text + "."
-
-
-def reference_table(ref: dict) -> str:
-    """The reference's force per press at each spacing, each refinement's change (%) and the
-    Richardson limit with its observed order."""
-    head = ["press"] + [f"{h * 1e3:.3g} mm" for h in ref["spacings"]] + ["last change %", "Richardson F0 (order)"]
-    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for key in ref["forces_by_spacing"][-1]:
-        f = [r[key] for r in ref["forces_by_spacing"]]
-        cells = [f"{f[0]:.4f}"] + [f"{b:.4f} ({100 * (b - a) / b:+.1f} %)" for a, b in zip(f, f[1:])]
-        p = ref["observed_order"].get(key)
-        rich = (f"{ref['extrapolated_N'][key]:.4f} ({p:.2f})" if p is not None and math.isfinite(p) else
-                "outside " f"{task_reference.MIN_ORDER:g}-{task_reference.MAX_ORDER:g}" if len(f) >= 3 else "-")
-        out.append(f"| {key} | " + " | ".join(cells) + f" | {100 * ref['last_change'][key]:.2f} | {rich} |")
-    return "\n".join(out)
-
-
-def markdown(table: dict) -> str:
-    """The table as markdown (one block per task)."""
-    out = []
-    for task, ref in table["references"].items():
-        out.append(f"### {task}\n")
-        out.append(reference_summary(ref) + "\n")
-        out.append("| model | spacing mm | nodes | error median % | error p95 % | contrast (ref) | rises with depth "
-                   "| max pull N | path diff % | us / env step |")
-        out.append("|---|---|---|---|---|---|---|---|---|---|")
-        for r in table["rows"]:
-            if r["task"] != task:
-                continue
-            if "refused" in r:
-                out.append(f"| {r['model']} | {r['spacing'] * 1e3:.3g} | refused: {r['refused'][:80]} |||||||")
-                continue
-            con = ", ".join(f"{a:.2f} ({b:.2f})" for a, b in zip(r["contrast"], r["contrast_reference"]))
-            path = f"{100 * r['path_difference']:.1f}" if "path_difference" in r else "-"
-            out.append(f"| {r['model']} | {r['spacing'] * 1e3:.3g} | {r['nodes']} | {100 * r['error_median']:.1f} | "
-                       f"{100 * r['error_p95']:.1f} | {con} | {'yes' if r['monotone'] else 'NO'} | "
-                       f"{r['max_tensile_N']:.3g} | {path} | {r['us_per_env_step']:.0f} |")
-        out.append("")
-        if "last_change" in ref:
-            out.append("The reference's forces (N) per press (inclusion / site / depth) at each fine spacing, with the "
-                       "change of each refinement:\n")
-            out.append(reference_table(ref) + "\n")
-    if table["not_covered"]:
-        out.append("Tasks without a probe set yet: " + ", ".join(table["not_covered"]) + ".\n")
-    return "\n".join(out)
-
-
 def chart(table: dict, path: str | Path) -> None:
     """Error (p95) against cost per env step, one panel per task."""
     import matplotlib
@@ -472,6 +391,13 @@ def add_arguments(parser) -> None:
     parser.add_argument("--rescore", default=None, metavar="TABLE_JSON",
                         help="recompute only the references of --tasks and score the model rows of this table "
                              "(their stored per-press forces) against them, without rerunning the models")
+    parser.add_argument("--render", default=None, metavar="TABLE_JSON",
+                        help="run nothing: write the markdown, chart (and --doc blocks) of this stored table, e.g. "
+                             "the shipped surgsim_envs/tissue/data/task_accuracy_table.json")
+    parser.add_argument("--doc", default=None, metavar="MARKDOWN",
+                        help="also rewrite each task's block of this page (between its markers "
+                             "'<!-- task-accuracy table: TASK -->' and '<!-- end task-accuracy table -->'), "
+                             "e.g. docs/task_accuracy.md")
 
 
 def _names(text: str, known: Iterable[str], what: str) -> list[str]:
@@ -507,6 +433,17 @@ def run(args) -> int:
     task_ids = [k for k in gym.registry if k.startswith("SurgSim/")]
     tasks = _names(args.tasks, task_ids, "tasks")
     models = tissue.names() if args.models is None else _names(args.models, tissue.names(), "models")
+    from surgsim_envs import validate
+
+    page = None
+    if getattr(args, "doc", None) is not None:
+        page = validate.path(args.doc, "--doc", fix="a markdown page with the task-accuracy markers, e.g. docs/task_accuracy.md")
+        check_doc(page.read_text(), tasks)
+    def stored(value, name):
+        return json.loads(validate.path(value, name, fix="a task_accuracy.json").read_text())
+
+    render = stored(args.render, "--render") if getattr(args, "render", None) is not None else None
+    source = stored(args.rescore, "--rescore") if render is None and args.rescore is not None else None
     from tqdm import tqdm
 
     bar = tqdm(total=None, desc="task-accuracy", unit="run", leave=False)
@@ -515,10 +452,9 @@ def run(args) -> int:
         bar.set_postfix_str(text)
         bar.update(1)
 
-    if args.rescore is not None:
-        from surgsim_envs import validate
-
-        source = json.loads(validate.path(args.rescore, "--rescore", fix="a task_accuracy.json").read_text())
+    if render is not None:
+        table = render
+    elif source is not None:
         table = rescore(source, tasks, progress=progress)
     else:
         table = build_table(tasks, models, quick=args.quick, progress=progress,
@@ -526,6 +462,9 @@ def run(args) -> int:
     bar.close()
     paths = write(table, args.out)
     print(markdown(table))
+    if page is not None:
+        page.write_text(update_doc(page.read_text(), table))
+        print(f"rewrote the blocks of {', '.join(table['references'])} in {page}")
     if args.json:
         print(json.dumps(table, indent=1))
     print(f"wrote {paths['json']}, {paths['md']} and {paths['png']}")

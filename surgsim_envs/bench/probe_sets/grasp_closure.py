@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from surgsim_envs.bench import reading_table as rt
 from surgsim_envs.errors import ConfigError
 
 TASK = "SurgSim/Grasp-v0"
@@ -201,6 +202,18 @@ def compare(row: dict, reference: dict, probes: ClosureSet) -> dict:
             "integrator": "default"}
 
 
+def markdown(reference: dict, rows: list[dict]) -> str:
+    """The task's block of the task-accuracy table: the reference ladder, its readings per level and
+    one row per model and spacing (whether the summed normal rises with closure, the settle change of
+    the slowest reading, the largest tensile jaw force and the cost per env step and simulated ms)."""
+    columns = [("sum N rises with closure", lambda r: rt.yes_no(r["monotone"])),
+               ("settle change %", lambda r: f"{100 * max(r['settle_change'].values()):.2g}"),
+               ("max tensile N", lambda r: f"{r['max_tensile_N']:.3g}"),
+               ("us / env step", lambda r: f"{r['us_per_env_step']:.0f}"),
+               ("us / sim ms", lambda r: f"{r['us_per_ms']:.1f}")]
+    return "\n\n".join([rt.reference_summary(reference), rt.reference_readings(reference), rt.model_rows(rows, columns)])
+
+
 def _description() -> str:
     from surgsim_envs.bench import grasp_reference as ref
 
@@ -212,4 +225,4 @@ def _description() -> str:
 REFERENCE_DESCRIPTION = _description()
 
 __all__ = ["TASK", "MU", "ClosureSet", "FULL", "QUICK", "REFERENCE_DESCRIPTION", "make_env", "measure",
-           "reference_row", "compare", "errors"]
+           "reference_row", "compare", "errors", "markdown"]

@@ -48,6 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from surgsim_envs.bench import reading_table as rt
 from surgsim_envs.errors import ConfigError
 
 TASK = "SurgSim/Slippage-v0"
@@ -294,6 +295,29 @@ def compare(row: dict, reference: dict, probes: PullSet) -> dict:
             "monotone": bool(all(a < b for a, b in zip(held, held[1:]))), "scene": row["task"], "integrator": "default"}
 
 
+def _ratios(row: dict, what: str) -> str:
+    """One of a row's held ratios (``held_ratio``, ``contact_ratio``, ``coulomb_ratio``) per mu."""
+    return ", ".join(f"{v[what]:.2f}" if v.get(what) is not None else "-" for v in row["held_ratio"].values())
+
+
+def markdown(reference: dict, rows: list[dict]) -> str:
+    """The task's block of the task-accuracy table: the reference ladder, its readings per level and
+    one row per model and spacing (the pull held over mu x the summed normal, by the motor and at the
+    contacts, the largest contact ratio of a step, the mus at which the grasp let go before the pull
+    or never slid, whether the held pull rises with mu, the largest tensile jaw force and the cost)."""
+    mus = ", ".join(k.removeprefix("mu") for k in next((r["held_ratio"] for r in rows if "held_ratio" in r), {}))
+    columns = [(f"motor held / (mu sum N), mu {mus}", lambda r: _ratios(r, "held_ratio")),
+               ("contact held / (mu sum N)", lambda r: _ratios(r, "contact_ratio")),
+               ("largest contact / (mu sum N) of a step", lambda r: _ratios(r, "coulomb_ratio")),
+               ("released (mu)", lambda r: ", ".join(f"{m:g}" for m in r["released_mu"]) or "-"),
+               ("never slid (mu)", lambda r: ", ".join(f"{m:g}" for m in r.get("never_slid_mu", [])) or "-"),
+               ("held rises with mu", lambda r: rt.yes_no(r["monotone"])),
+               ("max tensile N", lambda r: f"{r['max_tensile_N']:.3g}"),
+               ("us / env step", lambda r: f"{r['us_per_env_step']:.0f}"),
+               ("us / sim ms", lambda r: f"{r['us_per_ms']:.1f}")]
+    return "\n\n".join([rt.reference_summary(reference), rt.reference_readings(reference), rt.model_rows(rows, columns)])
+
+
 def _description() -> str:
     from surgsim_envs.bench import grasp_reference as ref
 
@@ -305,4 +329,4 @@ def _description() -> str:
 REFERENCE_DESCRIPTION = _description()
 
 __all__ = ["TASK", "HOLD", "PULL_RATE", "SLIP_ONSET", "PullSet", "FULL", "QUICK", "REFERENCE_DESCRIPTION", "make_env",
-           "options", "Pull", "measure", "motorise", "reference_row", "compare"]
+           "options", "Pull", "measure", "motorise", "reference_row", "compare", "markdown"]
