@@ -12,6 +12,9 @@ the stiffness weights with its own SIMD ``pow`` on AVX-512 hosts (up to 1 ulp fr
 the estimate's observation entries within 1 float32 ulp, the potential, shaping and localisation
 terms, the reward and the guess's error within 1e-14 (each weight is <= 1, the estimate a
 weighted mean of positions <= 0.05 m, so a few float64 ulps of it move phi by ~1e-16).
+
+The default run compares the first 40 control steps (presses, samples, a held report that ends an
+episode: about 10 s); the whole script runs under ``-m slow`` (about a minute on Warp's CPU device).
 """
 
 import numpy as np
@@ -23,6 +26,9 @@ pytestmark = pytest.mark.skipif(not available(), reason="needs the [batch] extra
 
 W = 4
 STEPS = 220
+#: the default run's share of the script: the first presses, samples and a held report (the whole
+#: script, with both truncations and every reward term firing, runs under ``-m slow``)
+SHORT_STEPS = 40
 #: 1 s episodes (100 control steps: truncation inside the run), reports from 0.2 s, a damage
 #: threshold the deep presses pass (the default tissue pushes back 0.2-0.45 N)
 TASK = dict(episode_seconds=1.0, min_report_seconds=0.2, damage_force=0.2)
@@ -68,8 +74,7 @@ def _host(x):
     return x.numpy().copy() if hasattr(x, "numpy") and not isinstance(x, np.ndarray) else np.array(x)
 
 
-@pytest.fixture(scope="module")
-def rollout():
+def _rollout(n_steps):
     """Both envs through the same actions; per step the numpy path's results and the device path's
     (copied to the host), and the device env for the later checks."""
     host, dev = _make(False), _make(True)
@@ -78,7 +83,7 @@ def rollout():
     rng = np.random.default_rng(0)
     t_episode = np.zeros(W, dtype=int)
     steps = [((oh, None, None, None, None), (_host(od), None, None, None, None))]
-    for _ in range(STEPS):
+    for _ in range(n_steps):
         a = _actions(t_episode, rng)
         rh = host.step(a)
         rd = dev.step(a)
@@ -87,11 +92,26 @@ def rollout():
                  for k in info}
         steps.append((rh, (_host(rd[0]), _host(rd[1]), _host(rd[2]), _host(rd[3]), dinfo)))
         t_episode = np.where(rh[2] | rh[3], 0, t_episode + 1)
+    return steps, host, dev
+
+
+@pytest.fixture(scope="module")
+def rollout():
+    steps, host, dev = _rollout(STEPS)
     yield steps, dev
     host.close()
     dev.close()
 
 
+@pytest.fixture(scope="module")
+def short_rollout():
+    steps, host, dev = _rollout(SHORT_STEPS)
+    yield steps, dev
+    host.close()
+    dev.close()
+
+
+@pytest.mark.slow
 def test_the_script_exercises_samples_terms_reports_and_truncation(rollout):
     steps, _ = rollout
     term = np.array([s[0][2] for s in steps[1:]])
@@ -105,8 +125,24 @@ def test_the_script_exercises_samples_terms_reports_and_truncation(rollout):
     assert (contrast > 1.0).mean() > 0.5, "the presses take stiffness samples (contrast seen > 1)"
 
 
+def test_the_first_steps_take_samples_and_end_an_episode_by_a_held_report(short_rollout):
+    steps, _ = short_rollout
+    term = np.array([s[0][2] for s in steps[1:]])
+    assert term[:, 2].sum() >= 1, "world 2's held report ends its episode"
+    contrast = np.array([s[0][0][:, 13] for s in steps[1:]])
+    assert (contrast > 1.0).any(), "the presses take stiffness samples (contrast seen > 1)"
+
+
+def test_device_path_equals_the_numpy_path_over_the_first_steps(short_rollout):
+    _assert_paths_equal(short_rollout[0])
+
+
+@pytest.mark.slow
 def test_device_path_equals_the_numpy_path(rollout):
-    steps, _ = rollout
+    _assert_paths_equal(rollout[0])
+
+
+def _assert_paths_equal(steps):
     (oh, *_), (od, *_) = steps[0]
     np.testing.assert_array_equal(od, oh, err_msg="reset observation")
     exact = [i for i in range(oh.shape[1]) if i not in (11, 12)]
@@ -135,10 +171,10 @@ def test_device_path_equals_the_numpy_path(rollout):
                                        rtol=0, atol=ESTIMATE_BOUND, err_msg=msg)
 
 
-def test_outputs_are_device_arrays_shared_through_dlpack(rollout):
+def test_outputs_are_device_arrays_shared_through_dlpack(short_rollout):
     import warp as wp
 
-    _, env = rollout
+    _, env = short_rollout
     obs, reward, terminated, truncated, info = env.step(np.zeros((W, 4), dtype=np.float32))
     for x in (obs, reward, terminated, truncated, info["force_N"], info["reward_terms"]["time"]):
         assert isinstance(x, wp.array) and x.device == wp.get_device("cpu")

@@ -13,6 +13,10 @@ order, BLAS's in-order dot for the norms, the slip tracker's centroid added in n
 divided by the count, Python's ``sum`` of the terms), compiled without floating-point contraction,
 and no operation in the chain goes through a numpy SIMD kernel whose result depends on the CPU's
 features (checked with ``NPY_DISABLE_CPU_FEATURES`` set: equal too).
+
+The scripted run takes about a minute on Warp's CPU device, so it runs under ``-m slow``; the default
+run keeps the checks that need no script (DLPack sharing, argument errors). Palpation-v0's device path
+(tests/test_batch_device_terms.py) is the default run's representative of the comparison.
 """
 
 import numpy as np
@@ -62,6 +66,15 @@ def _host_info(info):
 
 
 @pytest.fixture(scope="module")
+def device_env():
+    """The device path's env, reset: the DLPack and argument checks need no script."""
+    env = _make(True)
+    env.reset(seed=3)
+    yield env
+    env.close()
+
+
+@pytest.fixture(scope="module")
 def rollout():
     """Both envs through the same actions; per step the numpy path's results and the device path's
     (copied to the host), and the device env for the later checks."""
@@ -82,6 +95,7 @@ def rollout():
     dev.close()
 
 
+@pytest.mark.slow
 def test_the_script_exercises_grasps_successes_drops_truncations_and_terms(rollout):
     steps, _ = rollout
     info = [s[0][4] for s in steps[1:]]
@@ -100,6 +114,7 @@ def test_the_script_exercises_grasps_successes_drops_truncations_and_terms(rollo
         assert np.any(values != 0.0), f"reward term {name!r} never fired"
 
 
+@pytest.mark.slow
 def test_device_path_equals_the_numpy_path(rollout):
     steps, _ = rollout
     (oh, *_, ih), (od, *_, idv) = steps[0]
@@ -123,10 +138,10 @@ def test_device_path_equals_the_numpy_path(rollout):
                 np.testing.assert_array_equal(idv[key], ih[key], err_msg=f"{key}, {msg}")
 
 
-def test_outputs_are_device_arrays_shared_through_dlpack(rollout):
+def test_outputs_are_device_arrays_shared_through_dlpack(device_env):
     import warp as wp
 
-    _, env = rollout
+    env = device_env
     obs, reward, terminated, truncated, info = env.step(np.zeros((W, 4), dtype=np.float32))
     for x in (obs, reward, terminated, truncated, info["reward_terms"]["contact"], info["slip_distance_m"],
               info["grasped"], info["steps"]):

@@ -35,6 +35,7 @@ def _cpu_contact_nodes(sim):
     return contact_nodes(sim)
 
 
+@pytest.mark.slow
 def test_grasp_readouts_follow_the_cpu_simulation_through_a_closure():
     import gymnasium as gym
 

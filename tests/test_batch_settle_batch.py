@@ -22,7 +22,8 @@ def _env(device_outputs=False):
     return load_env_creator(BATCHED["SurgSim/Slippage-v0"])(W, device="cpu", device_outputs=device_outputs, **TASK)
 
 
-@pytest.mark.parametrize("device_outputs", [False, pytest.param(True, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("device_outputs", [False, True])
+@pytest.mark.slow
 def test_a_few_worlds_settle_in_a_small_batch_as_in_the_batch_itself(device_outputs):
     small, inside = _env(device_outputs), _env(device_outputs)
     inside._settle_batch = lambda k: None          # the settle in the batch itself, the other worlds held

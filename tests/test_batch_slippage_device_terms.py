@@ -18,6 +18,10 @@ count, Python's ``max(0.0, x)``, the C library's ``sin`` as numba calls it, Pyth
 terms), compiled without floating-point contraction, and no operation in the chain goes through a
 numpy SIMD kernel whose result depends on the CPU's features (checked with
 ``NPY_DISABLE_CPU_FEATURES`` set: equal too).
+
+The scripted run takes about a minute on Warp's CPU device, so it runs under ``-m slow``; the default
+run keeps the checks that need no script (DLPack sharing, argument errors). Palpation-v0's device path
+(tests/test_batch_device_terms.py) is the default run's representative of the comparison.
 """
 
 import numpy as np
@@ -65,6 +69,15 @@ def _host_info(info):
 
 
 @pytest.fixture(scope="module")
+def device_env():
+    """The device path's env, reset: the DLPack and argument checks need no script."""
+    env = _make(True)
+    env.reset(seed=3)
+    yield env
+    env.close()
+
+
+@pytest.fixture(scope="module")
 def rollout():
     """Both envs through the same actions; per step the numpy path's results and the device path's
     (copied to the host), the controls each wrote, and the device env for the later checks."""
@@ -89,6 +102,7 @@ def rollout():
     dev.close()
 
 
+@pytest.mark.slow
 def test_the_script_exercises_pulls_slips_drops_truncations_and_autoresets(rollout):
     steps, _, env = rollout
     c = env.unwrapped.config
@@ -115,6 +129,7 @@ def test_the_script_exercises_pulls_slips_drops_truncations_and_autoresets(rollo
         assert np.any(values != 0.0), f"reward term {name!r} never fired"
 
 
+@pytest.mark.slow
 def test_device_path_equals_the_numpy_path(rollout):
     steps, controls, _ = rollout
     (oh, *_, ih), (od, *_, idv) = steps[0]
@@ -139,10 +154,10 @@ def test_device_path_equals_the_numpy_path(rollout):
         np.testing.assert_array_equal(controls[k - 1][1], controls[k - 1][0], err_msg=f"jaw and pull controls, {msg}")
 
 
-def test_outputs_are_device_arrays_shared_through_dlpack(rollout):
+def test_outputs_are_device_arrays_shared_through_dlpack(device_env):
     import warp as wp
 
-    _, _, env = rollout
+    env = device_env
     obs, reward, terminated, truncated, info = env.step(np.zeros((W, 1), dtype=np.float32))
     for x in (obs, reward, terminated, truncated, info["reward_terms"]["hold"], info["slip_distance_m"],
               info["pull_force_N"], info["steps"]):
@@ -156,12 +171,12 @@ def test_outputs_are_device_arrays_shared_through_dlpack(rollout):
     assert later.ptr != obs.ptr and np.all(shared == 7.0), "a new step writes new arrays: the kept ones stay"
 
 
-def test_a_schedule_array_of_the_wrong_shape_is_refused(rollout):
+def test_a_schedule_array_of_the_wrong_shape_is_refused(device_env):
     import warp as wp
 
     from surgsim_envs.errors import ConfigError
 
-    _, _, env = rollout
+    env = device_env
     sim, acts = env.unwrapped.sim, env.unwrapped.acts
     bad = wp.zeros((2, W + 1, 2), dtype=wp.float64, device="cpu")
     with pytest.raises(ConfigError, match=rf"values must be a float64 Warp array of shape \(steps, {W}, 2\)"):

@@ -105,7 +105,7 @@ def _rollout(env, steps, seed=0):
     return out, env.sim.tissue_positions()
 
 
-@pytest.mark.parametrize("task", [pytest.param(t, marks=pytest.mark.slow) if t == "SurgSim/Grasp-v0" else t
+@pytest.mark.parametrize("task", [t if t == "SurgSim/Palpation-v0" else pytest.param(t, marks=pytest.mark.slow)
                                   for t in sorted(TASKS)])
 def test_recorded_bodies_do_device_work_only_and_replay_bit_for_bit(task):
     """Each task through its graph path (episodes of a few steps: autoresets inside) against plain launches."""

@@ -273,6 +273,7 @@ def _expert_episode(env, seed):
             return total, obs, info
 
 
+@pytest.mark.slow
 def test_palpation_guess_is_the_stiffness_estimate_and_shaping_telescopes():
     """The report guess is the env's stiffness-weighted estimate (not where the probe happens to
     be), and the potential-based shaping adds exactly shaping_weight * (1 - err / scale) per

@@ -73,6 +73,7 @@ def _wait_for(proc, word: str, timeout: float = 240.0) -> str:
     raise AssertionError(f"child never printed {word!r}; output:\n{seen}\n{proc.stderr.read() if proc.stderr else ''}")
 
 
+@pytest.mark.slow
 def test_human_viewer_shows_the_scene(xvfb):
     code = textwrap.dedent("""
         import time, numpy as np, gymnasium as gym, surgsim_envs
@@ -177,6 +178,7 @@ def test_teleop_keyboard_moves_the_probe(xvfb):
     assert moved >= 5, f"the probe moved {moved} px down on screen after 8 mm of Page Down"
 
 
+@pytest.mark.slow
 def test_run_scenario_with_viewer(xvfb, tmp_path):
     """`surgsim run TASK.toml --viewer` opens the viewer on the tissue, plays the scenario at real
     time (3.3 s at --duration-scale 0.3: long enough for the screenshot, even on a loaded machine)
@@ -203,6 +205,7 @@ def test_run_scenario_with_viewer(xvfb, tmp_path):
     assert img.std() > 10 and tissue.mean() > 0.02, f"the tissue is not on screen ({tissue.mean():.4f})"
 
 
+@pytest.mark.slow
 def test_dm_control_viewer_runs_palpation(xvfb):
     """dm_control.viewer.launch on surgsim_envs.integrations.dm_control.load("palpation"): the window
     ("Explorer", glfw) shows the tissue; Space un-pauses it and the viewer steps the environment

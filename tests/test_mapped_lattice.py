@@ -73,6 +73,7 @@ def test_bad_axes_are_refused_by_name(spleen):
         mapped_lattice_volume(spleen, (x, y))
 
 
+@pytest.mark.slow
 def test_tip_graded_organ_fills_the_task_surface_and_the_reference_places_it_there(monkeypatch):
     import trimesh
 

@@ -92,6 +92,7 @@ def test_bad_config_is_refused():
         gym.make("SurgSim/PalpationPress-v0", press_depth=0.002)
 
 
+@pytest.mark.slow
 def test_expert_far_above_random(env):
     """The raster expert localises the inclusion on >= 3 of 4 seeds; a uniform random policy
     (reports with probability 1/2 per press) on none (measured: expert 9/10, random 0/10 on

@@ -7,6 +7,8 @@ import json
 import shutil
 from pathlib import Path
 
+import pytest
+
 from surgsim_envs import cli
 from surgsim_envs.cli.run import command_line_path
 
@@ -26,6 +28,7 @@ def test_command_line_path_makes_files_absolute_from_the_working_directory(tmp_p
         assert command_line_path(unchanged) == unchanged
 
 
+@pytest.mark.slow
 def test_relative_policy_from_the_repository_root_runs(tmp_path, monkeypatch, capsys):
     """The README's command: a --policy relative to the working directory, not to tasks/."""
     monkeypatch.chdir(ROOT)
@@ -51,6 +54,7 @@ def test_policy_next_to_the_scenario_but_not_in_the_working_directory_is_not_fou
     assert "policy file 'mine.npz' not found" in err
 
 
+@pytest.mark.slow
 def test_several_scenario_files_run_each_and_print_a_summary(tmp_path, capsys):
     bad = tmp_path / "broken.toml"
     bad.write_text('[scenario]\nname = "x"\nscene = grasp\n')

@@ -486,6 +486,7 @@ def test_rollout_errors_name_the_problem():
         disabled.close()
 
 
+@pytest.mark.slow
 def test_rollout_with_the_shipped_palpation_policy_matches_sync():
     """The shipped Palpation-v0 policy (NpzPolicy.batched) rolled out in the workers, one env each, over
     an episode end (15-step episodes, autoreset at step 16), equals SyncVectorEnv stepped with the same
