@@ -94,3 +94,13 @@ def test_render_rewrites_the_blocks_of_a_stored_table_without_running(tmp_path, 
     text = page.read_text()
     assert "stale" not in text and ta.update_doc(text, table) == text
     assert (tmp_path / "out" / "task_accuracy.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("text", ["{not json", "[1, 2]", '{"rows": []}'])
+def test_render_refuses_a_file_that_is_not_a_table(tmp_path, text):
+    bad = tmp_path / "table.json"
+    bad.write_text(text)
+    args = SimpleNamespace(tasks="SurgSim/Grasp-v0", models=None, quick=False, spacings=None, out=str(tmp_path / "out"),
+                           json=False, rescore=None, render=str(bad), doc=None)
+    with pytest.raises(ConfigError, match=r"--render=.*table\.json.*give a task_accuracy\.json this command wrote"):
+        ta.run(args)

@@ -435,15 +435,25 @@ def run(args) -> int:
     models = tissue.names() if args.models is None else _names(args.models, tissue.names(), "models")
     from surgsim_envs import validate
 
-    page = None
-    if getattr(args, "doc", None) is not None:
-        page = validate.path(args.doc, "--doc", fix="a markdown page with the task-accuracy markers, e.g. docs/task_accuracy.md")
-        check_doc(page.read_text(), tasks)
     def stored(value, name):
-        return json.loads(validate.path(value, name, fix="a task_accuracy.json").read_text())
+        path = validate.path(value, name, fix="a task_accuracy.json")
+        try:
+            table = json.loads(path.read_text())
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{name}={str(path)!r} is not JSON ({exc}); give a task_accuracy.json this command "
+                              "wrote") from None
+        if not (isinstance(table, dict) and {"rows", "references", "not_covered"} <= set(table)):
+            raise ConfigError(f"{name}={str(path)!r} is not a task-accuracy table (it needs 'rows', 'references' and "
+                              "'not_covered'); give a task_accuracy.json this command wrote")
+        return table
 
     render = stored(args.render, "--render") if getattr(args, "render", None) is not None else None
     source = stored(args.rescore, "--rescore") if render is None and args.rescore is not None else None
+    page = None
+    if getattr(args, "doc", None) is not None:         # checked before anything runs
+        page = validate.path(args.doc, "--doc", fix="a markdown page with the task-accuracy markers, e.g. docs/task_accuracy.md")
+        stored_table = render if render is not None else source
+        check_doc(page.read_text(), list(stored_table["references"]) if stored_table is not None else tasks)
     from tqdm import tqdm
 
     bar = tqdm(total=None, desc="task-accuracy", unit="run", leave=False)
