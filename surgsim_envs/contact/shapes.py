@@ -227,7 +227,9 @@ def _sdf_points(points, kind, size, pos, mat, dist, normals, closest):
     n = np.empty(3)
     c = np.empty(3)
     for i in range(points.shape[0]):
-        dist[i] = world_sdf(kind, size, pos, mat, 0, points[i, 0], points[i, 1], points[i, 2], nl, cl, n, c)
+        # np.bool_ / np.int64, not a literal constant: a literal compiles the callee a second time (numba
+        # specialises on literal arguments), seconds to tens of seconds of first-use compile for nothing
+        dist[i] = world_sdf(kind, size, pos, mat, np.int64(0), points[i, 0], points[i, 1], points[i, 2], nl, cl, n, c)
         for k in range(3):
             normals[i, k] = n[k]
             closest[i, k] = c[k]

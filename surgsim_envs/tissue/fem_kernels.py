@@ -502,11 +502,13 @@ def symplectic_step(x, v, fext, masses, alpha, gravity, fixed, dt, beta, corotat
                 y_buf[i, k] = x[i, k] + beta * v[i, k]
         y = y_buf
     if parallel:
-        _element_vectors(y, tets, dm_inv, vol, mu, lam, rots, True, anp, kappa_node, node_vol, work,
+        # np.bool_ / np.int64, not a literal constant: a literal compiles the callee a second time (numba
+        # specialises on literal arguments), seconds to tens of seconds of first-use compile for nothing
+        _element_vectors(y, tets, dm_inv, vol, mu, lam, rots, np.bool_(True), anp, kappa_node, node_vol, work,
                          x, iters, rot_tol, beta <= 0.0)
         _integrate_pass(work[0], work[2], work[6], x, v, fext, masses, alpha, gravity, fixed, dt)
         return
-    _serial_product(y, tets, dm_inv, vol, mu, lam, rots, True, anp, kappa_node, node_vol, work, f_buf,
+    _serial_product(y, tets, dm_inv, vol, mu, lam, rots, np.bool_(True), anp, kappa_node, node_vol, work, f_buf,
                     x, iters, rot_tol, beta <= 0.0)
     for i in range(x.shape[0]):
         if fixed[i]:
@@ -524,8 +526,10 @@ def symplectic_step(x, v, fext, masses, alpha, gravity, fixed, dt, beta, corotat
 def apply_system(y, diag, c_k, tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, work, free, out,
                   parallel):
     """out = (diag + c_k R K R^T) y on free DOFs (zero rows/cols at fixed nodes)."""
-    stiffness_product(y, tets, dm_inv, vol, mu, lam, rots, False, anp, kappa_node, node_vol, work, out,
-                      y, 0, 0.0, False, parallel)
+    # np.bool_ / np.int64, not a literal constant: a literal compiles the callee a second time (numba
+    # specialises on literal arguments), seconds to tens of seconds of first-use compile for nothing
+    stiffness_product(y, tets, dm_inv, vol, mu, lam, rots, np.bool_(False), anp, kappa_node, node_vol, work, out,
+                      y, np.int64(0), 0.0, np.bool_(False), parallel)
     for i in range(y.shape[0]):
         if free[i]:
             for k in range(3):

@@ -318,7 +318,9 @@ def symplectic_step_work(pos, vel, inv_mass, b0, fext, gravity, fixed, dt,
                          si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, f_buf, tets, V0, kv, work):
     """:func:`symplectic_step` with the spring pass's (4, E) float64 work buffer ``work`` given
     (:func:`spring_forces_passes`)."""
-    spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, True, f_buf, work)
+    # np.bool_ / np.int64, not a literal constant: a literal compiles the callee a second time (numba
+    # specialises on literal arguments), seconds to tens of seconds of first-use compile for nothing
+    spring_forces_passes(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, np.bool_(True), f_buf, work)
     volume_forces(pos, tets, V0, kv, f_buf)
     g0 = gravity[0]
     g1 = gravity[1]
@@ -435,8 +437,10 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
     """
     n = pos.shape[0]
     # branch state is committed at x_n; tangents at x_n with the branch's stiffness over the coming step
-    spring_forces(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, True, f_buf)
-    spring_tangents(pos, si, sj, L0, K1, K2, kMg_next, s_state, True, coef_a, coef_g, unit)
+    # np.bool_ / np.int64, not a literal constant: a literal compiles the callee a second time (numba
+    # specialises on literal arguments), seconds to tens of seconds of first-use compile for nothing
+    spring_forces(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, np.bool_(True), f_buf)
+    spring_tangents(pos, si, sj, L0, K1, K2, kMg_next, s_state, np.bool_(True), coef_a, coef_g, unit)
     volume_forces(pos, tets, V0, kv, f_buf)
     volume_tangents(pos, tets, V0, kv, vgrad, vcoef)
     h2 = dt * dt

@@ -252,8 +252,10 @@ def implicit_step(pos, vel, mass, b0, fext, gravity, fixed, kc, dt,
     no_tets = np.zeros((0, 4), dtype=tets.dtype)
     no_grad = np.zeros((0, 4, 3))
     no_coef = np.zeros(0)
-    spring_forces(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, True, f_buf)
-    spring_tangents(pos, si, sj, L0, K1, K2, kMg_next, s_state, True, coef_a, coef_g, unit)
+    # np.bool_ / np.int64, not a literal constant: a literal compiles the callee a second time (numba
+    # specialises on literal arguments), seconds to tens of seconds of first-use compile for nothing
+    spring_forces(pos, si, sj, L0, K1, K2, kMg, decay, s_state, dl_state, np.bool_(True), f_buf)
+    spring_tangents(pos, si, sj, L0, K1, K2, kMg_next, s_state, np.bool_(True), coef_a, coef_g, unit)
     add_forces(pos, tets, V0, kv, vbuf, f_buf)
     tangents(pos, tets, vgrad)
     for i in range(n):
