@@ -260,11 +260,11 @@ class TetFEMModel(TissueModel):
         """Polar rotations at positions x: ``rotation_iters`` warm-started Newton steps while
         stepping (tol None), or iterate to ``tol`` rad (energies, static solves)."""
         if self.corotational:
-            par = self._set_threads()
+            update = kern.update_rotations_parallel if self._set_threads() else kern.update_rotations
             if tol is None:
-                kern.update_rotations(x, self.tets, self.dm_inv, self._rots, self.rotation_iters, 1e-12, par)
+                update(x, self.tets, self.dm_inv, self._rots, self.rotation_iters, 1e-12)
             else:
-                kern.update_rotations(x, self.tets, self.dm_inv, self._rots, max_iter or 50, tol, par)
+                update(x, self.tets, self.dm_inv, self._rots, max_iter or 50, tol)
 
     def _stiffness_product(self, y, subtract_rest: bool, out=None, update_rotations: bool = False) -> np.ndarray:
         """R K R^T y [- R K X] (N); ``update_rotations``: first ``rotation_iters`` warm-started
@@ -354,9 +354,10 @@ class TetFEMModel(TissueModel):
         """Stored energy (J) at the current positions. The rotations are first iterated (same
         pass) until the Newton step is below 1e-6 rad: the energy is stationary in R at the polar
         rotation, so its relative error is O(1e-12)."""
-        return float(kern.elastic_energy(self.positions, self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam,
-                                         self._rots, self._anp, self.kappa_node, self.node_volume,
-                                         50 if self.corotational else 0, 1e-6, self._work, self._set_threads()))
+        energy = kern.elastic_energy_parallel if self._set_threads() else kern.elastic_energy
+        return float(energy(self.positions, self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam, self._rots,
+                            self._anp, self.kappa_node, self.node_volume, 50 if self.corotational else 0, 1e-6,
+                            self._work))
 
     def inverted_elements(self) -> int:
         """Tets with det F <= 0 at the current positions."""

@@ -6,9 +6,12 @@ evaluated in tensor form: ``G = R^T (Ys Dm^-1)`` (minus I), ``eps = sym(G)``,
 ``sigma = 2 mu dev(eps) + p I`` with ``p = kappa tr(eps)`` (standard) or the averaged nodal
 pressure (ANP), and nodal vectors ``V R sigma grad N_a``.  Elastic force = -P(x).
 R is kept per tet as a matrix and refined by warm-started Newton steps applied as Cayley
-rotations (:func:`update_rotations`). Every kernel that loops over elements takes ``parallel``:
-False = single-thread loops with direct scatter; True = ``prange`` passes whose nodal sums are
-gathers over a fixed node -> tet adjacency (:func:`make_work`), deterministic for any thread count.
+rotations (:func:`update_rotations`). Every kernel that loops over elements comes single-thread
+(loops with direct scatter) and threaded (``prange`` passes whose nodal sums are gathers over a
+fixed node -> tet adjacency, :func:`make_work`, deterministic for any thread count): as two entry
+points where the caller chooses in Python (``update_rotations`` / ``update_rotations_parallel``,
+``elastic_energy`` / ``elastic_energy_parallel``), so a single-thread user never compiles the
+threaded passes, or with a ``parallel`` argument where kernels call each other.
 Units: m, N, Pa, s.
 """
 
@@ -143,14 +146,15 @@ def _rotation_from_gradient(f00, f01, f02, f10, f11, f12, f20, f21, f22, rots, e
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
-def _update_rotations_parallel(x, tets, dm_inv, rots, max_iter, tol):
+def update_rotations_parallel(x, tets, dm_inv, rots, max_iter, tol):
+    """:func:`update_rotations` as a ``prange`` loop over the tets (the same result)."""
     eps = np.empty((1, 6))  # not written (want_strain=False)
     for e in prange(tets.shape[0]):
         _element_rotation(x, tets, dm_inv, rots, e, max_iter, tol, eps, False)
 
 
 @njit(cache=True, error_model="numpy")
-def update_rotations(x, tets, dm_inv, rots, max_iter, tol, parallel):
+def update_rotations(x, tets, dm_inv, rots, max_iter, tol):
     """Rotation R of each tet's deformation gradient F = R S (polar decomposition).
 
     Newton iteration on the rotation, warm-started from ``rots`` (T, 3, 3), updated in place.
@@ -161,11 +165,8 @@ def update_rotations(x, tets, dm_inv, rots, max_iter, tol, parallel):
     converges only by ~1/3 per iteration near S = I). The step costs one division: w = u/det
     with u = adj(N) b is never formed. Stops per element when |w| < ``tol`` rad or after
     ``max_iter`` iterations; with a warm start one iteration per time step suffices. Steps are
-    clamped to 1 rad (inverted elements).
+    clamped to 1 rad (inverted elements). Single thread; :func:`update_rotations_parallel` threads it.
     """
-    if parallel:
-        _update_rotations_parallel(x, tets, dm_inv, rots, max_iter, tol)
-        return
     eps = np.empty((1, 6))  # not written (want_strain=False)
     for e in range(tets.shape[0]):
         _element_rotation(x, tets, dm_inv, rots, e, max_iter, tol, eps, False)
@@ -447,15 +448,30 @@ def _energy_serial(x, tets, dm_inv, vol, mu, lam, rots, anp, rot_iters, rot_tol,
 
 
 @njit(cache=True, error_model="numpy")
-def elastic_energy(x, tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, rot_iters, rot_tol, work, parallel):
+def elastic_energy(x, tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, rot_iters, rot_tol, work):
     """Stored energy (J) of the (corotated) linear material at positions x. With ``rot_iters`` > 0
-    the rotations are first brought to ``rot_tol`` rad at x (same pass). Sums in a fixed order."""
+    the rotations are first brought to ``rot_tol`` rad at x (same pass). Sums in a fixed order.
+    Single thread; :func:`elastic_energy_parallel` threads the element pass (the same result)."""
     adj_ptr, adj_tet, adj_slot, eps_buf, trv, p_node, fe = work
     e_tet = fe[:, 0]  # scratch (4T >= T entries)
-    if parallel:
-        _energy_pass(x, tets, dm_inv, vol, mu, lam, rots, anp, rot_iters, rot_tol, eps_buf, trv, e_tet)
-    else:
-        _energy_serial(x, tets, dm_inv, vol, mu, lam, rots, anp, rot_iters, rot_tol, eps_buf, trv, e_tet)
+    _energy_serial(x, tets, dm_inv, vol, mu, lam, rots, anp, rot_iters, rot_tol, eps_buf, trv, e_tet)
+    return _energy_sum(tets, anp, kappa_node, node_vol, adj_ptr, adj_tet, trv, e_tet)
+
+
+@njit(cache=True, error_model="numpy")
+def elastic_energy_parallel(x, tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, rot_iters, rot_tol, work):
+    """:func:`elastic_energy` with the element pass as a ``prange`` loop. A separate entry point,
+    not a flag: a kernel that branches on a run-time flag compiles both passes, and the threaded
+    one (about 12 s of first-use compile here) is then built for single-thread users too."""
+    adj_ptr, adj_tet, adj_slot, eps_buf, trv, p_node, fe = work
+    e_tet = fe[:, 0]
+    _energy_pass(x, tets, dm_inv, vol, mu, lam, rots, anp, rot_iters, rot_tol, eps_buf, trv, e_tet)
+    return _energy_sum(tets, anp, kappa_node, node_vol, adj_ptr, adj_tet, trv, e_tet)
+
+
+@njit(cache=True, error_model="numpy")
+def _energy_sum(tets, anp, kappa_node, node_vol, adj_ptr, adj_tet, trv, e_tet):
+    """The per-tet energies plus (anp) the nodal pressure energy, J, summed in a fixed order."""
     energy = 0.0
     for e in range(tets.shape[0]):
         energy += e_tet[e]
