@@ -58,6 +58,7 @@ from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue import fem_viscous as visc
 from surgsim_envs.tissue.compliance import (DEFAULT_CACHE_MB, SOLVERS, CondensedCompliance, add_response,
                                              gather_block)
+from surgsim_envs.tissue.dense_solve import solve_dense
 from surgsim_envs.tissue.fem import TetFEMModel
 from surgsim_envs.tissue.guard import StabilityGuard
 
@@ -121,7 +122,7 @@ def condensed_contact_solve(cols, slots, loaded, u0, forces, kc, use_kc, positio
     from the cached compliance columns ``cols[slots]`` and divided by ``c``; with contact stiffness
     (``use_kc``) the loaded dofs solve ``(I + W k) u_A = u0_A + W (f + k u_n)`` and carry
     ``g = f - k (u_A - u_n)``, else ``g = f``. Writes u (3N,) = u0 + C_A g / c and ``applied[loaded]`` =
-    g (N). The numpy expressions it replaces, operation for operation."""
+    g (N). The small system is solved by :func:`~surgsim_envs.tissue.dense_solve.solve_dense`."""
     m = loaded.shape[0]
     n3 = 3 * m
     w = np.empty((n3, n3))
@@ -146,16 +147,18 @@ def condensed_contact_solve(cols, slots, loaded, u0, forces, kc, use_kc, positio
                 k_a[d] = kc[i]
                 un_a[d] = positions[i, j] - rest[i, j]
                 v[d] = g[d] + k_a[d] * un_a[d]
-        wv = w @ v
         for b in range(m):
             for j in range(3):
                 d = 3 * b + j
-                rhs[d] = u0[3 * loaded[b] + j] + wv[d]
+                wv = 0.0                     # (W v)_d as a loop: numba's matmul wrapper costs seconds to compile
+                for e in range(n3):
+                    wv += w[d, e] * v[e]
+                rhs[d] = u0[3 * loaded[b] + j] + wv
         a = np.empty((n3, n3))
         for i in range(n3):
             for j in range(n3):
                 a[i, j] = (1.0 if i == j else 0.0) + w[i, j] * k_a[j]
-        u_a = np.linalg.solve(a, rhs)
+        u_a = solve_dense(a, rhs)
         for d in range(n3):
             g[d] = g[d] - k_a[d] * (u_a[d] - un_a[d])
     for d in range(u.shape[0]):
