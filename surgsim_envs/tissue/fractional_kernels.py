@@ -27,11 +27,17 @@ def history_sum(buf, pos, count, w, out):
 @njit(cache=True, nogil=True)
 def push(buf, pos, memory, row):
     """Insert ``row`` as the newest entry; returns the new ``pos`` (amortised O(1) per step)."""
+    n = buf.shape[1]
+    # element loops, not slice assignments: numba's array-to-array assignment builds a shape check
+    # whose error message formats the shapes, about 5 s of first-use compile for a copy
     if pos == 0:
-        buf[memory + 1:] = buf[:memory - 1]
+        for k in range(memory - 1):                     # buf[memory + 1:] = buf[:memory - 1]
+            for i in range(n):
+                buf[memory + 1 + k, i] = buf[k, i]
         pos = memory + 1
     pos -= 1
-    buf[pos] = row
+    for i in range(n):
+        buf[pos, i] = row[i]
     return pos
 
 

@@ -169,7 +169,9 @@ def symplectic_substeps(n_sub, h, pos, vel, inv_mass, b0, fext, gravity, fixed, 
     branch coefficients span the interval since the last commit) plus the nodal volume term
     (:func:`add_forces`), in one compiled call (integrator "subcycled" and plain "symplectic")."""
     for k in range(n_sub):
-        f_total[:, :] = fext
+        for i in range(fext.shape[0]):      # f_total = fext as a loop: a slice assignment costs seconds of compile
+            for d in range(3):
+                f_total[i, d] = fext[i, d]
         add_forces(pos, tets, V0, kv, vbuf, f_total)
         if k == 0:
             symplectic_step_work(pos, vel, inv_mass, b0, f_total, gravity, fixed, h, si, sj, L0, K1, K2,
