@@ -12,7 +12,6 @@ x86-64 CPU, where OpenBLAS's LAPACK picks kernels by CPU.
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
 
