@@ -272,9 +272,9 @@ class TetFEMModel(TissueModel):
         out = np.zeros_like(y) if out is None else out
         y = np.ascontiguousarray(y)
         iters = self.rotation_iters if (update_rotations and self.corotational) else 0
-        kern.stiffness_product(y, self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam,
-                               self._rots, subtract_rest, self._anp, self.kappa_node, self.node_volume,
-                               self._work, out, y, iters, 1e-12, True, self._set_threads())
+        product = kern.stiffness_product_parallel if self._set_threads() else kern.stiffness_product_serial
+        product(y, self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam, self._rots, subtract_rest, self._anp,
+                self.kappa_node, self.node_volume, self._work, out, y, iters, 1e-12, True)
         return out
 
     def elastic_forces(self, positions=None) -> np.ndarray:
@@ -471,11 +471,11 @@ class TetFEMModel(TissueModel):
                                self._sig_prev, keep, take, eps, theta, forces)
             self._pending_dt = dt
         if not implicit:
-            kern.symplectic_step(self.positions, self.velocities, forces, self.masses, self.alpha_node, self.gravity,
-                                 self.fixed, dt, self.stiffness_damping, self.corotational, self.rotation_iters, 1e-12,
-                                 self.tets, self.dm_inv, self.tet_volume, self.mu, self.lam, self._rots,
-                                 self._anp, self.kappa_node, self.node_volume, self._work, self._ybuf,
-                                 self._fbuf, parallel)
+            step = kern.symplectic_step_parallel if parallel else kern.symplectic_step
+            step(self.positions, self.velocities, forces, self.masses, self.alpha_node, self.gravity, self.fixed, dt,
+                 self.stiffness_damping, self.corotational, self.rotation_iters, 1e-12, self.tets, self.dm_inv,
+                 self.tet_volume, self.mu, self.lam, self._rots, self._anp, self.kappa_node, self.node_volume,
+                 self._work, self._ybuf, self._fbuf)
             return
         if self._visco:
             with self._effective_moduli(dt):

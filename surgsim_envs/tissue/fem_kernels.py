@@ -9,9 +9,10 @@ R is kept per tet as a matrix and refined by warm-started Newton steps applied a
 rotations (:func:`update_rotations`). Every kernel that loops over elements comes single-thread
 (loops with direct scatter) and threaded (``prange`` passes whose nodal sums are gathers over a
 fixed node -> tet adjacency, :func:`make_work`, deterministic for any thread count): as two entry
-points where the caller chooses in Python (``update_rotations`` / ``update_rotations_parallel``,
-``elastic_energy`` / ``elastic_energy_parallel``), so a single-thread user never compiles the
-threaded passes, or with a ``parallel`` argument where kernels call each other.
+points where the caller chooses in Python (``update_rotations``, ``elastic_energy``,
+``symplectic_step``, ``stiffness_product_serial`` and their ``_parallel`` twins), so a
+single-thread user never compiles the threaded passes; ``stiffness_product`` and the implicit
+solve (``pcg_solve``) take a ``parallel`` argument and compile both.
 Units: m, N, Pa, s.
 """
 
@@ -376,6 +377,23 @@ def stiffness_product(y, tets, dm_inv, vol, mu, lam, rots, subtract_rest, anp, k
         _serial_product(y, tets, dm_inv, vol, mu, lam, rots, subtract_rest, anp, kappa_node, node_vol, work, out,
                         x_rot, rot_iters, rot_tol, y_is_x_rot)
         return
+    stiffness_product_parallel(y, tets, dm_inv, vol, mu, lam, rots, subtract_rest, anp, kappa_node, node_vol,
+                               work, out, x_rot, rot_iters, rot_tol, y_is_x_rot)
+
+
+@njit(cache=True, error_model="numpy")
+def stiffness_product_serial(y, tets, dm_inv, vol, mu, lam, rots, subtract_rest, anp, kappa_node, node_vol,
+                             work, out, x_rot, rot_iters, rot_tol, y_is_x_rot):
+    """:func:`stiffness_product` on one thread: the entry point a single-thread caller takes from
+    Python, which then never compiles the threaded passes."""
+    _serial_product(y, tets, dm_inv, vol, mu, lam, rots, subtract_rest, anp, kappa_node, node_vol, work, out,
+                    x_rot, rot_iters, rot_tol, y_is_x_rot)
+
+
+@njit(cache=True, error_model="numpy")
+def stiffness_product_parallel(y, tets, dm_inv, vol, mu, lam, rots, subtract_rest, anp, kappa_node, node_vol,
+                               work, out, x_rot, rot_iters, rot_tol, y_is_x_rot):
+    """:func:`stiffness_product` as ``prange`` passes (the same result)."""
     _element_vectors(y, tets, dm_inv, vol, mu, lam, rots, subtract_rest, anp, kappa_node, node_vol, work,
                      x_rot, rot_iters, rot_tol, y_is_x_rot)
     _gather_pass(work[0], work[2], work[6], out)
@@ -501,29 +519,30 @@ def count_inverted(x, tets):
 
 
 @njit(cache=True, error_model="numpy")
-def symplectic_step(x, v, fext, masses, alpha, gravity, fixed, dt, beta, corotational, rot_iters, rot_tol,
-                    tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, work, y_buf, f_buf, parallel):
-    """One semi-implicit (symplectic) Euler step in place.
-
-    v += dt (f_el(x, v) + f_ext + m g) / m, then mass damping v /= (1 + alpha dt), then x += dt v.
-    Stiffness (Rayleigh) damping beta K v enters as the stiffness product of x + beta v.
-    The rotation update is fused into the strain loop; with ``parallel`` the force gather is
-    fused into the (parallel) nodal update.
-    """
-    iters = rot_iters if corotational else 0
-    y = x
+def _damped_positions(x, v, beta, y_buf):
+    """The positions the stiffness product sees: x, or x + beta v (Rayleigh damping) in ``y_buf``."""
     if beta > 0.0:
         for i in range(x.shape[0]):
             for k in range(3):
                 y_buf[i, k] = x[i, k] + beta * v[i, k]
-        y = y_buf
-    if parallel:
-        # np.bool_ / np.int64, not a literal constant: a literal compiles the callee a second time (numba
-        # specialises on literal arguments), seconds to tens of seconds of first-use compile for nothing
-        _element_vectors(y, tets, dm_inv, vol, mu, lam, rots, np.bool_(True), anp, kappa_node, node_vol, work,
-                         x, iters, rot_tol, beta <= 0.0)
-        _integrate_pass(work[0], work[2], work[6], x, v, fext, masses, alpha, gravity, fixed, dt)
-        return
+        return y_buf
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def symplectic_step(x, v, fext, masses, alpha, gravity, fixed, dt, beta, corotational, rot_iters, rot_tol,
+                    tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, work, y_buf, f_buf):
+    """One semi-implicit (symplectic) Euler step in place, single thread.
+
+    v += dt (f_el(x, v) + f_ext + m g) / m, then mass damping v /= (1 + alpha dt), then x += dt v.
+    Stiffness (Rayleigh) damping beta K v enters as the stiffness product of x + beta v.
+    The rotation update is fused into the strain loop. :func:`symplectic_step_parallel` is the
+    threaded twin (a separate entry point: a run-time flag would compile both for every caller).
+    """
+    iters = rot_iters if corotational else 0
+    y = _damped_positions(x, v, beta, y_buf)
+    # np.bool_ / np.int64, not a literal constant: a literal compiles the callee a second time (numba
+    # specialises on literal arguments), seconds to tens of seconds of first-use compile for nothing
     _serial_product(y, tets, dm_inv, vol, mu, lam, rots, np.bool_(True), anp, kappa_node, node_vol, work, f_buf,
                     x, iters, rot_tol, beta <= 0.0)
     for i in range(x.shape[0]):
@@ -536,6 +555,18 @@ def symplectic_step(x, v, fext, masses, alpha, gravity, fixed, dt, beta, corotat
         for k in range(3):
             v[i, k] = (v[i, k] + dt * ((fext[i, k] - f_buf[i, k]) * inv_m + gravity[k])) * damp
             x[i, k] += dt * v[i, k]
+
+
+@njit(cache=True, error_model="numpy")
+def symplectic_step_parallel(x, v, fext, masses, alpha, gravity, fixed, dt, beta, corotational, rot_iters, rot_tol,
+                             tets, dm_inv, vol, mu, lam, rots, anp, kappa_node, node_vol, work, y_buf, f_buf):
+    """:func:`symplectic_step` with ``prange`` passes, the force gather fused into the (parallel)
+    nodal update; the same result."""
+    iters = rot_iters if corotational else 0
+    y = _damped_positions(x, v, beta, y_buf)
+    _element_vectors(y, tets, dm_inv, vol, mu, lam, rots, np.bool_(True), anp, kappa_node, node_vol, work,
+                     x, iters, rot_tol, beta <= 0.0)
+    _integrate_pass(work[0], work[2], work[6], x, v, fext, masses, alpha, gravity, fixed, dt)
 
 
 @njit(cache=True, error_model="numpy")
