@@ -8,6 +8,8 @@ chart's case is E 4 kPa, nu 0.45, R 5 mm, H 30 mm).
 
 import math
 
+import os
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -303,6 +305,31 @@ def test_pardiso_solver_gives_the_superlu_step_and_refuses_by_name_when_absent(m
         _block(solver="pardiso")[0].compliance()
     with pytest.raises(ConfigError, match="solver='cholmod' is not one of"):
         _block(solver="cholmod")
+
+
+def test_mkl_runtime_is_named_for_pypardiso_from_the_mkl_wheel(monkeypatch):
+    """Each pypardiso solver otherwise searches the environment's lib tree for MKL's runtime (seconds
+    per factorisation): the path comes from the mkl distribution's file list, and a user's own
+    PYPARDISO_MKL_RT is left alone."""
+    from importlib import metadata
+
+    from surgsim_envs.tissue import compliance
+
+    try:
+        metadata.distribution("mkl")
+    except metadata.PackageNotFoundError:
+        monkeypatch.delenv("PYPARDISO_MKL_RT", raising=False)
+        assert compliance.mkl_runtime_path() is None
+        pytest.skip("the mkl wheel (pulled by the optional pypardiso) is not installed")
+    path = compliance.mkl_runtime_path()
+    assert path is not None and "mkl_rt" in os.path.basename(path) and os.path.isfile(path)
+    mine = os.path.realpath(path)          # a user's own spelling of the library
+    monkeypatch.setenv("PYPARDISO_MKL_RT", mine)
+    if compliance.pardiso_available():
+        assert os.environ["PYPARDISO_MKL_RT"] == mine
+    monkeypatch.delenv("PYPARDISO_MKL_RT")
+    if compliance.pardiso_available():
+        assert os.environ["PYPARDISO_MKL_RT"] == path
 
 
 def test_the_guard_takes_a_jump_up_to_max_jump_in_one_step_and_no_more():

@@ -66,10 +66,16 @@ class CompliantUnilateralProbe:
 
     def move_to(self, centre) -> np.ndarray:
         """Place the sphere away from the tissue (no contact): every node unloaded."""
-        self.nodes = np.zeros(0, dtype=np.int64)
-        self.lam = np.zeros(0)
+        self.clear()
         self.model.apply_axial_forces(self.nodes, np.zeros(0), self.axis)
         return self.nodes
+
+    def clear(self) -> None:
+        """Forget the contact without solving the tissue (no nodes, no force): for a caller that resets
+        the tissue's state itself right after, so that no equilibrium is solved (and no stiffness
+        factorised) only to be discarded."""
+        self.nodes = np.zeros(0, dtype=np.int64)
+        self.lam = np.zeros(0)
 
     def press(self, centre, max_iterations: int = MAX_ACTIVE_SET_ITERATIONS) -> np.ndarray:
         """Place the sphere's centre at ``centre`` (3,) m and solve the unilateral contact; the tissue's

@@ -21,6 +21,7 @@ Units: stiffness N/m, compliance m/N, displacements m, forces N. numpy/scipy + n
 
 from __future__ import annotations
 
+import os
 import warnings
 
 import numpy as np
@@ -42,18 +43,46 @@ SOLVERS = ("superlu", "pardiso", "auto")
 def pardiso_available() -> bool:
     """Whether the optional ``pypardiso`` package (MKL PARDISO) can be imported."""
     try:
-        import pypardiso  # noqa: F401
+        import_pypardiso()
     except ImportError:
         return False
     return True
+
+
+def import_pypardiso():
+    """The ``pypardiso`` module (ImportError without it), MKL's runtime named for it first: without
+    ``PYPARDISO_MKL_RT`` each pypardiso solver (one is made on import) searches the environment's
+    whole lib tree for the library (1.4 s each here); the mkl wheel's file list names it at once."""
+    if "PYPARDISO_MKL_RT" not in os.environ:
+        path = mkl_runtime_path()
+        if path is not None:
+            os.environ["PYPARDISO_MKL_RT"] = path
+    import pypardiso
+
+    return pypardiso
+
+
+def mkl_runtime_path() -> str | None:
+    """The path of MKL's runtime library (``mkl_rt``) from the installed ``mkl`` distribution's file
+    list (the shortest name first, as pypardiso's own search), or None."""
+    from importlib import metadata
+
+    try:
+        files = metadata.files("mkl") or []
+    except metadata.PackageNotFoundError:
+        return None
+    for f in sorted((f for f in files if "mkl_rt" in f.name), key=lambda f: len(str(f))):
+        path = str(f.locate())
+        if os.path.exists(path):
+            return path
+    return None
 
 
 class _Pardiso:
     """MKL PARDISO's Cholesky of a symmetric positive definite matrix, with SuperLU's ``solve``."""
 
     def __init__(self, kff):
-        import pypardiso
-
+        pypardiso = import_pypardiso()
         self.matrix = sp.triu(kff, format="csr")
         self.matrix.sort_indices()
         self.solver = pypardiso.PyPardisoSolver(mtype=2)        # real symmetric positive definite

@@ -41,9 +41,9 @@ _VOLUMES: dict = {}
 class Wall:
     """A built wall: ``tissue``, its ``top`` surface nodes, ``z_top`` m, the tets' ``centroids`` and
     the ``fat_z`` centroid heights of the fat's tets; ``probe`` (``nodes``, ``last_iterations``,
-    ``force()``); ``press(centre)`` solves a press; ``lift()`` takes the probe off; ``ready()``
-    prepares the tissue after a reset; ``organ`` what
-    the render scene builds (module :mod:`.scene`)."""
+    ``force()``); ``press(centre)`` solves a press; ``lift()`` takes the probe off before the reset's
+    ``tissue.reset()``; ``ready()`` prepares the tissue after a reset; ``organ`` what the render scene
+    builds (module :mod:`.scene`)."""
 
     tissue: object
     top: np.ndarray
@@ -106,8 +106,11 @@ def continuum_wall(cfg) -> Wall:
     probe = CompliantUnilateralProbe(tissue, top, cfg.probe_radius)
     centroids = tissue.element_centroids()
     fat = [name for name, _, _ in planes].index("fat")
+    # lift() runs right before the reset's tissue.reset(), which sets the rest state: the probe only
+    # forgets its contact (solving the unloaded equilibrium there would factorise the stiffness of the
+    # last episode's nodule, only for ready() to factorise the new one)
     return Wall(tissue, top, z_top, centroids, centroids[vol.labels == fat, 2], probe, probe.press,
-                lambda: probe.move_to((1e3, 1e3, 1e3)), ready=tissue.compliance, organ=vol)
+                probe.clear, ready=tissue.compliance, organ=vol)
 
 
 BUILDERS = {"layered": layered_wall, "fem_static": continuum_wall}
