@@ -3,7 +3,7 @@
 Run the suite from empty caches (a fresh clone, or an empty ``NUMBA_CACHE_DIR``) with it loaded,
 then summarise::
 
-    NUMBA_CACHE_DIR=$(mktemp -d) PYTHONPATH=scripts pytest -p numba_compile_profile
+    NUMBA_CACHE_DIR=$(mktemp -d) PYTHONPATH=scripts pytest -n 0 -p numba_compile_profile
     python scripts/numba_compile_profile.py numba_compile_profile.json
 
 Each compile is recorded with its function, signature, wall seconds, nesting depth (a kernel
