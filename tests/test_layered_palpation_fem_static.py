@@ -108,7 +108,7 @@ def test_a_reset_with_the_same_nodule_keeps_it(model):
 
 
 def test_a_model_the_task_does_not_build_is_refused_by_name():
-    with pytest.raises(ConfigError, match=r"model='mass_spring'.*\['layered', 'fem_static'\]"):
+    with pytest.raises(ConfigError, match=r"model='mass_spring'.*\['layered', 'fem_static', 'fem_hex'\]"):
         _env(model="mass_spring")
 
 

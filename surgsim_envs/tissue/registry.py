@@ -26,6 +26,7 @@ BUILTIN_MODELS: dict[str, str] = {
     "neo_hookean": "surgsim_envs.tissue.neo_hookean:NeoHookeanModel",
     "layered": "surgsim_envs.tissue.layered:LayeredModel",
     "fem_static": "surgsim_envs.tissue.fem_static:QuasiStaticFEMModel",
+    "fem_hex": "surgsim_envs.tissue.fem_hex:HexStaticModel",
 }
 
 _registry: dict[str, Any] = {}

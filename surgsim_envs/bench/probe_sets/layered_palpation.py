@@ -37,9 +37,9 @@ from surgsim_envs.errors import ConfigError
 
 TASK = "SurgSim/LayeredPalpation-v0"
 #: the models the task accepts (its env builds no other)
-MODELS = ("layered", "fem_static")
-REFUSAL = ("the task builds its wall with the layered model (the paper's springs) or fem_static (the continuum on a "
-           "layer-conforming lattice) only: its option model= takes no other")
+MODELS = ("layered", "fem_static", "fem_hex")
+REFUSAL = ("the task builds its wall with the layered model (the paper's springs), fem_static or fem_hex (the continuum "
+           "on a layer-conforming lattice, in tets or hexahedra) only: its option model= takes no other")
 #: m, the nodule's centre (x, y): a node of every lattice the probe set uses
 NODULE_XY = (0.02, 0.01)
 #: how the reference is described in the task-accuracy table

@@ -2,9 +2,9 @@
 
 Tissue: an abdominal wall patch (skin, fat, fascia, muscle, peritoneum;
 :mod:`surgsim_envs.geometry.anatomy`), bottom bonded, as the ``layered`` model (Lin et al. 2008;
-the default) or, with ``model="fem_static"``, as a continuum on a layer-conforming lattice
-(:mod:`.wall`). Each episode hides a stiff
-nodule in the fat: the tets within ``nodule_radius`` of a random centre get ``nodule_factor`` x
+the default) or as a continuum on a layer-conforming lattice, in tets (``model="fem_static"``) or
+in hexahedra with incompatible modes (``model="fem_hex"``) (:mod:`.wall`). Each episode hides a stiff
+nodule in the fat: the elements whose centre lies within ``nodule_radius`` of a random centre get ``nodule_factor`` x
 their Young's modulus, through the tissue contract (``scale_material``), never by model name. The
 reset option ``nodule_position`` (x, y) m places the centre instead (scripted probes and benchmarks
 such as ``surgsim bench task-accuracy``); its height is the median height of the fat's tets either way.

@@ -14,6 +14,10 @@
   CompliantUnilateralProbe`: the same unilateral frictionless contact law, solved on the
   prefactored stiffness's compliance block of the nodes under the probe (pinning nodes would
   refactorise the stiffness at each active-set iteration).
+* ``fem_hex``: the same continuum on the same lattice, its box cells as hexahedra with incompatible
+  bending modes (:mod:`surgsim_envs.tissue.fem_hex`): the skin bends as a plate on cells a linear
+  tet cannot bend in, so a coarse lattice reads the reference's forces (docs/task_accuracy.md).
+  The nodule rule applies to the cells' centres. Pressed as ``fem_static``.
 
 The nodule rule is the task's for both: the tets whose centroid lies within ``nodule_radius`` of
 its centre get ``nodule_factor`` x their Young's modulus (``scale_material``), the centre at the
@@ -28,7 +32,9 @@ from typing import Callable
 import numpy as np
 
 #: the models LayeredPalpation-v0 builds its wall with
-WALL_MODELS = ("layered", "fem_static")
+WALL_MODELS = ("layered", "fem_static", "fem_hex")
+#: the wall models built as a continuum on :func:`continuum_volume`'s lattice
+CONTINUUM_MODELS = ("fem_static", "fem_hex")
 #: m, the tallest skin cell of the fem_static wall: 2 cells through the 2 mm skin
 SKIN_CELL = 0.001
 #: MB of cached compliance columns of the fem_static wall (72 x nodes bytes per contact node)
@@ -84,13 +90,14 @@ def continuum_volume(cfg):
     from surgsim_envs.geometry.wall_lattice import layer_planes, uniform_wall_volume
 
     planes = layer_planes(ABDOMINAL_WALL_THICKNESS)
-    key = ("fem_static", tuple(float(v) for v in cfg.size), float(cfg.spacing))
+    key = ("continuum", tuple(float(v) for v in cfg.size), float(cfg.spacing))
     if key not in _VOLUMES:
         _VOLUMES[key] = uniform_wall_volume(key[1], planes, float(cfg.spacing), min(SKIN_CELL, float(cfg.spacing)))
     return _VOLUMES[key], planes
 
 
-def continuum_wall(cfg) -> Wall:
+def continuum_wall(cfg, model: str = "fem_static") -> Wall:
+    """The wall as a continuum of ``model`` (one of :data:`CONTINUUM_MODELS`) on :func:`continuum_volume`."""
     from surgsim_envs.contact.compliant_unilateral_probe import CompliantUnilateralProbe
     from surgsim_envs.geometry.anatomy import ANATOMY_MATERIALS
     from surgsim_envs.materials import PRESETS
@@ -101,19 +108,27 @@ def continuum_wall(cfg) -> Wall:
     mats = {k: table[name].replace(relax_fraction=0.0, friction=0.0) for k, (name, _, _) in enumerate(planes)}
     z_top = float(vol.nodes[:, 2].max())
     bottom = np.flatnonzero(vol.nodes[:, 2] <= 1e-9 * z_top)
-    tissue = make("fem_static", vol, mats[0], fixed=bottom, region_materials=mats, solver="auto", cache_mb=CACHE_MB)
+    tissue = make(model, vol, mats[0], fixed=bottom, region_materials=mats, solver="auto", cache_mb=CACHE_MB)
     top = np.flatnonzero(vol.nodes[:, 2] >= z_top * (1 - 1e-9))
     probe = CompliantUnilateralProbe(tissue, top, cfg.probe_radius)
-    centroids = tissue.element_centroids()
+    centroids = tissue.element_centroids()           # tets (fem_static) or box cells (fem_hex)
+    # each element's layer: the heights of the layers' planes classify the centroids alike for both
+    bottoms = np.array([lo for _, lo, _ in planes])
+    layer = np.clip(np.searchsorted(bottoms, centroids[:, 2], side="right") - 1, 0, len(planes) - 1)
     fat = [name for name, _, _ in planes].index("fat")
     # lift() runs right before the reset's tissue.reset(), which sets the rest state: the probe only
     # forgets its contact (solving the unloaded equilibrium there would factorise the stiffness of the
     # last episode's nodule, only for ready() to factorise the new one)
-    return Wall(tissue, top, z_top, centroids, centroids[vol.labels == fat, 2], probe, probe.press,
+    return Wall(tissue, top, z_top, centroids, centroids[layer == fat, 2], probe, probe.press,
                 probe.clear, ready=tissue.compliance, organ=vol)
 
 
-BUILDERS = {"layered": layered_wall, "fem_static": continuum_wall}
+def hex_wall(cfg) -> Wall:
+    """The continuum wall on hexahedra with incompatible modes (module docstring)."""
+    return continuum_wall(cfg, "fem_hex")
+
+
+BUILDERS = {"layered": layered_wall, "fem_static": continuum_wall, "fem_hex": hex_wall}
 
 
 def wall_nodes(model: str, size, spacing: float) -> int:
@@ -124,12 +139,12 @@ def wall_nodes(model: str, size, spacing: float) -> int:
     from surgsim_envs.geometry.anatomy import ABDOMINAL_WALL_THICKNESS
 
     cols = (size[0] / spacing + 1) * (size[1] / spacing + 1)
-    if model != "fem_static":
+    if model not in CONTINUUM_MODELS:
         return int(cols * (0.029 / spacing + 1))
     th = list(ABDOMINAL_WALL_THICKNESS.values())
     levels = 1 + math.ceil(th[0] / min(SKIN_CELL, spacing) - 1e-3) + sum(math.ceil(t / spacing - 1e-3) for t in th[1:])
     return int(cols * levels)
 
 
-__all__ = ["WALL_MODELS", "SKIN_CELL", "Wall", "BUILDERS", "layered_wall", "continuum_wall", "continuum_volume",
-           "wall_nodes"]
+__all__ = ["WALL_MODELS", "CONTINUUM_MODELS", "SKIN_CELL", "Wall", "BUILDERS", "layered_wall", "continuum_wall",
+           "hex_wall", "continuum_volume", "wall_nodes"]
