@@ -51,8 +51,7 @@ def baselines(env, ax, ay) -> np.ndarray:
     out = np.zeros((len(ay), len(ax)))
     for j, y in enumerate(ay):
         for i, x in enumerate(ax):
-            env.probe.press((x * 0.5 * cfg.size[0], y * 0.5 * cfg.size[1], env.z_top + cfg.probe_radius - cfg.max_depth),
-                            env.tissue.static_solve)
+            env.wall.press((x * 0.5 * cfg.size[0], y * 0.5 * cfg.size[1], env.z_top + cfg.probe_radius - cfg.max_depth))
             out[j, i] = float(env.probe.force()[2])
     return out
 

@@ -41,7 +41,7 @@ def test_presses_in_the_task_scene_are_unilateral_rise_with_depth_feel_the_nodul
 
 def test_models_the_task_does_not_build_are_refused_by_name():
     row = ta.measure(TASK, "fem", 0.005, lp.QUICK)
-    assert "forces_N" not in row and "layered model (the paper's springs) or fem_static" in row["refused"]
+    assert "forces_N" not in row and "layered model (the paper's springs), fem_static or fem_hex" in row["refused"]
 
 
 def test_reference_lattice_conforms_to_the_layers_and_labels_the_nodule_by_the_task_rule():

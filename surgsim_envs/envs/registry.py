@@ -161,7 +161,7 @@ TASKS: dict[str, TaskSpec] = {spec.id: spec for spec in (
              expert="surgsim_envs.envs.palpation_press:press_expert"),
     TaskSpec("SurgSim/LayeredPalpation-v0", "surgsim_envs.envs.layered_palpation:LayeredPalpationEnv",
              "surgsim_envs.envs.layered_palpation:LayeredPalpationConfig", scene=None, tool="probe",
-             model="layered",
+             model="fem_hex",
              force_tolerance=ForceTolerance(0.2, why=(
                  "the task is to find the nodule by the force it adds: over the 30x nodule (radius 8 mm, mid-fat) "
                  "the layered FEM reference reads C = 4.2-4.9 x the force at the mirror site (2.5-4.5 mm presses; "

@@ -32,7 +32,7 @@ from surgsim_envs.geometry.box_cells import box_cells
 from surgsim_envs.tissue.base import ELEMENT_FIELDS, TissueModel
 from surgsim_envs.tissue.compliance import DEFAULT_CACHE_MB, SOLVERS, CondensedCompliance
 from surgsim_envs.tissue.guard import StabilityGuard
-from surgsim_envs.tissue.hex_elements import hex_stiffness
+from surgsim_envs.tissue.hex_elements import HexAssembly
 
 
 class HexStaticModel(TissueModel):
@@ -61,6 +61,7 @@ class HexStaticModel(TissueModel):
             base_kwargs["guard"] = StabilityGuard(check_inversion=False, check_every=100)
         self._comp: CondensedCompliance | None = None
         self._u0: np.ndarray | None = None
+        self._assembly: HexAssembly | None = None
         super().__init__(volume, material, **base_kwargs)
         self._stiffness = None
         self._on_material_changed("young")
@@ -96,7 +97,9 @@ class HexStaticModel(TissueModel):
         if np.any(young <= 0) or np.any(nu <= -1.0) or np.any(nu >= 0.5):
             raise ConfigError("fem_hex needs E > 0 Pa and -1 < nu < 0.5 in every cell (use nu <= 0.499)")
         relaxed = young * (1.0 - self.fields["relax_fraction"])
-        self._stiffness = hex_stiffness(self.n_nodes, self.cells.hexes, self.cells.sizes, relaxed, nu)
+        if self._assembly is None or not np.array_equal(self._assembly.poisson, nu):
+            self._assembly = HexAssembly(self.n_nodes, self.cells.hexes, self.cells.sizes, nu)
+        self._stiffness = self._assembly.stiffness(relaxed)
         self._comp, self._u0 = None, None
 
     def _on_fixed_changed(self) -> None:

@@ -70,21 +70,47 @@ def box_stiffness(size, young: float, poisson: float, incompatible: bool = True)
     return 0.5 * (k + k.T)
 
 
+class HexAssembly:
+    """The global stiffness (3N x 3N, N/m) of box hexahedra ``hexes`` (H, 8) with edge lengths
+    ``sizes`` (H, 3) m and Poisson ratios ``poisson`` (H,), for any per-cell Young's modulus:
+    the element matrix is computed once per distinct (shape, nu) at unit E, and the sparsity
+    pattern with each element entry's place in it once, so :meth:`stiffness` is a scaled sum."""
+
+    def __init__(self, n_nodes: int, hexes: np.ndarray, sizes: np.ndarray, poisson: np.ndarray):
+        hexes = np.asarray(hexes, dtype=np.int64)
+        sizes = np.asarray(sizes, dtype=np.float64)
+        self.poisson = np.array(poisson, dtype=np.float64)
+        key = np.concatenate([np.round(sizes / max(float(sizes.max()), 1e-300), 12), self.poisson[:, None]], 1)
+        uniq, which = np.unique(key, axis=0, return_inverse=True)
+        self.which = which.reshape(-1)
+        self.unit = np.stack([box_stiffness(sizes[np.flatnonzero(self.which == u)[0]], 1.0, float(uniq[u, 3]))
+                              for u in range(len(uniq))])
+        dofs = (3 * hexes[:, :, None] + np.arange(3)).reshape(len(hexes), 24)
+        rows = np.repeat(dofs, 24, axis=1).ravel()
+        cols = np.tile(dofs, (1, 24)).ravel()
+        n = 3 * n_nodes
+        pattern = sp.csr_matrix((np.arange(1, len(rows) + 1, dtype=np.float64), (rows, cols)), shape=(n, n))
+        pattern.sum_duplicates()
+        self.indptr, self.indices, self.shape = pattern.indptr, pattern.indices, (n, n)
+        # the place of every element entry in the pattern's data: its (row, column) found by search
+        order = np.lexsort((cols, rows))
+        flat = rows[order] * n + cols[order]
+        first = np.concatenate([[True], flat[1:] != flat[:-1]])
+        self.place = np.empty(len(rows), dtype=np.int64)
+        self.place[order] = np.cumsum(first) - 1
+
+    def stiffness(self, young: np.ndarray) -> sp.csr_matrix:
+        """K for per-cell ``young`` (H,) Pa."""
+        vals = self.unit[self.which] * np.asarray(young, dtype=np.float64)[:, None, None]
+        data = np.bincount(self.place, weights=vals.ravel(), minlength=len(self.indices))
+        return sp.csr_matrix((data, self.indices.copy(), self.indptr.copy()), shape=self.shape)
+
+
 def hex_stiffness(n_nodes: int, hexes: np.ndarray, sizes: np.ndarray, young: np.ndarray,
                   poisson: np.ndarray) -> sp.csr_matrix:
     """Global stiffness (3N x 3N, N/m) of box hexahedra ``hexes`` (H, 8) with edge lengths ``sizes``
-    (H, 3) m and per-cell ``young`` (Pa) and ``poisson``. The element matrix is computed once per
-    distinct (size, nu) and scaled by E, so a lattice of a few cell shapes assembles in milliseconds."""
-    key = np.concatenate([np.round(sizes / max(float(sizes.max()), 1e-300), 12), np.asarray(poisson)[:, None]], 1)
-    uniq, which = np.unique(key, axis=0, return_inverse=True)
-    which = which.reshape(-1)
-    unit = np.stack([box_stiffness(sizes[np.flatnonzero(which == u)[0]], 1.0, float(uniq[u, 3]))
-                     for u in range(len(uniq))])
-    vals = unit[which] * np.asarray(young, dtype=np.float64)[:, None, None]
-    dofs = (3 * hexes[:, :, None] + np.arange(3)).reshape(len(hexes), 24)
-    rows = np.repeat(dofs, 24, axis=1).ravel()
-    cols = np.tile(dofs, (1, 24)).ravel()
-    return sp.csr_matrix((vals.ravel(), (rows, cols)), shape=(3 * n_nodes, 3 * n_nodes))
+    (H, 3) m and per-cell ``young`` (Pa) and ``poisson`` (:class:`HexAssembly`, once)."""
+    return HexAssembly(n_nodes, hexes, sizes, poisson).stiffness(young)
 
 
-__all__ = ["strain_operator", "elasticity_matrix", "box_stiffness", "hex_stiffness"]
+__all__ = ["strain_operator", "elasticity_matrix", "box_stiffness", "HexAssembly", "hex_stiffness"]

@@ -35,13 +35,15 @@ def _integer(value, what: str, lo: int, hi: int, hint: str) -> int:
 
 @dataclass
 class LayeredPalpationConfig:
-    """model: the tissue model of the wall (``"layered"``, the paper's springs; ``"fem_static"``, the
-    continuum in tets; ``"fem_hex"``, the continuum in hexahedra with incompatible modes; :mod:`.wall`); size (x, y) m of the wall patch; spacing m of its lattice; max_depth m; nodule radius m and
+    """model: the tissue model of the wall (``"fem_hex"``, the continuum in hexahedra with incompatible
+    modes, the default: the cheapest setting within the task's 20 % force tolerance,
+    docs/task_accuracy.md; ``"fem_static"``, the continuum in tets; ``"layered"``, the paper's
+    springs; :mod:`.wall`); size (x, y) m of the wall patch; spacing m of its lattice; max_depth m; nodule radius m and
     Young's modulus factor; press_cost per press; size_scale m of the commit reward; max_presses;
     probe_radius m; control_hz presses per second of the nominal clock (render fps, dm_control
     timestep); render_width/height px and camera ("overview", "top", "side") of rgb_array frames."""
 
-    model: str = "layered"
+    model: str = "fem_hex"
     size: tuple = (0.08, 0.06)
     spacing: float = 0.005
     max_depth: float = 0.008

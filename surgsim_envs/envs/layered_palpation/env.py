@@ -1,9 +1,10 @@
 """``SurgSim/LayeredPalpation-v0``: find a stiff nodule under the skin of an abdominal wall by pressing.
 
 Tissue: an abdominal wall patch (skin, fat, fascia, muscle, peritoneum;
-:mod:`surgsim_envs.geometry.anatomy`), bottom bonded, as the ``layered`` model (Lin et al. 2008;
-the default) or as a continuum on a layer-conforming lattice, in tets (``model="fem_static"``) or
-in hexahedra with incompatible modes (``model="fem_hex"``) (:mod:`.wall`). Each episode hides a stiff
+:mod:`surgsim_envs.geometry.anatomy`), bottom bonded, as a continuum on a layer-conforming lattice
+in hexahedra with incompatible modes (``model="fem_hex"``, the default: within the task's force
+tolerance at 5 mm) or in tets (``model="fem_static"``), or as the ``layered`` model of Lin et al.
+2008 (``model="layered"``, the paper's springs) (:mod:`.wall`). Each episode hides a stiff
 nodule in the fat: the elements whose centre lies within ``nodule_radius`` of a random centre get ``nodule_factor`` x
 their Young's modulus, through the tissue contract (``scale_material``), never by model name. The
 reset option ``nodule_position`` (x, y) m places the centre instead (scripted probes and benchmarks
