@@ -15,7 +15,9 @@ import sys
 __version__ = "0.1.0"
 
 from surgsim_envs.numba_cache import invalidate_stale_caches  # noqa: E402  (os/hashlib only)
+from surgsim_envs.numba_cache_lock import install as _lock_numba_cache  # noqa: E402  (no numba import)
 
+_lock_numba_cache()         # processes compiling at once share numba's cache safely
 invalidate_stale_caches()   # numba checks only a kernel's own file: drop caches of changed kernels
 
 from surgsim_envs.asset_files import assets_path  # noqa: E402  (pathlib only)

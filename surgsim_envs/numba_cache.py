@@ -31,6 +31,8 @@ import json
 import os
 from pathlib import Path
 
+from surgsim_envs.numba_cache_lock import cache_lock
+
 PACKAGE = Path(__file__).resolve().parent
 STAMP_NAME = "numba_sources.stamp"
 WARM_NAME = "numba_warm.json"
@@ -120,8 +122,15 @@ def invalidate_stale_caches(package: Path = PACKAGE) -> int:
     changed or the package folder is not writable). Two levels: a stat of every .py file (about a
     millisecond); only when that changed, the content of the numba modules (so an edit elsewhere,
     or a checkout that only touches mtimes, keeps the caches). With ``NUMBA_CACHE_DIR`` set the
-    caches and the stamp live there (:func:`invalidate_external_caches`). Never raises: a failure
-    only costs a recompilation."""
+    caches and the stamp live there (:func:`invalidate_external_caches`). Runs under the cache
+    lock (:mod:`surgsim_envs.numba_cache_lock`), so processes importing the package together
+    neither delete what another just compiled nor race on the stamp. Never raises: a failure only
+    costs a recompilation."""
+    with cache_lock():
+        return _invalidate_stale_caches(package)
+
+
+def _invalidate_stale_caches(package: Path) -> int:
     if os.environ.get("NUMBA_CACHE_DIR"):
         return invalidate_external_caches(package)
     try:

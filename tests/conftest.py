@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import sys
 from pathlib import Path
 
 import pytest
@@ -12,21 +11,11 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 REPO = Path(__file__).resolve().parents[1]
 
-# pytest-xdist workers (the default run uses them: pyproject's addopts) each keep numba's compiled
-# kernels in a folder of their own: .numba-cache/<worker> in the repository, or <worker> under a
-# NUMBA_CACHE_DIR set by the caller. numba numbers a kernel's cache files per process, so two
-# processes filling one cache at once can write one kernel's machine code under another's index
-# entry, which crashed a worker. Set before any test module imports numba; numba reads it on import.
-WORKER = os.environ.get("PYTEST_XDIST_WORKER")
-if WORKER:
-    _base = os.environ.get("NUMBA_CACHE_DIR") or str(REPO / ".numba-cache")
-    os.environ["NUMBA_CACHE_DIR"] = str(Path(_base) / WORKER)
-    if "numba" in sys.modules:     # a plugin imported numba first: make it read the folder again
-        from numba.core import config as _numba_config
+# pytest-xdist workers (the default run uses them: pyproject's addopts) share numba's cache with
+# each other and with a single-process run: the package locks numba's cache files
+# (surgsim_envs/numba_cache_lock.py), so a kernel one worker compiled loads in the others.
 
-        _numba_config.reload_config()
-
-MAX_WORKERS = 4          # each worker compiles the kernels it meets once and holds its own scenes
+MAX_WORKERS = 4          # each worker holds its own scenes
 WORKER_MEMORY = 3 << 30  # bytes a worker may need at its peak (the largest default-run tests)
 
 
