@@ -116,3 +116,25 @@ def make_haptic_simulation(task: str, spacing: float | None = None, model: str =
 def tissue_top(physics: SceneHapticPhysics) -> float:
     """Height (m) of the highest tissue node: where a vertical press makes contact."""
     return float(physics.sim.tissue().positions[:, 2].max())
+
+
+#: the warm-up press (:func:`warm_up`): physics steps and how far below the tissue's top it goes
+WARMUP_STEPS = 100
+WARMUP_DEPTH = 0.002
+
+
+def warm_up(physics: SceneHapticPhysics, steps: int = WARMUP_STEPS) -> None:
+    """Press the proxy down to ``WARMUP_DEPTH`` below the tissue's top and back over ``steps``
+    physics steps, then reset the scene: numba compiles the kernels of a press (the step loop,
+    contact, the tissue step, the coupling force) now, before the servo starts, instead of in the
+    first seconds of a session, where the physics would stand still while the servo runs. A few
+    milliseconds once the kernels are cached."""
+    home = physics.home_position.copy()
+    drop = max(0.0, home[2] - (tissue_top(physics) - WARMUP_DEPTH))
+    for k in range(steps):
+        s = math.sin(math.pi * (k + 1) / steps)             # down, then back up
+        physics.set_proxy_pose(home - np.array([0.0, 0.0, drop * s]))
+        physics.step()
+        physics.coupling_force()
+    physics.sim.reset()
+

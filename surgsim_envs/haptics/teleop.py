@@ -171,6 +171,7 @@ def run(args) -> int:
         print(f"surgsim teleop: {notice}", flush=True)
     print(f"building the {args.task} scene ...", flush=True)
     physics = scene_adapter.make_haptic_simulation(args.task, spacing=args.spacing, model=args.model)
+    _compile_kernels(physics, args.task)
     limits = DeviceLimits(max_force=args.max_force)
     if servo == "process":
         return _run_process_servo(args, arg, physics, limits)
@@ -200,6 +201,22 @@ def run(args) -> int:
         (out / "stats.json").write_text(json.dumps({"task": args.task, "device": args.device, **stats.as_dict()}, indent=2))
         print(f"wrote {out / f'teleop_{args.task}.mp4'}, {out / 'force_log.csv'}, {out / 'stats.json'}")
     return 0
+
+
+def _compile_kernels(physics, task: str) -> None:
+    """Compile the scene's kernels before the servo starts (a warm-up press, then a reset): on a
+    cold cache the first press would otherwise stall the physics for tens of seconds while the
+    servo and the viewer run. Under a progress bar when the caches are cold or elsewhere."""
+    from surgsim_envs.haptics.scene_adapter import warm_up
+    from surgsim_envs.numba_cache import is_warm
+    from surgsim_envs.scene.kernel_warmup import Stage, run_stages
+
+    stage = Stage(f"teleop: {task}", lambda: warm_up(physics))
+    cold = is_warm(stage.name) is not True
+    if cold:
+        print("surgsim teleop: compiling the physics kernels before the session starts (numba, once per "
+              "install; later sessions load them from the cache)", flush=True)
+    run_stages([stage], desc="surgsim teleop: compiling", progress=cold)
 
 
 def _config(args, physics):
