@@ -106,7 +106,7 @@ def _default_presses(inclusion_xy=None):
     from surgsim_envs.envs.layered_palpation import LayeredPalpationConfig
 
     cfg = LayeredPalpationConfig()
-    assert (cfg.model, cfg.spacing) == ("fem_hex", 0.005)
+    assert (cfg.model, cfg.spacing) == ("fem_hex", 0.01 / 3)
     probes = lp.FULL if inclusion_xy is None else dataclasses.replace(
         lp.FULL, inclusions=(dataclasses.replace(lp.NODULE, position=tuple(inclusion_xy)),))
     return lp.measure(lp.TASK, cfg.model, cfg.spacing, probes)
@@ -115,7 +115,11 @@ def _default_presses(inclusion_xy=None):
 def _check(row, ref, contrast_share=0.8):
     from surgsim_envs.bench.choose import task_tolerance
 
-    errors = {k: row["forces_N"][k] / ref[k] - 1 for k in ref}
+    from surgsim_envs.bench.probe_sets import layered_palpation as lp
+
+    # every press, those between the nodes against the reference's press over the nodule
+    errors = {k: f / ref[lp.reference_key(k)] - 1 for k, f in row["forces_N"].items()}
+    assert len(errors) == 9
     assert max(abs(e) for e in errors.values()) <= task_tolerance("SurgSim/LayeredPalpation-v0"), errors
     over, mirror = (row["forces_N"][f"0/{s}/3.5mm"] for s in ("over", "mirror"))
     assert over / mirror > contrast_share * ref["0/over/3.5mm"] / ref["0/mirror/3.5mm"]   # the nodule's contrast kept
@@ -123,9 +127,10 @@ def _check(row, ref, contrast_share=0.8):
 
 
 def test_layered_palpation_default_reads_the_reference_within_the_task_tolerance():
-    """gym.make("SurgSim/LayeredPalpation-v0") (fem_hex at 5 mm): the probe set of the task-accuracy
-    table (nodule at (2, 1) cm, presses over it and at its mirror site to 2.5, 3.5, 4.5 mm) against
-    the shipped 0.71 mm reference; the task's declared tolerance is 20 %."""
+    """gym.make("SurgSim/LayeredPalpation-v0") (fem_hex at 3.33 mm): the probe set of the task-accuracy
+    table (nodule at (2, 1) cm, presses over it, at its mirror site and over it moved to the middle of
+    a cell, to 2.5, 3.5, 4.5 mm) against the shipped 0.71 mm reference; the task's declared tolerance
+    is 20 %. (At 5 mm the presses between the nodes read up to 22 % low.)"""
     from surgsim_envs.bench.probe_sets import layered_palpation as lp
     from surgsim_envs.tissue.task_table import TASK_TABLE_PATH
 

@@ -3,6 +3,8 @@ the layered FEM reference's lattice and presses, and the refusal of the models t
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -29,14 +31,26 @@ def test_the_probe_set_is_registered_with_the_task_tolerance():
 
 
 def test_presses_in_the_task_scene_are_unilateral_rise_with_depth_feel_the_nodule_and_depend_on_the_pose_only():
-    row = ta.measure(TASK, "layered", 0.01, lp.QUICK)
+    row = ta.measure(TASK, "layered", 0.005, lp.QUICK)   # at 10 mm a press between the nodes meets none
     f = row["forces_N"]
-    assert set(f) == {"0/over/2.5mm", "0/over/4.5mm", "0/mirror/2.5mm", "0/mirror/4.5mm"}
+    assert set(f) == {"0/over/2.5mm", "0/over/4.5mm", "0/mirror/2.5mm", "0/mirror/4.5mm",
+                      "0/over-offnode/2.5mm", "0/over-offnode/4.5mm"}       # the nodule moved by half a cell
     assert row["max_tensile_N"] <= 1e-12                  # the unilateral probe never pulls
     assert ta.monotone(f, lp.QUICK.depths)
     assert ta.contrast(f, 1, 0.0045)[0] > 1.0              # a 30x nodule feels stiffer than its mirror site
     assert row["path_difference"] <= 1e-9                  # the same pose after another press: the same force
     assert row["nodule_centre"][:2] == pytest.approx(lp.NODULE_XY)
+
+
+def test_presses_between_the_nodes_are_scored_against_the_references_press_over_the_nodule():
+    """The reference solves the presses over the nodule and at its mirror site; a row's presses with
+    the nodule moved by half a cell count against the press over the nodule at the same depth."""
+    ref = {"forces_N": {"0/over/2.5mm": 1.0, "0/over/4.5mm": 2.0, "0/mirror/2.5mm": 0.2, "0/mirror/4.5mm": 0.4}}
+    f = {**ref["forces_N"], "0/over-offnode/2.5mm": 0.5, "0/over-offnode/4.5mm": 2.0}
+    row = ta.compare({"task": TASK, "forces_N": f}, ref, lp.QUICK)
+    assert row["error_median"] == 0.0 and row["error_p95"] == pytest.approx(np.percentile([0.0] * 5 + [0.5], 95))
+    assert lp.reference_key("0/over-offnode/2.5mm") == "0/over/2.5mm"
+    assert lp.reference_key("0/mirror/2.5mm") == "0/mirror/2.5mm"
 
 
 def test_models_the_task_does_not_build_are_refused_by_name():
@@ -82,6 +96,10 @@ def test_every_task_spacing_rises_with_depth_feels_the_nodule_and_never_pulls():
         row = ta.measure(TASK, "layered", spacing, lp.FULL)
         f = row["forces_N"]
         assert row["max_tensile_N"] <= 1e-12, spacing
+        off = [k for k in f if lp.OFF_NODE in k]
+        if spacing / math.sqrt(2) >= 0.005:   # a cell's centre farther from its nodes than the probe's radius:
+            assert all(f[k] == 0.0 for k in off), spacing     # the probe passes between them and feels nothing
+            f = {k: v for k, v in f.items() if k not in off}
         assert ta.monotone(f, lp.FULL.depths), spacing
         assert ta.contrast(f, 1, 0.0045)[0] > 1.0, spacing
         assert row["path_difference"] <= 1e-9, spacing

@@ -250,7 +250,10 @@ def compare(row: dict, reference: dict, probes: ProbeSet) -> dict:
     if "forces_N" not in row:
         return row
     f, ref = row["forces_N"], reference["forces_N"]
-    err = np.array([abs(f[k] - ref[k]) / max(abs(ref[k]), 1e-9) for k in ref])
+    # a probe set may score presses the reference does not solve against one it does (its reference_key)
+    alias = getattr(probe_sets.DRIVERS.get(row["task"]), "reference_key", None)
+    pairs = [(k, k) for k in ref] + [(k, alias(k)) for k in f if k not in ref and alias is not None and alias(k) in ref]
+    err = np.array([abs(f[k] - ref[r]) / max(abs(ref[r]), 1e-9) for k, r in pairs])
     n, deep = len(probes.inclusions), probes.depths[-1]
     return {**row, "error_median": float(np.median(err)), "error_p95": float(np.percentile(err, 95)),
             "error": float(np.percentile(err, 95)), "contrast": contrast(f, n, deep),
