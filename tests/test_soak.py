@@ -67,8 +67,9 @@ def test_short_soak_of_palpation_is_clean():
 
 def test_short_soak_of_layered_palpation_reads_its_press_force():
     """LayeredPalpation-v0 reports the press force as ``force_N`` (no episode peak): the soak's force
-    bound must read it, not pass it as unreported."""
-    row = soak("SurgSim/LayeredPalpation-v0", 30, seed=3)
+    bound must read it, not pass it as unreported. (On the 5 mm lattice: what is checked is how the
+    force is reported; a reset of the 3.33 mm default costs 0.8 s.)"""
+    row = soak("SurgSim/LayeredPalpation-v0", 30, seed=3, env_kwargs={"spacing": 0.005})
     bad = {k: row[k] for k in ("nan", "exceptions", "unstable", "obs_out_of_space", "force_out_of_bounds")}
     assert bad == dict.fromkeys(bad, 0), row["exception_messages"]
     assert 0.0 < row["max_peak_force_N"] <= 50.0
