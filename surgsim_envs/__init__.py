@@ -8,12 +8,9 @@ stays a numpy + numba import (tests/test_layering.py). Tissue physics lives in
 :mod:`surgsim_envs.scene`. All quantities are SI (m, kg, s, N, Pa).
 """
 
-import importlib.abc
-import importlib.util
-import sys
-
 __version__ = "0.1.0"
 
+from surgsim_envs.after_import import after_import  # noqa: E402  (importlib only)
 from surgsim_envs.numba_cache import invalidate_stale_caches  # noqa: E402  (os/hashlib only)
 from surgsim_envs.numba_cache_lock import install as _lock_numba_cache  # noqa: E402  (no numba import)
 
@@ -23,7 +20,7 @@ invalidate_stale_caches()   # numba checks only a kernel's own file: drop caches
 from surgsim_envs.asset_files import assets_path  # noqa: E402  (pathlib only)
 
 
-def _register_envs() -> None:
+def _register_envs(gymnasium_module=None) -> None:
     try:
         from surgsim_envs.envs import register_envs
     except ImportError:  # envs not built yet, or gymnasium/mujoco missing
@@ -31,29 +28,4 @@ def _register_envs() -> None:
     register_envs()
 
 
-class _RegisterWhenGymnasiumLoads(importlib.abc.MetaPathFinder):
-    """Import hook: once ``gymnasium`` has been imported, register the tasks (one shot)."""
-
-    def find_spec(self, name, path=None, target=None):
-        if name != "gymnasium":
-            return None
-        if self in sys.meta_path:
-            sys.meta_path.remove(self)
-        spec = importlib.util.find_spec(name)
-        if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
-            return spec
-        loader = spec.loader
-        exec_module = loader.exec_module
-
-        def exec_then_register(module):
-            exec_module(module)
-            _register_envs()
-
-        loader.exec_module = exec_then_register
-        return spec
-
-
-if "gymnasium" in sys.modules:
-    _register_envs()
-elif not any(isinstance(f, _RegisterWhenGymnasiumLoads) for f in sys.meta_path):
-    sys.meta_path.insert(0, _RegisterWhenGymnasiumLoads())
+after_import("gymnasium", _register_envs)      # the tasks register once Gymnasium is imported

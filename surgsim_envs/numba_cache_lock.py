@@ -27,13 +27,13 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import importlib.abc
-import importlib.util
 import os
 import sys
 import tempfile
 import threading
 import time
+
+from surgsim_envs.after_import import after_import
 
 try:
     import fcntl
@@ -126,33 +126,7 @@ def is_installed() -> bool:
     return cls is not None and all(getattr(getattr(cls, n, None), _MARK, False) for n in LOCKED_METHODS)
 
 
-class _PatchWhenNumbaCachingLoads(importlib.abc.MetaPathFinder):
-    """Import hook: once ``numba.core.caching`` has been executed, lock its cache files (one shot)."""
-
-    def find_spec(self, name, path=None, target=None):
-        if name != CACHING_MODULE:
-            return None
-        if self in sys.meta_path:
-            sys.meta_path.remove(self)
-        spec = importlib.util.find_spec(name)
-        if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
-            return spec
-        loader = spec.loader
-        exec_module = loader.exec_module
-
-        def exec_then_patch(module):
-            exec_module(module)
-            patch(module)
-
-        loader.exec_module = exec_then_patch
-        return spec
-
-
 def install() -> None:
     """Lock numba's cache files now if numba's caching module is loaded, else when it loads."""
-    if not enabled():
-        return
-    if CACHING_MODULE in sys.modules:
-        patch(sys.modules[CACHING_MODULE])
-    elif not any(isinstance(f, _PatchWhenNumbaCachingLoads) for f in sys.meta_path):
-        sys.meta_path.insert(0, _PatchWhenNumbaCachingLoads())
+    if enabled():
+        after_import(CACHING_MODULE, patch)
