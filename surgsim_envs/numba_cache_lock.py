@@ -18,7 +18,9 @@ is compiled once, by whichever process needs it first. The lock is held for the 
 only (milliseconds), never during a compile. The package installs it lazily, when numba's caching
 module is first imported, so ``import surgsim_envs`` still does not import numba.
 
-Where the lock cannot be taken (no ``fcntl``, an unwritable temporary folder, or a holder that
+Processes share the lock through the temporary folder (``tempfile.gettempdir()``, i.e. ``TMPDIR``):
+two processes given different temporary folders do not exclude each other, and numba's own
+behaviour returns between them. Where the lock cannot be taken (no ``fcntl``, an unwritable temporary folder, or a holder that
 keeps it past :data:`TIMEOUT_S`) the cache works as numba's own, unlocked; nothing fails or hangs.
 ``SURGSIM_NUMBA_CACHE_LOCK=0`` turns it off.
 """
