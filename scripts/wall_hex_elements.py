@@ -7,8 +7,9 @@ carries a press as a bending plate, and linear tets bend badly, so the wall need
 lattice outside the task: each box cell of the task's lattice (x-y uniform at H, a node on every
 interface, the skin in cells of at most 1 mm) as one 8-node hexahedron with Wilson and Taylor's
 nine incompatible modes (:mod:`surgsim_envs.tissue.hex_elements`). Per-layer E and nu as the task
-(elastic), the nodule 30x on the cells whose centre lies within its radius (the task's rule;
-``--nodule fraction`` mixes the moduli by the share of each cell inside the sphere instead), the
+(elastic), the nodule 30x at the cells' Gauss points that lie within its radius (the task's rule,
+``fem_hex.scale_material_at_points``; ``--nodule centroid`` takes whole cells by their centre,
+``--nodule fraction`` mixes the moduli by the share of each cell inside the sphere), the
 bottom held, the sides free. The contact is the task's: the 5 mm sphere on the top nodes over their
 rest footprint, unilateral and frictionless, solved by an active set on the press-axis compliance
 block of those nodes. Its forces equal the task's (``gym.make(TASK, model="fem_hex", spacing=H)``).
@@ -36,7 +37,7 @@ from surgsim_envs.materials import PRESETS
 from surgsim_envs.geometry import box_volume
 from surgsim_envs.geometry.box_cells import box_cells
 from surgsim_envs.geometry.wall_lattice import layer_planes, uniform_wall_volume
-from surgsim_envs.tissue.hex_elements import box_stiffness, hex_stiffness
+from surgsim_envs.tissue.hex_elements import GAUSS_POINTS, HexAssembly, box_stiffness
 from surgsim_envs.tissue.task_table import TASK_TABLE_PATH
 
 def cantilever_check() -> None:
@@ -99,7 +100,15 @@ def wall_presses(spacing: float, nodule: str, solver: str, nodule_xy, sites) -> 
     nodes, hexes, size = vol.nodes, cells.hexes, cells.sizes
     z_top = float(nodes[:, 2].max())
     centre = np.array([*nodule_xy, z_top - lp.NODULE.depth])
-    if nodule == "centroid":
+    points = None
+    if nodule == "gauss":
+        inside = np.linalg.norm(cells.centroids[:, None] + 0.5 * size[:, None] * GAUSS_POINTS[None] - centre,
+                                axis=2) < lp.NODULE.radius
+        point_factor = np.where(inside, lp.NODULE.contrast, 1.0)
+        factor = point_factor.mean(axis=1)
+        mixed = np.flatnonzero(inside.any(axis=1) & ~inside.all(axis=1))
+        points = (mixed, point_factor[mixed])
+    elif nodule == "centroid":
         factor = np.where(np.linalg.norm(cells.centroids - centre, axis=1) < lp.NODULE.radius, lp.NODULE.contrast, 1.0)
     else:
         q = (np.arange(6) + 0.5) / 6
@@ -112,7 +121,9 @@ def wall_presses(spacing: float, nodule: str, solver: str, nodule_xy, sites) -> 
     table = {**PRESETS, **ANATOMY_MATERIALS}
     young = np.array([table[names[label]].young for label in cells.labels]) * factor
     poisson = np.array([table[names[label]].poisson for label in cells.labels])
-    k = hex_stiffness(len(nodes), hexes, size, young, poisson)
+    if points is not None:   # the mixed cells' E per Gauss point: their layer's E x the point's factor
+        points = (points[0], (young / factor)[points[0], None] * points[1])
+    k = HexAssembly(len(nodes), hexes, size, poisson).stiffness(young, points)
     free = np.flatnonzero(~np.repeat(nodes[:, 2] <= 1e-12, 3))
     kf = k[free][:, free].tocsr()
     t1 = time.perf_counter()
@@ -139,7 +150,7 @@ def wall_presses(spacing: float, nodule: str, solver: str, nodule_xy, sites) -> 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--spacings", default="0.005,0.004,0.0033333,0.0025,0.002", help="x-y spacings, m")
-    parser.add_argument("--nodule", choices=("centroid", "fraction"), default="centroid")
+    parser.add_argument("--nodule", choices=("gauss", "centroid", "fraction"), default="gauss")
     parser.add_argument("--solver", choices=("superlu", "pardiso"), default="superlu")
     parser.add_argument("--nodule-xy", type=float, nargs=2, default=lp.NODULE_XY, help="nodule centre x y, m")
     parser.add_argument("--reference", help="JSON with forces_N per press (default: the shipped table's)")

@@ -106,7 +106,7 @@ def _default_presses(inclusion_xy=None):
     from surgsim_envs.envs.layered_palpation import LayeredPalpationConfig
 
     cfg = LayeredPalpationConfig()
-    assert (cfg.model, cfg.spacing) == ("fem_hex", 0.01 / 3)
+    assert (cfg.model, cfg.spacing) == ("fem_hex", 0.004)
     probes = lp.FULL if inclusion_xy is None else dataclasses.replace(
         lp.FULL, inclusions=(dataclasses.replace(lp.NODULE, position=tuple(inclusion_xy)),))
     return lp.measure(lp.TASK, cfg.model, cfg.spacing, probes)
@@ -147,3 +147,113 @@ def test_layered_palpation_default_reads_a_held_out_nodule_within_the_task_toler
     data = json.loads(resources.files("surgsim_envs.tissue").joinpath(
         "data/layered_palpation_heldout_reference.json").read_text())
     _check(_default_presses(data["position"]), data["forces_N"])
+
+
+def _one_cell_stretch(split_axis: int, load_axis: int) -> float:
+    """The stiffness (N/m) of a 2 x 3 x 4 mm cell stretched along ``load_axis`` (nu 0; its two faces
+    across that axis moved apart evenly, on rollers; one corner pinned), its Young's modulus 1 kPa at
+    the Gauss points on the low side of ``split_axis`` and 9 kPa on the high side."""
+    from surgsim_envs.geometry.box_cells import CORNER_SIGNS
+    from surgsim_envs.tissue.hex_elements import GAUSS_POINTS
+
+    size = np.array([0.002, 0.003, 0.004])
+    ke = box_stiffness(size, np.where(GAUSS_POINTS[:, split_axis] < 0, 1e3, 9e3), 0.0)
+    low = CORNER_SIGNS[:, load_axis] < 0
+    held = np.zeros((8, 3), dtype=bool)
+    held[:, load_axis] = True                                  # both faces on rollers, moved apart
+    held[np.flatnonzero(low)[0]] = True                        # one corner pinned
+    u = np.zeros((8, 3))
+    u[~low, load_axis] = 1e-5
+    free = ~held.reshape(-1)
+    u = u.reshape(-1)
+    u[free] = np.linalg.solve(ke[np.ix_(free, free)], -ke[np.ix_(free, ~free)] @ u[~free])
+    force = (ke @ u).reshape(8, 3)[~low, load_axis].sum()
+    return force / 1e-5
+
+
+def test_a_cell_split_between_its_gauss_points_is_the_series_or_the_parallel_of_its_halves():
+    """A region given per Gauss point (an inclusion's boundary through a cell): a cell whose low half
+    is 1 kPa and high half 9 kPa, loaded across the split, has the two halves in series (Reuss,
+    the incompatible modes let the strain differ between them: 2 / (1/E1 + 1/E2) = 1.8 kPa) and,
+    loaded along it, in parallel (Voigt, 5 kPa); one modulus per cell (its centre's) would give
+    9 or 1 kPa either way."""
+    area_over_length = {0: 0.003 * 0.004 / 0.002, 1: 0.002 * 0.004 / 0.003, 2: 0.002 * 0.003 / 0.004}
+    for split in range(3):
+        for load in range(3):
+            modulus = _one_cell_stretch(split, load) / area_over_length[load]
+            expected = 1.8e3 if split == load else 5e3
+            assert modulus == pytest.approx(expected, rel=1e-9), (split, load)
+
+
+def _small_wall():
+    vol = box_volume(size=(0.02, 0.02, 0.01), spacing=0.005)
+    bottom = np.flatnonzero(vol.nodes[:, 2] < vol.nodes[:, 2].min() + 1e-9)
+    return vol, bottom
+
+
+def test_material_given_per_gauss_point_equals_the_cell_rule_where_cells_are_uniform():
+    vol, bottom = _small_wall()
+    a = make("fem_hex", vol, "liver", fixed=bottom)
+    b = make("fem_hex", vol, "liver", fixed=bottom)
+    points = a.material_points()
+    assert points.shape == (len(a.cells.hexes), 8, 3)
+    assert np.allclose(points.mean(axis=1), a.element_centroids(), atol=1e-15)
+    per_cell = 1.0 + np.arange(len(a.cells.hexes)) % 3
+    a.scale_material_at_points("young", np.repeat(per_cell[:, None], 8, axis=1))
+    b.scale_material("young", per_cell)
+    assert np.allclose(a.fields["young"], b.fields["young"], rtol=1e-15)
+    diff = (a.stiffness_matrix() - b.stiffness_matrix()).toarray()
+    assert np.abs(diff).max() <= 1e-12 * abs(b.stiffness_matrix()).max()
+
+
+def test_a_stiff_region_through_cells_stiffens_by_its_share_and_scale_material_undoes_it():
+    vol, bottom = _small_wall()
+    model = make("fem_hex", vol, "liver", fixed=bottom)
+    top = np.flatnonzero(vol.nodes[:, 2] > vol.nodes[:, 2].max() - 1e-9)
+    press = np.zeros((len(vol.nodes), 3))
+    press[top, 2] = -0.01
+
+    def sink(factors=None):
+        if factors is not None:
+            model.scale_material_at_points("young", factors)
+        return -(model.static_solve(press)[top, 2] - vol.nodes[top, 2]).mean()
+
+    soft = sink()
+    x = model.material_points()[..., 0]
+    half = sink(np.where(x > 0.0025, 10.0, 1.0))   # the region's edge through the middle of a column of cells
+    assert 0 < np.sum(model.fields["young"] == 5.5 * model.material.young) < len(model.cells.hexes)
+    cells = model.element_centroids()[:, 0]
+    whole = sink(np.repeat(np.where(cells > 0.0, 10.0, 1.0)[:, None], 8, axis=1))   # those cells whole
+    assert whole < half < soft
+    assert model.fields["young"].min() == pytest.approx(model.material.young)
+    model.scale_material("young", 1.0)
+    assert sink() == pytest.approx(soft, rel=1e-12)
+
+
+def test_material_per_gauss_point_refuses_bad_factors_by_name():
+    vol, bottom = _small_wall()
+    model = make("fem_hex", vol, "liver", fixed=bottom)
+    n = len(model.cells.hexes)
+    with pytest.raises(ConfigError, match=r"factors must be a \(%d, 8\) array" % n):
+        model.scale_material_at_points("young", np.ones((n, 1)))
+    with pytest.raises(ConfigError, match="finite and > 0"):
+        model.scale_material_at_points("young", np.full((n, 8), np.nan))
+    mixed = np.ones((n, 8))
+    mixed[0, 0] = 2.0
+    with pytest.raises(ConfigError, match="only 'young' may vary within a cell"):
+        model.scale_material_at_points("poisson", mixed)
+    assert np.all(model.fields["poisson"] == model.material.poisson)    # nothing changed
+
+
+def test_a_model_with_one_point_per_element_takes_them_as_scale_material():
+    vol, bottom = _small_wall()
+    a = make("fem_static", vol, "liver", fixed=bottom)
+    b = make("fem_static", vol, "liver", fixed=bottom)
+    points = a.material_points()
+    assert points.shape == (len(vol.tets), 1, 3)
+    inside = np.linalg.norm(points - np.array([0.0, 0.0, 0.005]), axis=2) < 0.006
+    a.scale_material_at_points("young", np.where(inside, 5.0, 1.0))
+    b.scale_material("young", 5.0, mask=inside[:, 0])
+    assert np.array_equal(a.fields["young"], b.fields["young"])
+    with pytest.raises(ConfigError, match=r"factors must be a \(%d, 1\) array" % len(vol.tets)):
+        a.scale_material_at_points("young", np.ones(len(vol.tets)))

@@ -8,6 +8,10 @@ lattice's box cells as hexahedra with incompatible modes represent bending exact
 (docs/models/fem_hex.md). The model takes a tensor-product lattice (``geometry.box_volume``, the
 walls of ``geometry.wall_lattice``): its material fields live on the box cells (``element_centroids``
 are the cells' centres, ``scale_material`` masks are per cell); a cell's material is its tets' label's.
+A region that cuts through cells (a stiff nodule) is given per Gauss point
+(``material_points``, ``scale_material_at_points``): a cut cell integrates each of its 8 points with
+that point's Young's modulus, so the inclusion's stiffness follows its volume within the cell where
+a rule on the cell's centre would take the whole cell or nothing.
 
 Solved as ``fem_static``: the stiffness on the free dofs is factorised once per material
 (SuperLU, or MKL PARDISO through the optional pypardiso with ``solver="auto"``), the equilibrium
@@ -32,7 +36,7 @@ from surgsim_envs.geometry.box_cells import box_cells
 from surgsim_envs.tissue.base import ELEMENT_FIELDS, TissueModel
 from surgsim_envs.tissue.compliance import DEFAULT_CACHE_MB, SOLVERS, CondensedCompliance
 from surgsim_envs.tissue.guard import StabilityGuard
-from surgsim_envs.tissue.hex_elements import HexAssembly
+from surgsim_envs.tissue.hex_elements import GAUSS_POINTS, HexAssembly
 
 
 class HexStaticModel(TissueModel):
@@ -62,6 +66,8 @@ class HexStaticModel(TissueModel):
         self._comp: CondensedCompliance | None = None
         self._u0: np.ndarray | None = None
         self._assembly: HexAssembly | None = None
+        #: (cells (M,), (M, 8) Gauss-point factors of mean 1) where Young's modulus varies within a cell
+        self._point_shape: tuple[np.ndarray, np.ndarray] | None = None
         super().__init__(volume, material, **base_kwargs)
         self._stiffness = None
         self._on_material_changed("young")
@@ -92,6 +98,56 @@ class HexStaticModel(TissueModel):
         """(H, 8, 3) m rest corners of the box cells."""
         return self.rest_positions[self.cells.hexes]
 
+    def material_points(self) -> np.ndarray:
+        """(H, 8, 3) m rest positions of each cell's 2 x 2 x 2 Gauss points, where its stiffness is
+        integrated (:data:`~surgsim_envs.tissue.hex_elements.GAUSS_POINTS` order)."""
+        return self.cells.centroids[:, None, :] + 0.5 * self.cells.sizes[:, None, :] * GAUSS_POINTS[None]
+
+    def scale_material_at_points(self, name: str, factors) -> None:
+        """Scale field ``name`` by ``factors`` (H, 8) per Gauss point, relative to its value at build.
+        A cell whose points differ (an inclusion's boundary crosses it) is integrated with each
+        point's Young's modulus, its incompatible modes condensed with them; its field holds the
+        points' mean (its volume average: the points weigh alike on a box). Only ``young`` may vary
+        within a cell; other fields need equal factors across a cell's points."""
+        self._check_field_name(name)
+        f = self._point_factors(name, factors)
+        mean = f.mean(axis=1)
+        mixed = np.flatnonzero(np.any(f != f[:, :1], axis=1))
+        if len(mixed) and name != "young":
+            raise ConfigError(f"fem_hex: only 'young' may vary within a cell; {name!r} factors differ across the "
+                              f"Gauss points of {len(mixed)} cell(s) (give one value per cell: scale_material)")
+        values = self._fields0[name] * mean
+        shape = (mixed, f[mixed] / mean[mixed, None]) if len(mixed) else None
+        previous = self._point_shape
+        self._point_shape = shape if name == "young" else previous
+        try:
+            self._apply_field(name, values)
+        except Exception:
+            self._point_shape = previous
+            raise
+
+    def scale_material(self, name: str = "young", factor=1.0, mask=None) -> None:
+        """As the contract's (per cell); a ``young`` given per cell makes every cell uniform again."""
+        previous = self._point_shape
+        if name == "young":
+            self._point_shape = None
+        try:
+            super().scale_material(name, factor, mask)
+        except Exception:
+            self._point_shape = previous
+            raise
+
+    def set_field(self, name: str, values) -> None:
+        """As the contract's (per cell); a ``young`` given per cell makes every cell uniform again."""
+        previous = self._point_shape
+        if name == "young":
+            self._point_shape = None
+        try:
+            super().set_field(name, values)
+        except Exception:
+            self._point_shape = previous
+            raise
+
     def _on_material_changed(self, name: str) -> None:
         young, nu = self.fields["young"], self.fields["poisson"]
         if np.any(young <= 0) or np.any(nu <= -1.0) or np.any(nu >= 0.5):
@@ -99,7 +155,11 @@ class HexStaticModel(TissueModel):
         relaxed = young * (1.0 - self.fields["relax_fraction"])
         if self._assembly is None or not np.array_equal(self._assembly.poisson, nu):
             self._assembly = HexAssembly(self.n_nodes, self.cells.hexes, self.cells.sizes, nu)
-        self._stiffness = self._assembly.stiffness(relaxed)
+        points = None
+        if self._point_shape is not None:   # cells whose Young's modulus varies over their Gauss points
+            cells, shape = self._point_shape
+            points = (cells, relaxed[cells, None] * shape)
+        self._stiffness = self._assembly.stiffness(relaxed, points)
         self._comp, self._u0 = None, None
 
     def _on_fixed_changed(self) -> None:

@@ -23,7 +23,9 @@ import scipy.sparse as sp
 
 from surgsim_envs.geometry.box_cells import CORNER_SIGNS
 
-_GAUSS = np.stack(np.meshgrid(*([np.array([-1.0, 1.0]) / math.sqrt(3.0)] * 3), indexing="ij"), -1).reshape(-1, 3)
+#: (8, 3) natural coordinates of the 2 x 2 x 2 Gauss points, (+-1/sqrt 3)^3; a point's rest position in
+#: a box cell is its centre + half its size x these
+GAUSS_POINTS = np.stack(np.meshgrid(*([np.array([-1.0, 1.0]) / math.sqrt(3.0)] * 3), indexing="ij"), -1).reshape(-1, 3)
 
 
 def strain_operator(gradients: np.ndarray) -> np.ndarray:
@@ -47,27 +49,47 @@ def elasticity_matrix(young: float, poisson: float) -> np.ndarray:
     return d
 
 
-def box_stiffness(size, young: float, poisson: float, incompatible: bool = True) -> np.ndarray:
-    """24 x 24 stiffness (N/m) of a box hexahedron with edge lengths ``size`` (3,) m, nodes in
-    :data:`~surgsim_envs.geometry.box_cells.CORNER_SIGNS` order, dofs (node, axis); with
-    ``incompatible`` (default) the nine bending modes condensed in, else the plain trilinear element."""
-    d = elasticity_matrix(young, poisson)
+def _gauss_parts(size) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per Gauss point of a box with edge lengths ``size``: the strain operators of the nodal shapes
+    (8, 6, 24) and of the incompatible modes (8, 6, 9), and the Jacobian determinant (8,)."""
     half = 0.5 * np.asarray(size, dtype=np.float64)
-    det = float(half.prod())
-    kuu, kua, kaa = np.zeros((24, 24)), np.zeros((24, 9)), np.zeros((9, 9))
-    for p in _GAUSS:
+    b_all, ba_all = [], []
+    for p in GAUSS_POINTS:
         f = 1.0 + CORNER_SIGNS * p                        # (8, 3) factors of the trilinear shapes
         grad = CORNER_SIGNS * np.stack([f[:, 1] * f[:, 2], f[:, 0] * f[:, 2], f[:, 0] * f[:, 1]], 1) / (8.0 * half)
-        b = strain_operator(grad)
-        ba = strain_operator(np.diag(-2.0 * p / half))      # gradients of 1 - xi_k^2 (k = 0, 1, 2)
-        db, dba = d @ b, d @ ba
-        kuu += b.T @ db * det
-        kua += b.T @ dba * det
-        kaa += ba.T @ dba * det
-    if not incompatible:
-        return kuu
-    k = kuu - kua @ np.linalg.solve(kaa, kua.T)
-    return 0.5 * (k + k.T)
+        b_all.append(strain_operator(grad))
+        ba_all.append(strain_operator(np.diag(-2.0 * p / half)))      # gradients of 1 - xi_k^2 (k = 0, 1, 2)
+    return np.stack(b_all), np.stack(ba_all), np.full(len(GAUSS_POINTS), float(half.prod()))
+
+
+def point_parts(size, poisson: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(Kuu, Kua, Kaa) of each Gauss point at unit Young's modulus, (8, 24, 24), (8, 24, 9), (8, 9, 9),
+    of a box with edge lengths ``size`` (3,) m: the element's parts are their sums weighted by each
+    point's Young's modulus."""
+    b, ba, det = _gauss_parts(size)
+    d = elasticity_matrix(1.0, poisson)
+    db, dba = d @ b, d @ ba
+    kuu = np.einsum("qki,qkj->qij", b, db) * det[:, None, None]
+    kua = np.einsum("qki,qkj->qij", b, dba) * det[:, None, None]
+    kaa = np.einsum("qki,qkj->qij", ba, dba) * det[:, None, None]
+    return kuu, kua, kaa
+
+
+def condensed(kuu: np.ndarray, kua: np.ndarray, kaa: np.ndarray) -> np.ndarray:
+    """K = Kuu - Kua Kaa^-1 Kau (the incompatible modes condensed out), symmetrised; works on stacks."""
+    k = kuu - kua @ np.linalg.solve(kaa, np.swapaxes(kua, -1, -2))
+    return 0.5 * (k + np.swapaxes(k, -1, -2))
+
+
+def box_stiffness(size, young, poisson: float, incompatible: bool = True) -> np.ndarray:
+    """24 x 24 stiffness (N/m) of a box hexahedron with edge lengths ``size`` (3,) m, nodes in
+    :data:`~surgsim_envs.geometry.box_cells.CORNER_SIGNS` order, dofs (node, axis); with
+    ``incompatible`` (default) the nine bending modes condensed in, else the plain trilinear element.
+    ``young``: Pa, one value or one per Gauss point ((8,), :data:`GAUSS_POINTS` order: a cell that a
+    stiffer inclusion crosses)."""
+    e = np.broadcast_to(np.asarray(young, dtype=np.float64), (len(GAUSS_POINTS),))
+    kuu, kua, kaa = (np.einsum("q,qij->ij", e, part) for part in point_parts(size, poisson))
+    return condensed(kuu, kua, kaa) if incompatible else kuu
 
 
 class HexAssembly:
@@ -83,6 +105,7 @@ class HexAssembly:
         key = np.concatenate([np.round(sizes / max(float(sizes.max()), 1e-300), 12), self.poisson[:, None]], 1)
         uniq, which = np.unique(key, axis=0, return_inverse=True)
         self.which = which.reshape(-1)
+        self._sizes, self._parts = sizes, {}
         self.unit = np.stack([box_stiffness(sizes[np.flatnonzero(self.which == u)[0]], 1.0, float(uniq[u, 3]))
                               for u in range(len(uniq))])
         dofs = (3 * hexes[:, :, None] + np.arange(3)).reshape(len(hexes), 24)
@@ -99,11 +122,26 @@ class HexAssembly:
         self.place = np.empty(len(rows), dtype=np.int64)
         self.place[order] = np.cumsum(first) - 1
 
-    def stiffness(self, young: np.ndarray) -> sp.csr_matrix:
-        """K for per-cell ``young`` (H,) Pa."""
+    def stiffness(self, young: np.ndarray, point_young: tuple[np.ndarray, np.ndarray] | None = None) -> sp.csr_matrix:
+        """K for per-cell ``young`` (H,) Pa; ``point_young`` = (cells (M,), E (M, 8) Pa): those cells'
+        Young's modulus per Gauss point instead (cells an inclusion's boundary crosses)."""
         vals = self.unit[self.which] * np.asarray(young, dtype=np.float64)[:, None, None]
+        if point_young is not None:
+            cells, e = np.asarray(point_young[0], dtype=np.int64), np.asarray(point_young[1], dtype=np.float64)
+            for u in np.unique(self.which[cells]):
+                sel = self.which[cells] == u
+                parts = self._point_parts(int(u))
+                kuu, kua, kaa = (np.einsum("mq,qij->mij", e[sel], part) for part in parts)
+                vals[cells[sel]] = condensed(kuu, kua, kaa)
         data = np.bincount(self.place, weights=vals.ravel(), minlength=len(self.indices))
         return sp.csr_matrix((data, self.indices.copy(), self.indptr.copy()), shape=self.shape)
+
+    def _point_parts(self, u: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Gauss-point parts (:func:`point_parts`) of distinct (shape, nu) ``u``, computed once."""
+        if u not in self._parts:
+            i = int(np.flatnonzero(self.which == u)[0])
+            self._parts[u] = point_parts(self._sizes[i], float(self.poisson[i]))
+        return self._parts[u]
 
 
 def hex_stiffness(n_nodes: int, hexes: np.ndarray, sizes: np.ndarray, young: np.ndarray,
@@ -113,4 +151,4 @@ def hex_stiffness(n_nodes: int, hexes: np.ndarray, sizes: np.ndarray, young: np.
     return HexAssembly(n_nodes, hexes, sizes, poisson).stiffness(young)
 
 
-__all__ = ["strain_operator", "elasticity_matrix", "box_stiffness", "HexAssembly", "hex_stiffness"]
+__all__ = ["GAUSS_POINTS", "strain_operator", "elasticity_matrix", "point_parts", "condensed", "box_stiffness", "HexAssembly", "hex_stiffness"]

@@ -3,8 +3,8 @@
 The task's scene is its own (``gym.make("SurgSim/LayeredPalpation-v0", spacing=...)``): the
 abdominal wall patch (8 x 6 cm, skin / fat / fascia / muscle / peritoneum, bed bonded), the 5 mm
 frictionless unilateral probe and one equilibrium solve per press (quasi-static: no time step).
-The nodule is the task's (30x the Young's modulus of the tets within 8 mm of its centre, at the
-middle of the fat), placed by the reset option ``nodule_position`` at (2, 1) cm; the mirror site
+The nodule is the task's (30x the Young's modulus at the element points within 8 mm of its centre,
+``material_points``: tets' centroids, hexahedra's Gauss points; at the middle of the fat), placed by the reset option ``nodule_position`` at (2, 1) cm; the mirror site
 is (-2, -1) cm. Both sites lie on a node of every lattice the task builds at the spacings below
 (multiples of 10 mm from the patch's edges) and of the reference's (graded about each site).
 
@@ -14,10 +14,10 @@ spacing h, a node at distance rho joins at depth r - sqrt(r^2 - rho^2): 2.76 mm 
 at h = 2 mm, 5 mm for rho = r), so no reading sits on that edge.
 
 Models: the task builds its wall as ``layered`` (the paper's model, the task's premise: its
-unilateral probe solves each press with the model's all-node ``static_solve``) or, with its
-``model="fem_static"`` option, as a continuum on a layer-conforming lattice (the same contact law
-solved on the prefactored stiffness's compliance); every other model is reported as refused, with
-that reason. Rows at the task's spacings 10, 5, 2.5 and 2 mm.
+unilateral probe solves each press with the model's all-node ``static_solve``) or as a continuum
+on a layer-conforming lattice, ``fem_hex`` (its default, hexahedra) or ``fem_static`` (tets), the
+same contact law solved on the prefactored stiffness's compliance; every other model is reported as
+refused, with that reason. Rows at the spacings 10, 5, 4, 3.33, 2.5 and 2 mm.
 
 Between the nodes: the presses over the nodule again, with the nodule and the press moved by half the
 row's spacing in x and in y (the middle of a lattice cell), keyed ``0/over-offnode/<depth>``. A
@@ -77,7 +77,7 @@ def _nodule() -> Inclusion:
 
 NODULE = _nodule()
 FULL = ProbeSet(inclusions=(NODULE,), depths=(0.0025, 0.0035, 0.0045), hold=0.0,
-                spacings=(0.01, 0.005, 0.0025, 0.002),
+                spacings=(0.01, 0.005, 0.004, 0.01 / 3, 0.0025, 0.002),
                 reference_spacings=(0.002, 0.002 / math.sqrt(2), 0.001, 0.001 / math.sqrt(2)))
 QUICK = ProbeSet(inclusions=(NODULE,), depths=(0.0025, 0.0045), hold=0.0, spacings=(0.005,),
                  reference_spacings=(0.004, 0.004 / math.sqrt(2), 0.002))

@@ -45,7 +45,7 @@ class LayeredPalpationConfig:
 
     model: str = "fem_hex"
     size: tuple = (0.08, 0.06)
-    spacing: float = 0.01 / 3         # 3.33 mm: the cheapest fem_hex lattice within the tolerance (docs/task_accuracy.md)
+    spacing: float = 0.004            # the cheapest fem_hex lattice within the tolerance (docs/task_accuracy.md)
     max_depth: float = 0.008
     nodule_radius: float = 0.008
     nodule_factor: float = 30.0

@@ -3,10 +3,12 @@
 Tissue: an abdominal wall patch (skin, fat, fascia, muscle, peritoneum;
 :mod:`surgsim_envs.geometry.anatomy`), bottom bonded, as a continuum on a layer-conforming lattice
 in hexahedra with incompatible modes (``model="fem_hex"``, the default: within the task's force
-tolerance at 5 mm) or in tets (``model="fem_static"``), or as the ``layered`` model of Lin et al.
+tolerance at 4 mm) or in tets (``model="fem_static"``), or as the ``layered`` model of Lin et al.
 2008 (``model="layered"``, the paper's springs) (:mod:`.wall`). Each episode hides a stiff
-nodule in the fat: the elements whose centre lies within ``nodule_radius`` of a random centre get ``nodule_factor`` x
-their Young's modulus, through the tissue contract (``scale_material``), never by model name. The
+nodule in the fat: the points where the elements sample their material (``material_points``: the
+centres of tets and springs' tets, the 8 Gauss points of a hexahedron) within ``nodule_radius`` of a
+random centre get ``nodule_factor`` x their Young's modulus, through the tissue contract
+(``scale_material_at_points``), never by model name. The
 reset option ``nodule_position`` (x, y) m places the centre instead (scripted probes and benchmarks
 such as ``surgsim bench task-accuracy``); its height is the median height of the fat's tets either way.
 
@@ -74,9 +76,9 @@ class LayeredPalpationEnv(gym.Env):
         self.metadata = dict(self.metadata, render_fps=max(1, int(round(cfg.control_hz))))
         self.wall = wall = BUILDERS[cfg.model](cfg)
         self.tissue, self.top, self.z_top, self.probe = wall.tissue, wall.top, wall.z_top, wall.probe
-        self.centroids = wall.centroids
+        self.material_points = wall.tissue.material_points()   # (T, Q, 3) m
         self._fat_z = wall.fat_z
-        self._mask = None
+        self._inside = None
         hx, hy = 0.5 * float(cfg.size[0]), 0.5 * float(cfg.size[1])
         self.action_space = gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
         self.observation_terms = [ObsTerm("press_x", "m", 1, -hx, hx), ObsTerm("press_y", "m", 1, -hy, hy),
@@ -143,11 +145,10 @@ class LayeredPalpationEnv(gym.Env):
             self.nodule = np.array([self.np_random.uniform(-hx, hx), self.np_random.uniform(-hy, hy), z])
         else:
             self.nodule = np.array([*self._nodule_xy(placed, hx, hy), z])
-        mask = np.linalg.norm(self.centroids - self.nodule, axis=1) < cfg.nodule_radius
-        if self._mask is None or not np.array_equal(mask, self._mask):   # unchanged: keep a factorised stiffness
-            self.tissue.scale_material("young", 1.0)
-            self.tissue.scale_material("young", cfg.nodule_factor, mask=mask)
-            self._mask = mask
+        inside = np.linalg.norm(self.material_points - self.nodule, axis=2) < cfg.nodule_radius
+        if self._inside is None or not np.array_equal(inside, self._inside):   # unchanged: keep a factorised stiffness
+            self.tissue.scale_material_at_points("young", np.where(inside, float(cfg.nodule_factor), 1.0))
+            self._inside = inside
         self.wall.ready()
         self.presses = self.steps = 0
         self._centre = np.array([0.0, 0.0, self.z_top + 0.03])
@@ -155,7 +156,7 @@ class LayeredPalpationEnv(gym.Env):
         self._show()
         if self.render_mode == "human":
             self.render()
-        return np.zeros(4, dtype=np.float32), {"nodule_tets": int(mask.sum()), "nodule_centre": self.nodule.copy()}
+        return np.zeros(4, dtype=np.float32), {"nodule_tets": int(inside.any(axis=1).sum()), "nodule_centre": self.nodule.copy()}
 
     @staticmethod
     def _nodule_xy(value, hx: float, hy: float) -> tuple[float, float]:

@@ -17,11 +17,12 @@
 * ``fem_hex``: the same continuum on the same lattice, its box cells as hexahedra with incompatible
   bending modes (:mod:`surgsim_envs.tissue.fem_hex`): the skin bends as a plate on cells a linear
   tet cannot bend in, so a coarse lattice reads the reference's forces (docs/task_accuracy.md).
-  The nodule rule applies to the cells' centres. Pressed as ``fem_static``.
+  The nodule is given at the cells' 8 Gauss points. Pressed as ``fem_static``.
 
-The nodule rule is the task's for both: the tets whose centroid lies within ``nodule_radius`` of
-its centre get ``nodule_factor`` x their Young's modulus (``scale_material``), the centre at the
-median height of the fat's tets. Units: m, N.
+The nodule rule is the task's for all three: the points where the elements sample their material
+(``material_points()``: a tet's centroid, a hexahedron's Gauss points) within ``nodule_radius`` of
+its centre get ``nodule_factor`` x their Young's modulus (``scale_material_at_points``), the centre
+at the median height of the fat's tets. Units: m, N.
 """
 
 from __future__ import annotations
