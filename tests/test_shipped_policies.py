@@ -41,8 +41,8 @@ HELD_OUT = {
     "SurgSim/Slippage-v0": HeldOut(range(10_000, 10_004), 3),
     "SurgSim/Palpation-v0": HeldOut(range(10_000, 10_003), 0, compare="return"),
     # deterministic raster-and-threshold network (scripts/make_layered_policy.py, tuned on seeds
-    # 0-29 on the default fem_hex wall): 2/8 here, mean return 0.61 vs random's -0.21 (documented
-    # 21/40 on 10001-10040)
+    # 0-29 on the fem_hex wall at 5 mm): on the 4 mm default 2/8 here, mean return 0.60 vs random's
+    # 0.13 (documented 20/40 on 10001-10040)
     "SurgSim/LayeredPalpation-v0": HeldOut(range(10_001, 10_009), 2, compare="return"),
 }
 
