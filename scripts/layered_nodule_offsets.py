@@ -6,9 +6,12 @@ compared with the shipped reference's presses over the nodule: the reference's f
 nodule does not depend on where the nodule sits to about 1 % (its 1 mm levels at (2, 1) and
 (-1.5, 0.5) cm read 1.0-1.1 % apart), so one reference serves every position.
 
-    python scripts/layered_nodule_offsets.py --model fem_hex --spacings 0.005,0.0033333333333333335,0.0025
+    python scripts/layered_nodule_offsets.py --model fem_hex --spacings 0.005,0.004,0.0033333333333333335,0.0025 \
+        --plot docs/img/layered_nodule_offsets.png
 
-Prints per spacing the smallest and largest error over the 16 positions, overall and per depth.
+Prints per spacing the smallest and largest error over the 16 positions, overall and per depth;
+``--plot FILE`` draws them (a bar per depth from the smallest to the largest error, the task's
+tolerance and the default spacing marked).
 """
 from __future__ import annotations
 
@@ -26,8 +29,10 @@ from surgsim_envs.tissue.task_table import TASK_TABLE_PATH
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--model", default="fem_hex", choices=lp.MODELS)
-    ap.add_argument("--spacings", default="0.005,0.0033333333333333335,0.0025", help="comma-separated, m")
+    ap.add_argument("--spacings", default="0.005,0.004,0.0033333333333333335,0.0025", help="comma-separated, m")
+    ap.add_argument("--plot", default=None, help="write a PNG of the error ranges here")
     args = ap.parse_args()
+    ranges = {}
     with open(TASK_TABLE_PATH) as fh:
         ref = json.load(fh)["references"][lp.TASK]["forces_N"]
     over = [k for k in ref if "/over/" in k]
@@ -40,9 +45,46 @@ def main() -> None:
                 f = lp.measure(lp.TASK, args.model, h, probes)["forces_N"]
                 errors.append([f[k] / ref[k] - 1 for k in over])
         e = 100 * np.array(errors)
+        ranges[h] = (e.min(0), e.max(0))
         depths = ", ".join(f"{k.rsplit('/', 1)[-1]} {a:+.1f} to {b:+.1f}" for k, a, b in zip(over, e.min(0), e.max(0)))
         print(f"{args.model} at {h * 1e3:.3g} mm, 16 positions: {e.min():+.1f} to {e.max():+.1f} % (per depth "
               f"{depths}); {time.time() - t0:.0f} s", flush=True)
+    if args.plot:
+        plot(ranges, [k.rsplit("/", 1)[-1] for k in over], args.model, args.plot)
+
+
+def plot(ranges: dict, depths: list, model: str, path: str) -> None:
+    """Error ranges (%) per spacing and press depth, with the task's tolerance and default spacing."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from surgsim_envs.bench.choose import task_tolerance
+    from surgsim_envs.envs.layered_palpation import LayeredPalpationConfig
+
+    tol = 100 * task_tolerance(lp.TASK)
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    for j, depth in enumerate(depths):
+        x = [1e3 * h + 0.12 * (j - 1) for h in ranges]
+        lo = [r[0][j] for r in ranges.values()]
+        hi = [r[1][j] for r in ranges.values()]
+        ax.vlines(x, lo, hi, lw=6, color=f"C{j}", label=f"press to {depth}")
+    for sign in (-1, 1):
+        ax.axhline(sign * tol, color="k", ls="--", lw=1)
+    ax.axhline(0, color="0.6", lw=0.8)
+    default = LayeredPalpationConfig()
+    if default.model == model:
+        ax.axvline(1e3 * default.spacing, color="0.4", ls=":", lw=1)
+        ax.text(1e3 * default.spacing, -tol - 2, " default", color="0.3", va="top")
+    ax.set_xlabel("lattice spacing (mm)")
+    ax.set_ylabel("force error over the nodule (%)")
+    ax.set_title(f"{lp.TASK} ({model}): the nodule at 16 positions within a cell", fontsize=9)
+    ax.set_ylim(-tol - 15, tol + 12)
+    ax.legend(fontsize=8, loc="upper center", ncol=len(depths), frameon=False)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print("wrote", path)
 
 
 if __name__ == "__main__":
