@@ -9,6 +9,17 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+# Several workers share the cores (pytest-xdist, one per core: pytest_xdist_auto_num_workers below),
+# so the linear-algebra libraries' own thread pools (OpenBLAS, MKL through the optional pypardiso,
+# OpenMP) would put two threads a worker on each core; their waiting threads spin and take the
+# other worker's core. One thread each: a warm subset of the default run (eight physics test files,
+# two workers, 2-core AMD EPYC) took 89-92 s against 107-112 s. A value the user set is kept; numba's
+# own threads (the tests of its parallel kernels need them) are not touched. Set here, before any
+# test module imports numpy, and inherited by the subprocesses tests start.
+if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
+    for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
+
 REPO = Path(__file__).resolve().parents[1]
 
 # pytest-xdist workers (the default run uses them: pyproject's addopts) share numba's cache with
