@@ -11,7 +11,10 @@ nodule does not depend on where the nodule sits to about 1 % (its 1 mm levels at
 
 Prints per spacing the smallest and largest error over the 16 positions, overall and per depth;
 ``--plot FILE`` draws them (a bar per depth from the smallest to the largest error, the task's
-tolerance and the default spacing marked).
+tolerance and the default spacing marked). ``--volumes`` prints instead, per spacing, the range over
+the same 16 positions of the nodule's volume on the lattice (each cell's volume times the share of
+its material points inside the sphere) over the sphere's, for the task's rule and for the cells'
+centres, with no solve.
 """
 from __future__ import annotations
 
@@ -31,7 +34,11 @@ def main() -> None:
     ap.add_argument("--model", default="fem_hex", choices=lp.MODELS)
     ap.add_argument("--spacings", default="0.005,0.004,0.0033333333333333335,0.0025", help="comma-separated, m")
     ap.add_argument("--plot", default=None, help="write a PNG of the error ranges here")
+    ap.add_argument("--volumes", action="store_true", help="print the nodule's volume ranges only (no presses)")
     args = ap.parse_args()
+    if args.volumes:
+        volumes(args.model, [float(v) for v in args.spacings.split(",")])
+        return
     ranges = {}
     with open(TASK_TABLE_PATH) as fh:
         ref = json.load(fh)["references"][lp.TASK]["forces_N"]
@@ -51,6 +58,35 @@ def main() -> None:
               f"{depths}); {time.time() - t0:.0f} s", flush=True)
     if args.plot:
         plot(ranges, [k.rsplit("/", 1)[-1] for k in over], args.model, args.plot)
+
+
+def volumes(model: str, spacings: list) -> None:
+    """The nodule's volume on the lattice over the sphere's, at the 16 positions (module docstring)."""
+    import math
+
+    import gymnasium as gym
+
+    import surgsim_envs  # noqa: F401  (registers the tasks)
+
+    for h in spacings:
+        env = gym.make(lp.TASK, model=model, spacing=h, disable_env_checker=True).unwrapped
+        points, centres = env.tissue.material_points(), env.tissue.element_centroids()
+        cell = env.tissue.element_vertices()
+        size = cell.max(axis=1) - cell.min(axis=1)
+        element_volume = size.prod(axis=1) if cell.shape[1] == 8 else np.abs(np.linalg.det(cell[:, 1:] - cell[:, :1])) / 6
+        r = env.config.nodule_radius
+        sphere = 4.0 / 3.0 * math.pi * r ** 3
+        rule, centre = [], []
+        for ox in np.arange(4) * h / 4:
+            for oy in np.arange(4) * h / 4:
+                env.reset(seed=0, options={"nodule_position": (lp.NODULE_XY[0] + ox, lp.NODULE_XY[1] + oy)})
+                inside = np.linalg.norm(points - env.nodule, axis=2) < r
+                rule.append(float((inside.mean(axis=1) * element_volume).sum() / sphere))
+                centre.append(float(((np.linalg.norm(centres - env.nodule, axis=1) < r) * element_volume).sum() / sphere))
+        env.close()
+        print(f"{model} at {h * 1e3:.3g} mm, 16 positions: the nodule's volume / the sphere's {min(rule):.3f} to "
+              f"{max(rule):.3f} ({points.shape[1]} point(s) an element); the cells' centres {min(centre):.3f} to "
+              f"{max(centre):.3f}", flush=True)
 
 
 def plot(ranges: dict, depths: list, model: str, path: str) -> None:

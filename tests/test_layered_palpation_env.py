@@ -166,3 +166,25 @@ def test_the_nodule_position_option_places_the_nodule_inside_the_patch(env):
         env.reset(options={"nodule_position": (1.0, 0.0)})
     with pytest.raises(ConfigError, match="nodule_position.*pair"):
         env.reset(options={"nodule_position": 0.01})
+
+
+def test_the_nodule_is_given_at_the_material_points_and_keeps_the_spheres_volume(env):
+    """The default wall (fem_hex, 4 mm) takes the nodule at its cells' Gauss points: a cell's Young's
+    modulus is scaled by 1 + (factor - 1) x its share of points inside the sphere, and the nodule's
+    volume on the lattice stays within 8 % of the sphere's wherever it sits in a cell (0.98-1.07 at
+    16 positions); the cells' centres would give 0.90 at the probe set's site (1.92 against 2.14 cm^3)."""
+    cfg = env.config
+    points = env.tissue.material_points()
+    corners = env.tissue.element_vertices()
+    cell_volume = (corners.max(axis=1) - corners.min(axis=1)).prod(axis=1)
+    sphere = 4.0 / 3.0 * math.pi * cfg.nodule_radius ** 3
+    h = cfg.spacing
+    for offset in ((0.0, 0.0), (0.5 * h, 0.25 * h), (0.25 * h, 0.75 * h)):
+        env.reset(seed=0, options={"nodule_position": (0.02 + offset[0], 0.01 + offset[1])})
+        scaled = env.tissue.fields["young"].copy()
+        env.tissue.scale_material("young", 1.0)
+        share = (np.linalg.norm(points - env.nodule, axis=2) < cfg.nodule_radius).mean(axis=1)
+        np.testing.assert_allclose(scaled / env.tissue.fields["young"], 1.0 + (cfg.nodule_factor - 1.0) * share,
+                                   rtol=1e-12)
+        assert 0 < share.sum() and abs((share * cell_volume).sum() / sphere - 1.0) < 0.08, offset
+        env.reset(seed=0)    # the next reset re-applies a nodule to the uniform wall
