@@ -44,6 +44,9 @@ def _assert_same(s0, s1):
     pairs = [(t0.positions, t1.positions), (t0.velocities, t1.velocities),
              (t0.integrated_external_forces, t1.integrated_external_forces), (c0.forces, c1.forces),
              (c0.stiffness, c1.stiffness), (c0.tool_force, c1.tool_force), (c0.tool_torque, c1.tool_torque),
+             (c0.geom_normal_force, c1.geom_normal_force), (c0.geom_tangential_force, c1.geom_tangential_force),
+             (c0.report.normal_force, c1.report.normal_force),
+             (c0.report.tangential_force, c1.report.tangential_force),
              (s0.data.qpos, s1.data.qpos), (s0.data.qvel, s1.data.qvel), (s0.data.ctrl, s1.data.ctrl),
              (s0.data.xfrc_applied, s1.data.xfrc_applied)]
     for x, y in pairs:
@@ -103,7 +106,7 @@ def test_mass_spring_implicit_steps_give_the_tools_the_integrated_reaction():
     """MassSpringModel under "auto" with a step above its explicit limit: every step is implicit,
     the integrated force differs from the contact force, and the compiled loop attributes the
     increment to the tools exactly as ContactModel.attribute_increment does (same wrenches, same
-    tool motion), bit for bit."""
+    tool motion, the same readings of the integrated force), bit for bit."""
     a, b = _free_scene(1, True, integrator="auto", dt=5e-3), _free_scene(1, False, integrator="auto", dt=5e-3)
     assert a.compiled_runner() is not None and b.compiled_runner() is None
     p0 = a.momentum()
@@ -111,8 +114,13 @@ def test_mass_spring_implicit_steps_give_the_tools_the_integrated_reaction():
     for _ in range(40):
         a.step_with_controls([], np.zeros((1, 0)))
         b.step_with_controls([], np.zeros((1, 0)))
+        ca, cb = next(iter(a.contacts.values())), next(iter(b.contacts.values()))
         for x, y in ((a.tissue().positions, b.tissue().positions), (a.data.qvel, b.data.qvel),
-                     (a.tissue().integrated_external_forces, b.tissue().integrated_external_forces)):
+                     (a.tissue().integrated_external_forces, b.tissue().integrated_external_forces),
+                     (ca.result.geom_normal_force, cb.result.geom_normal_force),
+                     (ca.result.geom_tangential_force, cb.result.geom_tangential_force),
+                     (ca.report.normal_force, cb.report.normal_force),
+                     (ca.report.tangential_force, cb.report.tangential_force)):
             np.testing.assert_array_equal(x, y)
         assert a.tissue()._active == b.tissue()._active
         implicit += a.tissue()._active == "implicit"

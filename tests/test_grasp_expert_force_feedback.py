@@ -45,5 +45,6 @@ def test_the_expert_grasps_a_stiff_model_without_crushing_it():
     _, blind_ret, blind_peak = _episodes(env, full_closure)
     assert wins == len(SEEDS), f"the expert carried {wins} of {len(SEEDS)} grasps to the target"
     assert peak < 0.5 * blind_peak, (peak, blind_peak)
-    assert ret > blind_ret + 20.0, f"force feedback returned {ret:.2f}, the force-blind closure {blind_ret:.2f}"
+    # the reward pays the hold and charges the damage: the trimmed grasp gains, the crushing one loses
+    assert ret > 0.0 > blind_ret, f"force feedback returned {ret:.2f}, the force-blind closure {blind_ret:.2f}"
     env.close()

@@ -43,6 +43,7 @@ import numpy as np
 from numba import njit
 
 from surgsim_envs.contact.friction import stick_slip
+from surgsim_envs.contact.integrated_readings import integrated_readings_kernel
 from surgsim_envs.contact.report import ContactReport
 from surgsim_envs.contact.shapes import (BOX, CAPSULE, CYLINDER, N_KINDS, ROUNDED_BOX, bounding_radius, local_outside,
                                          world_sdf)
@@ -172,6 +173,13 @@ def _row_lists(C, S):
     return 2, 2 + C + 3 * S
 
 
+@njit(cache=True)
+def contact_rows_start(C, S):
+    """Index in the kernel's ``rows`` buffer where the list of the points in contact starts
+    (:func:`_row_lists`' ``a0``) for C candidate nodes and S surface samples."""
+    return _row_lists(C, S)[1]
+
+
 def _row_buffer(C: int, S: int) -> np.ndarray:
     """A zeroed ``rows`` buffer of :func:`_contact_kernel` (empty lists)."""
     return np.zeros(2 + (C + 3 * S) + (C + S), dtype=np.int64)
@@ -199,7 +207,7 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
                     mu, mu_s, k_n, c_n, c_imp, k_t, anchor_local, anchor_on,
                     forces, stiffness, node_tool_k, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv,
                     tool_fn, tool_ft, tool_ftv, contacts, slipping, penetration, last_contact, last_slip,
-                    err, radius, vec3, rows):
+                    err, radius, vec3, rows, pair):
     """Contact points p < C are the candidate nodes ``cand[p]``; points p >= C are the surface
     samples ``s = p - C`` at ``sum_j s_w[s, j] x[s_nodes[s, j]]`` whose forces go back to the nodes
     with the same weights. ``touched`` lists every node that can receive a force (all others stay
@@ -213,7 +221,10 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
     :func:`_row_lists`) the node rows this kernel wrote and the points whose contact state it left
     set, so that the next call zeroes only those: every other touched row and every other contact
     state is already zero (NO_CONTACT), so the outputs are those of zeroing every touched row and
-    writing every rejected point's states (the arrays start zero; ``ContactModel.reset`` zeroes them)."""
+    writing every rejected point's states (the arrays start zero; ``ContactModel.reset`` zeroes them).
+    ``pair`` (C + S, G, 4): for each point and geom in contact (``anchor_on[c, g] != 0``) the pair's
+    contact stiffness (N/m) and unit normal, read by
+    :func:`~surgsim_envs.contact.integrated_readings.integrated_readings_kernel` (other entries stale)."""
     G = kind.shape[0]
     T = tool_force.shape[0]
     # validate geoms and precompute bounding radii
@@ -373,6 +384,10 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
             fz += gz
             kg = (k_n if (slip or k_n > k_t) else k_t) + k_damp
             kk += kg
+            pair[c, g, 0] = kg
+            pair[c, g, 1] = nrm[0]
+            pair[c, g, 2] = nrm[1]
+            pair[c, g, 3] = nrm[2]
             if c < C:
                 node_tool_k[i, t] += kg
             else:
@@ -478,11 +493,11 @@ def contact_kernel_prepared(positions, velocities, gpos, gmat, gvel, tool_com, s
     (cand, s_nodes, s_w, touched, kind, tool, size, mu, k_n, c_n, k_t, anchor_local, anchor_on,
      forces, stiffness, node_tool_k, tool_force, tool_torque, geom_fn, geom_ft, geom_ftv, tool_fn, tool_ft, tool_ftv,
      contacts, slipping, penetration, last0, last1, err, com_copy, pos_copy, mu_s, c_imp, radius, vec3,
-     rows) = state
+     rows, pair) = state
     _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel,
                     tool_com, mu, mu_s, k_n, c_n, c_imp, k_t, anchor_local, anchor_on, forces, stiffness, node_tool_k,
                     tool_force, tool_torque, geom_fn, geom_ft, geom_ftv, tool_fn, tool_ft, tool_ftv, contacts,
-                    slipping, penetration, last0, last1, err, radius, vec3, rows)
+                    slipping, penetration, last0, last1, err, radius, vec3, rows, pair)
     if err[0] != 0:
         return err[0]
     for t in range(tool_com.shape[0]):
@@ -592,6 +607,7 @@ class ContactModel:
         self._vec3 = np.zeros((7, 3))          # kernel work rows (bounding box, 3-vectors)
         self._n_geoms = -1
         self._prepared = None
+        self._geom_tool = np.zeros(0, dtype=np.int64)     # the last compute's tool index per geom
         #: bumped by every :meth:`prepare` (and when the geom count changes): the arrays of
         #: :meth:`kernel_state` may then be new objects
         self.prepared_version = 0
@@ -660,6 +676,7 @@ class ContactModel:
         self.prepared_version += 1
         self._anchor_local = np.zeros((C, G, 3))
         self._anchor_on = np.zeros((C, G), dtype=np.uint8)
+        self._pair = np.zeros((C, G, 4))      # per point and geom in contact: stiffness, normal (kernel)
         self.result.geom_normal_force = np.zeros(G)
         self.result.geom_tangential_force = np.zeros(G)
         self._geom_ftv = np.zeros((G, 3))
@@ -738,9 +755,11 @@ class ContactModel:
                         r.tool_force,
                         r.tool_torque, r.geom_normal_force, r.geom_tangential_force, self._geom_ftv,
                         rep.normal_force, rep.tangential_force, self._tool_ftv, rep.contacts, rep.slipping,
-                        rep.penetration, self._last[0], self._last[1], err, self._radius, self._vec3, self._rows)
+                        rep.penetration, self._last[0], self._last[1], err, self._radius, self._vec3, self._rows,
+                        self._pair)
         if err[0] != _OK:
             self._raise_kernel_error(kind, tool, size)
+        self._geom_tool = tool
         np.copyto(self._com, com)
         np.copyto(self._pos, pos)
         return r
@@ -801,7 +820,8 @@ class ContactModel:
                 self.node_tool_stiffness, r.tool_force, r.tool_torque, r.geom_normal_force,
                 r.geom_tangential_force, self._geom_ftv, rep.normal_force, rep.tangential_force, self._tool_ftv,
                 rep.contacts, rep.slipping, rep.penetration, self._last[0], self._last[1], self._err,
-                self._com, self._pos, self.tool_static_friction, c_imp, self._radius, self._vec3, self._rows)
+                self._com, self._pos, self.tool_static_friction, c_imp, self._radius, self._vec3, self._rows,
+                self._pair)
 
     def attribute_increment_prepared(self, integrated_forces) -> None:
         """:meth:`attribute_increment` without the argument check (``integrated_forces`` a
@@ -809,6 +829,17 @@ class ContactModel:
         r = self.result
         attribute_increment_kernel(self._touched, integrated_forces, r.forces, r.stiffness, self.node_tool_stiffness,
                              self._pos, self._com, r.tool_force, r.tool_torque)
+        self._integrated_readings(integrated_forces)
+
+    def _integrated_readings(self, integrated_forces) -> None:
+        """The per-geom and per-tool readings moved onto the integrated force
+        (:mod:`surgsim_envs.contact.integrated_readings`)."""
+        r, rep = self.result, self.report
+        integrated_readings_kernel(self.candidate_nodes, self.sample_nodes, self.sample_weights, self._rows,
+                                   _row_lists(len(self.candidate_nodes), len(self.sample_nodes))[1], self._anchor_on,
+                                   self._pair, self._geom_tool, integrated_forces, r.forces, r.stiffness,
+                                   r.geom_normal_force, r.geom_tangential_force, self._geom_ftv, rep.normal_force,
+                                   rep.tangential_force, self._tool_ftv)
 
     def attribute_increment(self, integrated_forces) -> None:
         """After the tissue step: add to ``result.tool_force`` / ``tool_torque`` the reaction of
@@ -816,8 +847,12 @@ class ContactModel:
         added to the contact force (the tissue's ``integrated_external_forces``), split among the
         tools by their part of each node's contact stiffness. Then tools receive the reaction of
         exactly the force the tissue integrated, and total momentum is conserved for every
-        integrator (torques taken at the node positions of the last :meth:`compute`)."""
+        integrator (torques taken at the node positions of the last :meth:`compute`). The readings
+        (``geom_normal_force``, ``geom_tangential_force``, the report's ``normal_force`` and
+        ``tangential_force``) move onto the integrated force as well
+        (:mod:`surgsim_envs.contact.integrated_readings`)."""
         f = _array(integrated_forces, (self.n_nodes, 3), np.float64, "integrated_forces", "N")
         r = self.result
         attribute_increment_kernel(self._touched, f, r.forces, r.stiffness, self.node_tool_stiffness, self._pos,
                              self._com, r.tool_force, r.tool_torque)
+        self._integrated_readings(f)

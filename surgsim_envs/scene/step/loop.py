@@ -34,7 +34,8 @@ import math
 import numpy as np
 from numba import njit
 
-from surgsim_envs.contact.model import attribute_increment_kernel, contact_kernel_prepared
+from surgsim_envs.contact.integrated_readings import integrated_readings_kernel
+from surgsim_envs.contact.model import attribute_increment_kernel, contact_kernel_prepared, contact_rows_start
 from surgsim_envs.scene.step.kernels import add_wrench, advance_geoms, gather_geoms, rate_limit, write_rows, zero_rows
 from surgsim_envs.scene.step.mujoco_native import call_model_data, model_data_addresses
 from surgsim_envs.tissue.base import AUTO_RECHECK_STEPS, DT_SAFETY, max_ratio
@@ -51,13 +52,13 @@ NO_VALUES = np.zeros((0, 0))
 # the loop's section of the address table, rows relative to its start ``base``
 SLOT_GATHER = 0            # 13: the arguments of gather_geoms
 GATHER_KINDS = ["i8_1"] * 4 + ["f8_2"] * 9
-SLOT_CONTACT = 13          # 34: ContactModel.kernel_state() arrays (scalars in the last one)
+SLOT_CONTACT = 13          # 35: ContactModel.kernel_state() arrays (scalars in the last one)
 CONTACT_KINDS = ["i8_1", "i8_2", "f8_2", "i8_1", "i8_1", "i8_1", "f8_2", "f8_1", "f8_3", "u1_2", "f8_2", "f8_1",
                  "f8_2", "f8_2", "f8_2", "f8_1", "f8_1", "f8_2", "f8_1", "f8_1", "f8_2", "i8_1", "i8_1", "f8_1",
-                 "i8_1", "i8_1", "i8_1", "f8_2", "f8_2", "f8_1", "f8_1", "f8_2", "i8_1", "f8_1"]
+                 "i8_1", "i8_1", "i8_1", "f8_2", "f8_2", "f8_1", "f8_1", "f8_2", "i8_1", "f8_3", "f8_1"]
 #: kernel_state() entries that are arrays, in table order (8, 9, 10, 33 are the scalars k_n, c_n, k_t, c_imp)
-CONTACT_ARRAY_ENTRIES = [0, 1, 2, 3, 4, 5, 6, 7] + list(range(11, 33)) + [34, 35, 36]
-SLOT_REST = 47             # 17: controls, reaction, fixed nodes, counters, guard, sub-cycling
+CONTACT_ARRAY_ENTRIES = [0, 1, 2, 3, 4, 5, 6, 7] + list(range(11, 33)) + [34, 35, 36, 37]
+SLOT_REST = 48             # 17: controls, reaction, fixed nodes, counters, guard, sub-cycling
 REST_KINDS = ["f8_1", "f8_1", "f8_1", "b1_1",      # ctrl, goal, rate, moving
               "f8_2", "i8_1", "f8_2",              # xfrc_applied, bodies, wrench
               "i8_1", "f8_2",                      # fixed nodes, fixed_targets
@@ -82,14 +83,14 @@ def _gather_state(tab, base):
 def _contact_state(tab, base):
     """``ContactModel.kernel_state()`` rebuilt from the table (the scalars from the last slot)."""
     at = base + SLOT_CONTACT
-    sc = f8_1(tab, at + 33)
+    sc = f8_1(tab, at + 34)
     return (i8_1(tab, at), i8_2(tab, at + 1), f8_2(tab, at + 2), i8_1(tab, at + 3), i8_1(tab, at + 4),
             i8_1(tab, at + 5), f8_2(tab, at + 6), f8_1(tab, at + 7), sc[0], sc[1], sc[2], f8_3(tab, at + 8),
             u1_2(tab, at + 9), f8_2(tab, at + 10), f8_1(tab, at + 11), f8_2(tab, at + 12), f8_2(tab, at + 13),
             f8_2(tab, at + 14), f8_1(tab, at + 15), f8_1(tab, at + 16), f8_2(tab, at + 17), f8_1(tab, at + 18),
             f8_1(tab, at + 19), f8_2(tab, at + 20), i8_1(tab, at + 21), i8_1(tab, at + 22), f8_1(tab, at + 23),
             i8_1(tab, at + 24), i8_1(tab, at + 25), i8_1(tab, at + 26), f8_2(tab, at + 27), f8_2(tab, at + 28),
-            f8_1(tab, at + 29), sc[3], f8_1(tab, at + 30), f8_2(tab, at + 31), i8_1(tab, at + 32))
+            f8_1(tab, at + 29), sc[3], f8_1(tab, at + 30), f8_2(tab, at + 31), i8_1(tab, at + 32), f8_3(tab, at + 33))
 
 
 @njit(cache=True)
@@ -160,6 +161,7 @@ def run_substeps(tab, base, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k
     gpos, gmat, gvel, tcom = gather[9], gather[10], gather[11], gather[12]
     forces, stiffness, tool_force, tool_torque = contact[13], contact[14], contact[16], contact[17]
     touched, node_tool_k, com_copy, pos_copy = contact[3], contact[15], contact[30], contact[31]
+    a0 = contact_rows_start(contact[0].shape[0], contact[1].shape[0])
     rigid = count // n
     while k < rigid:
         if j == 0 and resume != 1:
@@ -196,6 +198,9 @@ def run_substeps(tab, base, ctrl_ids, ctrl_values, step1, step2, m_ptr, d_ptr, k
                     # the integrator added to the contact force: the tools get the reaction of it too
                     attribute_increment_kernel(touched, integrated, forces, stiffness, node_tool_k, pos_copy, com_copy,
                                          tool_force, tool_torque)
+                    integrated_readings_kernel(contact[0], contact[1], contact[2], contact[36], a0, contact[12],
+                                               contact[37], contact[5], integrated, forces, stiffness, contact[18],
+                                               contact[19], contact[20], contact[21], contact[22], contact[23])
                 counts[2] += 1
                 for q in range(fixed_idx.shape[0]):
                     i = fixed_idx[q]
