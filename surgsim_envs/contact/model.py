@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from surgsim_envs.contact.contact_set import contact_set_changes
 from surgsim_envs.contact.friction import stick_slip
 from surgsim_envs.contact.integrated_readings import integrated_readings_kernel
 from surgsim_envs.contact.report import ContactReport
@@ -802,6 +803,15 @@ class ContactModel:
             raise ConfigError("compute_prepared() needs prepare(shape_kind, shape_tool, shape_size, dt) first "
                               "(and again after compute() with a different number of geoms)")
         return self._run(positions, velocities, shape_pos, shape_mat, shape_vel, tool_com, self._prepared)
+
+    def contact_set_changes(self, positions, shape_pos, shape_mat) -> int:
+        """After :meth:`prepare`: the number of contact points whose state at ``positions`` (N,3) m,
+        inside a geom or not, differs from the contact the last compute left, with the geoms at
+        ``shape_pos`` (G,3) m and ``shape_mat`` (G,9) (C-contiguous float64, the simulation's
+        buffers). Writes no contact state (:mod:`surgsim_envs.contact.contact_set`)."""
+        kind, _, size = self._prepared[:3]
+        return int(contact_set_changes(positions, self.candidate_nodes, self.sample_nodes, self.sample_weights, kind,
+                                       size, shape_pos, shape_mat, self._anchor_on, self._vec3))
 
     def kernel_state(self) -> tuple:
         """The arguments of the contact kernel after :meth:`prepare`, for a compiled caller that

@@ -40,6 +40,7 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.builder import Scene
 from surgsim_envs.scene.step.buffers import StepBuffers
 from surgsim_envs.scene.step.compiled import compiled_substeps_for, key_of
+from surgsim_envs.scene.step.quasi_static import quasi_static_step
 from surgsim_envs.scene.step.kernels import add_wrench, advance_geoms, gather_geoms, rate_limit, write_rows, zero_rows
 from surgsim_envs.scene.config import validate_step
 
@@ -146,6 +147,8 @@ class Simulation:
         self._runner_key = None
         self._target_fast: dict = {}     # set_tool_target fast path: name -> (tool, first actuator, travel)
         self.steps = 0
+        #: extra solves of quasi-static steps whose contact set moved (scene/step/quasi_static.py), since build
+        self.contact_set_resolves = 0
         self.reset()
         self._check_initial_penetration()
 
@@ -399,7 +402,10 @@ class Simulation:
                     advance_geoms(gpos, gpos0, gvel, j * h)
                 for tissue, contact in pairs:
                     res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
-                    tissue.step_prevalidated(h, res.forces, res.stiffness)
+                    if tissue.resolves_contact_set:
+                        self.contact_set_resolves += quasi_static_step(tissue, contact, h, res, gpos, gmat, gvel, tcom)
+                    else:
+                        tissue.step_prevalidated(h, res.forces, res.stiffness)
                     # CONTRACT (tissue contract v2): an implicit integrator integrates forces + an increment
                     # from the contact stiffness; the tools must get the reaction of exactly
                     # tissue.integrated_external_forces or momentum leaks (11-14 % measured).

@@ -90,6 +90,10 @@ class TissueModel(abc.ABC):
     default_integrator: ClassVar[str | None] = None
     #: what the model can do (tissue/capabilities.py); scenes and tasks query these, never the name
     capabilities: ClassVar[frozenset[str]] = frozenset({"forces"})
+    #: a step is an equilibrium under the contact linearised about the positions it starts from, and
+    #: the scene may solve it again about the positions it reached while the contact set there differs
+    #: (:mod:`surgsim_envs.contact.contact_set`), through :meth:`step_state` / :meth:`restore_step_state`
+    resolves_contact_set: ClassVar[bool] = False
     #: material fields :meth:`scale_material` / :meth:`set_field` may change (the model re-derives
     #: whatever depends on them in :meth:`_on_material_changed`)
     material_fields: ClassVar[tuple[str, ...]] = ()
@@ -630,6 +634,33 @@ class TissueModel(abc.ABC):
 
     def _reset_state(self) -> None:
         """Hook: clear model-specific internal state (viscoelastic branches, history...)."""
+
+    def step_state(self) -> tuple:
+        """A copy of everything one step changes (positions, velocities, the integrated forces, the
+        clock and step count, the guard's state and the model's own, :meth:`_step_state_arrays`), for
+        :meth:`restore_step_state`: the scene solves a step again from where it started."""
+        energy, good_pos, good_vel, good_time = self.guard.state()
+        return (self.positions.copy(), self.velocities.copy(), self.integrated_external_forces.copy(),
+                self.external_forces, self.time, self.steps, energy,
+                None if good_pos is None else good_pos.copy(), None if good_vel is None else good_vel.copy(),
+                good_time, [a.copy() for a in self._step_state_arrays()])
+
+    def restore_step_state(self, state: tuple, positions: np.ndarray) -> None:
+        """Back to ``state`` (:meth:`step_state`), in place (no array is replaced), with the node
+        ``positions`` (N,3) m instead of the saved ones: the point the next step linearises about."""
+        _, vel, integrated, external, time, steps, energy, good_pos, good_vel, good_time, extra = state
+        np.copyto(self.positions, positions)
+        np.copyto(self.velocities, vel)
+        np.copyto(self.integrated_external_forces, integrated)
+        self.external_forces = external
+        self.time, self.steps = time, steps
+        self.guard.load_state(energy, good_pos, good_vel, good_time)
+        for dst, src in zip(self._step_state_arrays(), extra):
+            np.copyto(dst, src)
+
+    def _step_state_arrays(self) -> list:
+        """Hook: the model's own arrays a step changes (a history, a hereditary integral), in place."""
+        return []
 
     def describe(self) -> dict[str, Any]:
         """Summary for reports."""

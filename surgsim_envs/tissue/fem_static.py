@@ -200,6 +200,7 @@ class QuasiStaticFEMModel(TetFEMModel):
     integrators: ClassVar[tuple[str, ...]] = ("quasi_static",)
     auto_pair = None
     default_integrator = None
+    resolves_contact_set = True
     capabilities = frozenset({"forces", "unstructured_mesh", "implicit_contact", "quasi_static", "static_solve",
                               "subsurface_stiffness", "viscoelastic", "condensed_compliance"})
     material_fields = ("young", "poisson", "density")
@@ -532,6 +533,9 @@ class QuasiStaticFEMModel(TetFEMModel):
         self.external_forces = np.zeros_like(self.positions)
         self.external_forces[idx] = f
         return self.positions.copy()
+
+    def _step_state_arrays(self) -> list:
+        return [self._hist, self._u_step] if hasattr(self, "_hist") else []
 
     def _reset_state(self) -> None:
         super()._reset_state()

@@ -1,0 +1,40 @@
+"""One physics step of a quasi-static tissue that meets its tools through a linearised penalty: solved
+again from its start, about the positions it reached, while the contact set there differs from the
+one it was solved with (:mod:`surgsim_envs.contact.contact_set`: why, and what it measured).
+
+The scene's reference loop calls :func:`quasi_static_step` in place of ``tissue.step_prevalidated``
+for models with ``resolves_contact_set``. Each solve after the first restores the model to the
+step's start (:meth:`~surgsim_envs.tissue.base.TissueModel.restore_step_state`) with the reached
+positions as the linearisation point, and recomputes the contact there, so the contact result, the
+force the tissue integrates and the tools' reaction (``attribute_increment``, after this call)
+belong to the same, last solve. A step whose contact set holds after its first solve is the
+single-pass step, bit for bit. Units: s, m.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from surgsim_envs.contact.contact_set import MAX_CONTACT_SET_SOLVES
+
+
+def quasi_static_step(tissue, contact, dt: float, result, gpos, gmat, gvel, tcom) -> int:
+    """Step ``tissue`` by ``dt`` under ``result`` (``contact``'s last compute, at the tissue's
+    positions) and solve it again while the contact set moves; returns the number of extra solves.
+    The velocities are the finite difference over the step, from where it started."""
+    start = tissue.step_state()
+    tissue.step_prevalidated(dt, result.forces, result.stiffness)
+    extra = 0
+    while extra + 1 < MAX_CONTACT_SET_SOLVES and contact.contact_set_changes(tissue.positions, gpos, gmat):
+        tissue.restore_step_state(start, tissue.positions.copy())
+        result = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
+        tissue.step_prevalidated(dt, result.forces, result.stiffness)
+        extra += 1
+    if extra:
+        np.subtract(tissue.positions, start[0], out=tissue.velocities)
+        tissue.velocities /= dt
+        tissue.velocities[tissue.fixed] = 0.0          # held nodes: at rest, as every step leaves them
+    return extra
+
+
+__all__ = ["quasi_static_step"]
