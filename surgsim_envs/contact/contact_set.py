@@ -22,6 +22,7 @@ from __future__ import annotations
 from numba import njit
 
 from surgsim_envs.contact.shapes import local_outside, world_sdf
+from surgsim_envs.contact.surface_points import contact_point
 
 #: solves of one quasi-static step at most (the first, then re-solves while the contact set moves)
 MAX_CONTACT_SET_SOLVES = 4
@@ -39,16 +40,7 @@ def contact_set_changes(positions, cand, s_nodes, s_w, kind, size, gpos, gmat, a
     nl, cl, nrm, cpt = vec3[0], vec3[1], vec3[2], vec3[3]
     changes = 0
     for c in range(P):
-        if c < C:
-            i = cand[c]
-            x0, x1, x2 = positions[i, 0], positions[i, 1], positions[i, 2]
-        else:
-            s = c - C
-            a, b, e = s_nodes[s, 0], s_nodes[s, 1], s_nodes[s, 2]
-            wa, wb, we = s_w[s, 0], s_w[s, 1], s_w[s, 2]
-            x0 = wa * positions[a, 0] + wb * positions[b, 0] + we * positions[e, 0]
-            x1 = wa * positions[a, 1] + wb * positions[b, 1] + we * positions[e, 1]
-            x2 = wa * positions[a, 2] + wb * positions[b, 2] + we * positions[e, 2]
+        x0, x1, x2 = contact_point(c, C, cand, s_nodes, s_w, positions)[:3]
         inside = False
         was = False
         for g in range(G):

@@ -48,7 +48,7 @@ from surgsim_envs.contact.integrated_readings import integrated_readings_kernel
 from surgsim_envs.contact.report import ContactReport
 from surgsim_envs.contact.shapes import (BOX, CAPSULE, CYLINDER, N_KINDS, ROUNDED_BOX, bounding_radius, local_outside,
                                          world_sdf)
-from surgsim_envs.contact.surface_points import check_surface, subdivisions_for_spacing, surface_samples
+from surgsim_envs.contact.surface_points import check_surface, contact_point, subdivisions_for_spacing, surface_samples
 from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 
@@ -186,23 +186,6 @@ def _row_buffer(C: int, S: int) -> np.ndarray:
     return np.zeros(2 + (C + 3 * S) + (C + S), dtype=np.int64)
 
 
-@njit(cache=True, inline="always")
-def _contact_point(c, C, cand, s_nodes, s_w, positions):
-    """Contact point ``c`` of :func:`_contact_kernel`: (x0, x1, x2, i, a, b, e, wa, wb, we), its position
-    (m), its node ``i`` if it is a candidate node (c < C), else the surface sample's nodes (a, b, e) and
-    weights (wa, wb, we); the entries of the other kind are 0."""
-    if c < C:
-        i = cand[c]
-        return positions[i, 0], positions[i, 1], positions[i, 2], i, 0, 0, 0, 0.0, 0.0, 0.0
-    s = c - C
-    a, b, e = s_nodes[s, 0], s_nodes[s, 1], s_nodes[s, 2]
-    wa, wb, we = s_w[s, 0], s_w[s, 1], s_w[s, 2]
-    x0 = wa * positions[a, 0] + wb * positions[b, 0] + we * positions[e, 0]
-    x1 = wa * positions[a, 1] + wb * positions[b, 1] + we * positions[e, 1]
-    x2 = wa * positions[a, 2] + wb * positions[b, 2] + we * positions[e, 2]
-    return x0, x1, x2, 0, a, b, e, wa, wb, we
-
-
 @njit(cache=True, nogil=True)
 def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, tool, size, gpos, gmat, gvel, tool_com,
                     mu, mu_s, k_n, c_n, c_imp, k_t, anchor_local, anchor_on,
@@ -296,7 +279,7 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
     # below skips the box-rejected points; it writes every state of the others)
     for q in range(a0, a0 + rows[1]):
         c = rows[q]
-        x0, x1, x2, i, a, b, e, wa, wb, we = _contact_point(c, C, cand, s_nodes, s_w, positions)
+        x0, x1, x2, i, a, b, e, wa, wb, we = contact_point(c, C, cand, s_nodes, s_w, positions)
         if (x0 < blo[0] or x0 > bhi[0] or x1 < blo[1] or x1 > bhi[1] or x2 < blo[2] or x2 > bhi[2]):
             for g in range(G):
                 anchor_on[c, g] = 0
@@ -307,7 +290,7 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
     cpt = vec3[5]
     ft = vec3[6]
     for c in range(P):
-        x0, x1, x2, i, a, b, e, wa, wb, we = _contact_point(c, C, cand, s_nodes, s_w, positions)
+        x0, x1, x2, i, a, b, e, wa, wb, we = contact_point(c, C, cand, s_nodes, s_w, positions)
         fx = 0.0
         fy = 0.0
         fz = 0.0

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
@@ -95,3 +96,20 @@ def surface_samples(surface, subdivisions: int) -> tuple[np.ndarray, np.ndarray]
         w_out.append(np.tile(ijk / n, (len(tri), 1)))
     return (np.ascontiguousarray(np.concatenate(nodes_out), dtype=np.int64),
             np.ascontiguousarray(np.concatenate(w_out), dtype=np.float64))
+
+
+@njit(cache=True, inline="always")
+def contact_point(c, C, cand, s_nodes, s_w, positions):
+    """Contact point ``c`` of the contact kernel (:mod:`surgsim_envs.contact.model`): (x0, x1, x2, i, a, b, e, wa, wb, we), its position
+    (m), its node ``i`` if it is a candidate node (c < C), else the surface sample's nodes (a, b, e) and
+    weights (wa, wb, we); the entries of the other kind are 0."""
+    if c < C:
+        i = cand[c]
+        return positions[i, 0], positions[i, 1], positions[i, 2], i, 0, 0, 0, 0.0, 0.0, 0.0
+    s = c - C
+    a, b, e = s_nodes[s, 0], s_nodes[s, 1], s_nodes[s, 2]
+    wa, wb, we = s_w[s, 0], s_w[s, 1], s_w[s, 2]
+    x0 = wa * positions[a, 0] + wb * positions[b, 0] + we * positions[e, 0]
+    x1 = wa * positions[a, 1] + wb * positions[b, 1] + we * positions[e, 1]
+    x2 = wa * positions[a, 2] + wb * positions[b, 2] + we * positions[e, 2]
+    return x0, x1, x2, 0, a, b, e, wa, wb, we
