@@ -98,7 +98,7 @@ def test_cli_indent_json(capsys):
     import json
 
     rc = main(["material", "indent", "--model", "fem", "--set", "young=5000", "--set", "poisson=0.45", "--radius",
-               "0.005", "--depth", "0.001", "--thickness", "0.01", "--spacing", "0.002", "--points", "3", "--json"])
+               "0.005", "--depth", "0.001", "--thickness", "0.01", "--spacing", "0.004", "--points", "3", "--json"])
     assert rc == 0
     captured = capsys.readouterr()
     out = json.loads(captured.out)
