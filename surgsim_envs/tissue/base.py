@@ -53,6 +53,16 @@ def max_ratio(kc, masses):
     return best if nonzero else 0.0
 
 
+@njit(cache=True, nogil=True)
+def hold_fixed_nodes(positions, velocities, targets, nodes):
+    """``positions[nodes] = targets[nodes]`` and ``velocities[nodes] = 0`` ((N,3) arrays), in place."""
+    for k in range(nodes.shape[0]):
+        i = nodes[k]
+        for j in range(3):
+            positions[i, j] = targets[i, j]
+            velocities[i, j] = 0.0
+
+
 def von_mises(sig: np.ndarray) -> np.ndarray:
     """(T,) von Mises equivalent (Pa) of stresses (T,3,3)."""
     tr = np.trace(sig, axis1=1, axis2=2)
@@ -486,8 +496,7 @@ class TissueModel(abc.ABC):
         self._advance(dt, forces, stiffness)
         fx = self._fixed_idx
         if fx.size:
-            self.positions[fx] = self.fixed_targets[fx]
-            self.velocities[fx] = 0.0
+            hold_fixed_nodes(self.positions, self.velocities, self.fixed_targets, fx)
         self.time += dt
         self.steps += 1
         self.guard.check(self, dt)

@@ -101,7 +101,8 @@ class _Pardiso:
 @njit(cache=True, nogil=True)
 def gather_block(cols, slots, nodes, out):
     """``out`` (3m,3m) = W_AA: rows = dofs of ``nodes``, columns = their cached ``cols[slots]``
-    ((capacity, 3N, 3) compliance columns, m/N)."""
+    ((capacity, 3, 3N) compliance columns, m/N: ``cols[s, j]`` is the response to a unit force along
+    axis j on the node of slot s)."""
     m = nodes.shape[0]
     for b in range(m):
         s = slots[b]
@@ -109,7 +110,7 @@ def gather_block(cols, slots, nodes, out):
             r = 3 * nodes[a]
             for i in range(3):
                 for j in range(3):
-                    out[3 * a + i, 3 * b + j] = cols[s, r + i, j]
+                    out[3 * a + i, 3 * b + j] = cols[s, j, r + i]
 
 
 @njit(cache=True, nogil=True)
@@ -121,8 +122,9 @@ def add_response(cols, slots, g, out):
         g0, g1, g2 = g[b, 0], g[b, 1], g[b, 2]
         if g0 == 0.0 and g1 == 0.0 and g2 == 0.0:
             continue
+        c0, c1, c2 = cols[s, 0], cols[s, 1], cols[s, 2]     # each axis' column contiguous: the loop vectorises
         for d in range(n3):
-            out[d] += cols[s, d, 0] * g0 + cols[s, d, 1] * g1 + cols[s, d, 2] * g2
+            out[d] += c0[d] * g0 + c1[d] * g1 + c2[d] * g2
 
 
 @njit(cache=True, nogil=True)
@@ -147,6 +149,20 @@ def add_axis_response(cols, slots, g, out):
             continue
         for d in range(n3):
             out[d] += cols[s, d] * gb
+
+
+@njit(cache=True, nogil=True)
+def cached_slots(slot_of, last_used, nodes, tick, out):
+    """``out`` = the cache slots of ``nodes`` and their ``last_used`` set to ``tick``, if every node has
+    one; returns False (nothing written) when a column is missing."""
+    for k in range(nodes.shape[0]):
+        if slot_of[nodes[k]] < 0:
+            return False
+    for k in range(nodes.shape[0]):
+        s = slot_of[nodes[k]]
+        out[k] = s
+        last_used[s] = tick
+    return True
 
 
 def free_slots(slot_of: np.ndarray, node_in: np.ndarray, last_used: np.ndarray, nodes: np.ndarray,
@@ -224,7 +240,7 @@ class CondensedCompliance:
         # the whole budget at once: np.zeros maps zero pages lazily, so memory is touched only as columns
         # are written, and no growth copies the cached columns (a re-factorisation per episode, as a
         # task's per-episode lump makes, paid that copy again every episode)
-        self.cols = np.zeros((self.capacity, n3, 3))
+        self.cols = np.zeros((self.capacity, 3, n3))      # (slot, force axis, dof)
         self.slot_of = -np.ones(self.n_nodes, dtype=np.int64)
         self.node_in = -np.ones(self.capacity, dtype=np.int64)
         self.last_used = np.zeros(self.capacity, dtype=np.int64)
@@ -262,6 +278,9 @@ class CondensedCompliance:
         if len(nodes) > self.capacity:
             raise ConfigError(f"condensed compliance: {len(nodes)} loaded nodes exceed the column cache "
                               f"({self.capacity} nodes); raise cache_mb")
+        s = np.empty(len(nodes), dtype=np.int64)
+        if cached_slots(self.slot_of, self.last_used, nodes, self.tick, s):    # every column cached: no solve
+            return s
         missing = nodes[self.slot_of[nodes] < 0]
         if len(missing):
             use = free_slots(self.slot_of, self.node_in, self.last_used, nodes, len(missing))
@@ -269,7 +288,7 @@ class CondensedCompliance:
             for j in range(3):
                 rhs[3 * missing + j, 3 * np.arange(len(missing)) + j] = 1.0
             sol = self.solve(rhs)                          # (3N, 3m): response to unit forces
-            self.cols[use] = sol.reshape(3 * self.n_nodes, len(missing), 3).transpose(1, 0, 2)
+            self.cols[use] = sol.reshape(3 * self.n_nodes, len(missing), 3).transpose(1, 2, 0)
             self.node_in[use] = missing
             self.slot_of[missing] = use
             self.columns_computed += len(missing)

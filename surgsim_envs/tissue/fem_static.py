@@ -107,6 +107,24 @@ def hereditary_advance(u, decay, gamma, hist, u_step):
 
 
 @njit(cache=True, nogil=True)
+def held_targets(c, u_d, s, held, out):
+    """``out`` (h,) = c u_d + s on the ``held`` dofs: the Dirichlet values of the hereditary base
+    (equation (4)), in the numpy expression's operation order."""
+    for k in range(held.shape[0]):
+        d = held[k]
+        out[k] = c * u_d[d] + s[d]
+
+
+@njit(cache=True, nogil=True)
+def has_negative(values):
+    """Whether any entry of ``values`` (1-D) is below zero (``np.any(values < 0)``)."""
+    for i in range(values.shape[0]):
+        if values[i] < 0.0:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
 def commit_positions(u, rest, positions, velocities, dt):
     """positions = rest + u (u (3N,) m), velocities = finite difference over ``dt`` s, in place."""
     for i in range(rest.shape[0]):
@@ -362,9 +380,11 @@ class QuasiStaticFEMModel(TetFEMModel):
         u_d = self._base_displacement()
         if self._held_of is not comp:                 # the held dofs of this factorisation
             self._held_dofs, self._held_of = np.flatnonzero(~comp.free), comp
+            self._held_bytes, self._wd_held = self._held_dofs.tobytes(), np.empty(len(self._held_dofs))
         held = self._held_dofs
-        wd_held = c * u_d[held] + s[held]             # only the held dofs enter: the key costs O(held), not O(N)
-        key = (c, held.tobytes(), wd_held.tobytes())
+        wd_held = self._wd_held
+        held_targets(c, u_d, s, held, wd_held)       # only the held dofs enter: the key costs O(held), not O(N)
+        key = (c, self._held_bytes, wd_held.tobytes())
         if self._wd_key != key:
             wd = np.zeros(3 * self.n_nodes)
             wd[held] = wd_held
@@ -392,7 +412,7 @@ class QuasiStaticFEMModel(TetFEMModel):
         held = self.fixed
         if stiffness is not None:
             kc = np.asarray(stiffness, dtype=np.float64)
-            if kc.shape != (n,) or np.any(kc < 0):
+            if kc.shape != (n,) or has_negative(kc):
                 raise ConfigError(f"fem_static: stiffness must be (N,) >= 0 N/m, got shape {kc.shape}")
         else:
             kc = None
