@@ -113,3 +113,48 @@ def test_solved_once_the_same_slide_chatters(monkeypatch):
     flips, jump, nodes = _slide(monkeypatch, 1)
     assert flips > 50, flips
     assert jump > 0.25, jump
+
+
+@pytest.mark.parametrize("restore", [False, True])
+def test_a_re_solve_starts_from_the_friction_state_the_switch_names(monkeypatch, restore):
+    """RESTORE_FRICTION: each contact call after a step's first starts from the stick anchors from
+    before that first call (True) or from those it left (False, the default); a sliding probe makes
+    re-solved steps, so both branches are exercised."""
+    monkeypatch.setattr(quasi_static, "RESTORE_FRICTION", restore)
+    env = gym.make("SurgSim/Palpation-v0", disable_env_checker=True).unwrapped
+    contact = next(iter(env.sim.contacts.values()))
+    calls = []
+    compute = contact.compute_prepared
+
+    def recorded(*args):
+        before = contact.friction_state()
+        out = compute(*args)
+        calls.append((before, contact.friction_state()))
+        return out
+
+    monkeypatch.setattr(contact, "compute_prepared", recorded)
+    step = quasi_static.quasi_static_step
+    firsts = []
+
+    def logged(tissue, contact_model, *args):
+        firsts.append(len(calls) - 1)           # the step's first call was just made
+        return step(tissue, contact_model, *args)
+
+    import surgsim_envs.scene.simulation as simulation
+    monkeypatch.setattr(simulation, "quasi_static_step", logged)
+    env.reset(seed=5)
+    for i in range(50):
+        env.step(np.array([0.0 if i < 30 else 0.5, 0.0, 0.6, -1.0], dtype=np.float32))
+    env.close()
+    firsts.append(len(calls))
+    resolved = 0
+    for a, b in zip(firsts[:-1], firsts[1:]):
+        for k in range(a + 1, b):                # the step's later calls
+            expect = calls[a][0] if restore else calls[k - 1][1]
+            assert np.array_equal(calls[k][0][0], expect[0]) and np.array_equal(calls[k][0][1], expect[1])
+            resolved += 1
+    assert resolved > 5
+    state = contact.friction_state()              # a copy: the round trip restores in place
+    contact.reset()
+    contact.restore_friction_state(state)
+    assert np.array_equal(contact.friction_state()[1], state[1])

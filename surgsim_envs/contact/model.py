@@ -679,6 +679,17 @@ class ContactModel:
                     self.report.contacts, self.report.slipping, self.report.penetration):
             arr[...] = 0
 
+    def friction_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """A copy of the stick anchors and contact states (what a contact call reads and updates), for
+        :meth:`restore_friction_state`: a quasi-static step solved again starts from the same friction
+        state as its first solve (``scene/step/quasi_static.py``)."""
+        return self._anchor_local.copy(), self._anchor_on.copy()
+
+    def restore_friction_state(self, state: tuple[np.ndarray, np.ndarray]) -> None:
+        """Back to the anchors and contact states of :meth:`friction_state`, in place."""
+        np.copyto(self._anchor_local, state[0])
+        np.copyto(self._anchor_on, state[1])
+
     @property
     def in_contact(self) -> np.ndarray:
         """(C, G) bool: candidate node c is in contact with geom g after the last call."""

@@ -40,6 +40,7 @@ from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.builder import Scene
 from surgsim_envs.scene.step.buffers import StepBuffers
 from surgsim_envs.scene.step.compiled import compiled_substeps_for, key_of
+from surgsim_envs.scene.step import quasi_static
 from surgsim_envs.scene.step.quasi_static import quasi_static_step
 from surgsim_envs.scene.step.kernels import add_wrench, advance_geoms, gather_geoms, rate_limit, write_rows, zero_rows
 from surgsim_envs.scene.config import validate_step
@@ -401,9 +402,12 @@ class Simulation:
                 if j:
                     advance_geoms(gpos, gpos0, gvel, j * h)
                 for tissue, contact in pairs:
+                    restore = tissue.resolves_contact_set and quasi_static.RESTORE_FRICTION
+                    friction = contact.friction_state() if restore else None
                     res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
                     if tissue.resolves_contact_set:
-                        self.contact_set_resolves += quasi_static_step(tissue, contact, h, res, gpos, gmat, gvel, tcom)
+                        self.contact_set_resolves += quasi_static_step(tissue, contact, h, res, gpos, gmat, gvel, tcom,
+                                                                       friction)
                     else:
                         tissue.step_prevalidated(h, res.forces, res.stiffness)
                     # CONTRACT (tissue contract v2): an implicit integrator integrates forces + an increment

@@ -17,16 +17,28 @@ import numpy as np
 
 from surgsim_envs.contact.contact_set import MAX_CONTACT_SET_SOLVES
 
+#: whether each solve after the first computes the contact from the friction state (stick anchors)
+#: before the step's first contact call (True), or from the anchors that call left (False, the
+#: default). In Palpation-v0's pressed slide at 1 ms steps the drag reads 2.0x (False) and 1.2x
+#: (True) its value at 0.25 ms steps, but with True the contact set settles within
+#: MAX_CONTACT_SET_SOLVES less often (10x the extra solves): docs/contact.md, "Quasi-static steps";
+#: ``python scripts/palpation_slide_dt.py``.
+RESTORE_FRICTION = False
 
-def quasi_static_step(tissue, contact, dt: float, result, gpos, gmat, gvel, tcom) -> int:
+
+def quasi_static_step(tissue, contact, dt: float, result, gpos, gmat, gvel, tcom, friction=None) -> int:
     """Step ``tissue`` by ``dt`` under ``result`` (``contact``'s last compute, at the tissue's
     positions) and solve it again while the contact set moves; returns the number of extra solves.
-    The velocities are the finite difference over the step, from where it started."""
+    ``friction``: ``contact.friction_state()`` from before that compute; each solve again computes the
+    contact from it (None: from the anchors the last compute left). The velocities are the finite
+    difference over the step, from where it started."""
     start = tissue.step_state()
     tissue.step_prevalidated(dt, result.forces, result.stiffness)
     extra = 0
     while extra + 1 < MAX_CONTACT_SET_SOLVES and contact.contact_set_changes(tissue.positions, gpos, gmat):
         tissue.restore_step_state(start, tissue.positions.copy())
+        if friction is not None:
+            contact.restore_friction_state(friction)
         result = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
         tissue.step_prevalidated(dt, result.forces, result.stiffness)
         extra += 1

@@ -1,0 +1,77 @@
+"""How a probe sliding while pressed reads against the physics step, in Palpation-v0's default
+(``fem_static``, liver friction): pressed 0.6 for 60 control steps from seed 5, then sliding at half
+speed in x for 140. For each physics step (``--dts``, s) and each way a re-solved quasi-static step
+treats friction (``scene/step/quasi_static.py``, ``RESTORE_FRICTION``: the anchors the step's first
+contact call left, or those from before it), prints the normal force at the end of the straight
+press, and over the slide: the extra solves, the contact
+nodes that flipped out and back in, the mean normal force on the tissue (z) and the mean drag (x),
+N, and the 99th percentile of the normal force's change from one physics step to the next.
+
+    python scripts/palpation_slide_dt.py [--dts 1e-3,5e-4,2.5e-4] [--solves 4]
+
+A converged contact gives the same forces as the step shrinks; the spread over ``--dts`` is the
+time-discretisation error of the task's step (1 ms).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+import gymnasium as gym
+import numpy as np
+
+import surgsim_envs  # noqa: F401  (registers the tasks)
+import surgsim_envs.scene.simulation as simulation
+import surgsim_envs.scene.step.quasi_static as quasi_static
+
+PRESS, SLIDE = 60, 140
+
+
+def slide(dt: float, restore: bool, solves: int) -> dict:
+    """One pressed slide at physics step ``dt`` (s); per-physics-step forces after the last solve."""
+    sets, fz, fx = [], [], []
+    step = quasi_static.quasi_static_step
+
+    def logged(tissue, contact, *args):
+        extra = step(tissue, contact, *args)
+        sets.append(contact.result.stiffness > 0)
+        fz.append(-float(tissue.integrated_external_forces[:, 2].sum()))
+        fx.append(-float(tissue.integrated_external_forces[:, 0].sum()))
+        return extra
+
+    saved = quasi_static.RESTORE_FRICTION, quasi_static.MAX_CONTACT_SET_SOLVES, simulation.quasi_static_step
+    quasi_static.RESTORE_FRICTION, quasi_static.MAX_CONTACT_SET_SOLVES = restore, solves
+    simulation.quasi_static_step = logged
+    try:
+        env = gym.make("SurgSim/Palpation-v0", dt=dt, disable_env_checker=True).unwrapped
+        env.reset(seed=5)
+        for i in range(PRESS + SLIDE):
+            env.step(np.array([0.0 if i < PRESS else 0.5, 0.0, 0.6, -1.0], dtype=np.float32))
+        start = PRESS * env.sim.substeps
+        extra = env.sim.contact_set_resolves
+        env.close()
+    finally:
+        quasi_static.RESTORE_FRICTION, quasi_static.MAX_CONTACT_SET_SOLVES, simulation.quasi_static_step = saved
+    h, z, x = np.array(sets)[start:], np.array(fz)[start:], np.array(fx)[start:]
+    return {"pressed": float(fz[start - 1]), "extra": extra, "flips": int((h[:-2] & ~h[1:-1] & h[2:]).sum()), "normal": float(z.mean()),
+            "drag": float(x.mean()), "p99": float(np.percentile(np.abs(np.diff(z)), 99))}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--dts", default="1e-3,5e-4,2.5e-4", help="comma-separated physics steps, s")
+    ap.add_argument("--solves", type=int, default=quasi_static.MAX_CONTACT_SET_SOLVES,
+                    help="solves at most per physics step")
+    a = ap.parse_args()
+    for dt in (float(v) for v in a.dts.split(",")):
+        for restore in (False, True):
+            r = slide(dt, restore, a.solves)
+            print(f"dt {dt * 1e3:g} ms  friction from {'before' if restore else 'after '} the first call:  extra solves "
+                  f"{r['extra']:5d}  pressed {r['pressed']:.4f} N  flips {r['flips']:3d}  normal {r['normal']:.4f} N  drag {r['drag']:.4f} N  "
+                  f"p99 step change {r['p99']:.2e} N", flush=True)
+    print(f"load {os.getloadavg()[0]:.1f}")
+
+
+if __name__ == "__main__":
+    main()
