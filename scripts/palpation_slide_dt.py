@@ -5,7 +5,9 @@ treats friction (``scene/step/quasi_static.py``, ``RESTORE_FRICTION``: the ancho
 contact call left, or those from before it), prints the normal force at the end of the straight
 press, and over the slide: the extra solves, the contact
 nodes that flipped out and back in, the mean normal force on the tissue (z) and the mean drag (x),
-N, and the 99th percentile of the normal force's change from one physics step to the next.
+N, the 99th percentile of the normal force's change from one physics step to the next, and the
+median over the slide (after its first 10 control steps) of the probe's tangential reading over mu
+times its normal reading (Coulomb's bound on the forces the tissue integrated: at most 1).
 
     python scripts/palpation_slide_dt.py [--dts 1e-3,5e-4,2.5e-4] [--solves 4]
 
@@ -45,16 +47,21 @@ def slide(dt: float, restore: bool, solves: int) -> dict:
     simulation.quasi_static_step = logged
     try:
         env = gym.make("SurgSim/Palpation-v0", dt=dt, disable_env_checker=True).unwrapped
+        contact = next(iter(env.sim.contacts.values()))
+        mu = float(np.max(contact.tool_friction))
         env.reset(seed=5)
+        coulomb = []
         for i in range(PRESS + SLIDE):
             env.step(np.array([0.0 if i < PRESS else 0.5, 0.0, 0.6, -1.0], dtype=np.float32))
+            if i >= PRESS + 10:                  # sliding: the tool's readings of the integrated force
+                coulomb.append(float(contact.report.tangential_force[0]) / (mu * float(contact.report.normal_force[0])))
         start = PRESS * env.sim.substeps
         extra = env.sim.contact_set_resolves
         env.close()
     finally:
         quasi_static.RESTORE_FRICTION, quasi_static.MAX_CONTACT_SET_SOLVES, simulation.quasi_static_step = saved
     h, z, x = np.array(sets)[start:], np.array(fz)[start:], np.array(fx)[start:]
-    return {"pressed": float(fz[start - 1]), "extra": extra, "flips": int((h[:-2] & ~h[1:-1] & h[2:]).sum()), "normal": float(z.mean()),
+    return {"pressed": float(fz[start - 1]), "coulomb": float(np.median(coulomb)), "extra": extra, "flips": int((h[:-2] & ~h[1:-1] & h[2:]).sum()), "normal": float(z.mean()),
             "drag": float(x.mean()), "p99": float(np.percentile(np.abs(np.diff(z)), 99))}
 
 
@@ -69,7 +76,7 @@ def main() -> None:
             r = slide(dt, restore, a.solves)
             print(f"dt {dt * 1e3:g} ms  friction from {'before' if restore else 'after '} the first call:  extra solves "
                   f"{r['extra']:5d}  pressed {r['pressed']:.4f} N  flips {r['flips']:3d}  normal {r['normal']:.4f} N  drag {r['drag']:.4f} N  "
-                  f"p99 step change {r['p99']:.2e} N", flush=True)
+                  f"p99 step change {r['p99']:.2e} N  tangential / (mu normal) {r['coulomb']:.2f}", flush=True)
     print(f"load {os.getloadavg()[0]:.1f}")
 
 
