@@ -9,10 +9,12 @@ N, the 99th percentile of the normal force's change from one physics step to the
 median over the slide (after its first 10 control steps) of the probe's tangential reading over mu
 times its normal reading (Coulomb's bound on the forces the tissue integrated: at most 1).
 
-    python scripts/palpation_slide_dt.py [--dts 1e-3,5e-4,2.5e-4] [--solves 4]
+    python scripts/palpation_slide_dt.py [--dts 1e-3,5e-4,2.5e-4] [--solves 4] [--friction-cap penalty]
 
-A converged contact gives the same forces as the step shrinks; the spread over ``--dts`` is the
-time-discretisation error of the task's step (1 ms).
+``--friction-cap integrated`` caps a sliding contact's friction with the normal force the pair
+integrated over the last step instead of the penalty where the step starts
+(``ContactModel.set_friction_cap``). A converged contact gives the same forces as the step
+shrinks; the spread over ``--dts`` is the time-discretisation error of the task's step (1 ms).
 """
 
 from __future__ import annotations
@@ -26,11 +28,12 @@ import numpy as np
 import surgsim_envs  # noqa: F401  (registers the tasks)
 import surgsim_envs.scene.simulation as simulation
 import surgsim_envs.scene.step.quasi_static as quasi_static
+from surgsim_envs.contact.model import FRICTION_CAPS
 
 PRESS, SLIDE = 60, 140
 
 
-def slide(dt: float, restore: bool, solves: int) -> dict:
+def slide(dt: float, restore: bool, solves: int, cap: str = "penalty") -> dict:
     """One pressed slide at physics step ``dt`` (s); per-physics-step forces after the last solve."""
     sets, fz, fx = [], [], []
     step = quasi_static.quasi_static_step
@@ -48,6 +51,7 @@ def slide(dt: float, restore: bool, solves: int) -> dict:
     try:
         env = gym.make("SurgSim/Palpation-v0", dt=dt, disable_env_checker=True).unwrapped
         contact = next(iter(env.sim.contacts.values()))
+        contact.set_friction_cap(cap)
         mu = float(np.max(contact.tool_friction))
         env.reset(seed=5)
         coulomb = []
@@ -70,10 +74,12 @@ def main() -> None:
     ap.add_argument("--dts", default="1e-3,5e-4,2.5e-4", help="comma-separated physics steps, s")
     ap.add_argument("--solves", type=int, default=quasi_static.MAX_CONTACT_SET_SOLVES,
                     help="solves at most per physics step")
+    ap.add_argument("--friction-cap", default="penalty", choices=FRICTION_CAPS,
+                    help="ContactModel.set_friction_cap: what caps a sliding contact's friction")
     a = ap.parse_args()
     for dt in (float(v) for v in a.dts.split(",")):
         for restore in (False, True):
-            r = slide(dt, restore, a.solves)
+            r = slide(dt, restore, a.solves, a.friction_cap)
             print(f"dt {dt * 1e3:g} ms  friction from {'before' if restore else 'after '} the first call:  extra solves "
                   f"{r['extra']:5d}  pressed {r['pressed']:.4f} N  flips {r['flips']:3d}  normal {r['normal']:.4f} N  drag {r['drag']:.4f} N  "
                   f"p99 step change {r['p99']:.2e} N  tangential / (mu normal) {r['coulomb']:.2f}", flush=True)

@@ -18,6 +18,7 @@ import pytest
 import surgsim_envs  # noqa: F401  (registers the tasks)
 import surgsim_envs.scene.step.quasi_static as quasi_static
 from surgsim_envs.contact import SPHERE, ContactModel, ContactParams
+from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry import box_volume
 from surgsim_envs.tissue import registry
 
@@ -158,3 +159,36 @@ def test_a_re_solve_starts_from_the_friction_state_the_switch_names(monkeypatch,
     contact.reset()
     contact.restore_friction_state(state)
     assert np.array_equal(contact.friction_state()[1], state[1])
+
+
+def _slide_coulomb(cap: str) -> float:
+    """Palpation-v0's default, seed 5, pressed 0.6 for 60 control steps then sliding at half speed for
+    140, with the contact's friction ``cap``: the median over the slide after its first 10 of the
+    probe's tangential reading over mu times its normal reading (the forces the tissue integrated)."""
+    env = gym.make("SurgSim/Palpation-v0", disable_env_checker=True).unwrapped
+    contact = next(iter(env.sim.contacts.values()))
+    contact.set_friction_cap(cap)
+    mu = float(np.max(contact.tool_friction))
+    env.reset(seed=5)
+    ratios = []
+    for i in range(200):
+        env.step(np.array([0.0 if i < 60 else 0.5, 0.0, 0.6, -1.0], dtype=np.float32))
+        if i >= 70:
+            ratios.append(float(contact.report.tangential_force[0]) / (mu * float(contact.report.normal_force[0])))
+    env.close()
+    return float(np.median(ratios))
+
+
+def test_the_integrated_friction_cap_keeps_a_sliding_probe_within_coulomb():
+    """A quasi-static step computes its contact where it starts, after the probe moved on: capped by
+    that penalty (the default), the friction the tissue integrates exceeds mu times its normal force
+    (about 1.35x); capped by the normal force each pair integrated over the last step, it stays
+    within Coulomb's bound."""
+    assert _slide_coulomb("integrated") <= 1.0
+    assert _slide_coulomb("penalty") > 1.15
+
+
+def test_a_friction_cap_outside_the_choices_is_refused_by_name():
+    cm = ContactModel(3, [0, 1, 2], [0.3], ContactParams(stiffness=100.0, damping=0.0))
+    with pytest.raises(ConfigError, match="integrated"):
+        cm.set_friction_cap("lagged")

@@ -32,8 +32,9 @@ def integrated_readings_kernel(cand, s_nodes, s_w, rows, a0, anchor_on, pair, to
     ``integrated - forces`` of its nodes, and recompute the tangential magnitudes (``geom_ft``,
     ``tool_ft``). ``rows[a0:a0 + rows[1]]`` are the points in contact after the last contact call
     (candidate nodes ``cand`` first, then the surface samples on ``s_nodes`` with weights ``s_w``);
-    ``pair[c, g]`` holds the pair's stiffness and unit normal; ``tool[g]`` the geom's tool. Returns
-    whether any reading changed."""
+    ``pair[c, g]`` holds the pair's stiffness, unit normal and penalty normal force; the normal force
+    the pair integrated is written to ``pair[c, g, 5]`` (the next contact call caps the pair's
+    friction with it); ``tool[g]`` the geom's tool. Returns whether any reading changed."""
     C = cand.shape[0]
     G = anchor_on.shape[1]
     changed = False
@@ -64,6 +65,8 @@ def integrated_readings_kernel(cand, s_nodes, s_w, rows, a0, anchor_on, pair, to
                 continue
             changed = True
             dn = sx * pair[c, g, 1] + sy * pair[c, g, 2] + sz * pair[c, g, 3]
+            if pair[c, g, 5] != -2.0:                         # CAP_PENALTY (contact/model.py): not kept
+                pair[c, g, 5] = max(0.0, pair[c, g, 4] + dn)    # the normal force the pair integrated
             tx = sx - dn * pair[c, g, 1]
             ty = sy - dn * pair[c, g, 2]
             tz = sz - dn * pair[c, g, 3]

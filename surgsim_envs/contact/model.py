@@ -141,6 +141,10 @@ class ContactResult:
 
 # Status codes returned by the kernel (negative = bad input at a geom index).
 _OK, _BAD_KIND, _BAD_TOOL, _BAD_SIZE = 0, 1, 2, 3
+#: what may cap a sliding contact's friction force (:meth:`ContactModel.set_friction_cap`)
+FRICTION_CAPS = ("penalty", "integrated")
+#: ``pair[..., 5]`` of a model whose friction is capped by the penalty: never written, never read
+CAP_PENALTY = -2.0
 
 
 @njit(cache=True, inline="always")
@@ -206,9 +210,12 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
     set, so that the next call zeroes only those: every other touched row and every other contact
     state is already zero (NO_CONTACT), so the outputs are those of zeroing every touched row and
     writing every rejected point's states (the arrays start zero; ``ContactModel.reset`` zeroes them).
-    ``pair`` (C + S, G, 4): for each point and geom in contact (``anchor_on[c, g] != 0``) the pair's
-    contact stiffness (N/m) and unit normal, read by
-    :func:`~surgsim_envs.contact.integrated_readings.integrated_readings_kernel` (other entries stale)."""
+    ``pair`` (C + S, G, 6): for each point and geom in contact (``anchor_on[c, g] != 0``) the pair's
+    contact stiffness (N/m), unit normal and normal force (N), read by
+    :func:`~surgsim_envs.contact.integrated_readings.integrated_readings_kernel` (other entries
+    stale), and the normal force the pair integrated over the last step (N; -1: none yet), which that
+    kernel writes and which caps the pair's friction here (:data:`CAP_PENALTY`: the model caps
+    friction by the penalty; nothing is written or read)."""
     G = kind.shape[0]
     T = tool_force.shape[0]
     # validate geoms and precompute bounding radii
@@ -344,7 +351,16 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
                 else:
                     f_n -= c_n * vn
             t = tool[g]
-            slip = stick_slip(x0, x1, x2, nrm, f_n, mu[t], mu_s[t], k_t, gpos, gmat, g, anchor_local, c,
+            # friction cap: mu times the normal force, but not more than the pair integrated over the
+            # last step (pair[..., 5], kept by integrated_readings_kernel for steps that integrate
+            # the penalty linearised): a quasi-static step starts where the tool has moved on, so
+            # its penalty here carries the tool's travel, which its solve relaxes away
+            if anchor_on[c, g] == 0 and pair[c, g, 5] != CAP_PENALTY:
+                pair[c, g, 5] = -1.0          # a new contact: nothing integrated yet
+            f_cap = f_n
+            if pair[c, g, 5] >= 0.0 and pair[c, g, 5] < f_n:
+                f_cap = pair[c, g, 5]
+            slip = stick_slip(x0, x1, x2, nrm, f_cap, mu[t], mu_s[t], k_t, gpos, gmat, g, anchor_local, c,
                               anchor_on[c, g], ft)
             if not hit:       # listed before its rows and state are written (counts kept current)
                 hit = True
@@ -372,6 +388,7 @@ def _contact_kernel(positions, velocities, cand, s_nodes, s_w, touched, kind, to
             pair[c, g, 1] = nrm[0]
             pair[c, g, 2] = nrm[1]
             pair[c, g, 3] = nrm[2]
+            pair[c, g, 4] = f_n
             if c < C:
                 node_tool_k[i, t] += kg
             else:
@@ -559,6 +576,8 @@ class ContactModel:
                                   "(None = the same as tool_friction)")
         #: (T,) static friction coefficient per tool (mu_s >= tool_friction; equal by default)
         self.tool_static_friction = mu_s
+        #: what caps a sliding contact's friction (:data:`FRICTION_CAPS`, :meth:`set_friction_cap`)
+        self.friction_cap = "penalty"
         self.params = params if params is not None else ContactParams()
         if not isinstance(self.params, ContactParams):
             raise ConfigError(f"params must be a ContactParams, got {type(self.params).__name__}")
@@ -660,7 +679,9 @@ class ContactModel:
         self.prepared_version += 1
         self._anchor_local = np.zeros((C, G, 3))
         self._anchor_on = np.zeros((C, G), dtype=np.uint8)
-        self._pair = np.zeros((C, G, 4))      # per point and geom in contact: stiffness, normal (kernel)
+        # per point and geom in contact: stiffness, normal, normal force (kernel), integrated normal force
+        self._pair = np.zeros((C, G, 6))
+        self._pair[:, :, 5] = CAP_PENALTY if self.friction_cap == "penalty" else -1.0
         self.result.geom_normal_force = np.zeros(G)
         self.result.geom_tangential_force = np.zeros(G)
         self._geom_ftv = np.zeros((G, 3))
@@ -844,6 +865,19 @@ class ContactModel:
                                    self._pair, self._geom_tool, integrated_forces, r.forces, r.stiffness,
                                    r.geom_normal_force, r.geom_tangential_force, self._geom_ftv, rep.normal_force,
                                    rep.tangential_force, self._tool_ftv)
+
+    def set_friction_cap(self, cap: str) -> None:
+        """What caps a sliding contact's friction force (:data:`FRICTION_CAPS`): ``"penalty"`` (the
+        default) mu times the normal penalty where the contact is computed; ``"integrated"`` no more
+        than mu times the normal force the pair integrated over the last step, for tissue steps that
+        integrate the penalty linearised (quasi-static, implicit). A quasi-static step computes its
+        contact where it starts, after the tool moved on, so there the penalty carries the tool's
+        travel over the step, which the solve relaxes away: with ``"penalty"`` the integrated
+        friction then exceeds Coulomb's bound (docs/contact.md, "Quasi-static steps"). Explicit
+        steps integrate the penalty itself: the two caps are the same for them."""
+        self.friction_cap = validate.choice(cap, "ContactModel.set_friction_cap: cap", FRICTION_CAPS,
+                                            fix="'penalty' (default) or 'integrated'")
+        self._pair[:, :, 5] = CAP_PENALTY if self.friction_cap == "penalty" else -1.0
 
     def attribute_increment(self, integrated_forces) -> None:
         """After the tissue step: add to ``result.tool_force`` / ``tool_torque`` the reaction of
