@@ -12,8 +12,8 @@ times its normal reading (Coulomb's bound on the forces the tissue integrated: a
     python scripts/palpation_slide_dt.py [--dts 1e-3,5e-4,2.5e-4] [--solves 4] [--friction-cap penalty]
 
 ``--friction-cap integrated`` caps a sliding contact's friction with the normal force the pair
-integrated over the last step instead of the penalty where the step starts
-(``ContactModel.set_friction_cap``). A converged contact gives the same forces as the step
+integrated over the last step instead of the penalty where the step starts, ``solved`` with the
+step's own (``ContactModel.set_friction_cap``). A converged contact gives the same forces as the step
 shrinks; the spread over ``--dts`` is the time-discretisation error of the task's step (1 ms).
 """
 

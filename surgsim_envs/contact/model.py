@@ -142,7 +142,7 @@ class ContactResult:
 # Status codes returned by the kernel (negative = bad input at a geom index).
 _OK, _BAD_KIND, _BAD_TOOL, _BAD_SIZE = 0, 1, 2, 3
 #: what may cap a sliding contact's friction force (:meth:`ContactModel.set_friction_cap`)
-FRICTION_CAPS = ("penalty", "integrated")
+FRICTION_CAPS = ("penalty", "integrated", "solved")
 #: ``pair[..., 5]`` of a model whose friction is capped by the penalty: never written, never read
 CAP_PENALTY = -2.0
 
@@ -873,11 +873,37 @@ class ContactModel:
         integrate the penalty linearised (quasi-static, implicit). A quasi-static step computes its
         contact where it starts, after the tool moved on, so there the penalty carries the tool's
         travel over the step, which the solve relaxes away: with ``"penalty"`` the integrated
-        friction then exceeds Coulomb's bound (docs/contact.md, "Quasi-static steps"). Explicit
-        steps integrate the penalty itself: the two caps are the same for them."""
+        friction then exceeds Coulomb's bound (docs/contact.md, "Quasi-static steps"). ``"solved"``:
+        as ``"integrated"``, and a quasi-static step is solved again (up to
+        ``MAX_CONTACT_SET_SOLVES``) until every pair's integrated normal force changes by under
+        ``FRICTION_CAP_TOLERANCE`` of the largest, so that the cap is the step's own normal force.
+        Explicit steps integrate the penalty itself: the caps are the same for them."""
         self.friction_cap = validate.choice(cap, "ContactModel.set_friction_cap: cap", FRICTION_CAPS,
-                                            fix="'penalty' (default) or 'integrated'")
+                                            fix="'penalty' (default), 'integrated' or 'solved'")
         self._pair[:, :, 5] = CAP_PENALTY if self.friction_cap == "penalty" else -1.0
+
+    @property
+    def solves_friction_cap(self) -> bool:
+        """Whether a quasi-static step is solved again until each pair's friction cap is its own
+        integrated normal force (``set_friction_cap("solved")``; scene/step/quasi_static.py)."""
+        return self.friction_cap == "solved"
+
+    def update_pair_normals(self, integrated_forces) -> float:
+        """Keep each contact pair's integrated normal force after a solve that integrated
+        ``integrated_forces`` (the tissue's ``integrated_external_forces``), for the next contact
+        call's friction cap, and return the largest change of one pair's value over the largest
+        value. Nothing else (forces, readings, tool reactions) changes."""
+        before = self._pair[:, :, 5].copy()
+        G, T = len(self._radius), len(self.tool_friction)
+        integrated_readings_kernel(self.candidate_nodes, self.sample_nodes, self.sample_weights, self._rows,
+                                   _row_lists(len(self.candidate_nodes), len(self.sample_nodes))[1], self._anchor_on,
+                                   self._pair, self._geom_tool, integrated_forces, self.result.forces,
+                                   self.result.stiffness, np.zeros(G), np.zeros(G), np.zeros((G, 3)), np.zeros(T),
+                                   np.zeros(T), np.zeros((T, 3)))     # the sums into scratch: readings unchanged
+        on = self._anchor_on != 0
+        after = np.maximum(self._pair[:, :, 5][on], 0.0)       # -1: none yet
+        top = float(after.max()) if after.size else 0.0
+        return float(np.max(np.abs(after - np.maximum(before[on], 0.0)))) / top if top > 0.0 else 0.0
 
     def attribute_increment(self, integrated_forces) -> None:
         """After the tissue step: add to ``result.tool_force`` / ``tool_torque`` the reaction of

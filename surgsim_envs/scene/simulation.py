@@ -402,7 +402,8 @@ class Simulation:
                 if j:
                     advance_geoms(gpos, gpos0, gvel, j * h)
                 for tissue, contact in pairs:
-                    restore = tissue.resolves_contact_set and quasi_static.RESTORE_FRICTION
+                    restore = tissue.resolves_contact_set and (quasi_static.RESTORE_FRICTION
+                                                               or contact.solves_friction_cap)
                     friction = contact.friction_state() if restore else None
                     res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
                     if tissue.resolves_contact_set:

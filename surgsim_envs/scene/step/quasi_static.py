@@ -24,6 +24,9 @@ from surgsim_envs.contact.contact_set import MAX_CONTACT_SET_SOLVES
 #: MAX_CONTACT_SET_SOLVES less often (10x the extra solves): docs/contact.md, "Quasi-static steps";
 #: ``python scripts/palpation_slide_dt.py``.
 RESTORE_FRICTION = False
+#: ``ContactModel.set_friction_cap("solved")``: a step is solved again while a contact pair's
+#: integrated normal force (its friction cap) moves by more than this share of the largest
+FRICTION_CAP_TOLERANCE = 0.01
 
 
 def quasi_static_step(tissue, contact, dt: float, result, gpos, gmat, gvel, tcom, friction=None) -> int:
@@ -35,7 +38,11 @@ def quasi_static_step(tissue, contact, dt: float, result, gpos, gmat, gvel, tcom
     start = tissue.step_state()
     tissue.step_prevalidated(dt, result.forces, result.stiffness)
     extra = 0
-    while extra + 1 < MAX_CONTACT_SET_SOLVES and contact.contact_set_changes(tissue.positions, gpos, gmat):
+    while extra + 1 < MAX_CONTACT_SET_SOLVES:
+        capped = (contact.solves_friction_cap
+                  and contact.update_pair_normals(tissue.integrated_external_forces) > FRICTION_CAP_TOLERANCE)
+        if not capped and not contact.contact_set_changes(tissue.positions, gpos, gmat):
+            break
         tissue.restore_step_state(start, tissue.positions.copy())
         if friction is not None:
             contact.restore_friction_state(friction)
