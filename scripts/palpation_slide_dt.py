@@ -10,8 +10,11 @@ median over the slide (after its first 10 control steps) of the probe's tangenti
 times its normal reading (Coulomb's bound on the forces the tissue integrated: at most 1).
 
     python scripts/palpation_slide_dt.py [--dts 1e-3,5e-4,2.5e-4] [--solves 4] [--friction-cap penalty]
+        [--law linearised|plane] [--restore both|after|before]
 
-``--friction-cap integrated`` caps a sliding contact's friction with the normal force the pair
+``--law plane`` solves each step's contact with the step (``ContactModel.set_contact_law``: the
+penalty and Coulomb friction on each pair's tangent plane; the friction snapshot is then always taken,
+so ``--restore`` does not matter). ``--friction-cap integrated`` caps a sliding contact's friction with the normal force the pair
 integrated over the last step instead of the penalty where the step starts, ``solved`` with the
 step's own (``ContactModel.set_friction_cap``). A converged contact gives the same forces as the step
 shrinks; the spread over ``--dts`` is the time-discretisation error of the task's step (1 ms).
@@ -28,12 +31,12 @@ import numpy as np
 import surgsim_envs  # noqa: F401  (registers the tasks)
 import surgsim_envs.scene.simulation as simulation
 import surgsim_envs.scene.step.quasi_static as quasi_static
-from surgsim_envs.contact.model import FRICTION_CAPS
+from surgsim_envs.contact.model import CONTACT_LAWS, FRICTION_CAPS
 
 PRESS, SLIDE = 60, 140
 
 
-def slide(dt: float, restore: bool, solves: int, cap: str = "penalty") -> dict:
+def slide(dt: float, restore: bool, solves: int, cap: str = "penalty", law: str = "linearised") -> dict:
     """One pressed slide at physics step ``dt`` (s); per-physics-step forces after the last solve."""
     sets, fz, fx = [], [], []
     step = quasi_static.quasi_static_step
@@ -52,6 +55,7 @@ def slide(dt: float, restore: bool, solves: int, cap: str = "penalty") -> dict:
         env = gym.make("SurgSim/Palpation-v0", dt=dt, disable_env_checker=True).unwrapped
         contact = next(iter(env.sim.contacts.values()))
         contact.set_friction_cap(cap)
+        contact.set_contact_law(law)
         mu = float(np.max(contact.tool_friction))
         env.reset(seed=5)
         coulomb = []
@@ -76,10 +80,14 @@ def main() -> None:
                     help="solves at most per physics step")
     ap.add_argument("--friction-cap", default="penalty", choices=FRICTION_CAPS,
                     help="ContactModel.set_friction_cap: what caps a sliding contact's friction")
+    ap.add_argument("--law", default="linearised", choices=CONTACT_LAWS,
+                    help="ContactModel.set_contact_law: how the quasi-static step takes the contact")
+    ap.add_argument("--restore", default="both", choices=("both", "after", "before"),
+                    help="which friction state each re-solve starts from (both: one run each)")
     a = ap.parse_args()
     for dt in (float(v) for v in a.dts.split(",")):
-        for restore in (False, True):
-            r = slide(dt, restore, a.solves, a.friction_cap)
+        for restore in {"both": (False, True), "after": (False,), "before": (True,)}[a.restore]:
+            r = slide(dt, restore, a.solves, a.friction_cap, a.law)
             print(f"dt {dt * 1e3:g} ms  friction from {'before' if restore else 'after '} the first call:  extra solves "
                   f"{r['extra']:5d}  pressed {r['pressed']:.4f} N  flips {r['flips']:3d}  normal {r['normal']:.4f} N  drag {r['drag']:.4f} N  "
                   f"p99 step change {r['p99']:.2e} N  tangential / (mu normal) {r['coulomb']:.2f}", flush=True)

@@ -46,6 +46,7 @@ from surgsim_envs.contact.contact_set import contact_set_changes
 from surgsim_envs.contact.friction import stick_slip
 from surgsim_envs.contact.integrated_readings import integrated_readings_kernel
 from surgsim_envs.contact.report import ContactReport
+from surgsim_envs.contact.plane_law import ROW, PlaneContactLaw, build_plane_law
 from surgsim_envs.contact.shapes import (BOX, CAPSULE, CYLINDER, N_KINDS, ROUNDED_BOX, bounding_radius, local_outside,
                                          world_sdf)
 from surgsim_envs.contact.surface_points import check_surface, contact_point, subdivisions_for_spacing, surface_samples
@@ -145,6 +146,8 @@ _OK, _BAD_KIND, _BAD_TOOL, _BAD_SIZE = 0, 1, 2, 3
 FRICTION_CAPS = ("penalty", "integrated", "solved")
 #: ``pair[..., 5]`` of a model whose friction is capped by the penalty: never written, never read
 CAP_PENALTY = -2.0
+#: how a quasi-static tissue step takes the contact (:meth:`ContactModel.set_contact_law`)
+CONTACT_LAWS = ("linearised", "plane")
 
 
 @njit(cache=True, inline="always")
@@ -578,6 +581,10 @@ class ContactModel:
         self.tool_static_friction = mu_s
         #: what caps a sliding contact's friction (:data:`FRICTION_CAPS`, :meth:`set_friction_cap`)
         self.friction_cap = "penalty"
+        #: how a quasi-static tissue step takes the contact (:data:`CONTACT_LAWS`, :meth:`set_contact_law`)
+        self.contact_law = "linearised"
+        self._law = PlaneContactLaw(np.zeros(0, dtype=np.int64), np.zeros((0, ROW)))
+        self._gpos_last = self._gmat_last = None      # the geom poses of the last compute
         self.params = params if params is not None else ContactParams()
         if not isinstance(self.params, ContactParams):
             raise ConfigError(f"params must be a ContactParams, got {type(self.params).__name__}")
@@ -776,6 +783,7 @@ class ContactModel:
         if err[0] != _OK:
             self._raise_kernel_error(kind, tool, size)
         self._geom_tool = tool
+        self._gpos_last, self._gmat_last = gpos, gmat
         np.copyto(self._com, com)
         np.copyto(self._pos, pos)
         return r
@@ -881,6 +889,51 @@ class ContactModel:
         self.friction_cap = validate.choice(cap, "ContactModel.set_friction_cap: cap", FRICTION_CAPS,
                                             fix="'penalty' (default), 'integrated' or 'solved'")
         self._pair[:, :, 5] = CAP_PENALTY if self.friction_cap == "penalty" else -1.0
+
+    def set_contact_law(self, law: str) -> None:
+        """How a quasi-static tissue step takes this contact (:data:`CONTACT_LAWS`): ``"linearised"``
+        (the default) the force at the step's start linearised with one isotropic stiffness per node
+        (``result.stiffness``); ``"plane"`` each contact pair's penalty and Coulomb friction solved
+        with the step on the pair's tangent plane (:meth:`plane_law`,
+        :mod:`surgsim_envs.contact.plane_law`), for tissue models with the capability
+        ``plane_contact_law``. Nodes only (no surface samples), friction capped by the penalty."""
+        law = validate.choice(law, "ContactModel.set_contact_law: law", CONTACT_LAWS,
+                              fix="'linearised' (default) or 'plane'")
+        if law == "plane":
+            if self.n_samples:
+                raise ConfigError("ContactModel.set_contact_law('plane') takes contact at the nodes only; this model "
+                                  f"has {self.n_samples} surface samples (build it with surface=None)")
+            if self.friction_cap != "penalty":
+                raise ConfigError("ContactModel.set_contact_law('plane') solves the friction cap with the step; "
+                                  f"set_friction_cap('penalty') first (now {self.friction_cap!r})")
+            if len(self._law.nodes) < self.n_points * max(self._n_geoms, 1):
+                P = self.n_points * max(self._n_geoms, 1)
+                self._law = PlaneContactLaw(np.zeros(P, dtype=np.int64), np.zeros((P, ROW)))
+        self.contact_law = law
+
+    @property
+    def solves_plane_law(self) -> bool:
+        """Whether a quasi-static step solves this contact's plane law (``set_contact_law("plane")``)."""
+        return self.contact_law == "plane"
+
+    def plane_law(self, friction_before) -> PlaneContactLaw:
+        """The plane law of the pairs in contact after the last compute, linearised where it ran,
+        with the stick anchors of ``friction_before`` (:meth:`friction_state` from before that
+        compute). After :meth:`prepare` and ``set_contact_law("plane")``."""
+        kind, tool, size, k_n, c_n, c_imp, k_t = self._prepared
+        P = len(self._anchor_on) * self._anchor_on.shape[1]
+        if len(self._law.nodes) < P:
+            self._law = PlaneContactLaw(np.zeros(P, dtype=np.int64), np.zeros((P, ROW)))
+        count = build_plane_law(self.candidate_nodes, self._rows,
+                                _row_lists(len(self.candidate_nodes), len(self.sample_nodes))[1], self._anchor_on,
+                                self._pair, friction_before[1], friction_before[0], self._pos, self._gpos_last,
+                                self._gmat_last, self._geom_tool, k_n, k_t, self.tool_friction,
+                                self.tool_static_friction, self._law.nodes, self._law.data)
+        if count < 0:
+            raise ConfigError("ContactModel.plane_law: a surface sample is in contact; the plane law takes the "
+                              "nodes only")
+        self._law.count = int(count)
+        return self._law
 
     @property
     def solves_friction_cap(self) -> bool:

@@ -195,6 +195,14 @@ def check_contact_stiffness_per_area(value, what: str) -> None:
     validate.positive(value, what, unit="N/m^3", hi=1e13, fix="'auto', None (200 N/m per node) or e.g. 1e8")
 
 
+def check_contact_law(value, what: str) -> None:
+    """ConfigError unless ``value`` is "linearised", "plane" or "auto"
+    (:func:`surgsim_envs.scene.contact_options.contact_law_for`)."""
+    if not (isinstance(value, str) and value in ("linearised", "plane", "auto")):
+        raise ConfigError(f"{what}={validate.short_repr(value)}; use 'auto' (the plane law where the tissue model "
+                          "takes it), 'plane' or 'linearised' (docs/contact.md, \"Friction in a quasi-static step\")")
+
+
 def check_on_unstable(value, what: str) -> None:
     """``on_unstable`` must be "raise" (default) or "terminate" (see the module docstring)."""
     if value not in ("raise", "terminate"):

@@ -207,6 +207,12 @@ class ContactConfig:
     static_friction_ratio: mu_s / mu >= 1, the static friction coefficient of every tool as a
         multiple of its (kinetic) friction (1 = one coefficient; surgsim_envs.contact.friction).
         Tasks that draw mu per episode keep the ratio.
+    law: how a quasi-static tissue step takes the contact (ContactModel.set_contact_law):
+        "linearised" (the force at the step's start linearised with one isotropic stiffness per
+        node), "plane" (each contact pair's penalty and Coulomb friction solved with the step on its
+        tangent plane; tissue models with the capability ``plane_contact_law``, contact at the nodes
+        only) or "auto" ("plane" where it applies, else "linearised");
+        :mod:`surgsim_envs.scene.contact_options`.
     implicit_damping: "auto" (on for tissue models with the capabilities ``quasi_static``, whose
         velocities are finite differences, where explicit contact damping diverges, and
         ``implicit_contact``, whose solve takes the stiffness), True or
@@ -220,6 +226,7 @@ class ContactConfig:
     stiffness_per_area: Any = None
     static_friction_ratio: float = 1.0
     implicit_damping: Any = "auto"
+    law: Any = "linearised"
 
 
 def _default_cameras() -> list[CameraConfig]:

@@ -28,6 +28,7 @@ import dataclasses
 import math
 
 from surgsim_envs.contact import ContactParams
+from surgsim_envs.contact.model import CONTACT_LAWS
 from surgsim_envs.contact.surface_points import typical_edge_length
 from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
@@ -95,3 +96,23 @@ def contact_params_for(params: ContactParams, contact_cfg, tissue) -> ContactPar
     else:
         raise ConfigError(f"ContactConfig.implicit_damping={opt!r}; use 'auto', True or False")
     return dataclasses.replace(params, implicit_damping=on) if on != params.implicit_damping else params
+
+
+def contact_law_for(contact_cfg, tissue, n_samples: int) -> str:
+    """How ``tissue``'s quasi-static step takes the contact (``ContactModel.set_contact_law``):
+    ``contact_cfg.law``, where "auto" gives "plane" to tissue models with the capability
+    ``plane_contact_law`` whose contact has no surface samples (``n_samples`` 0), else "linearised".
+    An explicit "plane" for a model or contact that cannot take it is refused by name."""
+    opt = getattr(contact_cfg, "law", "linearised")
+    caps = getattr(tissue, "capabilities", ())
+    fits = "plane_contact_law" in caps and n_samples == 0
+    if opt == "auto":
+        return "plane" if fits else "linearised"
+    law = validate.choice(opt, "ContactConfig.law", CONTACT_LAWS + ("auto",),
+                          fix="'linearised', 'plane' or 'auto'")
+    if law == "plane" and not fits:
+        why = (f"its contact has {n_samples} surface samples (set ContactConfig.surface_samples=None)" if n_samples
+               else f"tissue model '{getattr(tissue, 'name', type(tissue).__name__)}' lacks the capability "
+                    "'plane_contact_law'")
+        raise ConfigError(f"ContactConfig.law='plane' cannot apply: {why}; use 'auto' or 'linearised'")
+    return law

@@ -34,7 +34,7 @@ import mujoco
 import numpy as np
 
 from surgsim_envs.contact import BOX, CAPSULE, CYLINDER, ROUNDED_BOX, SPHERE, ContactModel, ContactParams
-from surgsim_envs.scene.contact_options import contact_params_for, static_friction_ratio
+from surgsim_envs.scene.contact_options import contact_law_for, contact_params_for, static_friction_ratio
 from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.scene.builder import Scene
@@ -139,6 +139,7 @@ class Simulation:
                                                node_masses=model.masses, surface=model.surface,
                                                surface_subdivisions=self._surface_subdivisions(model),
                                                tool_static_friction=ratio * mu)
+            self.contacts[name].set_contact_law(contact_law_for(cfg.contact, model, self.contacts[name].n_samples))
         self._pairs = [(self.tissues[n], self.contacts[n]) for n in self.tissues]
         for contact in self.contacts.values():   # validated once here; the step loop uses compute_prepared
             contact.prepare(self._shape_kind, self._shape_tool, self._shape_size, self.dt)
@@ -403,7 +404,8 @@ class Simulation:
                     advance_geoms(gpos, gpos0, gvel, j * h)
                 for tissue, contact in pairs:
                     restore = tissue.resolves_contact_set and (quasi_static.RESTORE_FRICTION
-                                                               or contact.solves_friction_cap)
+                                                               or contact.solves_friction_cap
+                                                               or contact.solves_plane_law)
                     friction = contact.friction_state() if restore else None
                     res = contact.compute_prepared(tissue.positions, tissue.velocities, gpos, gmat, gvel, tcom)
                     if tissue.resolves_contact_set:

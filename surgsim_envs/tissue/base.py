@@ -484,7 +484,7 @@ class TissueModel(abc.ABC):
         (N), ``stiffness`` None or a C-contiguous float64 (N,) array (N/m). Skips only those
         type/shape checks: NaN/inf input is still refused with the same error before the state is
         touched, and the stability guard runs as in :meth:`step`. Physics identical to :meth:`step`."""
-        if first_non_finite(forces) >= 0 or (stiffness is not None and first_non_finite(stiffness) >= 0):
+        if first_non_finite(forces) >= 0 or (isinstance(stiffness, np.ndarray) and first_non_finite(stiffness) >= 0):
             self.guard.check_inputs(self, forces, stiffness)   # raises NonFiniteInputError naming the node
         self._step_body(dt, forces, stiffness)
 

@@ -58,11 +58,18 @@ from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue import fem_viscous as visc
 from surgsim_envs.tissue.compliance import (DEFAULT_CACHE_MB, SOLVERS, CondensedCompliance, add_response,
                                              gather_block)
+from surgsim_envs.contact.plane_law import PlaneContactLaw
+from surgsim_envs.tissue.condensed_plane_solve import condensed_plane_solve, find_loaded_law
 from surgsim_envs.tissue.dense_solve import solve_dense
 from surgsim_envs.tissue.fem import TetFEMModel
 from surgsim_envs.tissue.guard import StabilityGuard
 
 
+#: a step with the contact's plane law sweeps its pairs until no pair's force moves by more than
+#: this share of the largest (:mod:`condensed_plane_solve`)
+PLANE_LAW_TOLERANCE = 1e-6
+#: at most this many sweeps
+PLANE_LAW_SWEEPS = 500
 #: fem_static's treatments of a viscoelastic material (see the module docstring)
 VISCOELASTIC_MODES = ("auto", "hereditary", "relaxed")
 
@@ -220,7 +227,8 @@ class QuasiStaticFEMModel(TetFEMModel):
     default_integrator = None
     resolves_contact_set = True
     capabilities = frozenset({"forces", "unstructured_mesh", "implicit_contact", "quasi_static", "static_solve",
-                              "subsurface_stiffness", "viscoelastic", "condensed_compliance"})
+                              "subsurface_stiffness", "viscoelastic", "condensed_compliance",
+                              "plane_contact_law"})
     material_fields = ("young", "poisson", "density")
 
     def __init__(self, volume, material="liver", *, formulation: str = "anp", fixed_dofs=None,
@@ -273,6 +281,11 @@ class QuasiStaticFEMModel(TetFEMModel):
         self.last_loaded = 0
         self._loaded_buf = np.zeros(n, dtype=np.int64)
         self._zero_kc = np.zeros(n)
+        self._mark = np.zeros(n, dtype=np.int64)
+        self._slot_of = np.full(n, -1, dtype=np.int64)
+        #: Gauss-Seidel sweeps of the last step with the contact's plane law (``PLANE_LAW_SWEEPS + 1``:
+        #: stopped before the tolerance)
+        self.last_sweeps = 0
         if isinstance(precompute, str):
             if precompute != "surface":
                 raise ConfigError(f"fem_static: precompute={precompute!r}; use None, 'surface' or node indices")
@@ -395,7 +408,6 @@ class QuasiStaticFEMModel(TetFEMModel):
     # ------------------------------------------------------------------------------------------
     # Step: equations (2)-(3) of the module docstring
     def _advance(self, dt: float, forces: np.ndarray, stiffness) -> None:
-        n = self.n_nodes
         comp = self.compliance()
         u0 = self._base_displacement()
         c, s, decay, gamma = 1.0, None, 1.0, 1.0
@@ -410,13 +422,43 @@ class QuasiStaticFEMModel(TetFEMModel):
             u0 = self._u0_buf
             hereditary_base_displacement(self._hereditary_base(c, s), s, c, u0)
         held = self.fixed
+        if isinstance(stiffness, PlaneContactLaw):
+            self._advance_plane_law(comp, u0, c, forces, stiffness, held)
+        else:
+            self._advance_linearised(comp, u0, c, forces, stiffness, held)
+        u = self._u_buf
+        if s is not None:
+            hereditary_advance(u, decay, gamma, self._hist, self._u_step)
+        commit_positions(u, self.rest_positions, self.positions, self.velocities, dt)
+        self.external_forces = forces
+
+    def _advance_plane_law(self, comp, u0, c, forces, law, held) -> None:
+        """Equations (2)-(3) with the contact's plane law solved exactly (:mod:`condensed_plane_solve`)."""
+        if law.count and not np.isfinite(law.data[:law.count]).all():
+            raise ConfigError("fem_static: the contact's plane law holds non-finite values")
+        count = find_loaded_law(forces, law.nodes, law.count, held, self._mark, self._loaded_buf)
+        loaded = self._loaded_buf[:count]
+        self.last_loaded = count
+        u = self._u_buf
+        if count:
+            self.last_sweeps = condensed_plane_solve(
+                comp.cols, comp.slots(loaded), loaded, u0, forces, law.nodes, law.data, law.count, self.positions,
+                self.rest_positions, c, u, self.integrated_external_forces, PLANE_LAW_TOLERANCE, PLANE_LAW_SWEEPS,
+                self._slot_of)
+        else:
+            u[:] = u0
+
+    def _advance_linearised(self, comp, u0, c, forces, stiffness, held) -> None:
+        """Equations (2)-(3): the contact force linearised with the isotropic ``stiffness`` (N,) N/m."""
+        n = self.n_nodes
         if stiffness is not None:
             kc = np.asarray(stiffness, dtype=np.float64)
             if kc.shape != (n,) or has_negative(kc):
                 raise ConfigError(f"fem_static: stiffness must be (N,) >= 0 N/m, got shape {kc.shape}")
         else:
             kc = None
-        loaded = self._loaded_buf[:find_loaded(forces, self._zero_kc if kc is None else kc, held, self._loaded_buf)]
+        count = find_loaded(forces, self._zero_kc if kc is None else kc, held, self._loaded_buf)
+        loaded = self._loaded_buf[:count]
         u = self._u_buf
         self.last_loaded = len(loaded)
         if len(loaded):
@@ -426,10 +468,6 @@ class QuasiStaticFEMModel(TetFEMModel):
                                     self.integrated_external_forces)
         else:
             u[:] = u0
-        if s is not None:
-            hereditary_advance(u, decay, gamma, self._hist, self._u_step)
-        commit_positions(u, self.rest_positions, self.positions, self.velocities, dt)
-        self.external_forces = forces
 
     def _step_body(self, dt: float, forces: np.ndarray, stiffness) -> None:
         try:

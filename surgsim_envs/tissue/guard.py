@@ -161,6 +161,8 @@ class StabilityGuard:
         for name, arr, unit in (("external forces", forces, "N"), ("contact stiffness", stiffness, "N/m")):
             if arr is None:
                 continue
+            if not isinstance(arr, np.ndarray) and hasattr(arr, "count"):   # a contact law (plane_contact_law)
+                name, arr = "contact law", arr.data[:arr.count]
             a = np.ascontiguousarray(arr, dtype=np.float64)
             i = int(first_non_finite(a))
             if i >= 0:

@@ -8,7 +8,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from surgsim_envs import validate
-from surgsim_envs.envs.checks import (check_contact_stiffness_per_area, check_control_rate, check_integrator,
+from surgsim_envs.envs.checks import (check_contact_law, check_contact_stiffness_per_area, check_control_rate, check_integrator,
                                      check_on_unstable, check_positive,
                                      check_range, check_render_size, check_task_length, check_task_resolution,
                                      check_weights)
@@ -45,6 +45,9 @@ class PalpationConfig:
     # models (their equilibrium solve takes it at any spacing), the scene's 200 N/m per node for the
     # others (what an explicit step keeps stable); None = always per node (ContactConfig.stiffness_per_area)
     contact_stiffness_per_area: Any = "auto"
+    # how a quasi-static model's step takes the probe's contact (ContactConfig.law): "linearised" (one
+    # isotropic stiffness per node), "plane" (penalty and Coulomb friction solved with the step) or "auto"
+    contact_law: str = "linearised"
     probe_speed: float = 0.2           # m/s, rate limit of the probe target
     # action scaling
     max_xy_step: float = 0.003         # m per control step
@@ -106,6 +109,7 @@ class PalpationConfig:
         check_task_resolution(self, "PalpationConfig")
         check_on_unstable(self.on_unstable, "PalpationConfig")
         check_contact_stiffness_per_area(self.contact_stiffness_per_area, "PalpationConfig.contact_stiffness_per_area")
+        check_contact_law(self.contact_law, "PalpationConfig.contact_law")
         if not (isinstance(self.map_cells, (int, np.integer)) and 1 <= self.map_cells <= 20):
             raise ConfigError(f"PalpationConfig.map_cells={self.map_cells!r} must be an integer in [1, 20]")
         validate.integer(self.report_hold_steps, "PalpationConfig.report_hold_steps", lo=1,

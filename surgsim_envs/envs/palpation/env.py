@@ -103,6 +103,7 @@ class PalpationEnv(SurgSimEnv):
         p.position = (0.0, 0.0, self.surface_z + c.tip_radius + c.hover)
         cfg.dt = c.dt
         cfg.contact.stiffness_per_area = c.contact_stiffness_per_area
+        cfg.contact.law = c.contact_law
         # the probe's deepest commanded tip stays this far above the floor: MuJoCo's collision detection
         # (probe vs floor, the only rigid pair) has nothing to find and is switched off
         cfg.rigid_contacts = self.surface_z - c.max_depth < RIGID_CONTACT_CLEARANCE

@@ -29,12 +29,45 @@ RESTORE_FRICTION = False
 FRICTION_CAP_TOLERANCE = 0.01
 
 
+def plane_law_step(tissue, contact, dt: float, gpos, gmat, gvel, tcom, friction) -> int:
+    """Step ``tissue`` by ``dt`` with ``contact``'s plane law (``contact.set_contact_law("plane")``)
+    built from its last compute, at the tissue's positions, and the friction state ``friction`` from
+    before that compute; then compute the contact again where the step reached (with the velocities
+    the step started from), from ``friction``, so that the stick anchors, the contact states and the
+    readings are those of the solved step. The law opens a contact that separates; while a point
+    outside the law's pairs touches a tool where the step reached, the step is solved again from its
+    start with the law built there (up to ``MAX_CONTACT_SET_SOLVES`` solves). Returns the number of
+    extra solves."""
+    start = tissue.step_state()
+    start_vel = start[1]
+    tissue.step_prevalidated(dt, contact.result.forces, contact.plane_law(friction))
+    used = contact.points_in_contact
+    extra = 0
+    while True:
+        contact.restore_friction_state(friction)
+        contact.compute_prepared(tissue.positions, start_vel, gpos, gmat, gvel, tcom)
+        now = contact.points_in_contact
+        if extra + 1 >= MAX_CONTACT_SET_SOLVES or not (now & ~used).any():
+            break
+        tissue.restore_step_state(start, tissue.positions.copy())
+        tissue.step_prevalidated(dt, contact.result.forces, contact.plane_law(friction))
+        used |= now
+        extra += 1
+    if extra:
+        np.subtract(tissue.positions, start[0], out=tissue.velocities)
+        tissue.velocities /= dt
+        tissue.velocities[tissue.fixed] = 0.0
+    return extra
+
+
 def quasi_static_step(tissue, contact, dt: float, result, gpos, gmat, gvel, tcom, friction=None) -> int:
     """Step ``tissue`` by ``dt`` under ``result`` (``contact``'s last compute, at the tissue's
     positions) and solve it again while the contact set moves; returns the number of extra solves.
     ``friction``: ``contact.friction_state()`` from before that compute; each solve again computes the
     contact from it (None: from the anchors the last compute left). The velocities are the finite
     difference over the step, from where it started."""
+    if contact.solves_plane_law:
+        return plane_law_step(tissue, contact, dt, gpos, gmat, gvel, tcom, friction)
     start = tissue.step_state()
     tissue.step_prevalidated(dt, result.forces, result.stiffness)
     extra = 0
@@ -56,4 +89,4 @@ def quasi_static_step(tissue, contact, dt: float, result, gpos, gmat, gvel, tcom
     return extra
 
 
-__all__ = ["quasi_static_step"]
+__all__ = ["plane_law_step", "quasi_static_step"]
