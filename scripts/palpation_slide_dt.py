@@ -52,10 +52,9 @@ def slide(dt: float, restore: bool, solves: int, cap: str = "penalty", law: str 
     quasi_static.RESTORE_FRICTION, quasi_static.MAX_CONTACT_SET_SOLVES = restore, solves
     simulation.quasi_static_step = logged
     try:
-        env = gym.make("SurgSim/Palpation-v0", dt=dt, disable_env_checker=True).unwrapped
+        env = gym.make("SurgSim/Palpation-v0", dt=dt, contact_law=law, disable_env_checker=True).unwrapped
         contact = next(iter(env.sim.contacts.values()))
         contact.set_friction_cap(cap)
-        contact.set_contact_law(law)
         mu = float(np.max(contact.tool_friction))
         env.reset(seed=5)
         coulomb = []
@@ -80,7 +79,7 @@ def main() -> None:
                     help="solves at most per physics step")
     ap.add_argument("--friction-cap", default="penalty", choices=FRICTION_CAPS,
                     help="ContactModel.set_friction_cap: what caps a sliding contact's friction")
-    ap.add_argument("--law", default="linearised", choices=CONTACT_LAWS,
+    ap.add_argument("--law", default="plane", choices=CONTACT_LAWS,
                     help="ContactModel.set_contact_law: how the quasi-static step takes the contact")
     ap.add_argument("--restore", default="both", choices=("both", "after", "before"),
                     help="which friction state each re-solve starts from (both: one run each)")

@@ -1,7 +1,9 @@
 """The contact's plane law (surgsim_envs/contact/plane_law.py) and fem_static's step that solves it
 (surgsim_envs/tissue/condensed_plane_solve.py): each pair's solution satisfies its own law, a
 sticking contact set gives the linearised step's solution, and in Palpation-v0 a pressed slide keeps
-Coulomb's bound at every step and reads the same forces at the task's 1 ms as at a quarter of it."""
+Coulomb's bound at every step and reads the same forces at the task's 1 ms as at a quarter of it
+(under ``-m slow``; tests/test_contact_set.py checks Coulomb's bound and the chatter of a pressed
+slide in the default run)."""
 
 import gymnasium as gym
 import numpy as np
@@ -126,6 +128,7 @@ def _pressed_slide(dt: float, steps: tuple[int, int] = (40, 30)):
     return press, float(np.mean(normal)), float(np.mean(drag)), worst
 
 
+@pytest.mark.slow
 def test_a_pressed_slide_keeps_coulomb_and_reads_the_press_at_half_the_step():
     """The plane law solves each step's friction: no control step's readings exceed mu times the
     normal (the linearised default exceeds it by about 35 %), and the press reads the same at the
@@ -147,3 +150,13 @@ def test_a_pressed_slide_reads_the_same_at_a_quarter_of_the_step():
     assert coarse[0] == pytest.approx(fine[0], rel=0.02)
     assert coarse[1] == pytest.approx(fine[1], rel=0.02)
     assert abs(coarse[2]) > 0.05 and coarse[2] == pytest.approx(fine[2], rel=0.05)
+
+
+def test_the_task_option_is_checked_and_the_plane_law_refused_where_it_cannot_apply():
+    with pytest.raises(ConfigError, match="'auto'"):
+        gym.make("SurgSim/Palpation-v0", contact_law="exact")
+    with pytest.raises(ConfigError, match="plane_contact_law"):
+        gym.make("SurgSim/Palpation-v0", contact_law="plane", model="mass_spring", spacing=0.01)
+    env = gym.make("SurgSim/Palpation-v0", model="mass_spring", spacing=0.01).unwrapped   # "auto": linearised
+    assert next(iter(env.sim.contacts.values())).contact_law == "linearised"
+    env.close()

@@ -46,7 +46,7 @@ from surgsim_envs.contact.contact_set import contact_set_changes
 from surgsim_envs.contact.friction import stick_slip
 from surgsim_envs.contact.integrated_readings import integrated_readings_kernel
 from surgsim_envs.contact.report import ContactReport
-from surgsim_envs.contact.plane_law import ROW, PlaneContactLaw, build_plane_law
+from surgsim_envs.contact.plane_law import POTENTIAL_MARGIN, ROW, PlaneContactLaw, build_plane_law
 from surgsim_envs.contact.shapes import (BOX, CAPSULE, CYLINDER, N_KINDS, ROUNDED_BOX, bounding_radius, local_outside,
                                          world_sdf)
 from surgsim_envs.contact.surface_points import check_surface, contact_point, subdivisions_for_spacing, surface_samples
@@ -886,8 +886,12 @@ class ContactModel:
         ``MAX_CONTACT_SET_SOLVES``) until every pair's integrated normal force changes by under
         ``FRICTION_CAP_TOLERANCE`` of the largest, so that the cap is the step's own normal force.
         Explicit steps integrate the penalty itself: the caps are the same for them."""
-        self.friction_cap = validate.choice(cap, "ContactModel.set_friction_cap: cap", FRICTION_CAPS,
-                                            fix="'penalty' (default), 'integrated' or 'solved'")
+        cap = validate.choice(cap, "ContactModel.set_friction_cap: cap", FRICTION_CAPS,
+                              fix="'penalty' (default), 'integrated' or 'solved'")
+        if cap != "penalty" and self.contact_law == "plane":
+            raise ConfigError(f"ContactModel.set_friction_cap({cap!r}): the plane law solves the friction cap with "
+                              "the step; set_contact_law('linearised') first to cap a linearised step")
+        self.friction_cap = cap
         self._pair[:, :, 5] = CAP_PENALTY if self.friction_cap == "penalty" else -1.0
 
     def set_contact_law(self, law: str) -> None:
@@ -928,7 +932,8 @@ class ContactModel:
                                 _row_lists(len(self.candidate_nodes), len(self.sample_nodes))[1], self._anchor_on,
                                 self._pair, friction_before[1], friction_before[0], self._pos, self._gpos_last,
                                 self._gmat_last, self._geom_tool, k_n, k_t, self.tool_friction,
-                                self.tool_static_friction, self._law.nodes, self._law.data)
+                                self.tool_static_friction, self._law.nodes, self._law.data, kind, size,
+                                POTENTIAL_MARGIN, self._vec3)
         if count < 0:
             raise ConfigError("ContactModel.plane_law: a surface sample is in contact; the plane law takes the "
                               "nodes only")

@@ -43,11 +43,18 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from surgsim_envs.contact.shapes import bounding_radius, world_sdf
+
 #: the fields of one pair in :class:`PlaneContactLaw`'s ``data`` rows
 NORMAL, KN, FN0, STRETCH, KT, MU, MU_CAP, F0 = 0, 3, 4, 5, 8, 9, 10, 11
 #: columns of a ``data`` row
 ROW = 14
-#: slide directions sampled around the tangent plane by :func:`solve_pair` before bisecting
+#: m, a candidate node this close to a tool (signed distance) but not touching it where the law is
+#: built enters the law as an open pair (f_n0 < 0): it closes if the step moves it onto the tool
+POTENTIAL_MARGIN = 1e-3
+#: secant iterations on the slide direction from the stick trial's (:func:`solve_pair`)
+SECANT_ITERATIONS = 12
+#: slide directions sampled around the tangent plane, then bisected, where the secant fails
 SLIDE_SAMPLES = 32
 
 
@@ -164,8 +171,9 @@ def solve_pair(row, a, d0, out, work):
     """The pair's force F (N, written to ``out`` (3)) that satisfies its plane law at the
     displacement ``d = d0 + a F`` (``a`` (3,3) m/N, the node's own compliance; ``d0`` (3,) m, its
     displacement without this pair's force). ``work``: (5, 3) scratch. Tries, in order, the open
-    contact (F = 0 where f_n(d0) <= 0), sticking (linear), and sliding (its direction iterated
-    ``SLIDE_ITERATIONS`` times from the stick trial's). Returns 0 open, 1 stick, 2 slide."""
+    contact (F = 0 where f_n(d0) <= 0), sticking (linear), and sliding (its direction the root of
+    the stretch's component across it: secant steps from the stick trial's direction, else
+    ``SLIDE_SAMPLES`` directions around the plane, bisected). Returns 0 open, 1 stick, 2 slide."""
     n0, n1, n2 = row[0], row[1], row[2]
     kn, kt = row[KN], row[KT]
     if row[FN0] - kn * (n0 * d0[0] + n1 * d0[1] + n2 * d0[2]) <= 0.0:
@@ -211,8 +219,26 @@ def solve_pair(row, a, d0, out, work):
     b1x, b1y, b1z = s0, s1, s2                     # the stick trial's stretch direction starts the basis
     b2x, b2y, b2z = n1 * b1z - n2 * b1y, n2 * b1x - n0 * b1z, n0 * b1y - n1 * b1x
     best_th, best_gap, found = 0.0, 1e300, False
+    # secant iterations from the stick trial's direction (th = 0) first: the usual case, a few calls
+    t0_, t1_ = 0.0, 1e-3
+    h0, p0 = _slide_residual(row, a, d0, t0_, b1x, b1y, b1z, b2x, b2y, b2z)
+    h1, p1 = _slide_residual(row, a, d0, t1_, b1x, b1y, b1z, b2x, b2y, b2z)
+    for _ in range(SECANT_ITERATIONS):
+        if h1 == h0:
+            break
+        t2_ = t1_ - h1 * (t1_ - t0_) / (h1 - h0)
+        if not (abs(t2_) < math.pi):
+            break
+        t0_, h0 = t1_, h1
+        t1_ = t2_
+        h1, p1 = _slide_residual(row, a, d0, t1_, b1x, b1y, b1z, b2x, b2y, b2z)
+        if abs(t1_ - t0_) < 1e-13:
+            break
+    scale = math.sqrt((row[5] + d0[0]) ** 2 + (row[6] + d0[1]) ** 2 + (row[7] + d0[2]) ** 2) + 1e-300
+    if p1 > 0.0 and abs(h1) <= 1e-12 * max(scale, p1):
+        best_th, found = t1_, True
     h_prev, par_prev, th_prev = 0.0, 0.0, 0.0
-    for k in range(SLIDE_SAMPLES + 1):
+    for k in range(0 if found else SLIDE_SAMPLES + 1):
         th = 2.0 * math.pi * k / SLIDE_SAMPLES
         h, par = _slide_residual(row, a, d0, th, b1x, b1y, b1z, b2x, b2y, b2z)
         if k > 0 and (h_prev <= 0.0) != (h <= 0.0) and (par > 0.0 or par_prev > 0.0):
@@ -254,7 +280,7 @@ def solve_pair(row, a, d0, out, work):
 
 @njit(cache=True, nogil=True)
 def build_plane_law(cand, rows, a0, anchor_on, pair, anchor_on_before, anchor_local_before, positions, gpos, gmat,
-                    tool, k_n, k_t, mu, mu_s, nodes, data):
+                    tool, k_n, k_t, mu, mu_s, nodes, data, kind, size, margin, vec):
     """Write the plane law of every pair in contact after the last contact call into ``nodes`` /
     ``data`` (:class:`PlaneContactLaw`); returns their count, or -1 if a surface sample is in
     contact (not supported). ``rows[a0:a0 + rows[1]]`` the points in contact (candidate nodes
@@ -262,7 +288,9 @@ def build_plane_law(cand, rows, a0, anchor_on, pair, anchor_on_before, anchor_lo
     normal force); ``anchor_on_before`` / ``anchor_local_before`` the friction state before that call
     (``ContactModel.friction_state()``); ``positions`` (N,3) m where the call ran; ``gpos`` / ``gmat``
     the geoms' poses; ``tool`` (G,) each geom's tool; ``k_n``, ``k_t`` per contact point, N/m;
-    ``mu``, ``mu_s`` (T,) kinetic and static friction per tool."""
+    ``mu``, ``mu_s`` (T,) kinetic and static friction per tool. Candidate nodes within ``margin`` (m)
+    of a geom they do not touch (``kind`` (G,), ``size`` (G,3) the geoms' shapes; ``vec`` (4,3)
+    scratch) are added as open pairs on the geom's tangent plane at their closest point."""
     C = cand.shape[0]
     G = anchor_on.shape[1]
     p = 0
@@ -301,6 +329,34 @@ def build_plane_law(cand, rows, a0, anchor_on, pair, anchor_on_before, anchor_lo
             row[F0], row[F0 + 1], row[F0 + 2] = f[0], f[1], f[2]
             nodes[p] = i
             p += 1
+    # candidate nodes near a geom but not on it: open pairs (f_n0 = -k_n phi < 0, no stretch, new)
+    if margin > 0.0:
+        nl, cl, nrm, cpt = vec[0], vec[1], vec[2], vec[3]
+        for c in range(C):
+            i = cand[c]
+            x0, x1, x2 = positions[i, 0], positions[i, 1], positions[i, 2]
+            for g in range(G):
+                if anchor_on[c, g] != 0:
+                    continue
+                rg = bounding_radius(kind[g], size[g, 0], size[g, 1], size[g, 2]) + margin
+                dx, dy, dz = x0 - gpos[g, 0], x1 - gpos[g, 1], x2 - gpos[g, 2]
+                if dx * dx + dy * dy + dz * dz >= rg * rg:
+                    continue
+                phi = world_sdf(kind[g], size, gpos, gmat, g, x0, x1, x2, nl, cl, nrm, cpt)
+                if phi >= margin or phi < 0.0:
+                    continue
+                row = data[p]
+                row[0], row[1], row[2] = nrm[0], nrm[1], nrm[2]
+                row[KN] = k_n
+                row[FN0] = -k_n * phi
+                row[5] = row[6] = row[7] = 0.0
+                t = tool[g]
+                row[KT] = k_t
+                row[MU] = mu[t]
+                row[MU_CAP] = mu[t] if mu_s[t] < mu[t] else mu_s[t]
+                row[F0] = row[F0 + 1] = row[F0 + 2] = 0.0
+                nodes[p] = i
+                p += 1
     return p
 
 

@@ -114,6 +114,35 @@ def gather_block(cols, slots, nodes, out):
 
 
 @njit(cache=True, nogil=True)
+def scaled_block(cols, slots, nodes, c):
+    """W_AA / c (3m,3m) of ``nodes`` from their cached columns (:func:`gather_block`); ``c`` the
+    hereditary step's factor (1: elastic)."""
+    n3 = 3 * nodes.shape[0]
+    w = np.empty((n3, n3))
+    gather_block(cols, slots, nodes, w)
+    if c != 1.0:
+        for i in range(n3):
+            for j in range(n3):
+                w[i, j] = w[i, j] / c
+    return w
+
+
+@njit(cache=True, nogil=True)
+def respond(cols, slots, nodes, g, c, u0, u, applied):
+    """u (3N,) = u0 + C_A g / c for the forces ``g`` (3m,) N on ``nodes`` (their cached columns),
+    and ``applied[nodes]`` = g."""
+    m = nodes.shape[0]
+    for d in range(u.shape[0]):
+        u[d] = u0[d]
+    gs = np.empty((m, 3))
+    for b in range(m):
+        for j in range(3):
+            gs[b, j] = g[3 * b + j] / c if c != 1.0 else g[3 * b + j]
+            applied[nodes[b], j] = g[3 * b + j]
+    add_response(cols, slots, gs, u)
+
+
+@njit(cache=True, nogil=True)
 def add_response(cols, slots, g, out):
     """``out`` (3N,) += sum_b cols[slots[b]] @ g[b] (m): the displacement of nodal forces g (m,3) N."""
     n3 = out.shape[0]

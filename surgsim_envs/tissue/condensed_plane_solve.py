@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from surgsim_envs.contact.plane_law import F0, solve_pair
-from surgsim_envs.tissue.compliance import add_response, gather_block
+from surgsim_envs.tissue.compliance import respond, scaled_block
 
 
 @njit(cache=True, nogil=True)
@@ -52,12 +52,7 @@ def condensed_plane_solve(cols, slots, loaded, u0, forces, law_nodes, law_data, 
     (``max_sweeps + 1`` if the forces still moved by more than ``tol`` of the largest)."""
     m = loaded.shape[0]
     n3 = 3 * m
-    w = np.empty((n3, n3))
-    gather_block(cols, slots, loaded, w)
-    if c != 1.0:
-        for i in range(n3):
-            for j in range(n3):
-                w[i, j] = w[i, j] / c
+    w = scaled_block(cols, slots, loaded, c)
     for b in range(m):
         slot_of[loaded[b]] = b
     g = np.empty(n3)
@@ -110,14 +105,7 @@ def condensed_plane_solve(cols, slots, loaded, u0, forces, law_nodes, law_data, 
             break
     for b in range(m):
         slot_of[loaded[b]] = -1
-    for d in range(u.shape[0]):
-        u[d] = u0[d]
-    gs = np.empty((m, 3))
-    for b in range(m):
-        for j in range(3):
-            gs[b, j] = g[3 * b + j] / c if c != 1.0 else g[3 * b + j]
-            applied[loaded[b], j] = g[3 * b + j]
-    add_response(cols, slots, gs, u)
+    respond(cols, slots, loaded, g, c, u0, u, applied)
     return sweeps
 
 

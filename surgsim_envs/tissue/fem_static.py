@@ -56,8 +56,8 @@ from surgsim_envs import validate
 from surgsim_envs.errors import ConfigError, TissueUnstableError
 from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue import fem_viscous as visc
-from surgsim_envs.tissue.compliance import (DEFAULT_CACHE_MB, SOLVERS, CondensedCompliance, add_response,
-                                             gather_block)
+from surgsim_envs.tissue.compliance import (DEFAULT_CACHE_MB, SOLVERS, CondensedCompliance, respond,
+                                             scaled_block)
 from surgsim_envs.contact.plane_law import PlaneContactLaw
 from surgsim_envs.tissue.condensed_plane_solve import condensed_plane_solve, find_loaded_law
 from surgsim_envs.tissue.dense_solve import solve_dense
@@ -150,12 +150,7 @@ def condensed_contact_solve(cols, slots, loaded, u0, forces, kc, use_kc, positio
     g (N). The small system is solved by :func:`~surgsim_envs.tissue.dense_solve.solve_dense`."""
     m = loaded.shape[0]
     n3 = 3 * m
-    w = np.empty((n3, n3))
-    gather_block(cols, slots, loaded, w)
-    if c != 1.0:
-        for i in range(n3):
-            for j in range(n3):
-                w[i, j] = w[i, j] / c
+    w = scaled_block(cols, slots, loaded, c)
     g = np.empty(n3)
     for b in range(m):
         for j in range(3):
@@ -186,14 +181,7 @@ def condensed_contact_solve(cols, slots, loaded, u0, forces, kc, use_kc, positio
         u_a = solve_dense(a, rhs)
         for d in range(n3):
             g[d] = g[d] - k_a[d] * (u_a[d] - un_a[d])
-    for d in range(u.shape[0]):
-        u[d] = u0[d]
-    gs = np.empty((m, 3))
-    for b in range(m):
-        for j in range(3):
-            gs[b, j] = g[3 * b + j] / c if c != 1.0 else g[3 * b + j]
-            applied[loaded[b], j] = g[3 * b + j]
-    add_response(cols, slots, gs, u)
+    respond(cols, slots, loaded, g, c, u0, u, applied)
 
 
 class QuasiStaticFEMModel(TetFEMModel):

@@ -47,7 +47,7 @@ class PalpationConfig:
     contact_stiffness_per_area: Any = "auto"
     # how a quasi-static model's step takes the probe's contact (ContactConfig.law): "linearised" (one
     # isotropic stiffness per node), "plane" (penalty and Coulomb friction solved with the step) or "auto"
-    contact_law: str = "linearised"
+    contact_law: str = "auto"
     probe_speed: float = 0.2           # m/s, rate limit of the probe target
     # action scaling
     max_xy_step: float = 0.003         # m per control step
