@@ -12,13 +12,13 @@ import surgsim_envs
 
 ROOT = pathlib.Path(surgsim_envs.__file__).parent
 #: layer rank: a module may import only packages of a strictly lower rank (plus its own package)
-RANK = {"errors": 0, "after_import": 0, "numba_cache_lock": 0.05, "numba_cache": 0.1, "validate": 0.25, "materials": 0.5, "asset_files": 1, "policies": 1, "geometry": 1, "tissue": 2, "contact": 2, "scene": 3, "envs": 4, "haptics": 4,
+RANK = {"errors": 0, "after_import": 0, "numba_cache_lock": 0.05, "numba_cache": 0.1, "validate": 0.25, "materials": 0.5, "asset_files": 1, "policies": 1, "geometry": 1, "contact_law": 1.5, "tissue": 2, "contact": 2, "scene": 3, "envs": 4, "haptics": 4,
         "planning": 3, "scenarios": 5, "bench": 5, "integrations": 4.5, "cli": 6}
 RANK["warmup"] = 5          # `surgsim warmup`: exercises the demo (scene) and the tasks (envs)
 RANK["vector"] = 3.5         # the vector env: steps envs made by gymnasium.make, imports no task
 RANK["batch"] = 4.5         # the batched Warp backend: sits on scene and on the tasks (their configs and terms)
 #: third-party packages a layer must not import
-FORBIDDEN = {"tissue": {"mujoco", "gymnasium"}, "geometry": {"mujoco", "gymnasium"},
+FORBIDDEN = {"tissue": {"mujoco", "gymnasium"}, "contact_law": {"mujoco", "gymnasium"}, "geometry": {"mujoco", "gymnasium"},
              "contact": {"mujoco", "gymnasium"}}
 
 

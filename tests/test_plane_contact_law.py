@@ -1,4 +1,4 @@
-"""The contact's plane law (surgsim_envs/contact/plane_law.py) and fem_static's step that solves it
+"""The contact's plane law (surgsim_envs/contact_law/plane.py, built by surgsim_envs/contact/plane_law.py) and fem_static's step that solves it
 (surgsim_envs/tissue/condensed_plane_solve.py): each pair's solution satisfies its own law, a
 sticking contact set gives the linearised step's solution, and in Palpation-v0 a pressed slide keeps
 Coulomb's bound at every step and reads the same forces at the task's 1 ms as at a quarter of it
@@ -11,7 +11,7 @@ import pytest
 
 import surgsim_envs  # noqa: F401  (registers the tasks)
 from surgsim_envs.contact import ContactModel, ContactParams
-from surgsim_envs.contact.plane_law import F0, FN0, KN, KT, MU, MU_CAP, ROW, PlaneContactLaw, pair_force, solve_pair
+from surgsim_envs.contact_law.plane import F0, FN0, KN, KT, MU, MU_CAP, ROW, PlaneContactLaw, pair_force, solve_pair
 from surgsim_envs.errors import ConfigError
 from surgsim_envs.geometry import box_volume
 from surgsim_envs.tissue import registry

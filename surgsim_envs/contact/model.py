@@ -46,7 +46,8 @@ from surgsim_envs.contact.contact_set import contact_set_changes
 from surgsim_envs.contact.friction import stick_slip
 from surgsim_envs.contact.integrated_readings import integrated_readings_kernel
 from surgsim_envs.contact.report import ContactReport
-from surgsim_envs.contact.plane_law import POTENTIAL_MARGIN, ROW, PlaneContactLaw, build_plane_law
+from surgsim_envs.contact.plane_law import POTENTIAL_MARGIN, build_plane_law
+from surgsim_envs.contact_law.plane import ROW, PlaneContactLaw
 from surgsim_envs.contact.shapes import (BOX, CAPSULE, CYLINDER, N_KINDS, ROUNDED_BOX, bounding_radius, local_outside,
                                          world_sdf)
 from surgsim_envs.contact.surface_points import check_surface, contact_point, subdivisions_for_spacing, surface_samples
@@ -899,7 +900,7 @@ class ContactModel:
         (the default) the force at the step's start linearised with one isotropic stiffness per node
         (``result.stiffness``); ``"plane"`` each contact pair's penalty and Coulomb friction solved
         with the step on the pair's tangent plane (:meth:`plane_law`,
-        :mod:`surgsim_envs.contact.plane_law`), for tissue models with the capability
+        :mod:`surgsim_envs.contact_law.plane`), for tissue models with the capability
         ``plane_contact_law``. Nodes only (no surface samples), friction capped by the penalty."""
         law = validate.choice(law, "ContactModel.set_contact_law: law", CONTACT_LAWS,
                               fix="'linearised' (default) or 'plane'")

@@ -18,7 +18,7 @@ CAPABILITIES: dict[str, str] = {
     "forces": "step(dt, forces) takes external nodal forces (N,3) in N and moves the nodes",
     "implicit_contact": "step(dt, forces, stiffness) integrates the contact stiffness (N,) N/m implicitly; "
                         "integrated_external_forces (N,3) N is the external force actually integrated",
-    "plane_contact_law": "step(dt, forces, law) solves the contact's plane law (contact.plane_law.PlaneContactLaw: "
+    "plane_contact_law": "step(dt, forces, law) solves the contact's plane law (contact_law.plane.PlaneContactLaw: "
                          "per contact pair a unilateral penalty and Coulomb friction on its tangent plane) with "
                          "the step instead of linearising it (ContactModel.set_contact_law('plane'))",
     "quasi_static": "no inertia: each step returns an equilibrium; velocities are finite differences",

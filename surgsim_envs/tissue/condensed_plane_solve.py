@@ -2,7 +2,7 @@
 
 Equations (2)-(3) of :mod:`surgsim_envs.tissue.fem_static` linearise the contact force with one
 isotropic stiffness per node. Given the contact's plane law instead
-(:mod:`surgsim_envs.contact.plane_law`: per contact pair a unilateral penalty and Coulomb friction
+(:mod:`surgsim_envs.contact_law.plane`: per contact pair a unilateral penalty and Coulomb friction
 on the pair's tangent plane, with the stick anchor from before the step), the loaded nodes A solve
 
     u_A = u0_A + W_AA g_A,     g_A = f_A - sum_p F_p(0) + sum_p F_p(u_A - u_A^n)
@@ -11,7 +11,7 @@ on the pair's tangent plane, with the stick anchor from before the step), the lo
 nonlinear block Gauss-Seidel over the pairs (the nonsmooth contact dynamics of Jean and Moreau, on
 a compliance as in SOFA's precomputed-compliance solvers): each pair in turn solves its own law
 against its node's 3x3 compliance with every other force held
-(:func:`~surgsim_envs.contact.plane_law.solve_pair`), until no pair's force moves by more than
+(:func:`~surgsim_envs.contact_law.plane.solve_pair`), until no pair's force moves by more than
 ``tol`` of the largest. W_AA is symmetric positive definite, so a sticking or open contact set
 converges like Gauss-Seidel on a positive definite system. Units: m, N.
 """
@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from surgsim_envs.contact.plane_law import F0, solve_pair
+from surgsim_envs.contact_law.plane import F0, solve_pair
 from surgsim_envs.tissue.compliance import respond, scaled_block
 
 

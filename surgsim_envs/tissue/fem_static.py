@@ -58,7 +58,7 @@ from surgsim_envs.tissue import fem_assembly as asm
 from surgsim_envs.tissue import fem_viscous as visc
 from surgsim_envs.tissue.compliance import (DEFAULT_CACHE_MB, SOLVERS, CondensedCompliance, respond,
                                              scaled_block)
-from surgsim_envs.contact.plane_law import PlaneContactLaw
+from surgsim_envs.contact_law.plane import PlaneContactLaw
 from surgsim_envs.tissue.condensed_plane_solve import condensed_plane_solve, find_loaded_law
 from surgsim_envs.tissue.dense_solve import solve_dense
 from surgsim_envs.tissue.fem import TetFEMModel
