@@ -79,11 +79,15 @@ def test_fem_static_with_contact_damping_half_newton_second_per_metre():
 
 
 @pytest.mark.slow
-def test_palpation_press_fem_static_with_damping_through_the_scene():
+def test_palpation_press_fem_static_with_damping_through_the_scene(monkeypatch):
     """Palpation scene (liver slab with a stiff inclusion, probe R 8 mm pressed 3 mm and held,
     dt 1 ms), fem_static, contact damping 0.5 N s/m: ``implicit_damping="auto"`` turns the implicit
     damping on for the quasi-static model; the held force is the undamped one within 2 % (measured
-    0.8 %: the liver's friction makes the rest state depend on the path); explicit damping diverges."""
+    1.0 %: the liver's friction makes the rest state depend on the path). Explicit damping diverges
+    when each step is solved once; solved again while its contact set moves (the scene's step) it
+    stays bounded but reads the held force 10.7 % low (0.0836 against 0.0936 N, 276 extra solves
+    in 300 steps), so the implicit damping is still what makes it right."""
+    import surgsim_envs.scene.step.quasi_static as quasi_static
     from surgsim_envs.scene import Simulation, palpation_config, palpation_scene
 
     def press(damping, implicit):
@@ -101,5 +105,7 @@ def test_palpation_press_fem_static_with_damping_through_the_scene():
     ref = press(0.0, "auto")
     assert ref > 0.02
     assert press(0.5, "auto") == pytest.approx(ref, rel=0.02)
+    assert abs(press(0.5, False) / ref - 1.0) > 0.05
+    monkeypatch.setattr(quasi_static, "MAX_CONTACT_SET_SOLVES", 1)
     with pytest.raises(TissueUnstableError):
         press(0.5, False)

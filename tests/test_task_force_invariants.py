@@ -9,7 +9,8 @@ quasi-static force is the mean F_z on the probe over the last 50 ms of the hold.
   a probe pressed from above), at any physics step of a press, its hold and the retraction;
 * the force rises with depth at one site;
 * a stiffer inclusion never lowers the force above it (contrast C against contrast 1, the same
-  press), and raises it where the reference (``fem``) does;
+  press), and raises it where the converged reference does (REFERENCE_RATIOS: graded fem_static,
+  0.25 ms steps; scripts/contrast_reference_ratios.py);
 * the dent follows the probe: frictionless, no surface node lies inside the pressed tip deeper than
   half the press depth (the penalty contact's compliance), so the probe does not sink through;
 * frictionless, the quasi-static force at a pose does not depend on how the probe got there
@@ -322,21 +323,31 @@ CONTRAST_CASES = [((0.02, 0.0), 0.008, 5.0), ((0.02, 0.0), 0.008, 2.0), ((0.02, 
                   ((0.02, 0.0), 0.004, 5.0), ((0.017, 0.004), 0.008, 5.0)]
 
 
-@pytest.fixture(scope="module")
-def reference_ratios():
-    """``fem``'s contrast ratios of CONTRAST_CASES (the reference the invariant compares with)."""
-    return {case: contrast_ratio("fem", *case) for case in CONTRAST_CASES}
+#: F(C) / F(1) of CONTRAST_CASES in the converged reference's scene (graded fem_static, fine spacing
+#: 2 mm, physics step 0.25 ms, elastic liver with its friction): ``python
+#: scripts/contrast_reference_ratios.py``. The explicit ``fem`` at 10 mm, once the comparison here,
+#: reads the reported case 1.63x
+REFERENCE_RATIOS = {
+    ((0.02, 0.0), 0.008, 5.0): 1.218,
+    ((0.02, 0.0), 0.008, 2.0): 1.095,
+    ((0.02, 0.0), 0.006, 10.0): 1.447,
+    ((0.02, 0.0), 0.004, 5.0): 1.398,
+    ((0.017, 0.004), 0.008, 5.0): 1.180,
+}
+ELASTIC = {"preset": "liver", "relax_fraction": 0.0}
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("model", MODELS)
-def test_every_model_stiffer_inclusion_never_lowers_and_raises_where_fem_does(model, reference_ratios):
+def test_every_model_stiffer_inclusion_never_lowers_and_raises_where_the_reference_does(model):
+    """Each case, the liver elastic as in the reference: never below the contrast-1 press, and where
+    the reference feels the inclusion (a rise over 10 %), a rise of at least a third of the reference's."""
     for case in CONTRAST_CASES:
-        ratio = contrast_ratio(model, *case)
-        ref = reference_ratios[case]
+        ratio = contrast_ratio(model, *case, material=ELASTIC)
+        ref = REFERENCE_RATIOS[case]
         assert ratio >= 1.0 - NEVER_LOWER_SLACK, f"{model}: {case} lowers the force above the inclusion: {ratio:.3f}x"
-        if ref > 1.2:   # the reference feels the inclusion: so must the model, by a third of its rise at least
-            assert ratio - 1.0 >= (ref - 1.0) / 3.0, f"{model}: {case} reads {ratio:.3f}x where fem reads {ref:.3f}x"
+        if ref > 1.1:
+            assert ratio - 1.0 >= (ref - 1.0) / 3.0, f"{model}: {case} reads {ratio:.3f}x where the reference reads {ref:.3f}x"
 
 
 @pytest.mark.slow
